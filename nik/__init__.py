@@ -1,0 +1,42 @@
+"""nik: learned inverse kinematics for robot arms.
+
+robot -> FK -> dataset -> trained network -> swarm refinement -> result.
+The public names are listed in ``__all__``; submodules (``nik.data``, ``nik.analytic``, ...)
+are imported on first attribute access so that ``import nik`` stays light.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError
+from nik.poses import pose_error
+from nik.robots import Robot, builtin_robots, load_robot
+
+__version__ = "0.1.0"
+
+_SUBMODULES = {"analytic", "data", "kinematics", "learn", "models", "poses", "robots", "solver", "swarm", "cli"}
+_LAZY = {"IKSolver": "nik.solver", "IKResult": "nik.solver"}
+
+__all__ = [
+    "CheckpointError",
+    "DatasetError",
+    "IKResult",
+    "IKSolver",
+    "NikError",
+    "Robot",
+    "RobotDefinitionError",
+    "__version__",
+    "builtin_robots",
+    "load_robot",
+    "pose_error",
+    *sorted(_SUBMODULES),
+]
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f"nik.{name}")
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'nik' has no attribute {name!r}")

@@ -1,0 +1,50 @@
+"""The ``nik`` command line: argument parsing only; every command calls the library.
+
+Each submodule of ``nik.cli`` registers its subcommands with ``register(subparsers)`` and
+sets ``func`` on its parser; :func:`main` dispatches and turns a ``ValueError`` (nik's
+errors included) or a missing file into one line on stderr and exit code 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+#: Submodules that add subcommands, in the order they appear in ``nik --help``.
+COMMAND_MODULES = ["nik.cli.data", "nik.cli.solve", "nik.cli.train"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="nik", description="nik: learned inverse kinematics for robot arms")
+    parser.add_argument("--version", action="version", version=f"nik {importlib.import_module('nik').__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as err:
+            if err.name == name:  # that command group is not part of this build
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("nik: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError) as err:
+        print(f"nik {args.command}: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

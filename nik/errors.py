@@ -1,0 +1,19 @@
+"""Error classes of nik. All derive from ``ValueError`` so callers may catch either."""
+
+from __future__ import annotations
+
+
+class NikError(ValueError):
+    """Base class of every error nik raises on bad input."""
+
+
+class RobotDefinitionError(NikError):
+    """A robot name, file or definition is unknown or malformed."""
+
+
+class DatasetError(NikError):
+    """A dataset is missing, corrupt, or does not match the robot it is used with."""
+
+
+class CheckpointError(NikError):
+    """A checkpoint is missing, corrupt, or was made for another robot."""

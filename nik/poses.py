@@ -1,0 +1,259 @@
+"""Pose representations, pose errors and input validation.
+
+Every function is batched over leading dimensions and keeps the dtype and device
+of its input. Conventions:
+
+- a pose is a homogeneous 4x4 matrix ``T: (..., 4, 4)``, metres;
+- a quaternion is ``(w, x, y, z)`` with ``w >= 0`` on output (unit norm);
+- roll-pitch-yaw follows paper C eq. (3): ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``,
+  ``roll = atan2(o_z, a_z)``, ``pitch = atan2(-n_z, sqrt(n_x^2 + n_y^2))``, ``yaw = atan2(n_y, n_x)``
+  (``n, o, a`` the columns of ``R``);
+- the 6D rotation representation (Zhou et al. 2019) is the first two columns of ``R``,
+  stacked as ``(r11, r21, r31, r12, r22, r32)``.
+"""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = [
+    "ORTHONORMAL_TOL",
+    "matrix_to_quaternion",
+    "quaternion_to_matrix",
+    "matrix_to_rpy",
+    "rpy_to_matrix",
+    "matrix_to_rot6d",
+    "rot6d_to_matrix",
+    "pose_to_vector",
+    "vector_to_pose",
+    "make_pose",
+    "rotation_angle",
+    "pose_error",
+    "validate_pose",
+    "validate_joints",
+    "validate_quaternion",
+    "POSE_DIMS",
+]
+
+#: Largest accepted ``max |R^T R - I|`` (and ``|det R - 1|``) for a pose given to nik.
+#: Rotations computed in float32 carry errors of about 1e-6, so 1e-4 accepts them
+#: while rejecting anything that is not a rotation (a scaled or sheared matrix).
+ORTHONORMAL_TOL = 1e-4
+
+#: Length of the vector form of a pose for each representation.
+POSE_DIMS = {"quat": 7, "rpy": 6, "rot6d": 9, "matrix": 12}
+
+
+def make_pose(R: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+    """Assemble ``T: (..., 4, 4)`` from ``R: (..., 3, 3)`` and ``p: (..., 3)``."""
+    batch = torch.broadcast_shapes(R.shape[:-2], p.shape[:-1])
+    T = torch.zeros(*batch, 4, 4, dtype=R.dtype, device=R.device)
+    T[..., :3, :3] = R
+    T[..., :3, 3] = p
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def matrix_to_quaternion(R: torch.Tensor) -> torch.Tensor:
+    """Rotation ``R: (..., 3, 3)`` -> unit quaternion ``(..., 4)`` (w, x, y, z), ``w >= 0``.
+
+    Shepperd's method: of the four candidate formulas, use the one whose pivot
+    (``1 + trace`` or ``1 + 2 R_ii - trace``) is largest, so the division is never by a small number.
+    """
+    m = R
+    r00, r11, r22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    tr = r00 + r11 + r22
+    pivots = torch.stack([1 + tr, 1 + 2 * r00 - tr, 1 + 2 * r11 - tr, 1 + 2 * r22 - tr], dim=-1)
+    # Candidate quaternions, each scaled by 4 * its pivot component.
+    c0 = torch.stack([1 + tr, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1)
+    c1 = torch.stack([m[..., 2, 1] - m[..., 1, 2], 1 + 2 * r00 - tr, m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1)
+    c2 = torch.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0], 1 + 2 * r11 - tr, m[..., 1, 2] + m[..., 2, 1]], -1)
+    c3 = torch.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1], 1 + 2 * r22 - tr], -1)
+    cands = torch.stack([c0, c1, c2, c3], dim=-2)  # (..., 4, 4)
+    best = pivots.argmax(dim=-1)
+    q = torch.gather(cands, -2, best[..., None, None].expand(*best.shape, 1, 4)).squeeze(-2)
+    q = q / torch.linalg.vector_norm(q, dim=-1, keepdim=True)
+    return torch.where(q[..., :1] < 0, -q, q)
+
+
+def quaternion_to_matrix(quat: torch.Tensor) -> torch.Tensor:
+    """Quaternion ``(..., 4)`` (w, x, y, z) -> rotation ``(..., 3, 3)``. The quaternion is normalised first."""
+    q = quat / torch.linalg.vector_norm(quat, dim=-1, keepdim=True)
+    w, x, y, z = q.unbind(-1)
+    rows = [
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ]
+    return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
+
+
+def matrix_to_rpy(R: torch.Tensor) -> torch.Tensor:
+    """Rotation ``(..., 3, 3)`` -> ``(roll, pitch, yaw)`` ``(..., 3)`` radians, paper C eq. (3)."""
+    roll = torch.atan2(R[..., 2, 1], R[..., 2, 2])
+    pitch = torch.atan2(-R[..., 2, 0], torch.sqrt(R[..., 0, 0] ** 2 + R[..., 1, 0] ** 2))
+    yaw = torch.atan2(R[..., 1, 0], R[..., 0, 0])
+    return torch.stack([roll, pitch, yaw], dim=-1)
+
+
+def rpy_to_matrix(rpy: torch.Tensor) -> torch.Tensor:
+    """``(roll, pitch, yaw)`` ``(..., 3)`` -> ``R = Rz(yaw) Ry(pitch) Rx(roll)`` ``(..., 3, 3)``."""
+    cr, cp, cy = torch.cos(rpy).unbind(-1)
+    sr, sp, sy = torch.sin(rpy).unbind(-1)
+    rows = [
+        cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+        sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+        -sp, cp * sr, cp * cr,
+    ]
+    return torch.stack(rows, dim=-1).reshape(*rpy.shape[:-1], 3, 3)
+
+
+def matrix_to_rot6d(R: torch.Tensor) -> torch.Tensor:
+    """Rotation ``(..., 3, 3)`` -> 6D representation ``(..., 6)``: first column, then second column."""
+    return torch.cat([R[..., :, 0], R[..., :, 1]], dim=-1)
+
+
+def rot6d_to_matrix(r6: torch.Tensor) -> torch.Tensor:
+    """6D representation ``(..., 6)`` -> rotation ``(..., 3, 3)`` by Gram-Schmidt."""
+    a, b = r6[..., :3], r6[..., 3:]
+    x = a / torch.linalg.vector_norm(a, dim=-1, keepdim=True)
+    b = b - (x * b).sum(-1, keepdim=True) * x
+    y = b / torch.linalg.vector_norm(b, dim=-1, keepdim=True)
+    z = torch.linalg.cross(x, y, dim=-1)
+    return torch.stack([x, y, z], dim=-1)
+
+
+def pose_to_vector(T: torch.Tensor, representation: str = "quat") -> torch.Tensor:
+    """``T: (..., 4, 4)`` -> xyz followed by the rotation in ``representation``.
+
+    ``quat``: (..., 7) xyz + (w, x, y, z); ``rpy``: (..., 6) xyz + roll-pitch-yaw;
+    ``rot6d``: (..., 9) xyz + 6D; ``matrix``: (..., 12) xyz + the 9 rotation entries row by row.
+    """
+    p, R = T[..., :3, 3], T[..., :3, :3]
+    if representation == "quat":
+        rot = matrix_to_quaternion(R)
+    elif representation == "rpy":
+        rot = matrix_to_rpy(R)
+    elif representation == "rot6d":
+        rot = matrix_to_rot6d(R)
+    elif representation == "matrix":
+        rot = R.reshape(*R.shape[:-2], 9)
+    else:
+        raise ValueError(f"unknown pose representation {representation!r}; expected one of {sorted(POSE_DIMS)}")
+    return torch.cat([p, rot], dim=-1)
+
+
+def vector_to_pose(v: torch.Tensor, representation: str = "quat") -> torch.Tensor:
+    """Inverse of :func:`pose_to_vector`: ``(..., D)`` -> ``T: (..., 4, 4)``."""
+    if representation not in POSE_DIMS:
+        raise ValueError(f"unknown pose representation {representation!r}; expected one of {sorted(POSE_DIMS)}")
+    if v.shape[-1] != POSE_DIMS[representation]:
+        raise ValueError(
+            f"a {representation!r} pose has {POSE_DIMS[representation]} numbers per row, got shape {tuple(v.shape)}"
+        )
+    p, rot = v[..., :3], v[..., 3:]
+    if representation == "quat":
+        R = quaternion_to_matrix(rot)
+    elif representation == "rpy":
+        R = rpy_to_matrix(rot)
+    elif representation == "rot6d":
+        R = rot6d_to_matrix(rot)
+    else:
+        R = rot.reshape(*rot.shape[:-1], 3, 3)
+    return make_pose(R, p)
+
+
+def rotation_angle(R: torch.Tensor) -> torch.Tensor:
+    """Angle of the rotation ``R: (..., 3, 3)`` in radians, in [0, pi].
+
+    Computed as ``atan2(|vee(R - R^T)| / 2, (trace - 1) / 2)``: accurate near 0 (where
+    ``arccos`` loses half the digits and its derivative blows up) and never NaN for
+    ``trace`` slightly beyond [-1, 3]. Near pi the sine term is small and the cosine
+    term carries the angle, so the result is also accurate there.
+    """
+    vee = torch.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], dim=-1)
+    sin = 0.5 * torch.linalg.vector_norm(vee, dim=-1)
+    cos = 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1)
+    return torch.atan2(sin, cos)
+
+
+def pose_error(T_target: torch.Tensor, T: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Position and geodesic rotation error between poses.
+
+    Args:
+        T_target: (..., 4, 4) wanted poses.
+        T: (..., 4, 4) reached poses (broadcast against ``T_target``).
+
+    Returns:
+        ``(pos_err, rot_err)``, each ``(...,)``: Euclidean distance of the positions in metres,
+        and the angle of ``R_target^T R`` in radians (geodesic distance on SO(3)).
+    """
+    pos_err = torch.linalg.vector_norm(T[..., :3, 3] - T_target[..., :3, 3], dim=-1)
+    R_rel = T_target[..., :3, :3].transpose(-1, -2) @ T[..., :3, :3]
+    return pos_err, rotation_angle(R_rel)
+
+
+def _fail(name: str, what: str) -> ValueError:
+    return ValueError(f"{name}: {what}")
+
+
+def validate_pose(T: torch.Tensor, *, name: str = "T_target", tol: float = ORTHONORMAL_TOL) -> torch.Tensor:
+    """Check that ``T: (..., 4, 4)`` holds finite rigid transforms; return it unchanged.
+
+    Rejects, with a ``ValueError`` naming ``name`` and the offending row: a non-tensor or
+    wrong shape, NaN/inf, a bottom row other than ``[0, 0, 0, 1]``, and rotations with
+    ``max |R^T R - I| > tol`` or ``|det R - 1| > tol`` (``tol`` defaults to :data:`ORTHONORMAL_TOL`).
+    """
+    if not isinstance(T, torch.Tensor):
+        raise _fail(name, f"expected a torch.Tensor of shape (..., 4, 4), got {type(T).__name__}")
+    if T.ndim < 2 or T.shape[-2:] != (4, 4):
+        raise _fail(name, f"expected shape (..., 4, 4), got {tuple(T.shape)}")
+    if not T.is_floating_point():
+        raise _fail(name, f"expected a floating-point tensor, got {T.dtype}")
+    flat = T.detach().reshape(-1, 4, 4)
+    bad = ~torch.isfinite(flat).all(dim=(-1, -2))
+    if bad.any():
+        raise _fail(name, f"pose {int(bad.nonzero()[0])} contains NaN or inf")
+    bottom = flat[:, 3, :] - torch.tensor([0, 0, 0, 1], dtype=flat.dtype, device=flat.device)
+    bad = bottom.abs().amax(-1) > tol
+    if bad.any():
+        i = int(bad.nonzero()[0])
+        raise _fail(name, f"pose {i} has bottom row {flat[i, 3].tolist()}, expected [0, 0, 0, 1]")
+    R = flat[:, :3, :3]
+    eye = torch.eye(3, dtype=R.dtype, device=R.device)
+    ortho = (R.transpose(-1, -2) @ R - eye).abs().amax(dim=(-1, -2))
+    bad = ortho > tol
+    if bad.any():
+        i = int(bad.nonzero()[0])
+        raise _fail(name, f"rotation of pose {i} is not orthonormal (|R^T R - I| = {float(ortho[i]):.3g} > {tol:g})")
+    det = torch.linalg.det(R)
+    bad = (det - 1).abs() > tol
+    if bad.any():
+        i = int(bad.nonzero()[0])
+        raise _fail(name, f"rotation of pose {i} has det {float(det[i]):.6g}, expected +1 (a reflection?)")
+    return T
+
+
+def validate_quaternion(quat: torch.Tensor, *, name: str = "quaternion", tol: float = 1e-3) -> torch.Tensor:
+    """Return ``quat: (..., 4)`` normalised; reject NaN/inf and norms farther than ``tol`` from 1."""
+    if not torch.isfinite(quat).all():
+        raise _fail(name, "contains NaN or inf")
+    norm = torch.linalg.vector_norm(quat, dim=-1)
+    bad = (norm - 1).abs() > tol
+    if bad.any():
+        i = int(bad.reshape(-1).nonzero()[0])
+        raise _fail(name, f"row {i} has norm {float(norm.reshape(-1)[i]):.6g}; a unit quaternion (w, x, y, z) is expected")
+    return quat / norm[..., None]
+
+
+def validate_joints(q: torch.Tensor, dof: int, *, name: str = "q") -> torch.Tensor:
+    """Check that ``q: (..., dof)`` is a finite floating-point tensor; return it unchanged."""
+    if not isinstance(q, torch.Tensor):
+        raise _fail(name, f"expected a torch.Tensor of shape (..., {dof}), got {type(q).__name__}")
+    if q.ndim < 1 or q.shape[-1] != dof:
+        raise _fail(name, f"expected shape (..., {dof}) (one value per joint), got {tuple(q.shape)}")
+    if not q.is_floating_point():
+        raise _fail(name, f"expected a floating-point tensor (radians), got {q.dtype}")
+    if not torch.isfinite(q.detach()).all():
+        raise _fail(name, "contains NaN or inf joint values")
+    return q

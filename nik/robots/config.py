@@ -1,0 +1,234 @@
+"""Robot definitions from YAML files (DH, modified DH, screw axes, or a pointer to a URDF),
+and :func:`load_robot`, which resolves built-in names and paths.
+
+YAML schema (see ``shared/spec/interface.md``)::
+
+    name: my_arm
+    convention: dh | mdh | poe
+    unit: mm | m              # lengths (default m)
+    angles: deg | rad         # alpha, offset, limits (default rad)
+    base: {position: [x, y, z], rpy: [r, p, y]}     # optional, dh/mdh only
+    tool: {position: [x, y, z], rpy: [r, p, y]}     # optional, dh/mdh only
+    joints:
+      - {alpha: -90, a: 0, d: 0, offset: 0, limits: [-160, 160], name: j1}   # dh / mdh
+      - {axis: [0, 0, 1], point: [0, 0, 0], limits: [-180, 180]}            # poe
+    home: {position: [x, y, z], rotation: [[...], [...], [...]]}           # poe only
+
+or, for an arm described by a URDF: ``{name: ..., urdf: path/relative/to/this/file.urdf,
+end_link: ..., root_link: ...}``. Unknown keys are errors, so a typo never goes unnoticed.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from nik.errors import RobotDefinitionError
+from nik.poses import rpy_to_matrix
+from nik.robots.model import Robot, dh_chain, mdh_chain, poe_chain
+
+__all__ = ["BUILTIN_DIR", "builtin_robots", "load_robot", "robot_from_config"]
+
+#: Folder of the built-in robot files (``configs/robots`` at the repository root).
+BUILTIN_DIR = Path(__file__).resolve().parents[2] / "configs" / "robots"
+
+_TOP_KEYS = {"name", "convention", "unit", "angles", "joints", "home", "base", "tool", "urdf", "end_link", "root_link",
+             "description"}
+_DH_KEYS = {"alpha", "a", "d", "offset", "limits", "name", "theta"}
+_POE_KEYS = {"axis", "point", "offset", "limits", "name"}
+
+
+def builtin_robots() -> list[str]:
+    """Names of the robots shipped in ``configs/robots``."""
+    return sorted(p.stem for p in BUILTIN_DIR.glob("*.yaml") if _is_robot_file(p))
+
+
+def _is_robot_file(path: Path) -> bool:
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError):
+        return False
+    return isinstance(data, dict) and ("joints" in data or "urdf" in data)
+
+
+def load_robot(name_or_path, *, end_link: str | None = None) -> Robot:
+    """Load a robot by built-in name, YAML file or URDF file.
+
+    Args:
+        name_or_path: a built-in name (:func:`builtin_robots`), a ``.yaml``/``.yml`` robot file,
+            a ``.urdf`` file, or a :class:`Robot` (returned as is).
+        end_link: for URDF arms, the tool link (default: the last link of the longest chain of
+            revolute joints).
+
+    Raises:
+        RobotDefinitionError (a ValueError) naming the robot or file and what is wrong.
+    """
+    if isinstance(name_or_path, Robot):
+        return name_or_path
+    if not isinstance(name_or_path, (str, Path)):
+        raise RobotDefinitionError(f"load_robot expects a name or a path, got {type(name_or_path).__name__}")
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix.lower() in {".urdf", ".yaml", ".yml"} or path.exists():
+        if not path.is_file():
+            raise RobotDefinitionError(f"robot file not found: {path}")
+        if path.suffix.lower() == ".urdf":
+            from nik.robots.urdf import load_urdf
+
+            return load_urdf(path, end_link=end_link)
+        return robot_from_file(path, end_link=end_link)
+    builtin = BUILTIN_DIR / f"{text}.yaml"
+    if builtin.is_file() and _is_robot_file(builtin):
+        return robot_from_file(builtin, end_link=end_link)
+    raise RobotDefinitionError(
+        f"unknown robot {text!r}: not a built-in ({', '.join(builtin_robots())}) and not a robot file"
+    )
+
+
+def robot_from_file(path: str | Path, *, end_link: str | None = None) -> Robot:
+    """Load a YAML robot file; see the module docstring for the schema."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        raise RobotDefinitionError(f"{path}: not valid YAML ({err})") from err
+    return robot_from_config(data, source=str(path), base_dir=path.parent, end_link=end_link)
+
+
+def robot_from_config(data, *, source: str = "robot config", base_dir: Path | None = None,
+                      end_link: str | None = None) -> Robot:
+    """Build a :class:`Robot` from a parsed YAML mapping."""
+    if not isinstance(data, dict):
+        raise RobotDefinitionError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
+    _no_unknown(data, _TOP_KEYS, source)
+    if "urdf" in data:
+        from nik.robots.urdf import load_urdf
+
+        urdf = Path(data["urdf"])
+        if not urdf.is_absolute() and base_dir is not None:
+            urdf = base_dir / urdf
+        return load_urdf(urdf, end_link=end_link or data.get("end_link"), root_link=data.get("root_link"),
+                         name=data.get("name"))
+
+    name = data.get("name") or Path(source).stem
+    convention = data.get("convention")
+    if convention not in ("dh", "mdh", "poe"):
+        raise RobotDefinitionError(f"{source}: convention must be one of dh, mdh, poe; got {convention!r}")
+    unit = data.get("unit", "m")
+    if unit not in ("mm", "m"):
+        raise RobotDefinitionError(f"{source}: unit must be 'mm' or 'm', got {unit!r}")
+    angles = data.get("angles", "rad")
+    if angles not in ("deg", "rad"):
+        raise RobotDefinitionError(f"{source}: angles must be 'deg' or 'rad', got {angles!r}")
+    length = 1e-3 if unit == "mm" else 1.0
+    angle = math.pi / 180 if angles == "deg" else 1.0
+
+    joints = data.get("joints")
+    if not isinstance(joints, list) or not joints:
+        raise RobotDefinitionError(f"{source}: 'joints' must be a non-empty list")
+    n = len(joints)
+    limits = np.empty((n, 2))
+    offsets = np.zeros(n)
+    names = []
+    for i, j in enumerate(joints):
+        where = f"{source}: joints[{i}]"
+        if not isinstance(j, dict):
+            raise RobotDefinitionError(f"{where}: expected a mapping, got {j!r}")
+        _no_unknown(j, _DH_KEYS if convention in ("dh", "mdh") else _POE_KEYS, where)
+        limits[i] = _limits(j.get("limits", [-math.pi / angle, math.pi / angle]), where) * angle
+        offsets[i] = _number(j.get("offset", j.get("theta", 0.0)), f"{where}: offset") * angle
+        names.append(str(j.get("name", f"joint{i + 1}")))
+
+    if convention in ("dh", "mdh"):
+        if "home" in data:
+            raise RobotDefinitionError(f"{source}: 'home' belongs to convention poe, not {convention}")
+        alpha = [_number(_required(j, "alpha", f"{source}: joints[{i}]"), f"{source}: joints[{i}].alpha") * angle
+                 for i, j in enumerate(joints)]
+        a = [_number(_required(j, "a", f"{source}: joints[{i}]"), f"{source}: joints[{i}].a") * length
+             for i, j in enumerate(joints)]
+        d = [_number(_required(j, "d", f"{source}: joints[{i}]"), f"{source}: joints[{i}].d") * length
+             for i, j in enumerate(joints)]
+        base = _frame(data.get("base"), length, angle, f"{source}: base")
+        tool = _frame(data.get("tool"), length, angle, f"{source}: tool")
+        builder = dh_chain if convention == "dh" else mdh_chain
+        G = builder(alpha, a, d, base=base, tool=tool)
+    else:
+        for key in ("base", "tool"):
+            if key in data:
+                raise RobotDefinitionError(f"{source}: '{key}' is for dh/mdh; poe uses 'home'")
+        axes, points = [], []
+        for i, j in enumerate(joints):
+            where = f"{source}: joints[{i}]"
+            axis = _vector(_required(j, "axis", where), 3, f"{where}.axis")
+            if np.linalg.norm(axis) < 1e-9:
+                raise RobotDefinitionError(f"{where}.axis: must be non-zero")
+            axes.append(axis / np.linalg.norm(axis))
+            points.append(_vector(_required(j, "point", where), 3, f"{where}.point") * length)
+        home = _frame(_required(data, "home", source), length, angle, f"{source}: home")
+        G = poe_chain(axes, points, home)
+    return Robot(str(name), G, offsets, limits, names, source=source)
+
+
+# ---------------------------------------------------------------------------
+# Field checks: each raises RobotDefinitionError naming the field
+# ---------------------------------------------------------------------------
+def _no_unknown(mapping: dict, allowed: set[str], where: str) -> None:
+    unknown = set(map(str, mapping)) - allowed
+    if unknown:
+        raise RobotDefinitionError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+
+def _required(mapping: dict, key: str, where: str):
+    if key not in mapping:
+        raise RobotDefinitionError(f"{where}: missing field '{key}'")
+    return mapping[key]
+
+
+def _number(value, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise RobotDefinitionError(f"{where}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _vector(value, n: int, where: str) -> np.ndarray:
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise RobotDefinitionError(f"{where}: expected a list of {n} numbers, got {value!r}")
+    return np.array([_number(v, where) for v in value])
+
+
+def _limits(value, where: str) -> np.ndarray:
+    lim = _vector(value, 2, f"{where}.limits")
+    if not lim[0] < lim[1]:
+        raise RobotDefinitionError(f"{where}.limits: lower must be < upper, got {value!r}")
+    return lim
+
+
+def _frame(spec, length: float, angle: float, where: str) -> np.ndarray | None:
+    """``{position: [x, y, z], rpy: [r, p, y] | rotation: 3x3}`` -> 4x4, or None."""
+    if spec is None:
+        return None
+    if not isinstance(spec, dict):
+        raise RobotDefinitionError(f"{where}: expected a mapping with 'position' and optionally 'rpy' or 'rotation'")
+    _no_unknown(spec, {"position", "rpy", "rotation"}, where)
+    T = np.eye(4)
+    T[:3, 3] = _vector(spec.get("position", [0, 0, 0]), 3, f"{where}.position") * length
+    if "rpy" in spec and "rotation" in spec:
+        raise RobotDefinitionError(f"{where}: give 'rpy' or 'rotation', not both")
+    if "rpy" in spec:
+        import torch
+
+        rpy = torch.tensor(_vector(spec["rpy"], 3, f"{where}.rpy") * angle, dtype=torch.float64)
+        T[:3, :3] = rpy_to_matrix(rpy).numpy()
+    elif "rotation" in spec:
+        rows = spec["rotation"]
+        if not isinstance(rows, list) or len(rows) != 3:
+            raise RobotDefinitionError(f"{where}.rotation: expected a 3x3 list of rows")
+        R = np.stack([_vector(r, 3, f"{where}.rotation") for r in rows])
+        err = np.abs(R.T @ R - np.eye(3)).max()
+        if err > 1e-6 or abs(np.linalg.det(R) - 1) > 1e-6:
+            raise RobotDefinitionError(f"{where}.rotation: not a rotation matrix (|R^T R - I| = {err:.3g})")
+        T[:3, :3] = R
+    return T

@@ -1,0 +1,289 @@
+"""The :class:`Robot` model and the builders that reduce DH, modified DH and screw-axis
+(product of exponentials) tables to the FK normal form of :mod:`nik.kinematics`."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from nik.kinematics import chain_fk, chain_jacobian, to_homogeneous
+from nik.poses import validate_joints
+
+__all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
+
+
+# ---------------------------------------------------------------------------
+# Elementary float64 transforms (numpy, built once at load time)
+# ---------------------------------------------------------------------------
+def trans(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> np.ndarray:
+    """Pure translation, 4x4."""
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def rot_x(angle: float) -> np.ndarray:
+    """Rotation about x, 4x4. Exact at multiples of pi/2."""
+    c, s = _cos_sin(angle)
+    T = np.eye(4)
+    T[1:3, 1:3] = [[c, -s], [s, c]]
+    return T
+
+
+def rot_z(angle: float) -> np.ndarray:
+    """Rotation about z, 4x4. Exact at multiples of pi/2."""
+    c, s = _cos_sin(angle)
+    T = np.eye(4)
+    T[0:2, 0:2] = [[c, -s], [s, c]]
+    return T
+
+
+def _cos_sin(angle: float) -> tuple[float, float]:
+    # Snap multiples of pi/2 so that tables in degrees give exact 0 and +-1 entries.
+    quarter = angle / (math.pi / 2)
+    if abs(quarter - round(quarter)) < 1e-12:
+        k = int(round(quarter)) % 4
+        return [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][k]
+    return math.cos(angle), math.sin(angle)
+
+
+def axis_frame(axis: Sequence[float]) -> np.ndarray:
+    """A rotation ``P`` (4x4) with ``P e_z = axis``, so that ``Rot(axis, q) = P Rz(q) P^T``.
+
+    Exact (entries 0 and +-1) for axes along the coordinate axes.
+    """
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    h = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = h - (h @ a) * a
+    x /= np.linalg.norm(x)
+    y = np.cross(a, x)
+    P = np.eye(4)
+    P[:3, :3] = np.stack([x, y, a], axis=1)
+    return P
+
+
+class NormalFormBuilder:
+    """Collects a chain of fixed transforms and revolute joints into ``G: (n + 1, 4, 4)``.
+
+    ``fixed(M)`` right-multiplies a constant transform; ``joint(axis)`` inserts a revolute
+    joint about ``axis`` expressed in the current frame.
+    """
+
+    def __init__(self, base: np.ndarray | None = None):
+        self._current = np.eye(4) if base is None else np.asarray(base, dtype=float)
+        self._G: list[np.ndarray] = []
+
+    def fixed(self, M: np.ndarray) -> NormalFormBuilder:
+        self._current = self._current @ M
+        return self
+
+    def joint(self, axis: Sequence[float] = (0.0, 0.0, 1.0)) -> NormalFormBuilder:
+        P = axis_frame(axis)
+        self._G.append(self._current @ P)
+        self._current = P.T.copy()
+        return self
+
+    def finish(self, tool: np.ndarray | None = None) -> np.ndarray:
+        last = self._current if tool is None else self._current @ tool
+        return np.stack(self._G + [last])
+
+
+def dh_chain(alpha, a, d, *, base=None, tool=None) -> np.ndarray:
+    """Standard (distal) DH: ``A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``; SI units. Returns G."""
+    b = NormalFormBuilder(base)
+    for al, ai, di in zip(alpha, a, d):
+        b.joint().fixed(trans(z=di) @ trans(x=ai) @ rot_x(al))
+    return b.finish(tool)
+
+
+def mdh_chain(alpha, a, d, *, base=None, tool=None) -> np.ndarray:
+    """Modified DH (Craig): ``A_i = Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i)``; SI units. Returns G."""
+    b = NormalFormBuilder(base)
+    for al, ai, di in zip(alpha, a, d):
+        b.fixed(rot_x(al) @ trans(x=ai)).joint().fixed(trans(z=di))
+    return b.finish(tool)
+
+
+def poe_chain(axes, points, home: np.ndarray) -> np.ndarray:
+    """Space-frame product of exponentials: ``T = exp([xi_1] q_1) ... exp([xi_n] q_n) M``.
+
+    Revolute screw ``i`` turns about the unit axis ``axes[i]`` through ``points[i]`` (metres):
+    ``exp([xi] q) = Tr(r) Rot(axis, q) Tr(-r)``. ``home`` is ``M``, the tool pose at q = 0.
+    """
+    b = NormalFormBuilder()
+    for w, r in zip(axes, points):
+        b.fixed(trans(*r)).joint(w).fixed(trans(*(-np.asarray(r, dtype=float))))
+    return b.finish(home)
+
+
+# ---------------------------------------------------------------------------
+# Robot
+# ---------------------------------------------------------------------------
+class Robot:
+    """A serial revolute arm: names, joint limits and a batched, differentiable FK.
+
+    Built by :func:`nik.load_robot` (or :meth:`from_definition`); all quantities SI.
+
+    Attributes:
+        name: robot name.
+        dof: number of joints.
+        joint_names: one name per joint.
+        limits: (dof, 2) float64 tensor, radians (lower, upper) of the joint variable ``q``.
+        end_link: tool link name for URDF arms, else None.
+        G: (dof + 1, 4, 4) float64 normal-form transforms (see :mod:`nik.kinematics`).
+        offsets: (dof,) float64, ``theta = q + offset``.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        G: np.ndarray | torch.Tensor,
+        offsets: Sequence[float] | torch.Tensor,
+        limits: np.ndarray | torch.Tensor,
+        joint_names: Sequence[str] | None = None,
+        *,
+        end_link: str | None = None,
+        source: str | None = None,
+    ):
+        self.G = torch.as_tensor(np.asarray(G, dtype=float), dtype=torch.float64)
+        n = self.G.shape[0] - 1
+        self.offsets = torch.as_tensor(np.asarray(offsets, dtype=float), dtype=torch.float64).reshape(n)
+        self.limits = torch.as_tensor(np.asarray(limits, dtype=float), dtype=torch.float64).reshape(n, 2)
+        if not bool((self.limits[:, 0] < self.limits[:, 1]).all()):
+            raise ValueError(f"robot {name!r}: every joint needs lower limit < upper limit, got {self.limits.tolist()}")
+        self.name = name
+        self.dof = n
+        self.joint_names = list(joint_names) if joint_names is not None else [f"joint{i + 1}" for i in range(n)]
+        if len(self.joint_names) != n:
+            raise ValueError(f"robot {name!r}: {len(self.joint_names)} joint names for {n} joints")
+        self.end_link = end_link
+        self.source = source
+        self._cache: dict[tuple[torch.dtype, torch.device], tuple[torch.Tensor, torch.Tensor]] = {}
+
+    # -- identity -------------------------------------------------------
+    def to_definition(self) -> dict:
+        """A plain-data (JSON-able) description that :meth:`from_definition` rebuilds exactly."""
+        return {
+            "name": self.name,
+            "joint_names": list(self.joint_names),
+            "end_link": self.end_link,
+            "G": self.G.tolist(),
+            "offsets": self.offsets.tolist(),
+            "limits": self.limits.tolist(),
+        }
+
+    @classmethod
+    def from_definition(cls, definition: dict) -> Robot:
+        """Rebuild a robot from :meth:`to_definition` output (for checkpoints and datasets)."""
+        try:
+            return cls(
+                definition["name"],
+                definition["G"],
+                definition["offsets"],
+                definition["limits"],
+                definition["joint_names"],
+                end_link=definition.get("end_link"),
+            )
+        except (KeyError, TypeError) as err:
+            raise ValueError(f"malformed robot definition: {err}") from err
+
+    @property
+    def definition_hash(self) -> str:
+        """SHA-256 (hex, 16 chars) of the kinematics and limits; the name is not part of it."""
+        h = hashlib.sha256()
+        for arr in (self.G, self.offsets, self.limits):
+            h.update(np.round(arr.numpy(), 12).astype("<f8").tobytes())
+        return h.hexdigest()[:16]
+
+    def __repr__(self) -> str:
+        return f"Robot(name={self.name!r}, dof={self.dof}, hash={self.definition_hash})"
+
+    # -- kinematics -----------------------------------------------------
+    def _params(self, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        key = (like.dtype, like.device)
+        if key not in self._cache:
+            self._cache[key] = (self.G.to(like.device, like.dtype), self.offsets.to(like.device, like.dtype))
+        return self._cache[key]
+
+    def fk(self, q: torch.Tensor, *, compiled: bool = False) -> torch.Tensor:
+        """Forward kinematics.
+
+        Args:
+            q: (..., dof) joint angles in radians; any leading batch shape, any float dtype/device.
+            compiled: run the ``torch.compile``'d kernel (fast for large batches; the first call compiles).
+
+        Returns:
+            (..., 4, 4) tool poses in the base frame, metres, in q's dtype and device;
+            differentiable with respect to ``q``.
+        """
+        validate_joints(q, self.dof)
+        G, off = self._params(q)
+        batch = q.shape[:-1]
+        T = chain_fk(q.reshape(-1, self.dof), G, off, compiled=compiled)
+        return to_homogeneous(T).reshape(*batch, 4, 4)
+
+    def fk_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """FK and geometric Jacobian in the base frame.
+
+        Args:
+            q: (..., dof) radians.
+
+        Returns:
+            ``T: (..., 4, 4)`` and ``J: (..., 6, dof)`` (rows: linear then angular velocity).
+        """
+        validate_joints(q, self.dof)
+        G, off = self._params(q)
+        batch = q.shape[:-1]
+        T, J = chain_jacobian(q.reshape(-1, self.dof), G, off)
+        return to_homogeneous(T).reshape(*batch, 4, 4), J.reshape(*batch, 6, self.dof)
+
+    # -- joint space ----------------------------------------------------
+    def sample(
+        self,
+        n: int,
+        *,
+        generator: torch.Generator | None = None,
+        dtype: torch.dtype | None = None,
+        device: torch.device | str | None = None,
+        ranges: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """``(n, dof)`` joint vectors uniform within the limits (or within ``ranges: (dof, 2)``).
+
+        Drawn in float64 on the generator's device and then cast, so the same generator seed
+        gives the same joints in every dtype (up to rounding) and on every device.
+        """
+        if int(n) < 0:
+            raise ValueError(f"sample: n must be >= 0, got {n}")
+        lim = self.limits if ranges is None else torch.as_tensor(ranges, dtype=torch.float64).reshape(self.dof, 2)
+        gen_device = generator.device if generator is not None else torch.device("cpu")
+        u = torch.rand(int(n), self.dof, generator=generator, dtype=torch.float64, device=gen_device)
+        lim = lim.to(gen_device)
+        q = lim[:, 0] + u * (lim[:, 1] - lim[:, 0])
+        dtype = dtype or torch.get_default_dtype()
+        q = q.to(device=device or gen_device, dtype=dtype)
+        lo, hi = self.limits_as(q)
+        return torch.minimum(torch.maximum(q, lo), hi)
+
+    def limits_as(self, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Lower and upper limits ``(dof,)`` each, in the dtype/device of ``like``, rounded inward."""
+        lim = self.limits.to(like.device)
+        lo, hi = lim[:, 0].to(like.dtype), lim[:, 1].to(like.dtype)
+        # a float32 cast may round a limit outward; nudge it back inside
+        lo = torch.where(lo.double() < lim[:, 0], torch.nextafter(lo, hi), lo)
+        hi = torch.where(hi.double() > lim[:, 1], torch.nextafter(hi, lo), hi)
+        return lo, hi
+
+    def within_limits(self, q: torch.Tensor, *, atol: float = 0.0) -> torch.Tensor:
+        """``(...,)`` bool: every joint of ``q: (..., dof)`` inside ``[lower - atol, upper + atol]``."""
+        lo, hi = self.limits_as(q)
+        return ((q >= lo - atol) & (q <= hi + atol)).all(dim=-1)
+
+    def clamp(self, q: torch.Tensor) -> torch.Tensor:
+        """``q: (..., dof)`` clamped into the joint limits."""
+        lo, hi = self.limits_as(q)
+        return torch.minimum(torch.maximum(q, lo), hi)

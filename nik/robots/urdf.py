@@ -1,0 +1,116 @@
+"""URDF arms through pytorch-kinematics (the only module of nik that imports it).
+
+pytorch-kinematics parses the file and gives the serial chain from the root to the tool
+link; nik then converts that chain once into its own FK normal form, so a URDF arm runs
+on nik's FK like any other.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from nik.errors import RobotDefinitionError
+from nik.robots.model import NormalFormBuilder, Robot
+
+__all__ = ["load_urdf", "default_end_link", "build_pk_chain"]
+
+
+def _parse_chain(text: str, source: str):
+    import pytorch_kinematics as pk
+
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):  # the parser prints notes on unknown tags
+            return pk.build_chain_from_urdf(text)
+    except Exception as err:
+        raise RobotDefinitionError(f"{source}: not a readable URDF ({type(err).__name__}: {err})") from err
+
+
+def default_end_link(text: str, source: str = "URDF") -> str:
+    """The child link of the last joint of the longest chain of revolute joints (first found on ties)."""
+    chain = _parse_chain(text, source)
+    best = (0, None)
+
+    def visit(frame, count):
+        nonlocal best
+        if frame.joint.joint_type == "revolute":
+            count += 1
+            if count > best[0]:
+                best = (count, frame.link.name)
+        for child in frame.children:
+            visit(child, count)
+
+    visit(chain._root, 0)
+    if best[1] is None:
+        raise RobotDefinitionError(f"{source}: has no revolute joints")
+    return best[1]
+
+
+def build_pk_chain(text: str, end_link: str, root_link: str = ""):
+    """pytorch-kinematics ``SerialChain`` from the root (or ``root_link``) to ``end_link``."""
+    import pytorch_kinematics as pk
+
+    with contextlib.redirect_stderr(io.StringIO()):
+        return pk.build_serial_chain_from_urdf(text, end_link, root_link)
+
+
+def load_urdf(
+    path: str | Path, *, end_link: str | None = None, root_link: str | None = None, name: str | None = None
+) -> Robot:
+    """Load a serial revolute arm from a URDF file.
+
+    Args:
+        path: the ``.urdf`` file.
+        end_link: the tool link; default :func:`default_end_link`.
+        root_link: the base link; default the URDF's root.
+        name: robot name; default the URDF's ``<robot name>``.
+
+    Continuous joints get limits [-pi, pi]; prismatic joints between base and tool are refused.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RobotDefinitionError(f"URDF file not found: {path}")
+    text = path.read_text()
+    chain = _parse_chain(text, str(path))
+    end_link = end_link or default_end_link(text, str(path))
+    links = {f.link.name for f in _frames(chain._root)}
+    for role, link in (("end_link", end_link), ("root_link", root_link)):
+        if link is not None and link not in links:
+            raise RobotDefinitionError(f"{path}: {role} {link!r} is not a link of this URDF (links: {sorted(links)})")
+    try:
+        serial = build_pk_chain(text, end_link, root_link or "")
+    except Exception as err:
+        raise RobotDefinitionError(f"{path}: cannot build a chain to {end_link!r}: {err}") from err
+
+    builder = NormalFormBuilder()
+    names, limits = [], []
+    for frame in serial._serial_frames[1:]:
+        for offset in (frame.link.offset, frame.joint.offset):
+            if offset is not None:
+                builder.fixed(offset.get_matrix()[0].double().numpy())
+        jtype = frame.joint.joint_type
+        if jtype == "prismatic":
+            raise RobotDefinitionError(f"{path}: joint {frame.joint.name!r} is prismatic; nik supports revolute joints")
+        if jtype == "revolute":
+            builder.joint(frame.joint.axis.double().numpy())
+            names.append(frame.joint.name)
+            lim = frame.joint.limits
+            limits.append([-math.pi, math.pi] if lim is None or lim[0] >= lim[1] else [float(lim[0]), float(lim[1])])
+    if not names:
+        raise RobotDefinitionError(f"{path}: no revolute joint between the root and {end_link!r}")
+    if name is None:
+        m = re.search(r'<robot[^>]*\bname\s*=\s*"([^"]+)"', text)
+        name = m.group(1) if m else path.stem
+    return Robot(name, builder.finish(), np.zeros(len(names)), np.array(limits), names, end_link=end_link,
+                 source=str(path))
+
+
+def _frames(root):
+    yield root
+    for child in root.children:
+        yield from _frames(child)
