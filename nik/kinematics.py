@@ -13,17 +13,23 @@ constant ``G_i`` is one plain matrix product over the whole batch. Only the top 
 ``(..., 3, 4)`` are carried. There is no Python work per sample; the Python loop is over
 joints only.
 
-``torch.compile`` fuses the whole product into one kernel; :func:`chain_fk` uses the
-compiled version when asked and falls back to eager if compilation is unavailable.
+Two implementations of that product:
+
+- :func:`chain_fk_eager`, generic: a column rotation and one small matrix product per joint;
+- :func:`generate_fk_source`, specialised: for one robot, straight-line code over the twelve
+  entries of ``T`` with the constants of ``G`` written in, so that products by the zeros and
+  ones of DH tables disappear. It runs eagerly, and ``torch.compile`` fuses it into one loop
+  over the batch (:class:`FKKernel` with ``compiled=True``), with a plain eager fallback.
 """
 
 from __future__ import annotations
 
 import warnings
 
+import numpy as np
 import torch
 
-__all__ = ["chain_fk", "chain_fk_eager", "chain_jacobian", "to_homogeneous"]
+__all__ = ["FKKernel", "chain_fk", "chain_fk_eager", "chain_jacobian", "generate_fk_source", "to_homogeneous"]
 
 
 def to_homogeneous(T34: torch.Tensor) -> torch.Tensor:
@@ -58,38 +64,141 @@ def chain_fk_eager(q: torch.Tensor, G: torch.Tensor, offsets: torch.Tensor) -> t
     return T
 
 
-_compiled_fk = None
-_compile_failed = False
-
-
-def _get_compiled():
-    global _compiled_fk, _compile_failed
-    if _compiled_fk is None and not _compile_failed:
-        try:
-            _compiled_fk = torch.compile(chain_fk_eager, dynamic=True)
-        except Exception as err:  # pragma: no cover - depends on the platform's compiler
-            _compile_failed = True
-            warnings.warn(f"torch.compile unavailable ({err}); nik FK falls back to eager", stacklevel=3)
-    return _compiled_fk
+_compiled_chain_fk = None
 
 
 def chain_fk(q: torch.Tensor, G: torch.Tensor, offsets: torch.Tensor, *, compiled: bool = False) -> torch.Tensor:
-    """FK of the normal form for ``q: (B, n)`` -> ``(B, 3, 4)``; see :func:`chain_fk_eager`.
+    """Generic FK of the normal form for ``q: (B, n)`` -> ``(B, 3, 4)`` (see :func:`chain_fk_eager`).
 
-    ``compiled=True`` runs a ``torch.compile``'d kernel (the first call per dtype/device
-    compiles, which takes seconds); if compilation fails at run time nik warns once and
-    stays eager from then on.
+    ``compiled=True`` runs it through ``torch.compile`` (falls back to eager on failure). For one
+    fixed robot, :class:`FKKernel` (what :meth:`nik.Robot.fk` uses) is faster.
     """
-    global _compile_failed
-    if compiled and not _compile_failed:
-        fn = _get_compiled()
-        if fn is not None:
-            try:
-                return fn(q, G, offsets)
-            except Exception as err:  # pragma: no cover - depends on the platform's compiler
-                _compile_failed = True
-                warnings.warn(f"compiled FK failed ({type(err).__name__}: {err}); falling back to eager", stacklevel=2)
+    global _compiled_chain_fk
+    if compiled:
+        try:
+            if _compiled_chain_fk is None:
+                _compiled_chain_fk = torch.compile(chain_fk_eager, dynamic=True)
+            return _compiled_chain_fk(q, G, offsets)
+        except Exception as err:  # pragma: no cover - depends on the platform's compiler
+            warnings.warn(f"compiled FK failed ({type(err).__name__}: {err}); using eager FK", stacklevel=2)
     return chain_fk_eager(q, G, offsets)
+
+
+def _term(coef: float, var: str) -> str:
+    if coef == 1.0:
+        return f"+ {var}"
+    if coef == -1.0:
+        return f"- {var}"
+    return f"+ {var} * {coef!r}" if coef > 0 else f"- {var} * {-coef!r}"
+
+
+def generate_fk_source(G, offsets, *, name: str = "fk_kernel") -> str:
+    """Python source of a function ``name(q: (B, n)) -> (B, 4, 4)`` computing the normal-form FK.
+
+    Each entry of ``T`` is tracked as a linear combination ``{variable: coefficient}`` of
+    tensors, plus a constant; multiplying by a constant ``G_i`` only changes coefficients,
+    and a new tensor variable is emitted only where two or more terms meet. Zero entries of
+    ``G`` contribute nothing. The result equals :func:`chain_fk_eager` up to rounding.
+    """
+    G = np.asarray(G, dtype=float)
+    n = G.shape[0] - 1
+    lines = [
+        f"def {name}(q):",
+        f"    theta = q + q.new_tensor({[float(o) for o in offsets]!r})",
+        "    c = torch.cos(theta)",
+        "    s = torch.sin(theta)",
+    ]
+    counter = 0
+
+    def emit(expr: dict) -> dict:
+        nonlocal counter
+        const = expr.get("", 0.0)
+        terms = [(v, cf) for v, cf in expr.items() if v and cf != 0.0]
+        if not terms or (len(terms) == 1 and const == 0.0):
+            return {v: cf for v, cf in terms} or {"": const}
+        counter += 1
+        body = " ".join(_term(cf, v) for v, cf in terms) + (f" + {const!r}" if const != 0.0 else "")
+        body = body[2:] if body.startswith("+ ") else "-" + body[2:]
+        lines.append(f"    v{counter} = {body}")
+        return {f"v{counter}": 1.0}
+
+    def scaled(expr: dict, factor: str, sign: float) -> dict:
+        return {(factor if v == "" else f"{v} * {factor}"): sign * cf for v, cf in expr.items() if cf != 0.0}
+
+    def added(a: dict, b: dict) -> dict:
+        out = dict(a)
+        for v, cf in b.items():
+            out[v] = out.get(v, 0.0) + cf
+        return out
+
+    T = [[{"": float(G[0, r, k])} for k in range(4)] for r in range(3)]
+    for i in range(n):
+        lines += [f"    c{i} = c[:, {i}]", f"    s{i} = s[:, {i}]"]
+        rotated = []
+        for r in range(3):
+            x, y = T[r][0], T[r][1]
+            col0 = emit(added(scaled(x, f"c{i}", 1.0), scaled(y, f"s{i}", 1.0)))
+            col1 = emit(added(scaled(y, f"c{i}", 1.0), scaled(x, f"s{i}", -1.0)))
+            rotated.append([col0, col1, T[r][2], T[r][3]])
+        Gi = G[i + 1]
+        T = []
+        for r in range(3):
+            row = []
+            for col in range(4):
+                acc: dict = {}
+                for k in range(4):
+                    g = float(Gi[k, col]) if k < 3 else float(col == 3)
+                    if g != 0.0:
+                        acc = added(acc, {v: cf * g for v, cf in rotated[r][k].items()})
+                row.append(acc)
+            T.append(row)
+    outputs = []
+    for r in range(3):
+        for k in range(4):
+            expr = emit(T[r][k])
+            ((v, cf),) = expr.items() if len(expr) == 1 else ((None, None),)
+            if v == "":
+                outputs.append(f"q.new_full(q.shape[:1], {cf!r})")
+            elif cf == 1.0:
+                outputs.append(v)
+            elif cf == -1.0:
+                outputs.append(f"(-{v})")
+            else:
+                outputs.append(f"({v} * {cf!r})")
+    lines += [
+        "    z = q.new_zeros(q.shape[:1])",
+        "    o = q.new_ones(q.shape[:1])",
+        f"    return torch.stack([{', '.join(outputs)}, z, z, z, o], dim=-1).reshape(-1, 4, 4)",
+    ]
+    return "\n".join(lines)
+
+
+class FKKernel:
+    """The specialised FK of one robot (:func:`generate_fk_source`), eager and compiled.
+
+    ``kernel(q: (B, n), compiled=False) -> (B, 4, 4)``. The compiled version is built on first
+    use (seconds) with ``torch.compile(dynamic=True)``; if compiling or running it fails, a
+    warning is given once and the eager version is used from then on.
+    """
+
+    def __init__(self, G, offsets):
+        self.source = generate_fk_source(G, offsets)
+        namespace: dict = {"torch": torch}
+        exec(compile(self.source, "<nik generated fk>", "exec"), namespace)
+        self.eager = namespace["fk_kernel"]
+        self._compiled = None
+        self._compile_failed = False
+
+    def __call__(self, q: torch.Tensor, *, compiled: bool = False) -> torch.Tensor:
+        if compiled and not self._compile_failed:
+            try:
+                if self._compiled is None:
+                    self._compiled = torch.compile(self.eager, dynamic=True)
+                return self._compiled(q)
+            except Exception as err:  # pragma: no cover - depends on the platform's compiler
+                self._compile_failed = True
+                warnings.warn(f"compiled FK failed ({type(err).__name__}: {err}); using eager FK", stacklevel=2)
+        return self.eager(q)
 
 
 def chain_jacobian(q: torch.Tensor, G: torch.Tensor, offsets: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

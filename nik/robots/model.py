@@ -10,7 +10,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from nik.kinematics import chain_fk, chain_jacobian, to_homogeneous
+from nik.kinematics import FKKernel, chain_jacobian, to_homogeneous
 from nik.poses import validate_joints
 
 __all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
@@ -164,6 +164,7 @@ class Robot:
         self.end_link = end_link
         self.source = source
         self._cache: dict[tuple[torch.dtype, torch.device], tuple[torch.Tensor, torch.Tensor]] = {}
+        self._kernel: FKKernel | None = None
 
     # -- identity -------------------------------------------------------
     def to_definition(self) -> dict:
@@ -222,10 +223,9 @@ class Robot:
             differentiable with respect to ``q``.
         """
         validate_joints(q, self.dof)
-        G, off = self._params(q)
-        batch = q.shape[:-1]
-        T = chain_fk(q.reshape(-1, self.dof), G, off, compiled=compiled)
-        return to_homogeneous(T).reshape(*batch, 4, 4)
+        if self._kernel is None:
+            self._kernel = FKKernel(self.G.numpy(), self.offsets.numpy())
+        return self._kernel(q.reshape(-1, self.dof), compiled=compiled).reshape(*q.shape[:-1], 4, 4)
 
     def fk_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """FK and geometric Jacobian in the base frame.

@@ -14,8 +14,10 @@ import re
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from nik.errors import RobotDefinitionError
+from nik.poses import rpy_to_matrix
 from nik.robots.model import NormalFormBuilder, Robot
 
 __all__ = ["load_urdf", "default_end_link", "build_pk_chain"]
@@ -60,7 +62,12 @@ def build_pk_chain(text: str, end_link: str, root_link: str = ""):
 
 
 def load_urdf(
-    path: str | Path, *, end_link: str | None = None, root_link: str | None = None, name: str | None = None
+    path: str | Path,
+    *,
+    end_link: str | None = None,
+    root_link: str | None = None,
+    name: str | None = None,
+    origins: str = "pk",
 ) -> Robot:
     """Load a serial revolute arm from a URDF file.
 
@@ -70,8 +77,17 @@ def load_urdf(
         root_link: the base link; default the URDF's root.
         name: robot name; default the URDF's ``<robot name>``.
 
+        origins: where the fixed joint transforms come from. ``"pk"`` (default): the transforms
+            pytorch-kinematics parsed, so nik and pytorch-kinematics agree to machine precision on
+            the same file. pytorch-kinematics converts ``rpy`` through float32, so those transforms
+            carry errors up to about 1e-7 (0.1 micrometre, 1e-7 rad) for angles such as pi/2;
+            ``"float64"`` recomputes every ``<origin>`` from the file in float64 (exact FK, which then
+            differs from pytorch-kinematics' by that much).
+
     Continuous joints get limits [-pi, pi]; prismatic joints between base and tool are refused.
     """
+    if origins not in ("pk", "float64"):
+        raise ValueError(f"origins must be 'pk' or 'float64', got {origins!r}")
     path = Path(path)
     if not path.is_file():
         raise RobotDefinitionError(f"URDF file not found: {path}")
@@ -87,17 +103,22 @@ def load_urdf(
     except Exception as err:
         raise RobotDefinitionError(f"{path}: cannot build a chain to {end_link!r}: {err}") from err
 
+    urdf = _parse_urdf(text) if origins == "float64" else None
     builder = NormalFormBuilder()
     names, limits = [], []
     for frame in serial._serial_frames[1:]:
-        for offset in (frame.link.offset, frame.joint.offset):
-            if offset is not None:
-                builder.fixed(offset.get_matrix()[0].double().numpy())
+        if urdf is not None:
+            joint = urdf.joint_map[frame.joint.name]
+            builder.fixed(_origin_matrix(joint.origin))
+        else:
+            for offset in (frame.link.offset, frame.joint.offset):
+                if offset is not None:
+                    builder.fixed(offset.get_matrix()[0].double().numpy())
         jtype = frame.joint.joint_type
         if jtype == "prismatic":
             raise RobotDefinitionError(f"{path}: joint {frame.joint.name!r} is prismatic; nik supports revolute joints")
         if jtype == "revolute":
-            builder.joint(frame.joint.axis.double().numpy())
+            builder.joint(frame.joint.axis.double().numpy() if urdf is None else _axis(urdf.joint_map[frame.joint.name]))
             names.append(frame.joint.name)
             lim = frame.joint.limits
             limits.append([-math.pi, math.pi] if lim is None or lim[0] >= lim[1] else [float(lim[0]), float(lim[1])])
@@ -108,6 +129,29 @@ def load_urdf(
         name = m.group(1) if m else path.stem
     return Robot(name, builder.finish(), np.zeros(len(names)), np.array(limits), names, end_link=end_link,
                  source=str(path))
+
+
+def _parse_urdf(text: str):
+    from pytorch_kinematics.urdf_parser_py.urdf import URDF
+
+    with contextlib.redirect_stderr(io.StringIO()):
+        return URDF.from_xml_string(text)
+
+
+def _axis(joint) -> np.ndarray:
+    return np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+
+
+def _origin_matrix(origin) -> np.ndarray:
+    """URDF ``<origin xyz rpy>`` -> 4x4 float64: translation, then R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    T = np.eye(4)
+    if origin is None:
+        return T
+    if origin.rpy is not None:
+        T[:3, :3] = rpy_to_matrix(torch.tensor(origin.rpy, dtype=torch.float64)).numpy()
+    if origin.xyz is not None:
+        T[:3, 3] = origin.xyz
+    return T
 
 
 def _frames(root):

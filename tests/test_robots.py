@@ -1,0 +1,160 @@
+"""Robot loading: built-ins, YAML files in every unit, URDF options, sampling, and clear errors."""
+
+import math
+
+import pytest
+import torch
+from torch.testing import assert_close
+
+import nik
+from nik.errors import RobotDefinitionError
+
+PAPER_A_PUMA = """\
+name: puma560_paper_a
+convention: dh
+unit: mm
+angles: deg
+joints:
+  - {alpha: -90, a: 0, d: 0, offset: 0, limits: [-160, 160]}
+  - {alpha: 0, a: 431.8, d: 149.09, limits: [-225, 45]}
+  - {alpha: 90, a: 0, d: 0, limits: [-45, 225]}
+  - {alpha: -90, a: 0, d: 433.07, limits: [-110, 170]}
+  - {alpha: 90, a: 0, d: 0, limits: [-100, 100]}
+  - {alpha: 0, a: 0, d: 56.25, limits: [-266, 266]}
+"""
+
+
+def write(tmp_path, text, name="arm.yaml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_builtins_are_listed_and_load():
+    names = nik.builtin_robots()
+    for required in ["puma560", "kuka_kr", "rebot_v_6r", "panda", "ur5"]:
+        assert required in names
+    dofs = {n: nik.load_robot(n).dof for n in names}
+    assert dofs["panda"] == 7 and dofs["ur5"] == 6 and dofs["kuka_kr"] == 6
+
+
+def test_robot_attributes_follow_the_interface():
+    robot = nik.load_robot("puma560")
+    assert robot.name == "puma560" and robot.dof == 6 and len(robot.joint_names) == 6
+    assert robot.end_link is None
+    assert robot.limits.dtype == torch.float64 and robot.limits.shape == (6, 2)
+    assert_close(robot.limits[1], torch.tensor([-225.0, 45.0], dtype=torch.float64) * math.pi / 180)
+
+
+def test_user_defined_paper_a_puma_needs_no_code(tmp_path):
+    robot = nik.load_robot(write(tmp_path, PAPER_A_PUMA))
+    assert robot.name == "puma560_paper_a"
+    # zero pose with a3 = 0: p = (a2, d2, d4 + d6)
+    T = robot.fk(torch.zeros(6, dtype=torch.float64))
+    assert_close(T[:3, 3], torch.tensor([0.4318, 0.14909, 0.48932], dtype=torch.float64), atol=1e-12, rtol=0)
+
+
+def test_metres_and_radians_give_the_same_robot_as_mm_and_degrees(tmp_path):
+    mm = nik.load_robot(write(tmp_path, PAPER_A_PUMA))
+    rows = [(-90, 0, 0, (-160, 160)), (0, 431.8, 149.09, (-225, 45)), (90, 0, 0, (-45, 225)),
+            (-90, 0, 433.07, (-110, 170)), (90, 0, 0, (-100, 100)), (0, 0, 56.25, (-266, 266))]
+    r = math.pi / 180
+    text = "name: si\nconvention: dh\nunit: m\nangles: rad\njoints:\n" + "".join(
+        f"  - {{alpha: {al * r!r}, a: {a / 1000!r}, d: {d / 1000!r}, limits: [{lo * r!r}, {hi * r!r}]}}\n"
+        for al, a, d, (lo, hi) in rows)
+    si = nik.load_robot(write(tmp_path, text, "si.yaml"))
+    q = si.sample(50, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    assert_close(si.fk(q), mm.fk(q), atol=1e-12, rtol=0)
+    assert_close(si.limits, mm.limits, atol=1e-12, rtol=0)
+    assert si.definition_hash == mm.definition_hash
+
+
+def test_default_limits_are_plus_minus_180_degrees(tmp_path):
+    robot = nik.load_robot(write(tmp_path, "convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0}\n"))
+    assert_close(robot.limits, torch.tensor([[-math.pi, math.pi]], dtype=torch.float64))
+    assert robot.name == "arm"
+
+
+def test_urdf_default_end_link_is_last_link_of_longest_revolute_chain():
+    assert nik.load_robot("configs/robots/urdf/panda.urdf").end_link == "panda_link7"
+    assert nik.load_robot("ur5").end_link == "wrist_3_link"
+
+
+def test_sample_is_within_limits_reproducible_and_uniform():
+    robot = nik.load_robot("kuka_kr")
+    a = robot.sample(20000, generator=torch.Generator().manual_seed(3))
+    b = robot.sample(20000, generator=torch.Generator().manual_seed(3))
+    assert a.shape == (20000, 6) and a.dtype == torch.get_default_dtype()
+    assert torch.equal(a, b)
+    assert robot.within_limits(a).all()
+    lo, hi = robot.limits[:, 0].float(), robot.limits[:, 1].float()
+    mean = (a.mean(0) - lo) / (hi - lo)
+    assert_close(mean, torch.full((6,), 0.5), atol=0.02, rtol=0)  # uniform: mean at the middle of the range
+
+
+def test_definition_round_trip_keeps_fk_and_hash():
+    robot = nik.load_robot("rebot_v_6r")
+    again = nik.Robot.from_definition(robot.to_definition())
+    q = robot.sample(10, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    assert_close(again.fk(q), robot.fk(q), atol=0, rtol=0)
+    assert again.definition_hash == robot.definition_hash
+    assert nik.load_robot("puma560").definition_hash != robot.definition_hash
+
+
+def test_clamp_and_within_limits():
+    robot = nik.load_robot("puma560")
+    q = torch.full((1, 6), 10.0)
+    assert not robot.within_limits(q).item()
+    assert robot.within_limits(robot.clamp(q)).item()
+
+
+# ---- errors ---------------------------------------------------------------
+def test_unknown_robot_name_is_a_clear_error():
+    with pytest.raises(RobotDefinitionError, match="unknown robot 'not_a_robot'.*puma560"):
+        nik.load_robot("not_a_robot")
+
+
+def test_missing_file_is_a_clear_error(tmp_path):
+    with pytest.raises(RobotDefinitionError, match="not found"):
+        nik.load_robot(tmp_path / "missing.yaml")
+    with pytest.raises(RobotDefinitionError, match="not found"):
+        nik.load_robot(tmp_path / "missing.urdf")
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("convention: dh\njoints:\n  - {alpha: 0, d: 0}\n", r"joints\[0\]: missing field 'a'"),
+        ("convention: xyz\njoints:\n  - {alpha: 0, a: 1, d: 0}\n", "convention must be one of dh, mdh, poe"),
+        ("convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0, limits: [-90, 0, 90]}\n",
+         r"joints\[0\]\.limits: expected a list of 2 numbers"),
+        ("convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0, limits: [90, -90]}\n", "lower must be < upper"),
+        ("convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0, lenght: 2}\n", r"unknown field\(s\) \['lenght'\]"),
+        ("convention: dh\nunit: inch\njoints:\n  - {alpha: 0, a: 1, d: 0}\n", "unit must be 'mm' or 'm'"),
+        ("convention: dh\njoints: []\n", "'joints' must be a non-empty list"),
+        ("convention: dh\njoints:\n  - {alpha: 0, a: .nan, d: 0}\n", r"joints\[0\]\.a: expected a finite number"),
+        ("convention: poe\njoints:\n  - {axis: [0, 0, 1], point: [0, 0, 0]}\n", "missing field 'home'"),
+        ("convention: poe\nhome: {position: [1, 0, 0]}\njoints:\n  - {axis: [0, 0], point: [0, 0, 0]}\n",
+         r"axis: expected a list of 3 numbers"),
+        ("- just a list\n", "expected a mapping"),
+        ("convention: dh\njoints: [\n", "not valid YAML"),
+    ],
+)
+def test_malformed_yaml_names_the_problem(tmp_path, text, message):
+    with pytest.raises(RobotDefinitionError, match=message):
+        nik.load_robot(write(tmp_path, text))
+
+
+def test_bad_urdf_end_link_names_the_links():
+    with pytest.raises(RobotDefinitionError, match="end_link 'gripper' is not a link"):
+        nik.load_robot("configs/robots/urdf/panda.urdf", end_link="gripper")
+
+
+def test_corrupt_urdf_is_a_clear_error(tmp_path):
+    path = write(tmp_path, "<robot name='x'><link name='a'/><joint name=", "bad.urdf")
+    with pytest.raises(RobotDefinitionError, match="not a readable URDF"):
+        nik.load_robot(path)
+
+
+def test_robot_errors_are_value_errors():
+    assert issubclass(RobotDefinitionError, ValueError)
