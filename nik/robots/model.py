@@ -211,18 +211,20 @@ class Robot:
             self._cache[key] = (self.G.to(like.device, like.dtype), self.offsets.to(like.device, like.dtype))
         return self._cache[key]
 
-    def fk(self, q: torch.Tensor, *, compiled: bool = False) -> torch.Tensor:
+    def fk(self, q: torch.Tensor, *, compiled: bool = False, check: bool = True) -> torch.Tensor:
         """Forward kinematics.
 
         Args:
             q: (..., dof) joint angles in radians; any leading batch shape, any float dtype/device.
             compiled: run the ``torch.compile``'d kernel (fast for large batches; the first call compiles).
+            check: validate ``q`` (shape, NaN/inf); hot loops that built ``q`` themselves pass False.
 
         Returns:
             (..., 4, 4) tool poses in the base frame, metres, in q's dtype and device;
             differentiable with respect to ``q``.
         """
-        validate_joints(q, self.dof)
+        if check:
+            validate_joints(q, self.dof)
         if self._kernel is None:
             self._kernel = FKKernel(self.G.numpy(), self.offsets.numpy())
         return self._kernel(q.reshape(-1, self.dof), compiled=compiled).reshape(*q.shape[:-1], 4, 4)

@@ -1,0 +1,26 @@
+"""Datasets of (joint vector, pose) pairs: generation, storage format, loading, IK branch labels.
+
+    generate_dataset(robot, n, out, seed=...)  -> writes data/NAME/ (q.npy, pose.npy, branch.npy, meta.json)
+    load_dataset(path, robot=None)             -> IKDataset (.q (N, dof), .pose (N, 4, 4), .meta, splits)
+"""
+
+from nik.data.branches import BRANCH_NAMES, BranchClassifier, branch_classifier, branch_labels, branch_name
+from nik.data.generate import BLOCK_SIZE, DEFAULT_CHUNK, generate_dataset, resolve_ranges, sample_stream
+from nik.data.storage import IKDataset, load_dataset, read_meta, sha256_file
+
+__all__ = [
+    "BLOCK_SIZE",
+    "BRANCH_NAMES",
+    "BranchClassifier",
+    "DEFAULT_CHUNK",
+    "IKDataset",
+    "branch_classifier",
+    "branch_labels",
+    "branch_name",
+    "generate_dataset",
+    "load_dataset",
+    "read_meta",
+    "resolve_ranges",
+    "sample_stream",
+    "sha256_file",
+]

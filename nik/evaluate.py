@@ -1,0 +1,338 @@
+"""End-to-end evaluation on a dataset's held-out test split: the table users compare.
+
+:func:`evaluate` solves the same test poses with every pipeline and measures each the same
+way (FK of the returned joints against the target): the network alone, the network plus each
+refinement, the uniform-init swarm (no network), the closed form (PUMA-like arms) and
+pytorch-kinematics' ``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
+table, a JSON copy and the error histogram.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from nik.poses import matrix_to_rpy, pose_error, rpy_to_matrix
+from nik.robots import Robot, load_robot
+
+__all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "robot_to_urdf", "write_report"]
+
+#: Refinement methods evaluated after the network, in table order.
+REFINEMENTS = ("lm", "pso", "sapso", "ipso", "ga")
+
+
+@dataclass
+class EvalRow:
+    """One pipeline's results on the test poses. Errors in mm and degrees (human-facing)."""
+
+    method: str
+    n: int
+    success_1mm_1deg: float  # fraction within 1 mm and 1 degree
+    success_01mm_01deg: float  # fraction within 0.1 mm and 0.1 degree
+    pos_mm: dict  # percentiles p50, p95, p99, max of the position error, mm
+    rot_deg: dict  # the same for the geodesic rotation error, degrees
+    outside_limits: int  # number of returned joint vectors with a joint outside its limits
+    ms_per_target: float  # wall time of the batched call divided by n, milliseconds
+    note: str = ""
+
+
+@dataclass
+class EvalReport:
+    """All rows plus the raw errors (for the histogram) and what was left out and why."""
+
+    robot: str
+    data: str
+    n: int
+    rows: list[EvalRow] = field(default_factory=list)
+    errors: dict = field(default_factory=dict)  # method -> (pos_mm ndarray, rot_deg ndarray)
+    notes: list[str] = field(default_factory=list)
+    device: str = "cpu"
+    threads: int = 1
+
+
+def _row(method: str, robot: Robot, T: torch.Tensor, q: torch.Tensor, seconds: float, note: str = "") -> tuple:
+    q = q.to(T.dtype)
+    pos, rot = pose_error(T, robot.fk(q))
+    pos_mm = (pos * 1e3).cpu().numpy()
+    rot_deg = np.degrees(rot.cpu().numpy())
+    pct = lambda a: {"p50": float(np.percentile(a, 50)), "p95": float(np.percentile(a, 95)),  # noqa: E731
+                     "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+    n = int(T.shape[0])
+    row = EvalRow(
+        method=method,
+        n=n,
+        success_1mm_1deg=float(((pos_mm <= 1.0) & (rot_deg <= 1.0)).mean()),
+        success_01mm_01deg=float(((pos_mm <= 0.1) & (rot_deg <= 0.1)).mean()),
+        pos_mm=pct(pos_mm),
+        rot_deg=pct(rot_deg),
+        outside_limits=int((~robot.within_limits(q)).sum()),
+        ms_per_target=1e3 * seconds / max(n, 1),
+        note=note,
+    )
+    return row, (pos_mm, rot_deg)
+
+
+def _timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0
+
+
+# ---------------------------------------------------------------------------
+# pytorch-kinematics peer
+# ---------------------------------------------------------------------------
+def robot_to_urdf(robot: Robot) -> tuple[str, str]:
+    """A URDF string with the same FK as ``robot`` (from its normal form), and its end link name.
+
+    Joint ``i`` sits at origin ``G_{i-1} Rz(offset_i)`` of its parent link and turns about z;
+    a fixed joint with origin ``G_n`` carries the tool link.
+    """
+    G, off = robot.G.numpy(), robot.offsets.numpy()
+    lim = robot.limits.numpy()
+
+    def origin(M: np.ndarray) -> str:
+        rpy = matrix_to_rpy(torch.as_tensor(M[:3, :3])).numpy()
+        xyz = M[:3, 3]
+        xyz_s, rpy_s = " ".join(f"{v:.17g}" for v in xyz), " ".join(f"{v:.17g}" for v in rpy)
+        return f'<origin xyz="{xyz_s}" rpy="{rpy_s}"/>'
+
+    def rz(t: float) -> np.ndarray:
+        M = np.eye(4)
+        M[:2, :2] = [[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]]
+        return M
+
+    def rx(t: float) -> np.ndarray:
+        M = np.eye(4)
+        M[1:3, 1:3] = [[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]]
+        return M
+
+    def rpy_safe(M: np.ndarray) -> list[np.ndarray]:
+        """``M`` as a product of one or two transforms whose roll-pitch-yaw round-trips exactly
+        (pitch = +-90 deg loses roll and yaw)."""
+        generic = rz(0.3) @ rx(0.7)
+        for pre in (None, rx(math.pi / 2), rx(-math.pi / 2), generic):
+            parts_ = [M] if pre is None else [M @ np.linalg.inv(pre), pre]
+            ok = True
+            for P in parts_:
+                R = torch.as_tensor(P[:3, :3])
+                back = rpy_to_matrix(matrix_to_rpy(R)).numpy()
+                ok &= bool(np.abs(back - P[:3, :3]).max() < 1e-12)
+            if ok:
+                return parts_
+        raise RuntimeError("robot_to_urdf: no roll-pitch-yaw form found")  # pragma: no cover
+
+    parts = [f'<robot name="{robot.name}">', '<link name="link0"/>']
+    for i in range(robot.dof):
+        first, *rest = rpy_safe(G[i] @ rz(off[i]))
+        parent = f"link{i}"
+        if rest:  # an intermediate fixed frame
+            parts.append(f'<link name="link{i}_fixed"/>')
+            parts.append(f'<joint name="fixed{i}" type="fixed"><parent link="link{i}"/><child link="link{i}_fixed"/>'
+                         f'{origin(first)}</joint>')
+            parent, first = f"link{i}_fixed", rest[0]
+        parts.append(f'<link name="link{i + 1}"/>')
+        parts.append(
+            f'<joint name="{robot.joint_names[i]}" type="revolute"><parent link="{parent}"/><child link="link{i + 1}"/>'
+            f'{origin(first)}<axis xyz="0 0 1"/>'
+            f'<limit lower="{lim[i, 0]:.17g}" upper="{lim[i, 1]:.17g}" effort="1" velocity="1"/></joint>'
+        )
+    tool_parts = rpy_safe(G[robot.dof])
+    parent = f"link{robot.dof}"
+    for k, P in enumerate(tool_parts):
+        child = "tool" if k == len(tool_parts) - 1 else "tool_fixed"
+        parts.append(f'<link name="{child}"/>')
+        parts.append(f'<joint name="{child}_joint" type="fixed"><parent link="{parent}"/><child link="{child}"/>'
+                     f'{origin(P)}</joint>')
+        parent = child
+    parts.append("</robot>")
+    return "\n".join(parts), "tool"
+
+
+def _pk_solve(robot: Robot, T: torch.Tensor, *, tol_pos: float, tol_rot: float, seed: int,
+              retries: int = 10, max_iterations: int = 50) -> tuple[torch.Tensor, float, str]:
+    """pytorch-kinematics ``PseudoInverseIK`` on ``T: (B, 4, 4)``: the best retry per target and the seconds."""
+    import pytorch_kinematics as pk  # the peer baseline, only on this code path
+
+    from nik.robots.urdf import build_pk_chain
+
+    text, end = robot_to_urdf(robot)
+    chain = build_pk_chain(text, end).to(dtype=T.dtype, device=T.device)
+    # the chain must reproduce nik's FK, else the comparison is meaningless
+    qc = robot.sample(16, generator=torch.Generator().manual_seed(0), dtype=T.dtype)
+    ref = robot.fk(qc)
+    got = chain.forward_kinematics(qc).get_matrix()
+    if float((ref - got).abs().max()) > 1e-6:  # pytorch-kinematics parses origins in float32 (about 1e-8 m)
+        raise RuntimeError(f"generated URDF does not reproduce the FK of {robot.name!r}")
+    torch.manual_seed(seed)  # pk draws its retry configurations from the global generator
+    ik = pk.PseudoInverseIK(
+        chain, pos_tolerance=tol_pos, rot_tolerance=tol_rot, num_retries=retries, max_iterations=max_iterations,
+        joint_limits=robot.limits.to(T.dtype), early_stopping_any_converged=True,
+    )
+    target = pk.Transform3d(matrix=T)
+    sol, seconds = _timed(lambda: ik.solve(target))
+    err = sol.err_pos + 0.1 * sol.err_rot  # (B, retries)
+    idx = err.argmin(-1)
+    q = torch.gather(sol.solutions, 1, idx[:, None, None].expand(-1, 1, robot.dof)).squeeze(1)
+    note = f"PseudoInverseIK, {retries} retries, {max_iterations} iterations"
+    return q, seconds, note
+
+
+# ---------------------------------------------------------------------------
+# The evaluation
+# ---------------------------------------------------------------------------
+def evaluate(
+    robot: Robot | str | Path,
+    *,
+    data: str | Path,
+    checkpoint: str | Path | None = None,
+    n: int = 1000,
+    split: str = "test",
+    refinements: tuple[str, ...] = REFINEMENTS,
+    swarm: str = "ipso",
+    include_pk: bool = True,
+    tol_pos: float = 1e-4,
+    tol_rot: float = 1e-3,
+    seed: int = 0,
+    progress=None,
+) -> EvalReport:
+    """Evaluate every pipeline on the first ``n`` poses of a dataset's ``split``.
+
+    Args:
+        robot: the arm (object, built-in name or file); the dataset and checkpoint must match it.
+        data: dataset directory (``nik generate``).
+        checkpoint: trained network; without it the network rows are left out (and said so).
+        n: number of test poses.
+        refinements: methods run after the network (``lm``, ``pso``, ``sapso``, ``ipso``, ``ga``).
+        swarm: the uniform-init swarm row's method (no network).
+        include_pk: add pytorch-kinematics' ``PseudoInverseIK`` as a peer.
+        tol_pos, tol_rot: tolerances the refinements stop at (metres, radians).
+        progress: optional callable ``progress(message)`` told before each row.
+
+    Returns:
+        :class:`EvalReport`.
+    """
+    from nik.data import load_dataset
+    from nik.solver import IKSolver
+
+    robot = load_robot(robot) if not isinstance(robot, Robot) else robot
+    ds = load_dataset(data, robot=robot)
+    part = ds.split(split)
+    if len(part) == 0:
+        raise ValueError(f"{data}: the {split!r} split is empty")
+    n = min(int(n), len(part))
+    T = part.pose[:n].to(torch.float64).clone()
+    report = EvalReport(robot=robot.name, data=str(data), n=n, threads=torch.get_num_threads())
+    say = progress or (lambda msg: None)
+
+    def add(method: str, q: torch.Tensor, seconds: float, note: str = "") -> None:
+        row, errs = _row(method, robot, T, q, seconds, note)
+        report.rows.append(row)
+        report.errors[method] = errs
+
+    if checkpoint is not None:
+        say("network")
+        raw = IKSolver(robot, checkpoint=checkpoint, refine="none")
+        res, sec = _timed(lambda: raw.solve(T, seed=seed))
+        add("network", res.q, sec)
+        for method in refinements:
+            say(f"network + {method}")
+            solver = IKSolver(robot, checkpoint=checkpoint, refine=method, fallback=False)
+            res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
+            polish = " + LM polish" if method != "lm" else ""
+            add(f"network + {method}", res.q, sec, f"mean {res.iterations.float().mean():.1f} iterations{polish}")
+    else:
+        report.notes.append("no checkpoint given: the network rows are missing")
+    say(f"uniform-init {swarm}")
+    solver = IKSolver(robot, refine=swarm, analytic=False)
+    res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
+    its = float(res.iterations.float().mean())
+    add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
+    from nik.analytic import is_puma_like
+
+    if is_puma_like(robot):
+        say("analytic")
+        solver = IKSolver(robot, refine="none")
+        res, sec = _timed(lambda: solver.solve(T))
+        add("analytic (closed form)", res.q, sec, "all 8 solutions, FK-verified; the most central valid one")
+    else:
+        report.notes.append(f"{robot.name} is not PUMA-like: no closed-form row")
+    if include_pk:
+        say("pytorch-kinematics")
+        try:
+            q, sec, note = _pk_solve(robot, T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
+            add("pytorch-kinematics", q, sec, note)
+        except ImportError as err:
+            report.notes.append(f"pytorch-kinematics row skipped: {err}")
+    return report
+
+
+# ---------------------------------------------------------------------------
+# Output
+# ---------------------------------------------------------------------------
+def _fmt(x: float) -> str:
+    if x == 0:
+        return "0"
+    if abs(x) >= 100:
+        return f"{x:.0f}"
+    if abs(x) >= 0.01:
+        return f"{x:.3g}"
+    return f"{x:.1e}"
+
+
+def markdown_table(report: EvalReport) -> str:
+    """The report as a Markdown table (errors in mm and degrees, success in percent)."""
+    lines = [
+        f"Robot `{report.robot}`, {report.n} poses of the test split of `{report.data}`, "
+        f"CPU ({report.threads} threads), float64.",
+        "",
+        "| method | success 1 mm / 1 deg | success 0.1 mm / 0.1 deg | position error mm (p50 / p95 / p99 / max) "
+        "| rotation error deg (p50 / p95 / p99 / max) | joints outside limits | ms / target | note |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in report.rows:
+        pos = " / ".join(_fmt(r.pos_mm[k]) for k in ("p50", "p95", "p99", "max"))
+        rot = " / ".join(_fmt(r.rot_deg[k]) for k in ("p50", "p95", "p99", "max"))
+        lines.append(
+            f"| {r.method} | {100 * r.success_1mm_1deg:.2f} % | {100 * r.success_01mm_01deg:.2f} % | {pos} | {rot} "
+            f"| {r.outside_limits} | {r.ms_per_target:.3f} | {r.note} |"
+        )
+    for note in report.notes:
+        lines.append(f"\nNote: {note}.")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(report: EvalReport, out: str | Path) -> dict[str, Path]:
+    """Write ``evaluation.md``, ``evaluation.json`` and ``errors.png`` (histograms) into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"markdown": out / "evaluation.md", "json": out / "evaluation.json", "histogram": out / "errors.png"}
+    paths["markdown"].write_text(markdown_table(report))
+    data = {k: v for k, v in asdict(report).items() if k != "errors"}
+    paths["json"].write_text(json.dumps(data, indent=2))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    for method, (pos_mm, rot_deg) in report.errors.items():
+        for ax, vals in zip(axes, (pos_mm, rot_deg), strict=True):
+            v = np.log10(np.maximum(vals, 1e-12))
+            ax.hist(v, bins=60, range=(-12, 3), histtype="step", label=method)
+    axes[0].set_xlabel("log10 position error (mm); below 1e-12 drawn at -12")
+    axes[1].set_xlabel("log10 rotation error (deg); below 1e-12 drawn at -12")
+    for ax, thr in zip(axes, (math.log10(0.1), math.log10(0.1)), strict=True):
+        ax.axvline(thr, color="k", linestyle=":", linewidth=1)
+        ax.set_ylabel("targets")
+    axes[1].legend(fontsize=7)
+    fig.suptitle(f"{report.robot}: IK errors on {report.n} test poses (dotted: 0.1 mm / 0.1 deg)")
+    fig.tight_layout()
+    fig.savefig(paths["histogram"], dpi=110)
+    plt.close(fig)
+    return paths

@@ -1,0 +1,27 @@
+"""Training: losses, differential evolution (state + pure step), batched population evaluation,
+and the Lightning modules / data module behind ``train.py``.
+
+The Lightning parts (``modules``, ``datamodule``, ``callbacks``) are imported on first use so that
+``import nik.learn`` for DE or the losses does not pull in Lightning.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from nik.learn.de import DECfg, DEState, de_ask, de_init, de_minimize, de_step, de_tell
+from nik.learn.losses import evaluate, joint_mse, pose_loss
+from nik.learn.population import flat_params, init_population, population_fitness, population_raw, set_flat_params
+
+_LAZY = {"IKModule": "nik.learn.modules", "GradientIK": "nik.learn.modules", "DEIK": "nik.learn.modules",
+         "IKDataModule": "nik.learn.datamodule", "History": "nik.learn.callbacks"}
+
+__all__ = ["DECfg", "DEState", "de_ask", "de_init", "de_minimize", "de_step", "de_tell", "evaluate", "joint_mse",
+           "pose_loss", "flat_params", "init_population", "population_fitness", "population_raw", "set_flat_params",
+           *sorted(_LAZY)]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'nik.learn' has no attribute {name!r}")

@@ -1,0 +1,390 @@
+"""Lightning modules: gradient-trained networks (``bp``, ``adam``, ``lbfgs``) and DE / DE-BP.
+
+Every module owns one :class:`nik.models.IKNet` (``self.net``), built in :meth:`IKModule.setup`
+from the data module's robot and training split (its normalisation buffers are fitted there), and
+reports the same metrics at validation/test: ``val_loss`` (the training objective), ``val_joint_mse``
+(paper C eq. 4), ``val_pose_loss``, ``val_joint_rmse_deg``, ``val_pose_pos_mm`` / ``val_pose_rot_deg``
+(means) and ``_p95``, ``loss_evals`` (losses of one weight vector on one batch so far, all
+closure calls and DE individuals included), ``sample_evals`` (network forward passes on single
+samples so far) and ``wall_s`` (seconds since the fit started).
+
+Checkpoints carry ``checkpoint["nik"]`` (robot definition, hash, architecture; plain data) so that
+:func:`nik.models.load_checkpoint` reads them with ``torch.load(weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import lightning as L
+import torch
+
+from nik.learn.de import DECfg, DEState, de_init, de_step
+from nik.learn.losses import LOSSES, evaluate, joint_mse, pose_loss
+from nik.learn.population import flat_params, init_population, population_fitness, set_flat_params
+from nik.models import IKNet, checkpoint_extra
+
+__all__ = ["IKModule", "GradientIK", "DEIK"]
+
+
+class IKModule(L.LightningModule):
+    """Shared part: the network, the objective, metrics, counters and the checkpoint block.
+
+    Args:
+        hidden: hidden layer sizes (paper C: ``[8]``).
+        activation: ``tanh`` (paper C), ``silu``, ``relu``, ... (:data:`nik.models.ACTIVATIONS`).
+        representation: network input: ``rpy`` (paper C), ``quat`` or ``rot6d``.
+        output: ``angles`` or ``sincos``.
+        loss: training objective: ``joint`` (paper C eq. 4), ``pose`` (through FK) or ``both``
+            (joint + ``pose_weight`` * pose).
+        rot_weight: weight of the rotation term of the pose loss (1 rad ~ one workspace length scale).
+        pose_weight: weight of the pose loss in ``both``.
+    """
+
+    def __init__(
+        self,
+        hidden: tuple[int, ...] = (8,),
+        activation: str = "tanh",
+        representation: str = "rpy",
+        output: str = "angles",
+        loss: str = "joint",
+        rot_weight: float = 1.0,
+        pose_weight: float = 1.0,
+    ):
+        super().__init__()
+        if loss not in LOSSES:
+            raise ValueError(f"model.loss must be one of {LOSSES}, got {loss!r}")
+        self.save_hyperparameters()
+        self.net: IKNet | None = None
+        self.loss_evals = 0
+        self.sample_evals = 0
+        self._t0: float | None = None
+        self._wall_before = 0.0  # seconds spent in earlier (resumed) fits
+
+    # -- network ---------------------------------------------------------------
+    def net_config(self) -> dict:
+        h = self.hparams
+        return {"hidden": list(h.hidden), "activation": h.activation, "representation": h.representation,
+                "output": h.output}
+
+    def setup(self, stage: str) -> None:
+        if self.net is not None:
+            return
+        dm = self.trainer.datamodule
+        if dm is None or getattr(dm, "robot", None) is None:
+            raise ValueError("nik training modules need an IKDataModule (it supplies the robot and training data)")
+        pose, q = dm.train_data
+        net = IKNet(dm.robot, **self.net_config())
+        net.fit_normalisation(pose, q)
+        self.net = net.to(dtype=pose.dtype)
+
+    # -- objective ---------------------------------------------------------------
+    def objective(self, y: torch.Tensor, T: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        """Training loss of raw outputs ``y: (..., N, out)`` for poses ``T: (N, 4, 4)`` and joints ``q: (N, dof)``."""
+        h, net = self.hparams, self.net
+        total = 0.0
+        if h.loss in ("joint", "both"):
+            total = total + joint_mse(y, net.encode(q))
+        if h.loss in ("pose", "both"):
+            pl = pose_loss(net.decode(y), T, net.robot, length_scale=net.length_scale, rot_weight=h.rot_weight)
+            total = total + (h.pose_weight if h.loss == "both" else 1.0) * pl
+        return total
+
+    def batch_loss(self, batch) -> torch.Tensor:
+        T, q = batch
+        loss = self.objective(self.net.raw(self.net.features(T)), T, q)
+        self.loss_evals += 1
+        self.sample_evals += T.shape[0]
+        return loss
+
+    # -- timing and metrics ------------------------------------------------------------
+    def on_fit_start(self) -> None:
+        self._t0 = time.perf_counter()
+
+    @property
+    def wall_s(self) -> float:
+        return self._wall_before + (0.0 if self._t0 is None else time.perf_counter() - self._t0)
+
+    def _log_counters(self) -> None:
+        self.log("loss_evals", float(self.loss_evals), on_step=False, on_epoch=True)
+        self.log("sample_evals", float(self.sample_evals), on_step=False, on_epoch=True)
+        self.log("wall_s", self.wall_s, on_step=False, on_epoch=True)
+
+    def _eval_step(self, batch, prefix: str) -> None:
+        T, q = batch
+        with torch.no_grad():
+            loss = self.objective(self.net.raw(self.net.features(T)), T, q)
+        m = evaluate(self.net, T, q, rot_weight=self.hparams.rot_weight)
+        n = T.shape[0]
+        values = {
+            "loss": float(loss), "joint_mse": m["joint_mse"], "pose_loss": m["pose_loss"],
+            "joint_rmse_deg": m["joint_rmse_deg"], "pose_pos_mm": m["pos_mm_mean"], "pose_rot_deg": m["rot_deg_mean"],
+            "pose_pos_mm_p95": m["pos_mm_p95"], "pose_rot_deg_p95": m["rot_deg_p95"],
+        }
+        for k, v in values.items():
+            self.log(f"{prefix}_{k}", v, batch_size=n, prog_bar=k == "loss")
+        if prefix == "val":
+            self._log_counters()
+
+    def validation_step(self, batch, batch_idx):
+        self._eval_step(batch, "val")
+
+    def test_step(self, batch, batch_idx):
+        self._eval_step(batch, "test")
+
+    # -- checkpoints -------------------------------------------------------------
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        extra = checkpoint_extra(self.net)
+        extra["counters"] = {"loss_evals": int(self.loss_evals), "sample_evals": int(self.sample_evals),
+                             "wall_s": float(self.wall_s)}
+        checkpoint["nik"] = extra
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        counters = checkpoint.get("nik", {}).get("counters", {})
+        self.loss_evals = int(counters.get("loss_evals", 0))
+        self.sample_evals = int(counters.get("sample_evals", 0))
+        self._wall_before = float(counters.get("wall_s", 0.0))
+
+
+class GradientIK(IKModule):
+    """Gradient training: ``optimizer`` ``sgd`` (plain back-propagation, paper C's baseline), ``adam``
+    or ``lbfgs`` (use it with a full batch, ``data.batch_size: null``).
+
+    Args (beyond :class:`IKModule`):
+        optimizer: ``sgd`` | ``adam`` | ``lbfgs``.
+        lr: learning rate (L-BFGS: step scale, 1 is standard).
+        momentum: SGD momentum (0 = plain gradient descent).
+        weight_decay: L2 penalty (sgd/adam).
+        schedule: ``none`` or ``cosine``: the LR decays from ``lr`` to ``lr * min_lr_ratio`` over the
+            run, measured by whichever is further along, steps (of ``trainer.max_steps`` / the
+            estimated total) or wall-clock time (of ``trainer.max_time``), so a time-budgeted run decays too.
+        min_lr_ratio: final LR of the cosine schedule relative to ``lr``.
+        lbfgs_max_iter: L-BFGS iterations per step (each evaluates the loss at least once).
+        lbfgs_history: L-BFGS memory.
+    """
+
+    def __init__(
+        self,
+        hidden: tuple[int, ...] = (8,),
+        activation: str = "tanh",
+        representation: str = "rpy",
+        output: str = "angles",
+        loss: str = "joint",
+        rot_weight: float = 1.0,
+        pose_weight: float = 1.0,
+        optimizer: str = "adam",
+        lr: float = 1e-3,
+        momentum: float = 0.0,
+        weight_decay: float = 0.0,
+        schedule: str = "none",
+        min_lr_ratio: float = 0.01,
+        lbfgs_max_iter: int = 20,
+        lbfgs_history: int = 50,
+    ):
+        super().__init__(hidden, activation, representation, output, loss, rot_weight, pose_weight)
+        if optimizer not in ("sgd", "adam", "lbfgs"):
+            raise ValueError(f"model.optimizer must be sgd, adam or lbfgs, got {optimizer!r}")
+        if schedule not in ("none", "cosine"):
+            raise ValueError(f"model.schedule must be none or cosine, got {schedule!r}")
+        self.save_hyperparameters()
+
+    def training_step(self, batch, batch_idx):
+        loss = self.batch_loss(batch)
+        self.log("train_loss", loss, on_step=False, on_epoch=True, batch_size=batch[0].shape[0])
+        return loss
+
+    def _progress(self) -> float:
+        """Fraction of the run done, in [0, 1]: the larger of the step and the time fractions."""
+        trainer = self.trainer
+        frac = 0.0
+        total = self._total_steps
+        if total and math.isfinite(total):
+            frac = trainer.global_step / max(1, total)
+        timer = next((cb for cb in trainer.callbacks if type(cb).__name__ == "Timer"), None)
+        duration = getattr(timer, "_duration", None) if timer is not None else None
+        if duration:
+            frac = max(frac, self.wall_s / duration)
+        return min(1.0, frac)
+
+    def configure_optimizers(self):
+        h = self.hparams
+        params = self.net.parameters()
+        # computed once: Lightning's estimate re-walks the data loaders on every access
+        t = self.trainer
+        self._total_steps = t.max_steps if t.max_steps and t.max_steps > 0 else t.estimated_stepping_batches
+        if h.optimizer == "sgd":
+            opt = torch.optim.SGD(params, lr=h.lr, momentum=h.momentum, weight_decay=h.weight_decay)
+        elif h.optimizer == "adam":
+            opt = torch.optim.Adam(params, lr=h.lr, weight_decay=h.weight_decay)
+        else:
+            opt = torch.optim.LBFGS(params, lr=h.lr, max_iter=h.lbfgs_max_iter, history_size=h.lbfgs_history,
+                                    line_search_fn="strong_wolfe")
+        if h.schedule == "none":
+            return opt
+        r = h.min_lr_ratio
+
+        def factor(_step: int) -> float:
+            return r + (1 - r) * 0.5 * (1 + math.cos(math.pi * self._progress()))
+
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, factor)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "step"}}
+
+
+class DEIK(IKModule):
+    """Differential evolution of the flattened weights (``de``), optionally followed by
+    back-propagation from the best individual (``de_bp``, paper C's flow). Manual optimisation.
+
+    Each training step is one DE generation on that step's batch (``data.batch_size: null``: the
+    whole training split, as in paper C), evaluated for all ``pop_size`` networks in one batched
+    computation (:func:`nik.learn.population.population_fitness`). After every generation the
+    network holds the best individual, so validation and checkpoints see it. With ``bp_steps`` set,
+    DE stops after ``generations`` generations and training continues by BP from the best individual.
+
+    Args (beyond :class:`IKModule`):
+        pop_size, F, CR, strategy, jde: see :class:`nik.learn.de.DECfg` (paper C: 220, 0.6, 0.5, rand1bin, no).
+        generations: DE generations (paper C: 500); for ``de`` alone ``null`` means "until the trainer stops".
+        bound: every weight is kept in ``[-bound, bound]`` (``null``: unbounded).
+        fitness_samples: if set, each generation scores all individuals on the same random subset of
+            this many samples of the batch (parents re-evaluated on it too, so selection compares like
+            with like); ``null``: the whole batch.
+        bp: continue with back-propagation after ``generations`` (DE-BP).
+        bp_optimizer, bp_lr, bp_momentum: the BP stage (``sgd`` = paper C's BP).
+        max_fk, max_elements: memory bounds of the batched evaluation (see ``population_fitness``).
+    """
+
+    def __init__(
+        self,
+        hidden: tuple[int, ...] = (8,),
+        activation: str = "tanh",
+        representation: str = "rpy",
+        output: str = "angles",
+        loss: str = "joint",
+        rot_weight: float = 1.0,
+        pose_weight: float = 1.0,
+        pop_size: int = 220,
+        F: float = 0.6,
+        CR: float = 0.5,
+        strategy: str = "rand1bin",
+        jde: bool = False,
+        generations: int | None = 500,
+        bound: float | None = 10.0,
+        fitness_samples: int | None = None,
+        bp: bool = False,
+        bp_optimizer: str = "sgd",
+        bp_lr: float = 0.1,
+        bp_momentum: float = 0.9,
+        max_fk: int = 2**18,
+        max_elements: int = 2**21,
+    ):
+        super().__init__(hidden, activation, representation, output, loss, rot_weight, pose_weight)
+        self.cfg = DECfg(pop_size=pop_size, F=F, CR=CR, strategy=strategy, jde=jde)
+        if bp and generations is None:
+            raise ValueError("model.bp (DE-BP) needs model.generations: how many DE generations before BP")
+        if bp_optimizer not in ("sgd", "adam"):
+            raise ValueError(f"model.bp_optimizer must be sgd or adam, got {bp_optimizer!r}")
+        self.save_hyperparameters()
+        self.automatic_optimization = False
+        self.de_state: DEState | None = None
+        self.generator: torch.Generator | None = None
+        self.history: list[float] = []  # best fitness after each generation
+        self.first_bp_loss: float | None = None
+
+    @property
+    def in_de_phase(self) -> bool:
+        g = self.hparams.generations
+        return g is None or self.de_state is None or self.de_state.generation < g or not self.hparams.bp
+
+    def on_fit_start(self) -> None:
+        super().on_fit_start()
+        if self.generator is None:
+            # drawn from the global RNG, which seed_everything has seeded: same seed, same run
+            self.generator = torch.Generator().manual_seed(int(torch.randint(0, 2**62, (1,))))
+
+    def _fitness_fn(self, T: torch.Tensor, q: torch.Tensor):
+        h, net = self.hparams, self.net
+        x = net.features(T)
+        y_t = net.encode(q) if h.loss != "pose" else None
+
+        def fitness(W: torch.Tensor) -> torch.Tensor:
+            self.loss_evals += W.shape[0]
+            self.sample_evals += W.shape[0] * T.shape[0]
+            return population_fitness(net, W, x, y_target=y_t, T_target=T, loss=h.loss, rot_weight=h.rot_weight,
+                                      pose_weight=h.pose_weight, max_fk=h.max_fk, max_elements=h.max_elements)
+
+        return fitness
+
+    def _bounds(self, like: torch.Tensor):
+        b = self.hparams.bound
+        if b is None:
+            return None, None
+        return torch.tensor(-float(b), dtype=like.dtype), torch.tensor(float(b), dtype=like.dtype)
+
+    def training_step(self, batch, batch_idx):
+        h = self.hparams
+        T, q = batch
+        if not self.in_de_phase:
+            return self._bp_step(batch)
+        subsample = h.fitness_samples is not None and h.fitness_samples < T.shape[0]
+        if subsample:
+            idx = torch.randperm(T.shape[0], generator=self.generator)[: h.fitness_samples].to(T.device)
+            T, q = T.index_select(0, idx), q.index_select(0, idx)
+        fitness = self._fitness_fn(T, q)
+        if self.de_state is None:
+            x0 = init_population(self.net, self.cfg.pop_size, generator=self.generator)
+            x0[0] = flat_params(self.net)  # the net's own initial weights are one of the individuals
+            lo, hi = self._bounds(x0)
+            if lo is not None:
+                x0 = x0.clamp(float(lo), float(hi))
+            self.de_state = de_init(x0, fitness(x0), self.cfg, lower=lo, upper=hi)
+        else:
+            self.de_state = de_step(self.de_state, fitness, self.cfg, generator=self.generator, reevaluate=subsample)
+        set_flat_params(self.net, self.de_state.best_x)
+        best = self.de_state.best_fitness
+        self.history.append(best)
+        self.log("train_loss", best, on_step=False, on_epoch=True, batch_size=T.shape[0])
+        self.log("de_generation", float(self.de_state.generation), on_step=False, on_epoch=True)
+        if not h.bp and h.generations is not None and self.de_state.generation >= h.generations:
+            self.trainer.should_stop = True
+        return None
+
+    def _bp_step(self, batch):
+        opt = self.optimizers()
+        opt.zero_grad()
+        loss = self.batch_loss(batch)
+        if self.first_bp_loss is None:
+            self.first_bp_loss = float(loss.detach())
+        self.manual_backward(loss)
+        opt.step()
+        self.log("train_loss", loss.detach(), on_step=False, on_epoch=True, batch_size=batch[0].shape[0])
+        return loss
+
+    def configure_optimizers(self):
+        h = self.hparams
+        if h.bp_optimizer == "sgd":
+            return torch.optim.SGD(self.net.parameters(), lr=h.bp_lr, momentum=h.bp_momentum)
+        return torch.optim.Adam(self.net.parameters(), lr=h.bp_lr)
+
+    # -- checkpoints: the population too, so that a DE run resumes where it stopped ------------
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        super().on_save_checkpoint(checkpoint)
+        s = self.de_state
+        if s is not None:
+            checkpoint["nik_de"] = {
+                "x": s.x.detach().cpu(), "fitness": s.fitness.detach().cpu(), "F": s.F.detach().cpu(),
+                "CR": s.CR.detach().cpu(), "generation": int(s.generation), "evals": int(s.evals),
+                "generator": self.generator.get_state(), "history": list(self.history),
+                "first_bp_loss": self.first_bp_loss,
+            }
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        super().on_load_checkpoint(checkpoint)
+        d = checkpoint.get("nik_de")
+        if d is None:
+            return
+        lo, hi = self._bounds(d["x"])
+        self.de_state = DEState(d["x"], d["fitness"], d["F"], d["CR"], lo, hi, d["generation"], d["evals"])
+        self.generator = torch.Generator()
+        self.generator.set_state(d["generator"])
+        self.history = list(d["history"])
+        self.first_bp_loss = d["first_bp_loss"]

@@ -1,0 +1,182 @@
+"""nik.learn: losses, DE, batched population evaluation, and the Lightning training entry point."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+import pytest
+import torch
+
+import nik
+from nik.learn import (
+    DECfg,
+    de_minimize,
+    init_population,
+    joint_mse,
+    population_fitness,
+    pose_loss,
+    set_flat_params,
+)
+from nik.models import IKNet, load_checkpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+METHODS = ["bp", "adam", "lbfgs", "de", "de_bp"]
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:LightningCLI's args parameter"),
+    pytest.mark.filterwarnings("ignore::DeprecationWarning"),
+    pytest.mark.filterwarnings("ignore:.*treespec"),
+]
+QUIET = ["--trainer.enable_progress_bar", "false", "--trainer.enable_model_summary", "false"]
+
+
+def _train_cli():
+    spec = importlib.util.spec_from_file_location("nik_train_script", ROOT / "train.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.cli_main
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    from nik.data import generate_dataset
+
+    out = tmp_path_factory.mktemp("data") / "kuka_tiny"
+    return generate_dataset("kuka_kr", 500, out, seed=0, progress=False)
+
+
+@pytest.fixture(scope="module")
+def kuka():
+    return nik.load_robot("kuka_kr")
+
+
+def _run(method, dataset, root, *extra):
+    args = ["fit", "--config", str(ROOT / "configs" / "train" / f"{method}.yaml"), "--data.path", str(dataset),
+            "--trainer.default_root_dir", str(root), "--trainer.logger", "false", *QUIET, *extra]
+    return _train_cli()(args)
+
+
+# -- differential evolution -------------------------------------------------------
+def _sphere(x):
+    return (x - 0.3).square().sum(-1)
+
+
+@pytest.mark.parametrize("strategy,jde", [("rand1bin", False), ("current_to_best1bin", False), ("rand1bin", True)])
+def test_de_converges_on_a_sphere(strategy, jde):
+    g = torch.Generator().manual_seed(0)
+    cfg = DECfg(pop_size=30, F=0.6, CR=0.9, strategy=strategy, jde=jde)
+    x0 = torch.rand(30, 5, generator=g, dtype=torch.float64) * 4 - 2
+    state = de_minimize(_sphere, x0, cfg, 200, generator=g)
+    assert state.best_fitness < 1e-6
+    torch.testing.assert_close(state.best_x, torch.full((5,), 0.3, dtype=torch.float64), atol=1e-3, rtol=0)
+    assert state.generation == 200 and state.evals == 30 * 201
+
+
+def test_de_respects_bounds():
+    # the optimum (0.3 in every coordinate) lies outside the box [-1, 0.1]: DE must stay inside and end on the bound
+    g = torch.Generator().manual_seed(1)
+    cfg = DECfg(pop_size=20, F=0.9, CR=0.9)
+    x0 = torch.rand(20, 4, generator=g, dtype=torch.float64) * 1.1 - 1.0
+    lo, hi = torch.tensor(-1.0, dtype=torch.float64), torch.tensor(0.1, dtype=torch.float64)
+    seen = []
+
+    def fitness(x):
+        seen.append(x.clone())
+        return _sphere(x)
+
+    state = de_minimize(fitness, x0, cfg, 150, generator=g, lower=lo, upper=hi)
+    every = torch.cat(seen)
+    assert float(every.min()) >= -1.0 and float(every.max()) <= 0.1
+    torch.testing.assert_close(state.best_x, torch.full((4,), 0.1, dtype=torch.float64), atol=1e-3, rtol=0)
+
+
+def test_de_config_is_checked():
+    with pytest.raises(ValueError, match="strategy"):
+        DECfg(strategy="best2exp")
+    with pytest.raises(ValueError, match="CR"):
+        DECfg(CR=1.5)
+
+
+# -- batched population against a per-individual reference -------------------------
+@pytest.mark.parametrize("loss", ["joint", "pose", "both"])
+def test_population_fitness_matches_one_network_at_a_time(kuka, loss):
+    g = torch.Generator().manual_seed(2)
+    q = kuka.sample(300, generator=g)
+    T = kuka.fk(q)
+    net = IKNet(kuka, hidden=[8, 5]).fit_normalisation(T, q)
+    W = init_population(net, 7, generator=g)
+    x, y_t = net.features(T), net.encode(q)
+    # tiny memory caps force several sample chunks
+    got = population_fitness(net, W, x, y_target=y_t, T_target=T, loss=loss, max_elements=7 * 40 * 8, max_fk=7 * 64)
+    want = []
+    for w in W:
+        set_flat_params(net, w)
+        with torch.no_grad():
+            y = net.raw(x)
+            value = 0.0
+            if loss != "pose":
+                value = value + joint_mse(y, y_t)
+            if loss != "joint":
+                value = value + pose_loss(net.decode(y), T, kuka, length_scale=net.length_scale)
+        want.append(value)
+    torch.testing.assert_close(got, torch.stack(want), rtol=1e-5, atol=1e-6)
+
+
+def test_pose_loss_is_zero_at_the_answer_and_geodesic_to_second_order(kuka):
+    q = kuka.sample(4, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
+    T = kuka.fk(q)
+    assert float(pose_loss(q, T, kuka, length_scale=1.0)) == 0.0
+    # a pure rotation of 1e-3 rad about the tool z axis (last joint: position unchanged)
+    dq = torch.zeros_like(q)
+    dq[:, -1] = 1e-3
+    value = float(pose_loss(q + dq, T, kuka, length_scale=1.0, rot_weight=1.0))
+    assert math.isclose(value, 1e-6, rel_tol=1e-3)
+
+
+# -- Lightning -------------------------------------------------------------------
+@pytest.mark.parametrize("method", METHODS)
+def test_every_config_runs_fast_dev_run(method, dataset, tmp_path):
+    cli = _run(method, dataset, tmp_path, "--trainer.fast_dev_run", "true")
+    assert cli.trainer.state.finished
+    assert cli.model.net.robot.name == "kuka_kr"
+
+
+def test_de_bp_hands_des_best_weights_to_bp_and_leaves_a_loadable_checkpoint(dataset, tmp_path, kuka):
+    cli = _run("de_bp", dataset, tmp_path, "--model.pop_size", "24", "--model.generations", "4",
+               "--trainer.max_epochs", "8", "--trainer.check_val_every_n_epoch", "2")
+    model = cli.model
+    assert model.de_state.generation == 4
+    # BP's first loss is DE's best fitness, on the same (full) batch
+    torch.testing.assert_close(model.first_bp_loss, model.history[-1], rtol=1e-5, atol=0)
+    ckpts = list(Path(tmp_path).rglob("last.ckpt"))
+    assert len(ckpts) == 1
+    assert "nik" in torch.load(ckpts[0], weights_only=True)
+    net = load_checkpoint(ckpts[0], robot=kuka)
+    T = cli.datamodule.test_data[0]
+    assert torch.equal(net.predict(T), model.net.predict(T))
+    with pytest.raises(nik.CheckpointError, match="puma560"):
+        load_checkpoint(ckpts[0], robot="puma560")
+
+
+@pytest.mark.parametrize("method", ["de", "adam"])
+def test_same_seed_same_run(method, dataset, tmp_path):
+    extra = ["--trainer.max_epochs", "3", "--trainer.check_val_every_n_epoch", "3"]
+    if method == "de":
+        extra += ["--model.pop_size", "16", "--model.jde", "true"]
+    else:
+        extra += ["--model.hidden", "[16]"]
+    runs = [_run(method, dataset, tmp_path / str(i), *extra).model for i in range(2)]
+    for a, b in zip(runs[0].net.parameters(), runs[1].net.parameters(), strict=True):
+        assert torch.equal(a, b)
+    if method == "de":
+        assert runs[0].history == runs[1].history
+        assert torch.equal(runs[0].de_state.x, runs[1].de_state.x)
+
+
+def test_nik_compare_is_registered_with_the_cli():
+    from nik.cli import build_parser
+
+    args = build_parser().parse_args(["compare", "--data", "data/x", "--budget", "5", "--methods", "de", "bp"])
+    assert args.command == "compare" and args.budget == 5.0 and args.methods == ["de", "bp"]
+    assert callable(args.func)

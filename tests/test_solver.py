@@ -1,0 +1,246 @@
+"""nik.IKSolver: round trips for every built-in robot, input forms, q_near, solve_all, bad inputs, checkpoints."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.analytic import puma560_ik
+from nik.poses import matrix_to_quaternion, matrix_to_rpy
+
+HAS_MODELS = importlib.util.find_spec("nik.models") is not None
+
+
+def _targets(robot, n: int, seed: int):
+    q = robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    return q, robot.fk(q)
+
+
+def _check_round_trip(robot, res, T, tol_pos, tol_rot):
+    assert res.q.shape == (T.shape[0], robot.dof)
+    assert bool(res.success.all())
+    assert bool(robot.within_limits(res.q).all())
+    pos, rot = nik.pose_error(T, robot.fk(res.q))
+    torch.testing.assert_close(pos, res.pos_err)
+    torch.testing.assert_close(rot, res.rot_err)
+    assert float(pos.max()) <= tol_pos and float(rot.max()) <= tol_rot
+
+
+@pytest.mark.parametrize("name", ["puma560", "kuka_kr", "rebot_v_6r"])
+def test_round_trip_analytic_robots(name):
+    robot = nik.load_robot(name)
+    _, T = _targets(robot, 50, 1)
+    solver = nik.IKSolver(robot)
+    assert solver.initial_source == "analytic"
+    res = solver.solve(T)
+    _check_round_trip(robot, res, T, 1e-9, 1e-9)
+    assert int(res.iterations.sum()) == 0  # the closed form is already exact
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_round_trip_other_robots_from_a_near_guess(name):
+    robot = nik.load_robot(name)
+    q, T = _targets(robot, 20, 2)
+    noise = 0.05 * torch.randn(q.shape, generator=torch.Generator().manual_seed(3), dtype=q.dtype)
+    solver = nik.IKSolver(robot, refine="lm")
+    assert solver.initial_source == "multistart"
+    res = solver.solve(T, q_near=robot.clamp(q + noise))
+    _check_round_trip(robot, res, T, 1e-4, 1e-3)
+
+
+def test_round_trip_ur5_multistart_swarm():
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 8, 4)
+    res = nik.IKSolver(robot, refine="ipso").solve(T, tol_pos=1e-3, tol_rot=1e-2, seed=0)
+    # honest flags: whatever succeeded is within tolerance, whatever failed is not
+    assert bool(res.success.float().mean() >= 0.5)
+    ok = res.success
+    assert bool((res.pos_err[ok] <= 1e-3).all()) and bool((res.rot_err[ok] <= 1e-2).all())
+    assert bool(((res.pos_err[~ok] > 1e-3) | (res.rot_err[~ok] > 1e-2)).all())
+    assert bool(robot.within_limits(res.q).all())
+
+
+def test_every_input_form_gives_the_same_answer():
+    robot = nik.load_robot("puma560")
+    _, T = _targets(robot, 5, 5)
+    solver = nik.IKSolver(robot)
+    ref = solver.solve(T).q
+    quat = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
+    rpy = torch.cat([T[:, :3, 3], matrix_to_rpy(T[:, :3, :3])], dim=-1)
+    forms = [
+        (quat, None), (quat, "quat"), (rpy, None), (rpy, "rpy"), (T.numpy(), None), (T.tolist(), None),
+        (quat.numpy(), "quat"),
+    ]
+    for value, rep in forms:
+        res = solver.solve(value, representation=rep)
+        torch.testing.assert_close(res.q, ref, atol=1e-9, rtol=0)
+        assert bool(res.success.all())
+    # a single pose in each form counts as B = 1
+    for single in (T[0], quat[0], rpy[0]):
+        res = solver.solve(single)
+        assert res.q.shape == (1, 6)
+        torch.testing.assert_close(res.q[0], ref[0], atol=1e-9, rtol=0)
+
+
+def test_near_unit_quaternion_is_normalised():
+    robot = nik.load_robot("puma560")
+    _, T = _targets(robot, 3, 6)
+    quat = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3]) * 1.003], dim=-1)
+    res = nik.IKSolver(robot).solve(quat)
+    assert bool(res.success.all())
+
+
+@pytest.mark.parametrize(
+    ("mutate", "match"),
+    [
+        (lambda v: v.__setitem__((1, 3), 0.0) or v[1, 3:].zero_(), "row 1: quaternion"),
+        (lambda v: v[2, 3:].mul_(1.5), "row 2: quaternion"),
+        (lambda v: v.__setitem__((1, 0), float("nan")), "row 1: x, y, z contains NaN"),
+        (lambda v: v.__setitem__((0, 4), float("inf")), "row 0: quaternion .* NaN or inf"),
+    ],
+)
+def test_bad_quaternion_rows_are_rejected(mutate, match):
+    robot = nik.load_robot("puma560")
+    _, T = _targets(robot, 3, 7)
+    v = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
+    mutate(v)
+    with pytest.raises(ValueError, match=match):
+        nik.IKSolver(robot).solve(v)
+
+
+def test_bad_matrices_are_rejected():
+    robot = nik.load_robot("puma560")
+    solver = nik.IKSolver(robot)
+    _, T = _targets(robot, 3, 8)
+    bad = T.clone()
+    bad[2, :3, :3] *= 1.2
+    with pytest.raises(ValueError, match="pose 2 is not orthonormal"):
+        solver.solve(bad)
+    bad = T.clone()
+    bad[1, 0, 3] = float("nan")
+    with pytest.raises(ValueError, match="pose 1 contains NaN"):
+        solver.solve(bad)
+    with pytest.raises(ValueError, match="cannot tell the pose form"):
+        solver.solve(torch.zeros(3, 5))
+    with pytest.raises(ValueError, match=r"expected shape \(B, 7\)"):
+        solver.solve(torch.zeros(3, 6), representation="quat")
+    with pytest.raises(ValueError, match="representation"):
+        solver.solve(T, representation="euler")
+    with pytest.raises(ValueError, match="q_near"):
+        solver.solve(T, q_near=torch.zeros(5))
+    with pytest.raises(ValueError, match="refine must be one of"):
+        nik.IKSolver(robot, refine="newton")
+
+
+def test_q_near_picks_the_nearest_closed_form_solution():
+    robot = nik.load_robot("puma560")
+    _, T = _targets(robot, 1, 9)
+    sols, valid = puma560_ik(robot, T[0])
+    assert int(valid.sum()) >= 2
+    solver = nik.IKSolver(robot)
+    g = torch.Generator().manual_seed(10)
+    for s in sols[valid]:
+        near = s + 0.05 * torch.randn(6, generator=g, dtype=s.dtype)
+        res = solver.solve(T, q_near=near)
+        torch.testing.assert_close(res.q[0], s, atol=1e-9, rtol=0)
+
+
+def test_q_near_picks_the_nearest_solution_without_closed_form():
+    robot = nik.load_robot("ur5")
+    q, T = _targets(robot, 4, 11)
+    res = nik.IKSolver(robot, refine="lm").solve(T, q_near=robot.clamp(q + 0.02), tol_pos=1e-10, tol_rot=1e-10)
+    assert bool(res.success.all())
+    torch.testing.assert_close(res.q, q, atol=1e-6, rtol=0)
+
+
+def test_refine_none_reports_the_raw_guess_with_its_true_errors():
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 6, 12)
+    res = nik.IKSolver(robot, refine="none").solve(T)
+    pos, rot = nik.pose_error(T, robot.fk(res.q))
+    torch.testing.assert_close(res.pos_err, pos)
+    torch.testing.assert_close(res.rot_err, rot)
+    assert torch.equal(res.success, (pos <= 1e-4) & (rot <= 1e-3))
+    assert int(res.iterations.sum()) == 0
+
+
+def test_seed_makes_results_repeatable():
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 3, 13)
+    solver = nik.IKSolver(robot, refine="pso")
+    a = solver.solve(T, seed=5, max_iters=20, tol_pos=1e-3, tol_rot=1e-2)
+    b = solver.solve(T, seed=5, max_iters=20, tol_pos=1e-3, tol_rot=1e-2)
+    assert torch.equal(a.q, b.q)
+
+
+def test_solve_all_puma_returns_the_valid_closed_form_solutions():
+    robot = nik.load_robot("puma560")
+    q, T = _targets(robot, 1, 14)
+    sols = nik.IKSolver(robot).solve_all(T[0])
+    _, valid = puma560_ik(robot, T[0])
+    assert sols.shape == (int(valid.sum()), 6)
+    pos, rot = nik.pose_error(T[0], robot.fk(sols))
+    assert float(pos.max()) < 1e-9 and float(rot.max()) < 1e-9
+    wrapped = torch.remainder(sols - q + math.pi, 2 * math.pi) - math.pi
+    assert bool((wrapped.abs().amax(-1) < 1e-7).any())
+
+
+def test_solve_all_multistart_finds_several_distinct_solutions():
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 1, 15)
+    sols = nik.IKSolver(robot, refine="lm").solve_all(T, n_starts=128)
+    assert sols.shape[0] >= 2
+    pos, rot = nik.pose_error(T[0], robot.fk(sols))
+    assert float(pos.max()) <= 1e-4 and float(rot.max()) <= 1e-3
+    diff = torch.remainder(sols[:, None] - sols[None] + math.pi, 2 * math.pi) - math.pi
+    dist = diff.abs().amax(-1) + torch.eye(sols.shape[0], dtype=sols.dtype) * 10
+    assert float(dist.min()) >= 1e-3
+    with pytest.raises(ValueError, match="one pose"):
+        nik.IKSolver(robot).solve_all(torch.eye(4).expand(2, 4, 4))
+
+
+@pytest.mark.skipif(not HAS_MODELS, reason="nik.models (the training issue) is not in this build")
+def test_checkpoint_network_path_and_robot_mismatch(tmp_path):
+    from nik.errors import CheckpointError
+    from nik.models import IKNet, save_checkpoint
+
+    robot = nik.load_robot("ur5")
+    q, T = _targets(robot, 64, 16)
+    torch.manual_seed(0)
+    net = IKNet(robot, hidden=[16]).fit_normalisation(T, q)
+    path = save_checkpoint(net, tmp_path / "ur5.ckpt")
+    raw = nik.IKSolver(robot, checkpoint=path, refine="none")
+    assert raw.initial_source == "network"
+    res = raw.solve(T[:8])
+    torch.testing.assert_close(res.q, robot.clamp(net.predict(T[:8])))
+    refined = nik.IKSolver(robot, checkpoint=path, refine="lm").solve(T[:8], q_near=robot.clamp(q[:8] + 0.02))
+    assert bool(refined.success.all())
+    with pytest.raises(CheckpointError, match="ur5.*puma560|puma560.*ur5"):
+        nik.IKSolver("puma560", checkpoint=path)
+
+
+def test_numpy_q_near_and_float32_targets():
+    robot = nik.load_robot("kuka_kr")
+    q, T = _targets(robot, 4, 17)
+    res = nik.IKSolver(robot).solve(T.float(), q_near=np.asarray(q[0]))
+    assert res.q.dtype == torch.float32
+    assert bool(res.success.all())
+
+
+@pytest.mark.skipif(not HAS_MODELS, reason="nik.models (the training issue) is not in this build")
+def test_fallback_to_the_closed_form_rescues_a_poor_network(tmp_path):
+    from nik.models import IKNet, save_checkpoint
+
+    robot = nik.load_robot("puma560")
+    q, T = _targets(robot, 32, 18)
+    torch.manual_seed(0)
+    path = save_checkpoint(IKNet(robot, hidden=[4]).fit_normalisation(T, q), tmp_path / "poor.ckpt")  # untrained
+    without = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback=False).solve(T, max_iters=3)
+    assert not bool(without.success.all())
+    rescued = nik.IKSolver(robot, checkpoint=path, refine="lm").solve(T, max_iters=3)
+    _check_round_trip(robot, rescued, T, 1e-4, 1e-3)

@@ -1,0 +1,15 @@
+"""Train an IK network: ``python train.py fit --config configs/train/<method>.yaml [--data.path data/NAME] ...``.
+
+Methods (one config each): ``bp``, ``adam``, ``lbfgs``, ``de``, ``de_bp``. LightningCLI supplies
+checkpoints, resume (``--ckpt_path``), loggers, progress bars, seeding (``seed_everything``) and the
+accelerator choice; see ``docs/readme_training.md``. The CLI itself is :func:`nik.learn.cli.cli_main`.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from nik.learn.cli import cli_main
+
+if __name__ == "__main__":
+    cli_main(sys.argv[1:])
