@@ -59,9 +59,10 @@ def main() -> None:
             for batch in args.batches:
                 q = robot.sample(batch, generator=torch.Generator().manual_seed(0), dtype=dtype)
                 with torch.no_grad():
-                    eager = throughput(lambda: robot.fk(q), batch, min_time, repeats)
-                    compiled = throughput(lambda: robot.fk(q, compiled=True), batch, min_time, repeats)
-                    peer = throughput(lambda: pk_chain.forward_kinematics(q).get_matrix(), batch, min_time, repeats)
+                    eager = throughput(lambda r=robot, q=q: r.fk(q), batch, min_time, repeats)
+                    compiled = throughput(lambda r=robot, q=q: r.fk(q, compiled=True), batch, min_time, repeats)
+                    peer = throughput(lambda c=pk_chain, q=q: c.forward_kinematics(q).get_matrix(), batch, min_time,
+                                      repeats)
                 print(f"| {name} | {str(dtype)[6:]} | {batch:,} | {eager / 1e6:.3f} M | {compiled / 1e6:.3f} M "
                       f"| {peer / 1e6:.3f} M | {eager / peer:.1f}x | {compiled / peer:.1f}x |", flush=True)
 

@@ -246,10 +246,15 @@ def evaluate(
             res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
             polish = " + LM polish" if method != "lm" else ""
             add(f"network + {method}", res.q, sec, f"mean {res.iterations.float().mean():.1f} iterations{polish}")
+        say("network + lm + LM restarts")
+        solver = IKSolver(robot, checkpoint=checkpoint, refine="lm", fallback="multistart")
+        res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
+        add("network + lm + LM restarts", res.q, sec,
+            "targets LM misses from the guess restart from uniform starts; no closed form")
     else:
         report.notes.append("no checkpoint given: the network rows are missing")
     say(f"uniform-init {swarm}")
-    solver = IKSolver(robot, refine=swarm, analytic=False)
+    solver = IKSolver(robot, refine=swarm, analytic=False, fallback="none")
     res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
     its = float(res.iterations.float().mean())
     add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")

@@ -65,10 +65,11 @@ def matrix_to_quaternion(R: torch.Tensor) -> torch.Tensor:
     tr = r00 + r11 + r22
     pivots = torch.stack([1 + tr, 1 + 2 * r00 - tr, 1 + 2 * r11 - tr, 1 + 2 * r22 - tr], dim=-1)
     # Candidate quaternions, each scaled by 4 * its pivot component.
-    c0 = torch.stack([1 + tr, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1)
-    c1 = torch.stack([m[..., 2, 1] - m[..., 1, 2], 1 + 2 * r00 - tr, m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1)
-    c2 = torch.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0], 1 + 2 * r11 - tr, m[..., 1, 2] + m[..., 2, 1]], -1)
-    c3 = torch.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1], 1 + 2 * r22 - tr], -1)
+    r01, r02, r10, r12, r20, r21 = m[..., 0, 1], m[..., 0, 2], m[..., 1, 0], m[..., 1, 2], m[..., 2, 0], m[..., 2, 1]
+    c0 = torch.stack([1 + tr, r21 - r12, r02 - r20, r10 - r01], -1)
+    c1 = torch.stack([r21 - r12, 1 + 2 * r00 - tr, r01 + r10, r02 + r20], -1)
+    c2 = torch.stack([r02 - r20, r01 + r10, 1 + 2 * r11 - tr, r12 + r21], -1)
+    c3 = torch.stack([r10 - r01, r02 + r20, r12 + r21, 1 + 2 * r22 - tr], -1)
     cands = torch.stack([c0, c1, c2, c3], dim=-2)  # (..., 4, 4)
     best = pivots.argmax(dim=-1)
     q = torch.gather(cands, -2, best[..., None, None].expand(*best.shape, 1, 4)).squeeze(-2)
@@ -242,7 +243,8 @@ def validate_quaternion(quat: torch.Tensor, *, name: str = "quaternion", tol: fl
     bad = (norm - 1).abs() > tol
     if bad.any():
         i = int(bad.reshape(-1).nonzero()[0])
-        raise _fail(name, f"row {i} has norm {float(norm.reshape(-1)[i]):.6g}; a unit quaternion (w, x, y, z) is expected")
+        value = float(norm.reshape(-1)[i])
+        raise _fail(name, f"row {i} has norm {value:.6g}; a unit quaternion (w, x, y, z) is expected")
     return quat / norm[..., None]
 
 

@@ -216,10 +216,13 @@ class IKSolver:
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
         swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
         analytic: use the closed form for PUMA-like arms when no checkpoint is given (default True).
-        fallback: targets still outside tolerance after refining the network's guess get a second
-            chance: the closed-form solution nearest the network's guess (PUMA-like arms), else a
-            multi-start refinement (uniform particles / uniform LM starts). Default True; the
-            evaluation turns it off to measure what the network's guess alone delivers.
+        fallback: a second chance for targets still outside tolerance after the refinement:
+            ``"analytic"``, the closed-form solution nearest the first answer (PUMA-like arms only);
+            ``"multistart"``, Levenberg-Marquardt from ``LMCfg.starts`` uniform starts;
+            ``"auto"`` (or True, the default), analytic where available, else multistart;
+            ``"none"`` (or False). It is not used where it would repeat the first pass (no network
+            on a PUMA-like arm, or ``refine="lm"`` without a network), nor with ``refine="none"``.
+            The evaluation turns it off to measure what the network's guess alone delivers.
     """
 
     def __init__(
@@ -231,7 +234,7 @@ class IKSolver:
         polish: bool = True,
         swarm_cfg=None,
         analytic: bool = True,
-        fallback: bool = True,
+        fallback: bool | str = "auto",
     ):
         if refine not in REFINE_METHODS:
             raise ValueError(f"IKSolver: refine must be one of {list(REFINE_METHODS)}, got {refine!r}")
@@ -239,7 +242,9 @@ class IKSolver:
         self.refine = refine
         self.polish = bool(polish)
         self.swarm_cfg = swarm_cfg
-        self.fallback = bool(fallback)
+        fallback = {True: "auto", False: "none"}.get(fallback, fallback)
+        if fallback not in ("auto", "analytic", "multistart", "none"):
+            raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
         self.net = None
         if checkpoint is not None:
             from nik.models import load_checkpoint
@@ -250,6 +255,11 @@ class IKSolver:
             from nik.analytic import is_puma_like
 
             self._analytic = is_puma_like(self.robot)
+        if fallback == "analytic" and not self._analytic:
+            raise ValueError(f"IKSolver: fallback='analytic' needs a PUMA-like arm; {self.robot.name} is not")
+        if fallback == "auto":
+            fallback = "analytic" if self._analytic else "multistart"
+        self.fallback = fallback
 
     def __repr__(self) -> str:
         return (f"IKSolver(robot={self.robot.name!r}, network={self.net is not None}, "
@@ -414,15 +424,19 @@ class IKSolver:
         q = robot.clamp(q)
         pos, rot = pose_error(T, robot.fk(q))
         success = (pos <= tol_pos) & (rot <= tol_rot)
-        if self.fallback and self.net is not None and not bool(success.all()):
+        first_pass_is_fallback = (self.net is None and self._analytic) or (self.net is None and self.refine == "lm")
+        if self.fallback != "none" and not first_pass_is_fallback and not bool(success.all()):
             idx = (~success).nonzero().squeeze(1)
-            if self._analytic:  # the closed-form solution nearest the network's guess (or q_near)
-                near = q_near_t[idx] if q_near_t is not None else q0[idx]
+            if self.fallback == "analytic":  # the closed-form solution nearest the first answer (or q_near)
+                near = q_near_t[idx] if q_near_t is not None else q[idx]
                 fq = self._analytic_guess(T[idx], near)
                 fpos, frot = pose_error(T[idx], robot.fk(fq))
                 fit = torch.zeros_like(iterations[idx])
-            else:  # a multi-start refinement
-                res = self._refine(T[idx], None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
+            else:  # Levenberg-Marquardt from uniform starts
+                from nik.swarm import refine as swarm_refine
+
+                res = swarm_refine(robot, T[idx], method="lm", q_init=None, tol_pos=tol_pos, tol_rot=tol_rot,
+                                   seed=seed)
                 fq, fpos, frot, fit = res.q, res.pos_err, res.rot_err, res.iterations.to(torch.long)
             better = (fpos + 0.1 * frot) < (pos[idx] + 0.1 * rot[idx])
             keep = idx[better]

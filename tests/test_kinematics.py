@@ -57,13 +57,13 @@ def reference_fk(name, q):
     """One configuration q (list of radians) -> 4x4, metres, by the explicit products above."""
     T = torch.eye(4, dtype=torch.float64)
     if name == "puma560":
-        for qi, (al, a, d) in zip(q, PUMA_DH):
+        for qi, (al, a, d) in zip(q, PUMA_DH, strict=True):
             T = T @ dh_matrix(qi, d * 1e-3, a * 1e-3, al * DEG)
     elif name == "kuka_kr":
-        for qi, (off, d, a, al) in zip(q, KUKA_DH):
+        for qi, (off, d, a, al) in zip(q, KUKA_DH, strict=True):
             T = T @ dh_matrix(qi + off * DEG, d * 1e-3, a * 1e-3, al * DEG)
     elif name == "rebot_v_6r":
-        for qi, (w, r) in zip(q, REBOT_SCREWS):
+        for qi, (w, r) in zip(q, REBOT_SCREWS, strict=True):
             T = T @ twist_exp(w, [x * 1e-3 for x in r], qi)
         M = torch.eye(4, dtype=torch.float64)
         M[:3, 3] = torch.tensor([D1 + D5, 0, D2 + D3 + D4], dtype=torch.float64) * 1e-3
@@ -142,9 +142,9 @@ def test_mdh_convention_matches_explicit_craig_products(tmp_path):
     (tmp_path / "puma_mdh.yaml").write_text(text)
     robot = nik.load_robot(tmp_path / "puma_mdh.yaml")
     q = random_q(robot, 30)
-    for qi, T in zip(q, robot.fk(q)):
+    for qi, T in zip(q, robot.fk(q), strict=True):
         expected = torch.eye(4, dtype=torch.float64)
-        for theta, (al, a, d) in zip(qi.tolist(), rows):
+        for theta, (al, a, d) in zip(qi.tolist(), rows, strict=True):
             expected = expected @ mdh_matrix(theta, d * 1e-3, a * 1e-3, al * DEG)
         assert_close(T, expected, atol=1e-9, rtol=0)
 
@@ -154,7 +154,7 @@ def test_dh_chain_written_as_urdf_gives_the_same_fk(tmp_path):
     robot = nik.load_robot("kuka_kr")
     joints, parent = [], "base"
     origin = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # x y z r p y before joint 1
-    for i, (off, d, a, al) in enumerate(KUKA_DH):
+    for i, (_, d, a, al) in enumerate(KUKA_DH):
         joints.append(f"""<joint name="j{i + 1}" type="revolute"><parent link="{parent}"/><child link="l{i + 1}"/>
           <origin xyz="{origin[0]} {origin[1]} {origin[2]}" rpy="{origin[3]} {origin[4]} {origin[5]}"/>
           <axis xyz="0 0 1"/><limit lower="-6" upper="6" effort="1" velocity="1"/></joint>""")
@@ -164,7 +164,8 @@ def test_dh_chain_written_as_urdf_gives_the_same_fk(tmp_path):
     links = "".join(f'<link name="l{i + 1}"/>' for i in range(6))
     tool = f"""<link name="tool"/><joint name="jt" type="fixed"><parent link="l6"/><child link="tool"/>
       <origin xyz="{origin[0]} {origin[1]} {origin[2]}" rpy="{origin[3]} {origin[4]} {origin[5]}"/></joint>"""
-    (tmp_path / "kuka.urdf").write_text(f'<robot name="kuka_urdf"><link name="base"/>{links}{"".join(joints)}{tool}</robot>')
+    urdf = f'<robot name="kuka_urdf"><link name="base"/>{links}{"".join(joints)}{tool}</robot>'
+    (tmp_path / "kuka.urdf").write_text(urdf)
     urdf_robot = load_urdf(tmp_path / "kuka.urdf", end_link="tool", origins="float64")
     q = random_q(robot, 50)
     offsets = torch.tensor([off for off, *_ in KUKA_DH], dtype=torch.float64) * DEG

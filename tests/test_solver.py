@@ -244,3 +244,31 @@ def test_fallback_to_the_closed_form_rescues_a_poor_network(tmp_path):
     assert not bool(without.success.all())
     rescued = nik.IKSolver(robot, checkpoint=path, refine="lm").solve(T, max_iters=3)
     _check_round_trip(robot, rescued, T, 1e-4, 1e-3)
+
+
+@pytest.mark.skipif(not HAS_MODELS, reason="nik.models (the training issue) is not in this build")
+def test_multistart_fallback_rescues_a_poor_network_on_an_arm_without_closed_form(tmp_path):
+    from nik.models import IKNet, save_checkpoint
+
+    robot = nik.load_robot("ur5")
+    q, T = _targets(robot, 32, 19)
+    torch.manual_seed(0)
+    path = save_checkpoint(IKNet(robot, hidden=[4]).fit_normalisation(T, q), tmp_path / "poor.ckpt")  # untrained
+    without = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback=False).solve(T, max_iters=3)
+    assert not bool(without.success.all())
+    rescued = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback="multistart").solve(T, max_iters=3)
+    _check_round_trip(robot, rescued, T, 1e-4, 1e-3)
+
+
+def test_default_solver_reaches_random_targets_on_a_7_dof_urdf_arm():
+    robot = nik.load_robot("panda")
+    q, T = _targets(robot, 16, 20)
+    res = nik.IKSolver(robot).solve(T, seed=0)  # uniform-init ipso + LM polish, then LM multi-start fallback
+    _check_round_trip(robot, res, T, 1e-4, 1e-3)
+
+
+def test_unknown_fallback_is_refused():
+    with pytest.raises(ValueError, match="fallback must be"):
+        nik.IKSolver("ur5", fallback="maybe")
+    with pytest.raises(ValueError, match="needs a PUMA-like arm"):
+        nik.IKSolver("ur5", fallback="analytic")

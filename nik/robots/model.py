@@ -96,7 +96,7 @@ class NormalFormBuilder:
 def dh_chain(alpha, a, d, *, base=None, tool=None) -> np.ndarray:
     """Standard (distal) DH: ``A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``; SI units. Returns G."""
     b = NormalFormBuilder(base)
-    for al, ai, di in zip(alpha, a, d):
+    for al, ai, di in zip(alpha, a, d, strict=True):
         b.joint().fixed(trans(z=di) @ trans(x=ai) @ rot_x(al))
     return b.finish(tool)
 
@@ -104,7 +104,7 @@ def dh_chain(alpha, a, d, *, base=None, tool=None) -> np.ndarray:
 def mdh_chain(alpha, a, d, *, base=None, tool=None) -> np.ndarray:
     """Modified DH (Craig): ``A_i = Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i)``; SI units. Returns G."""
     b = NormalFormBuilder(base)
-    for al, ai, di in zip(alpha, a, d):
+    for al, ai, di in zip(alpha, a, d, strict=True):
         b.fixed(rot_x(al) @ trans(x=ai)).joint().fixed(trans(z=di))
     return b.finish(tool)
 
@@ -116,7 +116,7 @@ def poe_chain(axes, points, home: np.ndarray) -> np.ndarray:
     ``exp([xi] q) = Tr(r) Rot(axis, q) Tr(-r)``. ``home`` is ``M``, the tool pose at q = 0.
     """
     b = NormalFormBuilder()
-    for w, r in zip(axes, points):
+    for w, r in zip(axes, points, strict=True):
         b.fixed(trans(*r)).joint(w).fixed(trans(*(-np.asarray(r, dtype=float))))
     return b.finish(home)
 

@@ -118,7 +118,8 @@ def load_urdf(
         if jtype == "prismatic":
             raise RobotDefinitionError(f"{path}: joint {frame.joint.name!r} is prismatic; nik supports revolute joints")
         if jtype == "revolute":
-            builder.joint(frame.joint.axis.double().numpy() if urdf is None else _axis(urdf.joint_map[frame.joint.name]))
+            axis = frame.joint.axis.double().numpy() if urdf is None else _axis(urdf.joint_map[frame.joint.name])
+            builder.joint(axis)
             names.append(frame.joint.name)
             lim = frame.joint.limits
             limits.append([-math.pi, math.pi] if lim is None or lim[0] >= lim[1] else [float(lim[0]), float(lim[1])])

@@ -37,8 +37,9 @@ __all__ = ["LMCfg", "lm_solve", "so3_log"]
 class LMCfg:
     """Levenberg-Marquardt settings (``method="lm"`` and ``polish=True``)."""
 
-    iters: int = 30  # iteration limit (each: one FK + Jacobian per start)
-    starts: int = 8  # uniform random starts per target when no guess is given
+    iters: int = 60  # iteration limit (each: one FK + Jacobian per start); converged targets stop early
+    starts: int = 32  # uniform random starts per target when no guess is given (measured on 1,000 random
+    #                   targets: 8 -> 92-99.9 %, 32 -> 99.3-100 % within 0.1 mm / 0.1 deg on the built-in arms)
     rot_weight: float = 0.5  # m/rad, weight of the rotation error rows
     lambda0: float = 1e-3  # initial damping (relative to diag(J^T J))
     lambda_up: float = 5.0  # damping factor after a rejected step
