@@ -7,7 +7,7 @@ Rows:
   (a) every swarm from uniform init (paper settings), without and with LM polish;
   (b) every swarm seeded near a guess (the true joints + N(0, noise^2) per joint, clamped), without
       and with LM polish, plus a short seeded improved PSO (10 iterations) + polish;
-  (c) LM alone: from the guess, and multi-start from 8 uniform starts;
+  (c) LM alone: from the guess, and multi-start from LMCfg.starts (default 32) uniform starts;
   (d) pytorch-kinematics PseudoInverseIK on the same targets: 10 per-target uniform random
       initial configs ((N, R, dof) initial_config), early_stopping_any_converged=True, joint limits
       given, same tolerances; and seeded from the same guess (R = 1). Its answers are re-measured
@@ -133,7 +133,8 @@ def main(argv=None):
     res, dt = timed(lambda: refine(robot, T, method="lm", q_init=guess, tol_pos=TOL_POS, tol_rot=TOL_ROT))
     report(rows, "(c) LM from guess", robot, T, res.q, dt, f"iters mean {res.iterations.double().mean():.1f}")
     res, dt = timed(lambda: refine(robot, T, method="lm", tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=args.seed))
-    report(rows, "(c) LM, 8 uniform starts", robot, T, res.q, dt, f"iters mean {res.iterations.double().mean():.1f}")
+    report(rows, f"(c) LM, {LMCfg().starts} uniform starts", robot, T, res.q, dt,
+           f"iters mean {res.iterations.double().mean():.1f}")
 
     # (b) seeded swarms
     for method in ("ipso", "pso", "sapso", "ga"):
