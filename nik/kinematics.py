@@ -29,7 +29,15 @@ import warnings
 import numpy as np
 import torch
 
-__all__ = ["FKKernel", "chain_fk", "chain_fk_eager", "chain_jacobian", "generate_fk_source", "to_homogeneous"]
+__all__ = [
+    "FKKernel",
+    "chain_fk",
+    "chain_fk_eager",
+    "chain_jacobian",
+    "chain_joint_frames",
+    "generate_fk_source",
+    "to_homogeneous",
+]
 
 
 def to_homogeneous(T34: torch.Tensor) -> torch.Tensor:
@@ -203,18 +211,19 @@ class FKKernel:
         return self.eager(q)
 
 
-def chain_jacobian(q: torch.Tensor, G: torch.Tensor, offsets: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """FK and geometric Jacobian of the normal form, in closed form.
+def chain_joint_frames(
+    q: torch.Tensor, G: torch.Tensor, offsets: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """FK plus, for every joint, its axis and a point on it, in the base frame.
 
-    Joint ``i`` turns about the z axis of the frame ``F_i = G_0 Rz(.) G_1 ... G_{i-1}``
-    (before its own ``Rz``), so its Jacobian column is ``[z_i x (p - p_i); z_i]`` in the
-    base frame.
+    Joint ``i`` turns about the z axis of the frame ``F_i = G_0 Rz(.) G_1 ... G_{i-1}`` (before its
+    own ``Rz``): the axis is that frame's z column and the point its origin.
 
     Args:
         q: (B, n) joint angles, radians.
 
     Returns:
-        ``T: (B, 3, 4)`` and ``J: (B, 6, n)``, rows (linear velocity xyz, angular velocity xyz).
+        ``T: (B, 3, 4)``, ``axes: (B, 3, n)`` unit vectors and ``points: (B, 3, n)`` metres.
     """
     theta = q + offsets
     c, s = torch.cos(theta), torch.sin(theta)
@@ -224,7 +233,20 @@ def chain_jacobian(q: torch.Tensor, G: torch.Tensor, offsets: torch.Tensor) -> t
         axes.append(T[..., 2])
         points.append(T[..., 3])
         T = _rotate_columns(T, c[:, i : i + 1], s[:, i : i + 1]) @ G[i + 1]
-    z = torch.stack(axes, dim=-1)  # (B, 3, n)
-    p = torch.stack(points, dim=-1)  # (B, 3, n)
+    return T, torch.stack(axes, dim=-1), torch.stack(points, dim=-1)
+
+
+def chain_jacobian(q: torch.Tensor, G: torch.Tensor, offsets: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """FK and geometric Jacobian of the normal form, in closed form.
+
+    Joint ``i``'s column is ``[z_i x (p - p_i); z_i]`` with ``z_i``, ``p_i`` from :func:`chain_joint_frames`.
+
+    Args:
+        q: (B, n) joint angles, radians.
+
+    Returns:
+        ``T: (B, 3, 4)`` and ``J: (B, 6, n)``, rows (linear velocity xyz, angular velocity xyz).
+    """
+    T, z, p = chain_joint_frames(q, G, offsets)
     lin = torch.linalg.cross(z, T[..., 3:4] - p, dim=-2)
     return T, torch.cat([lin, z], dim=-2)

@@ -37,6 +37,8 @@ from __future__ import annotations
 
 import torch
 
+from nik.kinematics import chain_joint_frames
+
 __all__ = ["BRANCH_NAMES", "BranchClassifier", "branch_classifier", "branch_labels", "branch_name", "joint_frames"]
 
 #: Human names of the three bits, value 0 first.
@@ -63,17 +65,8 @@ def joint_frames(robot, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         (the origin of the frame the joint turns), metres; dtype of ``q``.
     """
     G, off = robot.G.to(q.device, q.dtype), robot.offsets.to(q.device, q.dtype)
-    theta = q + off
-    c, s = torch.cos(theta), torch.sin(theta)
-    T = G[0, :3, :].expand(q.shape[0], 3, 4)
-    axes, points = [], []
-    for i in range(q.shape[-1]):
-        axes.append(T[..., 2])
-        points.append(T[..., 3])
-        x, y = T[..., 0], T[..., 1]
-        ci, si = c[:, i : i + 1], s[:, i : i + 1]
-        T = torch.stack([x * ci + y * si, y * ci - x * si, T[..., 2], T[..., 3]], dim=-1) @ G[i + 1]
-    return torch.stack(axes, dim=1), torch.stack(points, dim=1)
+    _, axes, points = chain_joint_frames(q, G, off)
+    return axes.transpose(1, 2), points.transpose(1, 2)
 
 
 def _meeting_point(axes: torch.Tensor, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
