@@ -45,8 +45,10 @@ def main(argv=None) -> None:
 
     ref = torch.rand(args.n * 8, dtype=torch.float64)
     t_ref = _median_time(lambda: ref * ref, args.repeats)
-    print(f"reference: one multiply of {args.n * 8} float64 takes {t_ref * 1e3:.2f} ms "
-          f"({args.n * 8 * 16 / t_ref / 1e9:.1f} GB/s; an idle modern core does ~10 GB/s)\n")
+    print(
+        f"reference: one multiply of {args.n * 8} float64 takes {t_ref * 1e3:.2f} ms "
+        f"({args.n * 8 * 16 / t_ref / 1e9:.1f} GB/s; an idle modern core does ~10 GB/s)\n"
+    )
 
     rows = []
     compiled_modes = [False] if args.no_compile else [False, True]
@@ -54,9 +56,14 @@ def main(argv=None) -> None:
         T = robot.fk(robot.sample(args.n, generator=gen, dtype=dtype))
         for compiled in compiled_modes:
             for check in (False, True):
-                fns = {w: (lambda w=w, T=T, check=check, compiled=compiled:
-                           puma560_ik(robot, T, wrist=w, check=check, compiled=compiled))
-                       for w in ("quaternion", "matrix")}
+                fns = {
+                    w: (
+                        lambda w=w, T=T, check=check, compiled=compiled: puma560_ik(
+                            robot, T, wrist=w, check=check, compiled=compiled
+                        )
+                    )
+                    for w in ("quaternion", "matrix")
+                }
                 for fn in fns.values():  # warm-up (and compilation)
                     fn()
                 times = {w: [] for w in fns}
@@ -70,17 +77,24 @@ def main(argv=None) -> None:
 
     # single-query latency (Python overhead dominates)
     T1 = robot.fk(robot.sample(1, generator=gen, dtype=torch.float64))
-    lat = {w: _median_time(lambda w=w: puma560_ik(robot, T1, wrist=w, check=False), 200)
-           for w in ("quaternion", "matrix")}
+    lat = {
+        w: _median_time(lambda w=w: puma560_ik(robot, T1, wrist=w, check=False), 200) for w in ("quaternion", "matrix")
+    }
 
-    print("| dtype | compiled | FK check | quaternion wrist (M poses/s) | matrix wrist (M poses/s) "
-          "| quaternion speed-up |")
+    print(
+        "| dtype | compiled | FK check | quaternion wrist (M poses/s) | matrix wrist (M poses/s) "
+        "| quaternion speed-up |"
+    )
     print("|---|---|---|---|---|---|")
     for dt, comp, check, tq, tm in rows:
-        print(f"| {dt} | {comp} | {check} | {args.n / tq / 1e6:.3f} | {args.n / tm / 1e6:.3f} "
-              f"| {100 * (tm / tq - 1):+.1f} % |")
-    print(f"\nsingle pose (B = 1, eager, no FK check): quaternion {lat['quaternion'] * 1e6:.0f} us, "
-          f"matrix {lat['matrix'] * 1e6:.0f} us")
+        print(
+            f"| {dt} | {comp} | {check} | {args.n / tq / 1e6:.3f} | {args.n / tm / 1e6:.3f} "
+            f"| {100 * (tm / tq - 1):+.1f} % |"
+        )
+    print(
+        f"\nsingle pose (B = 1, eager, no FK check): quaternion {lat['quaternion'] * 1e6:.0f} us, "
+        f"matrix {lat['matrix'] * 1e6:.0f} us"
+    )
     best = max(args.n / min(tq, tm) for _, _, check, tq, tm in rows if not check)
     print(f"best throughput with all 8 solutions: {best / 1e6:.2f} M poses/s (goal: 2 M poses/s on 2 cores)")
 

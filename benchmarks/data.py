@@ -43,27 +43,60 @@ def child(args) -> None:
     out = Path(args.out)
     t0 = time.perf_counter()
     # warm-up (and compilation, for the compiled kernel) on a small dataset, not timed below
-    generate_dataset(robot, 70000, out / "warmup", dtype=args.dtype, compiled=args.compiled, progress=False,
-                     overwrite=True, threads=args.threads)
+    generate_dataset(
+        robot,
+        70000,
+        out / "warmup",
+        dtype=args.dtype,
+        compiled=args.compiled,
+        progress=False,
+        overwrite=True,
+        threads=args.threads,
+    )
     warm = time.perf_counter() - t0
     shutil.rmtree(out / "warmup")
     rss_before = _maxrss_mb()
     t0 = time.perf_counter()
-    generate_dataset(robot, args.n, out / "bench", dtype=args.dtype, compiled=args.compiled, progress=False,
-                     seed=0, overwrite=True, threads=args.threads)
+    generate_dataset(
+        robot,
+        args.n,
+        out / "bench",
+        dtype=args.dtype,
+        compiled=args.compiled,
+        progress=False,
+        seed=0,
+        overwrite=True,
+        threads=args.threads,
+    )
     dt = time.perf_counter() - t0
     size = sum(f.stat().st_size for f in (out / "bench").iterdir())
     shutil.rmtree(out / "bench")
-    print(json.dumps({"n": args.n, "seconds": dt, "rate": args.n / dt, "rss_before_mb": rss_before,
-                      "rss_peak_mb": _maxrss_mb(), "warmup_s": warm, "bytes": size}))
+    print(
+        json.dumps(
+            {
+                "n": args.n,
+                "seconds": dt,
+                "rate": args.n / dt,
+                "rss_before_mb": rss_before,
+                "rss_peak_mb": _maxrss_mb(),
+                "warmup_s": warm,
+                "bytes": size,
+            }
+        )
+    )
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="kuka_kr")
     p.add_argument("--n", type=int, nargs="+", default=[1_000_000, 250_000])
-    p.add_argument("--threads", type=int, nargs="+", default=[1, 2],
-                   help="torch threads for the maths; writing and hashing run in one more thread (default: 1 and 2)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        nargs="+",
+        default=[1, 2],
+        help="torch threads for the maths; writing and hashing run in one more thread (default: 1 and 2)",
+    )
     p.add_argument("--dtype", nargs="+", default=["float64", "float32"])
     p.add_argument("--compiled", nargs="+", default=["0", "1"], help="0 eager, 1 torch.compile'd FK")
     p.add_argument("--out", default=None, help="scratch folder (default: a temporary one)")
@@ -77,24 +110,46 @@ def main() -> None:
 
     scratch = Path(args.out or tempfile.mkdtemp(prefix="nik_bench_data_"))
     scratch.mkdir(parents=True, exist_ok=True)
-    print(f"nik generate --robot {args.robot}: end to end (sample + labels + FK + write + sha256 + fsync), "
-          f"cpus = {os.cpu_count()}, load average = "
-          f"{' '.join(f'{x:.1f}' for x in os.getloadavg())}")
-    print(f"{'threads':<8}{'dtype':<8}{'FK':<10}{'N':>10}{'time (s)':>10}{'samples/s':>14}{'MB/s':>8}"
-          f"{'RSS before (MB)':>17}{'RSS peak (MB)':>15}{'peak-before':>13}{'warm-up (s)':>13}")
+    print(
+        f"nik generate --robot {args.robot}: end to end (sample + labels + FK + write + sha256 + fsync), "
+        f"cpus = {os.cpu_count()}, load average = "
+        f"{' '.join(f'{x:.1f}' for x in os.getloadavg())}"
+    )
+    print(
+        f"{'threads':<8}{'dtype':<8}{'FK':<10}{'N':>10}{'time (s)':>10}{'samples/s':>14}{'MB/s':>8}"
+        f"{'RSS before (MB)':>17}{'RSS peak (MB)':>15}{'peak-before':>13}{'warm-up (s)':>13}"
+    )
     try:
         for threads, dtype, comp, n in itertools.product(args.threads, args.dtype, args.compiled, args.n):
-            cmd = [sys.executable, __file__, "--child", "--robot", args.robot, "--n", str(n), "--dtype", dtype,
-                   "--compiled", comp, "--threads", str(threads), "--out", str(scratch)]
+            cmd = [
+                sys.executable,
+                __file__,
+                "--child",
+                "--robot",
+                args.robot,
+                "--n",
+                str(n),
+                "--dtype",
+                dtype,
+                "--compiled",
+                comp,
+                "--threads",
+                str(threads),
+                "--out",
+                str(scratch),
+            ]
             proc = subprocess.run(cmd, capture_output=True, text=True)
             label = f"{threads:<8}{dtype:<8}{'compiled' if comp == '1' else 'eager':<10}{n:>10}"
             if proc.returncode != 0:
                 print(f"{label}  failed: {proc.stderr.strip().splitlines()[-1:]}")
                 continue
             r = json.loads(proc.stdout.strip().splitlines()[-1])
-            print(f"{label}{r['seconds']:>10.2f}{r['rate']:>14,.0f}{r['bytes'] / r['seconds'] / 1e6:>8.0f}"
-                  f"{r['rss_before_mb']:>17.0f}{r['rss_peak_mb']:>15.0f}{r['rss_peak_mb'] - r['rss_before_mb']:>13.0f}"
-                  f"{r['warmup_s']:>13.1f}", flush=True)
+            print(
+                f"{label}{r['seconds']:>10.2f}{r['rate']:>14,.0f}{r['bytes'] / r['seconds'] / 1e6:>8.0f}"
+                f"{r['rss_before_mb']:>17.0f}{r['rss_peak_mb']:>15.0f}{r['rss_peak_mb'] - r['rss_before_mb']:>13.0f}"
+                f"{r['warmup_s']:>13.1f}",
+                flush=True,
+            )
     finally:
         if args.out is None:
             shutil.rmtree(scratch, ignore_errors=True)

@@ -33,8 +33,13 @@ from nik.models import IKNet
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--samples", type=int, nargs="+", default=[10_000, 1_000, 100],
-                    help="sample counts per generation (the first is the goal's 10,000)")
+    ap.add_argument(
+        "--samples",
+        type=int,
+        nargs="+",
+        default=[10_000, 1_000, 100],
+        help="sample counts per generation (the first is the goal's 10,000)",
+    )
     ap.add_argument("--pop", type=int, default=220)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--loss", choices=["joint", "pose"], default="joint")
@@ -44,12 +49,16 @@ def main(argv=None) -> int:
         torch.set_num_threads(args.threads)
 
     robot = nik.load_robot("kuka_kr")
-    print(f"DE generation, NP={args.pop}, paper C's 6-8-6 tanh net, {args.loss} loss, "
-          f"{torch.get_num_threads()} threads, torch {torch.__version__}")
+    print(
+        f"DE generation, NP={args.pop}, paper C's 6-8-6 tanh net, {args.loss} loss, "
+        f"{torch.get_num_threads()} threads, torch {torch.__version__}"
+    )
     for n in args.samples:
         t_batched, t_loop = run(robot, n, args)
-        print(f"  {n:6d} samples: batched {t_batched * 1e3:8.1f} ms | per-individual loop {t_loop * 1e3:8.1f} ms | "
-              f"ratio {t_loop / t_batched:5.1f}x (goal >= 20x)")
+        print(
+            f"  {n:6d} samples: batched {t_batched * 1e3:8.1f} ms | per-individual loop {t_loop * 1e3:8.1f} ms | "
+            f"ratio {t_loop / t_batched:5.1f}x (goal >= 20x)"
+        )
     return 0
 
 

@@ -61,10 +61,14 @@ def main() -> None:
                 with torch.no_grad():
                     eager = throughput(lambda r=robot, q=q: r.fk(q), batch, min_time, repeats)
                     compiled = throughput(lambda r=robot, q=q: r.fk(q, compiled=True), batch, min_time, repeats)
-                    peer = throughput(lambda c=pk_chain, q=q: c.forward_kinematics(q).get_matrix(), batch, min_time,
-                                      repeats)
-                print(f"| {name} | {str(dtype)[6:]} | {batch:,} | {eager / 1e6:.3f} M | {compiled / 1e6:.3f} M "
-                      f"| {peer / 1e6:.3f} M | {eager / peer:.1f}x | {compiled / peer:.1f}x |", flush=True)
+                    peer = throughput(
+                        lambda c=pk_chain, q=q: c.forward_kinematics(q).get_matrix(), batch, min_time, repeats
+                    )
+                print(
+                    f"| {name} | {str(dtype)[6:]} | {batch:,} | {eager / 1e6:.3f} M | {compiled / 1e6:.3f} M "
+                    f"| {peer / 1e6:.3f} M | {eager / peer:.1f}x | {compiled / peer:.1f}x |",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

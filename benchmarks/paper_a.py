@@ -35,8 +35,10 @@ def direction_angles(T_target: torch.Tensor, T: torch.Tensor) -> torch.Tensor:
 
 def summary(name: str, v: torch.Tensor) -> str:
     v = v.double()
-    return (f"{name:<28} median {v.median().item():.3g}  mean {v.mean().item():.3g}  "
-            f"p90 {v.quantile(0.9).item():.3g}  max {v.max().item():.3g}")
+    return (
+        f"{name:<28} median {v.median().item():.3g}  mean {v.mean().item():.3g}  "
+        f"p90 {v.quantile(0.9).item():.3g}  max {v.max().item():.3g}"
+    )
 
 
 def main(argv=None):
@@ -53,8 +55,17 @@ def main(argv=None):
     q_true = robot.sample(args.n, generator=g, dtype=torch.float64)
     T = robot.fk(q_true)
     t0 = time.perf_counter()
-    res = refine(robot, T, method="sapso", cfg=SAPSOCfg(), max_iters=args.iters, seed=args.seed,
-                 tol_pos=CLAIM_MM * 1e-3, tol_rot=math.radians(CLAIM_DEG), polish=args.polish)
+    res = refine(
+        robot,
+        T,
+        method="sapso",
+        cfg=SAPSOCfg(),
+        max_iters=args.iters,
+        seed=args.seed,
+        tol_pos=CLAIM_MM * 1e-3,
+        tol_rot=math.radians(CLAIM_DEG),
+        polish=args.polish,
+    )
     dt = time.perf_counter() - t0
     T_reached = robot.fk(res.q)
     pos_mm = res.pos_err * 1000
@@ -62,17 +73,23 @@ def main(argv=None):
     worst_dir = dirs.amax(dim=1)
     geo = torch.rad2deg(res.rot_err)
     meets = (pos_mm <= CLAIM_MM) & (worst_dir <= CLAIM_DEG)
-    print(f"paper A check: SA-PSO (paper settings, N = {args.iters}) on puma560, {args.n} random reachable targets, "
-          f"float64, {args.threads} thread(s){', + LM polish' if args.polish else ''}")
+    print(
+        f"paper A check: SA-PSO (paper settings, N = {args.iters}) on puma560, {args.n} random reachable targets, "
+        f"float64, {args.threads} thread(s){', + LM polish' if args.polish else ''}"
+    )
     print(summary("position error (mm)", pos_mm))
     for k, axis in enumerate("noa"):
         print(summary(f"direction angle {axis} (deg)", dirs[:, k]))
     print(summary("geodesic rotation (deg)", geo))
     print(summary("iterations", res.iterations.double()))
-    print(f"paper A claim (position <= {CLAIM_MM:g} mm and every direction angle <= {CLAIM_DEG:g} deg): "
-          f"met on {meets.double().mean().item() * 100:.1f} % of targets")
-    print(f"within limits: {bool(robot.within_limits(res.q).all())}; time {dt:.1f} s "
-          f"({dt / args.n * 1000:.2f} ms per target)")
+    print(
+        f"paper A claim (position <= {CLAIM_MM:g} mm and every direction angle <= {CLAIM_DEG:g} deg): "
+        f"met on {meets.double().mean().item() * 100:.1f} % of targets"
+    )
+    print(
+        f"within limits: {bool(robot.within_limits(res.q).all())}; time {dt:.1f} s "
+        f"({dt / args.n * 1000:.2f} ms per target)"
+    )
 
 
 if __name__ == "__main__":

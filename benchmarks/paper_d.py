@@ -70,27 +70,46 @@ def main(argv=None):
             dt = time.perf_counter() - t0
             f1mm = f1.double() * 1000
             stats[aname] = (f1mm.mean().item(), f2.double().mean().item())
-            rows.append((tname, aname, f1mm.max().item(), f1mm.min().item(), f1mm.mean().item(),
-                         f2.max().item(), f2.min().item(), f2.mean().item(), dt))
+            rows.append(
+                (
+                    tname,
+                    aname,
+                    f1mm.max().item(),
+                    f1mm.min().item(),
+                    f1mm.mean().item(),
+                    f2.max().item(),
+                    f2.min().item(),
+                    f2.mean().item(),
+                    dt,
+                )
+            )
             curves[(tname, aname)] = (h1.double().mean(1) * 1000, h2.double().mean(1))
         for k, label in ((0, "f1"), (1, "f2")):
             i, c, g = stats["improved PSO"][k], stats["classic PSO"][k], stats["GA"][k]
-            verdicts.append(f"{tname} {label} (mean): improved PSO {i:.3g} < classic PSO {c:.3g}: "
-                            f"{'held' if i < c else 'did NOT hold'}; classic PSO << GA {g:.3g}: "
-                            f"{'held' if c * 10 < g else 'did NOT hold'}")
-    header = ("| target | algorithm | f1 max (mm) | f1 min (mm) | f1 mean (mm) | f2 max | f2 min | f2 mean "
-              "| time (s) |\n|---|---|---|---|---|---|---|---|---|")
+            verdicts.append(
+                f"{tname} {label} (mean): improved PSO {i:.3g} < classic PSO {c:.3g}: "
+                f"{'held' if i < c else 'did NOT hold'}; classic PSO << GA {g:.3g}: "
+                f"{'held' if c * 10 < g else 'did NOT hold'}"
+            )
+    header = (
+        "| target | algorithm | f1 max (mm) | f1 min (mm) | f1 mean (mm) | f2 max | f2 min | f2 mean "
+        "| time (s) |\n|---|---|---|---|---|---|---|---|---|"
+    )
     lines = [header]
     lines += [f"| {r[0]} | {r[1]} | " + " | ".join(f"{v:.3g}" for v in r[2:8]) + f" | {r[8]:.1f} |" for r in rows]
     text = "\n".join(lines) + "\n\n" + "\n".join(verdicts) + "\n"
-    print(f"paper D protocol: rebot_v_6r, {args.runs} runs per algorithm and target, {args.dtype}, "
-          f"{args.threads} thread(s)\n")
+    print(
+        f"paper D protocol: rebot_v_6r, {args.runs} runs per algorithm and target, {args.dtype}, "
+        f"{args.threads} thread(s)\n"
+    )
     print(text)
     n_ic = sum(v.split(";")[0].endswith("held") for v in verdicts)
     n_cg = sum(v.endswith("held") for v in verdicts)
     overall = n_ic == n_cg == len(verdicts)
-    print(f"paper D ordering improved PSO < classic PSO << GA: {'HELD' if overall else 'DID NOT HOLD'} "
-          f"(improved < classic on {n_ic}/{len(verdicts)} rows, classic << GA (10x) on {n_cg}/{len(verdicts)} rows)")
+    print(
+        f"paper D ordering improved PSO < classic PSO << GA: {'HELD' if overall else 'DID NOT HOLD'} "
+        f"(improved < classic on {n_ic}/{len(verdicts)} rows, classic << GA (10x) on {n_cg}/{len(verdicts)} rows)"
+    )
     (out / "table.md").write_text(text)
     try:
         import matplotlib

@@ -45,8 +45,10 @@ def dh_urdf(robot_name: str = "kuka_kr") -> str:
 
     def origin(M):
         rpy = matrix_to_rpy(torch.tensor(M[:3, :3])).numpy()
-        return (f'<origin xyz="{M[0, 3]:.12g} {M[1, 3]:.12g} {M[2, 3]:.12g}" '
-                f'rpy="{rpy[0]:.12g} {rpy[1]:.12g} {rpy[2]:.12g}"/>')
+        return (
+            f'<origin xyz="{M[0, 3]:.12g} {M[1, 3]:.12g} {M[2, 3]:.12g}" '
+            f'rpy="{rpy[0]:.12g} {rpy[1]:.12g} {rpy[2]:.12g}"/>'
+        )
 
     def rz(a):
         c, s = math.cos(a), math.sin(a)
@@ -57,12 +59,16 @@ def dh_urdf(robot_name: str = "kuka_kr") -> str:
     parts = [f'<robot name="{robot_name}">', '<link name="link0"/>']
     for i in range(robot.dof):
         parts.append(f'<link name="link{i + 1}"/>')
-        parts.append(f'<joint name="joint{i + 1}" type="revolute"><parent link="link{i}"/><child link="link{i + 1}"/>'
-                     f'{origin(G[i] @ rz(off[i]))}<axis xyz="0 0 1"/>'
-                     f'<limit lower="{lim[i, 0]:.12g}" upper="{lim[i, 1]:.12g}" effort="1" velocity="1"/></joint>')
+        parts.append(
+            f'<joint name="joint{i + 1}" type="revolute"><parent link="link{i}"/><child link="link{i + 1}"/>'
+            f'{origin(G[i] @ rz(off[i]))}<axis xyz="0 0 1"/>'
+            f'<limit lower="{lim[i, 0]:.12g}" upper="{lim[i, 1]:.12g}" effort="1" velocity="1"/></joint>'
+        )
     parts.append('<link name="tool"/>')
-    parts.append(f'<joint name="tool_joint" type="fixed"><parent link="link{robot.dof}"/><child link="tool"/>'
-                 f'{origin(G[-1])}</joint>')
+    parts.append(
+        f'<joint name="tool_joint" type="fixed"><parent link="link{robot.dof}"/><child link="tool"/>'
+        f"{origin(G[-1])}</joint>"
+    )
     parts.append("</robot>")
     return "\n".join(parts)
 
@@ -104,9 +110,15 @@ def run_pk(robot, T, q_guess, *, retries, seed, max_iterations=50):
         init = robot.sample(n * retries, generator=g, dtype=T.dtype).reshape(n, retries, robot.dof)
     else:
         init = q_guess.reshape(n, 1, robot.dof)
-    ik = pk.PseudoInverseIK(chain, pos_tolerance=TOL_POS, rot_tolerance=TOL_ROT, retry_configs=init[0],
-                            joint_limits=robot.limits.to(T.dtype), early_stopping_any_converged=True,
-                            max_iterations=max_iterations)
+    ik = pk.PseudoInverseIK(
+        chain,
+        pos_tolerance=TOL_POS,
+        rot_tolerance=TOL_ROT,
+        retry_configs=init[0],
+        joint_limits=robot.limits.to(T.dtype),
+        early_stopping_any_converged=True,
+        max_iterations=max_iterations,
+    )
     ik.initial_config = init  # (N, R, dof): per-target guesses (the constructor only takes (R, dof))
     sol, dt = timed(lambda: ik.solve(pk.Transform3d(matrix=T)))
     err = sol.err_pos + sol.err_rot + (~sol.converged) * 1e6
@@ -133,8 +145,10 @@ def main(argv=None):
     q_true = robot.sample(args.n, generator=g, dtype=dtype)
     T = robot.fk(q_true)
     guess = robot.clamp(q_true + args.noise * torch.randn(q_true.shape, generator=g, dtype=dtype))
-    print(f"kuka_kr, {args.n} random reachable targets, tolerance 0.1 mm / 0.1 deg, {args.dtype}, "
-          f"{args.threads} thread(s), guess noise {args.noise} rad\n")
+    print(
+        f"kuka_kr, {args.n} random reachable targets, tolerance 0.1 mm / 0.1 deg, {args.dtype}, "
+        f"{args.threads} thread(s), guess noise {args.noise} rad\n"
+    )
     rows = []
     # warm up kernels
     refine(robot, T[:8], method="lm", q_init=guess[:8])
@@ -144,20 +158,55 @@ def main(argv=None):
     res, dt = timed(lambda: refine(robot, T, method="lm", q_init=guess, tol_pos=TOL_POS, tol_rot=TOL_ROT))
     report(rows, "(c) LM from guess", robot, T, res.q, dt, f"iters mean {res.iterations.double().mean():.1f}")
     res, dt = timed(lambda: refine(robot, T, method="lm", tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=args.seed))
-    report(rows, f"(c) LM, {LMCfg().starts} uniform starts", robot, T, res.q, dt,
-           f"iters mean {res.iterations.double().mean():.1f}")
+    report(
+        rows,
+        f"(c) LM, {LMCfg().starts} uniform starts",
+        robot,
+        T,
+        res.q,
+        dt,
+        f"iters mean {res.iterations.double().mean():.1f}",
+    )
 
     # (b) seeded swarms
     for method in ("ipso", "pso", "sapso", "ga"):
         for polish in (False, True):
-            res, dt = timed(lambda m=method, p=polish: refine(robot, T, method=m, q_init=guess, tol_pos=TOL_POS,
-                                                              tol_rot=TOL_ROT, seed=args.seed, polish=p))
-            report(rows, f"(b) {method} seeded{' + LM polish' if polish else ''}", robot, T, res.q, dt,
-                   f"iters mean {res.iterations.double().mean():.1f}")
-    res, dt = timed(lambda: refine(robot, T, method="ipso", q_init=guess, tol_pos=TOL_POS, tol_rot=TOL_ROT,
-                                   seed=args.seed, polish=True, max_iters=10))
-    report(rows, "(b) ipso seeded, 10 iters + LM polish", robot, T, res.q, dt,
-           f"polish iters mean {res.polish_iterations.double().mean():.1f}")
+            res, dt = timed(
+                lambda m=method, p=polish: refine(
+                    robot, T, method=m, q_init=guess, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=args.seed, polish=p
+                )
+            )
+            report(
+                rows,
+                f"(b) {method} seeded{' + LM polish' if polish else ''}",
+                robot,
+                T,
+                res.q,
+                dt,
+                f"iters mean {res.iterations.double().mean():.1f}",
+            )
+    res, dt = timed(
+        lambda: refine(
+            robot,
+            T,
+            method="ipso",
+            q_init=guess,
+            tol_pos=TOL_POS,
+            tol_rot=TOL_ROT,
+            seed=args.seed,
+            polish=True,
+            max_iters=10,
+        )
+    )
+    report(
+        rows,
+        "(b) ipso seeded, 10 iters + LM polish",
+        robot,
+        T,
+        res.q,
+        dt,
+        f"polish iters mean {res.polish_iterations.double().mean():.1f}",
+    )
 
     # (d) pytorch-kinematics
     q_pk, dt, chain = run_pk(robot, T, None, retries=10, seed=args.seed)
@@ -172,25 +221,61 @@ def main(argv=None):
         m = min(args.swarm_n, args.n)
         for method in ("ipso", "pso", "sapso", "ga"):
             for polish in (False, True):
-                res, dt = timed(lambda mm=method, p=polish: refine(robot, T[:m], method=mm, tol_pos=TOL_POS,
-                                                                  tol_rot=TOL_ROT, seed=args.seed, polish=p,
-                                                                  polish_starts=4))
-                report(rows, f"(a) {method} uniform{' + LM polish (4 starts)' if polish else ''}", robot, T[:m],
-                       res.q, dt, f"iters mean {res.iterations.double().mean():.1f}")
+                res, dt = timed(
+                    lambda mm=method, p=polish: refine(
+                        robot,
+                        T[:m],
+                        method=mm,
+                        tol_pos=TOL_POS,
+                        tol_rot=TOL_ROT,
+                        seed=args.seed,
+                        polish=p,
+                        polish_starts=4,
+                    )
+                )
+                report(
+                    rows,
+                    f"(a) {method} uniform{' + LM polish (4 starts)' if polish else ''}",
+                    robot,
+                    T[:m],
+                    res.q,
+                    dt,
+                    f"iters mean {res.iterations.double().mean():.1f}",
+                )
 
     if args.boundary:
         m = min(args.swarm_n, args.n)
         for method in ("ipso", "pso"):
             for b in ("reflect", "clamp", "resample"):
                 cfg = replace(default_cfg(method), boundary=b)
-                res, dt = timed(lambda mm=method, c=cfg: refine(robot, T[:m], method=mm, cfg=c, tol_pos=TOL_POS,
-                                                               tol_rot=TOL_ROT, seed=args.seed))
-                report(rows, f"boundary {b}: {method} uniform", robot, T[:m], res.q, dt,
-                       f"median pos {res.pos_err.median().item() * 1e3:.3g} mm")
-                res, dt = timed(lambda mm=method, c=cfg: refine(robot, T, method=mm, cfg=c, q_init=guess,
-                                                               tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=args.seed))
-                report(rows, f"boundary {b}: {method} seeded", robot, T, res.q, dt,
-                       f"median pos {res.pos_err.median().item() * 1e3:.3g} mm")
+                res, dt = timed(
+                    lambda mm=method, c=cfg: refine(
+                        robot, T[:m], method=mm, cfg=c, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=args.seed
+                    )
+                )
+                report(
+                    rows,
+                    f"boundary {b}: {method} uniform",
+                    robot,
+                    T[:m],
+                    res.q,
+                    dt,
+                    f"median pos {res.pos_err.median().item() * 1e3:.3g} mm",
+                )
+                res, dt = timed(
+                    lambda mm=method, c=cfg: refine(
+                        robot, T, method=mm, cfg=c, q_init=guess, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=args.seed
+                    )
+                )
+                report(
+                    rows,
+                    f"boundary {b}: {method} seeded",
+                    robot,
+                    T,
+                    res.q,
+                    dt,
+                    f"median pos {res.pos_err.median().item() * 1e3:.3g} mm",
+                )
 
     print("\n| configuration | targets | success @0.1 mm/0.1 deg (%) | time per target (ms) |\n|---|---|---|---|")
     for name, n, s, ms, _ in rows:

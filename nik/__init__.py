@@ -16,7 +16,17 @@ from nik.robots import Robot, builtin_robots, load_robot
 __version__ = "0.1.0"
 
 _SUBMODULES = {
-    "analytic", "cli", "data", "evaluate", "kinematics", "learn", "models", "poses", "robots", "solver", "swarm",
+    "analytic",
+    "cli",
+    "data",
+    "evaluate",
+    "kinematics",
+    "learn",
+    "models",
+    "poses",
+    "robots",
+    "solver",
+    "swarm",
 }
 _LAZY = {"IKSolver": "nik.solver", "IKResult": "nik.solver"}
 

@@ -61,8 +61,15 @@ def _row(method: str, robot: Robot, T: torch.Tensor, q: torch.Tensor, seconds: f
     pos, rot = pose_error(T, robot.fk(q))
     pos_mm = (pos * 1e3).cpu().numpy()
     rot_deg = np.degrees(rot.cpu().numpy())
-    pct = lambda a: {"p50": float(np.percentile(a, 50)), "p95": float(np.percentile(a, 95)),  # noqa: E731
-                     "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+    def pct(a):
+        return {
+            "p50": float(np.percentile(a, 50)),
+            "p95": float(np.percentile(a, 95)),
+            "p99": float(np.percentile(a, 99)),
+            "max": float(a.max()),
+        }
+
     n = int(T.shape[0])
     row = EvalRow(
         method=method,
@@ -133,8 +140,10 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
         parent = f"link{i}"
         if rest:  # an intermediate fixed frame
             parts.append(f'<link name="link{i}_fixed"/>')
-            parts.append(f'<joint name="fixed{i}" type="fixed"><parent link="link{i}"/><child link="link{i}_fixed"/>'
-                         f'{origin(first)}</joint>')
+            parts.append(
+                f'<joint name="fixed{i}" type="fixed"><parent link="link{i}"/><child link="link{i}_fixed"/>'
+                f"{origin(first)}</joint>"
+            )
             parent, first = f"link{i}_fixed", rest[0]
         parts.append(f'<link name="link{i + 1}"/>')
         parts.append(
@@ -147,15 +156,25 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
     for k, P in enumerate(tool_parts):
         child = "tool" if k == len(tool_parts) - 1 else "tool_fixed"
         parts.append(f'<link name="{child}"/>')
-        parts.append(f'<joint name="{child}_joint" type="fixed"><parent link="{parent}"/><child link="{child}"/>'
-                     f'{origin(P)}</joint>')
+        parts.append(
+            f'<joint name="{child}_joint" type="fixed"><parent link="{parent}"/><child link="{child}"/>'
+            f"{origin(P)}</joint>"
+        )
         parent = child
     parts.append("</robot>")
     return "\n".join(parts), "tool"
 
 
-def _pk_solve(robot: Robot, T: torch.Tensor, *, tol_pos: float, tol_rot: float, seed: int,
-              retries: int = 10, max_iterations: int = 50) -> tuple[torch.Tensor, float, str]:
+def _pk_solve(
+    robot: Robot,
+    T: torch.Tensor,
+    *,
+    tol_pos: float,
+    tol_rot: float,
+    seed: int,
+    retries: int = 10,
+    max_iterations: int = 50,
+) -> tuple[torch.Tensor, float, str]:
     """pytorch-kinematics ``PseudoInverseIK`` on ``T: (B, 4, 4)``: the best retry per target and the seconds."""
     import pytorch_kinematics as pk  # the peer baseline, only on this code path
 
@@ -171,8 +190,13 @@ def _pk_solve(robot: Robot, T: torch.Tensor, *, tol_pos: float, tol_rot: float, 
         raise RuntimeError(f"generated URDF does not reproduce the FK of {robot.name!r}")
     torch.manual_seed(seed)  # pk draws its retry configurations from the global generator
     ik = pk.PseudoInverseIK(
-        chain, pos_tolerance=tol_pos, rot_tolerance=tol_rot, num_retries=retries, max_iterations=max_iterations,
-        joint_limits=robot.limits.to(T.dtype), early_stopping_any_converged=True,
+        chain,
+        pos_tolerance=tol_pos,
+        rot_tolerance=tol_rot,
+        num_retries=retries,
+        max_iterations=max_iterations,
+        joint_limits=robot.limits.to(T.dtype),
+        early_stopping_any_converged=True,
     )
     target = pk.Transform3d(matrix=T)
     sol, seconds = _timed(lambda: ik.solve(target))
@@ -249,8 +273,12 @@ def evaluate(
         say("network + lm + LM restarts")
         solver = IKSolver(robot, checkpoint=checkpoint, refine="lm", fallback="multistart")
         res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
-        add("network + lm + LM restarts", res.q, sec,
-            "targets LM misses from the guess restart from uniform starts; no closed form")
+        add(
+            "network + lm + LM restarts",
+            res.q,
+            sec,
+            "targets LM misses from the guess restart from uniform starts; no closed form",
+        )
     else:
         report.notes.append("no checkpoint given: the network rows are missing")
     say(f"uniform-init {swarm}")

@@ -27,8 +27,17 @@ from nik.errors import CheckpointError
 from nik.poses import POSE_DIMS, pose_to_vector
 from nik.robots import Robot, load_robot
 
-__all__ = ["ACTIVATIONS", "REPRESENTATIONS", "OUTPUTS", "PAPER_C", "DEFAULT", "IKNet", "load_checkpoint",
-           "save_checkpoint", "checkpoint_extra"]
+__all__ = [
+    "ACTIVATIONS",
+    "REPRESENTATIONS",
+    "OUTPUTS",
+    "PAPER_C",
+    "DEFAULT",
+    "IKNet",
+    "load_checkpoint",
+    "save_checkpoint",
+    "checkpoint_extra",
+]
 
 #: Activation functions by name; the same callables serve the single net and the batched population.
 ACTIVATIONS = {
@@ -108,8 +117,12 @@ class IKNet(nn.Module):
     # -- description --------------------------------------------------------
     def config(self) -> dict:
         """The constructor arguments (plain data) that rebuild this architecture."""
-        return {"hidden": list(self.hidden), "activation": self.activation,
-                "representation": self.representation, "output": self.output}
+        return {
+            "hidden": list(self.hidden),
+            "activation": self.activation,
+            "representation": self.representation,
+            "output": self.output,
+        }
 
     @property
     def n_params(self) -> int:
@@ -122,8 +135,10 @@ class IKNet(nn.Module):
 
     def __repr__(self) -> str:
         sizes = "-".join(str(s) for s in [self.in_dim, *self.hidden, self.out_dim])
-        return (f"IKNet({sizes}, {self.activation}, in={self.representation}, out={self.output}, "
-                f"robot={self.robot.name!r}, params={self.n_params})")
+        return (
+            f"IKNet({sizes}, {self.activation}, in={self.representation}, out={self.output}, "
+            f"robot={self.robot.name!r}, params={self.n_params})"
+        )
 
     # -- normalisation ------------------------------------------------------
     @torch.no_grad()
@@ -214,8 +229,9 @@ def save_checkpoint(net: IKNet, path: str | Path) -> Path:
     return path
 
 
-def load_checkpoint(path: str | Path, *, robot: Robot | str | Path | None = None,
-                    map_location: str | torch.device = "cpu") -> IKNet:
+def load_checkpoint(
+    path: str | Path, *, robot: Robot | str | Path | None = None, map_location: str | torch.device = "cpu"
+) -> IKNet:
     """Load an :class:`IKNet` from a Lightning ``.ckpt`` (or :func:`save_checkpoint` file), safely.
 
     The file is read with ``torch.load(..., weights_only=True)``: no code from it is run.
@@ -255,7 +271,7 @@ def load_checkpoint(path: str | Path, *, robot: Robot | str | Path | None = None
                 f"not for robot {robot.name!r} (hash {robot.definition_hash})"
             )
     net = IKNet(stored, **cfg)
-    state = {k[len("net."):]: v for k, v in ckpt["state_dict"].items() if k.startswith("net.")}
+    state = {k[len("net.") :]: v for k, v in ckpt["state_dict"].items() if k.startswith("net.")}
     try:
         net.load_state_dict(state)
     except RuntimeError as err:

@@ -119,8 +119,10 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
     if T.ndim == 1:
         T = T.unsqueeze(0)
     if T.ndim != 2 or T.shape[-1] != width:
-        raise ValueError(f"{name}: a {representation!r} pose has {width} numbers per row; expected shape (B, {width}), "
-                         f"got {tuple(T.shape)}")
+        raise ValueError(
+            f"{name}: a {representation!r} pose has {width} numbers per row; expected shape (B, {width}), "
+            f"got {tuple(T.shape)}"
+        )
     fields = ("x, y, z", "quaternion (w, x, y, z)" if representation == "quat" else "roll, pitch, yaw")
     for label, part in zip(fields, (T[:, :3], T[:, 3:]), strict=True):
         bad = ~torch.isfinite(part).all(dim=-1)
@@ -132,8 +134,10 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
         bad = (norm - 1).abs() > QUAT_NORM_TOL
         if bool(bad.any()):
             i = int(bad.nonzero()[0])
-            raise ValueError(f"{name}: row {i}: quaternion (w, x, y, z) has norm {float(norm[i]):.6g}; "
-                             f"a unit quaternion is expected (norm within {QUAT_NORM_TOL:g} of 1 is normalised)")
+            raise ValueError(
+                f"{name}: row {i}: quaternion (w, x, y, z) has norm {float(norm[i]):.6g}; "
+                f"a unit quaternion is expected (norm within {QUAT_NORM_TOL:g} of 1 is normalised)"
+            )
         R = quaternion_to_matrix(rot / norm[:, None])
     else:
         R = rpy_to_matrix(rot)
@@ -262,8 +266,10 @@ class IKSolver:
         self.fallback = fallback
 
     def __repr__(self) -> str:
-        return (f"IKSolver(robot={self.robot.name!r}, network={self.net is not None}, "
-                f"analytic={self._analytic}, refine={self.refine!r})")
+        return (
+            f"IKSolver(robot={self.robot.name!r}, network={self.net is not None}, "
+            f"analytic={self._analytic}, refine={self.refine!r})"
+        )
 
     @property
     def initial_source(self) -> str:
@@ -319,8 +325,18 @@ class IKSolver:
         kwargs = {}
         if self.refine != "lm":
             kwargs["polish"] = self.polish
-        return swarm_refine(self.robot, T, method=self.refine, q_init=q_init, cfg=self.swarm_cfg,
-                            tol_pos=tol_pos, tol_rot=tol_rot, max_iters=max_iters, seed=seed, **kwargs)
+        return swarm_refine(
+            self.robot,
+            T,
+            method=self.refine,
+            q_init=q_init,
+            cfg=self.swarm_cfg,
+            tol_pos=tol_pos,
+            tol_rot=tol_rot,
+            max_iters=max_iters,
+            seed=seed,
+            **kwargs,
+        )
 
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
@@ -398,8 +414,9 @@ class IKSolver:
             res = self._refine(Tt, init, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
             cand_q, cand_pos, cand_rot, cand_it = res.q, res.pos_err, res.rot_err, res.iterations
             if use_near:
-                near = self._refine(Tt, q_near_t[todo], tol_pos=tol_pos, tol_rot=tol_rot, seed=seed,
-                                    max_iters=max_iters)
+                near = self._refine(
+                    Tt, q_near_t[todo], tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters
+                )
                 ok_a = (cand_pos <= tol_pos) & (cand_rot <= tol_rot)
                 ok_b = (near.pos_err <= tol_pos) & (near.rot_err <= tol_rot)
                 qn = q_near_t[todo]
@@ -435,8 +452,7 @@ class IKSolver:
             else:  # Levenberg-Marquardt from uniform starts
                 from nik.swarm import refine as swarm_refine
 
-                res = swarm_refine(robot, T[idx], method="lm", q_init=None, tol_pos=tol_pos, tol_rot=tol_rot,
-                                   seed=seed)
+                res = swarm_refine(robot, T[idx], method="lm", q_init=None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
                 fq, fpos, frot, fit = res.q, res.pos_err, res.rot_err, res.iterations.to(torch.long)
             better = (fpos + 0.1 * frot) < (pos[idx] + 0.1 * rot[idx])
             keep = idx[better]

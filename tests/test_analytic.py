@@ -142,13 +142,29 @@ def _write(tmp_path, data: dict):
 def test_paper_a_variant_and_modified_dh_table(tmp_path):
     # paper A's worked example: a2 = 431.8, a3 = 0 (standard DH)
     rows = [(-90, 0, 0), (0, 431.8, 149.09), (90, 0, 0), (-90, 0, 433.07), (90, 0, 0), (0, 0, 56.25)]
-    paper_a = _write(tmp_path, {"name": "puma_paper_a", "convention": "dh", "unit": "mm", "angles": "deg",
-                                "joints": [{"alpha": al, "a": a, "d": d} for al, a, d in rows]})
+    paper_a = _write(
+        tmp_path,
+        {
+            "name": "puma_paper_a",
+            "convention": "dh",
+            "unit": "mm",
+            "angles": "deg",
+            "joints": [{"alpha": al, "a": a, "d": d} for al, a, d in rows],
+        },
+    )
     # paper B / Craig: modified DH, the tool offset d6 as a tool frame
     craig = [(0, 0, 0), (-90, 0, 0), (0, 431.8, 149.09), (-90, -20.32, 433.07), (90, 0, 0), (-90, 0, 0)]
-    mdh = _write(tmp_path, {"name": "puma_craig", "convention": "mdh", "unit": "mm", "angles": "deg",
-                            "tool": {"position": [0, 0, 56.25]},
-                            "joints": [{"alpha": al, "a": a, "d": d} for al, a, d in craig]})
+    mdh = _write(
+        tmp_path,
+        {
+            "name": "puma_craig",
+            "convention": "mdh",
+            "unit": "mm",
+            "angles": "deg",
+            "tool": {"position": [0, 0, 56.25]},
+            "joints": [{"alpha": al, "a": a, "d": d} for al, a, d in craig],
+        },
+    )
     for robot in (paper_a, mdh):
         q = robot.sample(300, generator=torch.Generator().manual_seed(7), dtype=torch.float64)
         T = robot.fk(q)

@@ -21,8 +21,9 @@ def run(capsys, *argv):
 
 def test_generate_then_info(tmp_path, capsys):
     out = tmp_path / "kuka"
-    code, stdout, err = run(capsys, "generate", "--robot", "kuka_kr", "--n", "2000", "--out", str(out), "--seed", "3",
-                            "--no-progress")
+    code, stdout, err = run(
+        capsys, "generate", "--robot", "kuka_kr", "--n", "2000", "--out", str(out), "--seed", "3", "--no-progress"
+    )
     assert code == 0, err
     assert "wrote 2000 samples" in stdout
     ds = load_dataset(out, robot="kuka_kr")
@@ -39,9 +40,29 @@ def test_generate_then_info(tmp_path, capsys):
 
 def test_generate_options(tmp_path, capsys):
     out = tmp_path / "puma"
-    code, _, err = run(capsys, "generate", "--robot", "puma560", "--n", "1e3", "--out", str(out), "--sampler", "sobol",
-                       "--dtype", "float32", "--val-fraction", "0.2", "--test-fraction", "0", "--branch", "5",
-                       "--chunk-size", "700", "--no-progress")
+    code, _, err = run(
+        capsys,
+        "generate",
+        "--robot",
+        "puma560",
+        "--n",
+        "1e3",
+        "--out",
+        str(out),
+        "--sampler",
+        "sobol",
+        "--dtype",
+        "float32",
+        "--val-fraction",
+        "0.2",
+        "--test-fraction",
+        "0",
+        "--branch",
+        "5",
+        "--chunk-size",
+        "700",
+        "--no-progress",
+    )
     assert code == 0, err
     ds = load_dataset(out)
     assert ds.q.dtype == torch.float32 and len(ds) == 1000 and ds.meta["sampler"] == "sobol"
@@ -51,8 +72,19 @@ def test_generate_options(tmp_path, capsys):
 
 def test_same_command_twice_gives_identical_arrays(tmp_path, capsys):
     for name in ("a", "b"):
-        code, _, err = run(capsys, "generate", "--robot", "kuka_kr", "--n", "3000", "--out", str(tmp_path / name),
-                           "--seed", "11", "--no-progress")
+        code, _, err = run(
+            capsys,
+            "generate",
+            "--robot",
+            "kuka_kr",
+            "--n",
+            "3000",
+            "--out",
+            str(tmp_path / name),
+            "--seed",
+            "11",
+            "--no-progress",
+        )
         assert code == 0, err
     a, b = load_dataset(tmp_path / "a"), load_dataset(tmp_path / "b")
     assert torch.equal(a.q, b.q) and torch.equal(a.pose, b.pose)
@@ -66,8 +98,10 @@ def test_same_command_twice_gives_identical_arrays(tmp_path, capsys):
         (["--n", "-3"], "positive"),
         (["--robot", "nosuch"], "unknown robot 'nosuch'"),
         (["--ranges", "limits_typo.yaml"], "ranges file not found"),
-        (["--ranges", str(REPO / "configs/robots/kuka_kr_training_ranges.yaml"), "--robot", "puma560"],
-         "outside the joint limits"),
+        (
+            ["--ranges", str(REPO / "configs/robots/kuka_kr_training_ranges.yaml"), "--robot", "puma560"],
+            "outside the joint limits",
+        ),
         (["--val-fraction", "1.5"], "val_fraction"),
         (["--robot", "ur5", "--branch", "2"], "no IK branch classification"),
     ],
@@ -91,16 +125,18 @@ def test_existing_output_refused_then_overwritten(tmp_path, capsys):
     code, _, err = run(capsys, "generate", "--robot", "kuka_kr", "--n", "20", "--out", out, "--no-progress")
     assert code == 2 and "already exists" in err and "--overwrite" in err
     assert len(load_dataset(out)) == 10
-    code, _, err = run(capsys, "generate", "--robot", "kuka_kr", "--n", "20", "--out", out, "--overwrite",
-                       "--no-progress")
+    code, _, err = run(
+        capsys, "generate", "--robot", "kuka_kr", "--n", "20", "--out", out, "--overwrite", "--no-progress"
+    )
     assert code == 0, err
     assert len(load_dataset(out)) == 20
 
 
 def test_unwritable_folder(tmp_path, capsys):
     (tmp_path / "f").write_text("x")
-    code, _, err = run(capsys, "generate", "--robot", "kuka_kr", "--n", "10", "--out", str(tmp_path / "f" / "d"),
-                       "--no-progress")
+    code, _, err = run(
+        capsys, "generate", "--robot", "kuka_kr", "--n", "10", "--out", str(tmp_path / "f" / "d"), "--no-progress"
+    )
     assert code == 2 and "a file is in the way" in err
 
 
@@ -115,8 +151,18 @@ def test_info_on_corrupt_dataset(tmp_path, capsys):
 
 
 def test_subprocess_exit_code_and_no_traceback(tmp_path):
-    cmd = [sys.executable, "-c", "import sys; from nik.cli import main; sys.exit(main())",
-           "generate", "--robot", "kuka_kr", "--n", "0", "--out", str(tmp_path / "d")]
+    cmd = [
+        sys.executable,
+        "-c",
+        "import sys; from nik.cli import main; sys.exit(main())",
+        "generate",
+        "--robot",
+        "kuka_kr",
+        "--n",
+        "0",
+        "--out",
+        str(tmp_path / "d"),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=REPO)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == ["nik generate: error: --n must be a positive integer, got 0"]

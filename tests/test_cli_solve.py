@@ -49,10 +49,27 @@ def checkpoint(dataset, tmp_path_factory):
     if not HAS_TRAINING:
         pytest.skip("nik.models / train.py (the training issue) missing")
     root = tmp_path_factory.mktemp("runs")
-    cmd = [sys.executable, str(ROOT / "train.py"), "fit", "--config", str(ROOT / "configs" / "train" / "adam.yaml"),
-           "--data.path", str(dataset), "--trainer.default_root_dir", str(root), "--trainer.max_epochs", "2",
-           "--model.init_args.hidden", "[16]", "--trainer.logger", "false", "--trainer.enable_progress_bar", "false",
-           "--trainer.enable_model_summary", "false"]
+    cmd = [
+        sys.executable,
+        str(ROOT / "train.py"),
+        "fit",
+        "--config",
+        str(ROOT / "configs" / "train" / "adam.yaml"),
+        "--data.path",
+        str(dataset),
+        "--trainer.default_root_dir",
+        str(root),
+        "--trainer.max_epochs",
+        "2",
+        "--model.init_args.hidden",
+        "[16]",
+        "--trainer.logger",
+        "false",
+        "--trainer.enable_progress_bar",
+        "false",
+        "--trainer.enable_model_summary",
+        "false",
+    ]
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     ckpts = sorted(root.rglob("last.ckpt"))
@@ -91,8 +108,21 @@ def test_solve_csv_in_csv_out_with_a_trained_checkpoint(checkpoint, tmp_path, ca
     T, rows = _pose_rows(robot, 6, 2)
     src = _write_csv(tmp_path / "poses.csv", rows)
     out = tmp_path / "solutions.csv"
-    rc = main(["solve", "--robot", "puma560", "--checkpoint", str(checkpoint), "--refine", "lm",
-               "--poses", str(src), "--out", str(out)])
+    rc = main(
+        [
+            "solve",
+            "--robot",
+            "puma560",
+            "--checkpoint",
+            str(checkpoint),
+            "--refine",
+            "lm",
+            "--poses",
+            str(src),
+            "--out",
+            str(out),
+        ]
+    )
     with out.open() as fh:
         table = list(csv.DictReader(fh))
     assert len(table) == 6
@@ -158,12 +188,32 @@ def test_unreachable_pose_exits_1_and_says_no(capsys):
 @needs_training
 def test_evaluate_writes_table_json_and_histogram(checkpoint, dataset, tmp_path, capsys):
     out = tmp_path / "eval"
-    rc = main(["evaluate", "--robot", "puma560", "--checkpoint", str(checkpoint), "--data", str(dataset),
-               "--n", "6", "--out", str(out), "--refinements", "lm"])
+    rc = main(
+        [
+            "evaluate",
+            "--robot",
+            "puma560",
+            "--checkpoint",
+            str(checkpoint),
+            "--data",
+            str(dataset),
+            "--n",
+            "6",
+            "--out",
+            str(out),
+            "--refinements",
+            "lm",
+        ]
+    )
     assert rc == 0
     text = (out / "evaluation.md").read_text()
-    for row in ("| network |", "| network + lm |", "| uniform-init ipso |",
-                "| analytic (closed form) |", "| pytorch-kinematics |"):
+    for row in (
+        "| network |",
+        "| network + lm |",
+        "| uniform-init ipso |",
+        "| analytic (closed form) |",
+        "| pytorch-kinematics |",
+    ):
         assert row in text
     doc = json.loads((out / "evaluation.json").read_text())
     assert all(r["outside_limits"] == 0 for r in doc["rows"])

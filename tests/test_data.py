@@ -74,11 +74,13 @@ def test_every_q_inside_the_limits(small, kuka):
 
 @pytest.mark.parametrize("sampler", ["uniform", "sobol"])
 def test_every_q_inside_training_ranges_file(tmp_path, kuka, sampler):
-    out = generate_dataset(kuka, 4000, tmp_path / "c", ranges=KUKA_RANGES, sampler=sampler, progress=False,
-                           fsync=False)
+    out = generate_dataset(kuka, 4000, tmp_path / "c", ranges=KUKA_RANGES, sampler=sampler, progress=False, fsync=False)
     ds = load_dataset(out)
-    rng = torch.tensor([[-180, 180], [-120, 35], [-120, 120], [-180, 180], [-120, 120], [-180, 180]],
-                       dtype=torch.float64) * math.pi / 180
+    rng = (
+        torch.tensor([[-180, 180], [-120, 35], [-120, 120], [-180, 180], [-120, 120], [-180, 180]], dtype=torch.float64)
+        * math.pi
+        / 180
+    )
     assert bool(((ds.q >= rng[:, 0]) & (ds.q <= rng[:, 1])).all())
     assert_close(torch.tensor(ds.meta["ranges"]["radians"], dtype=torch.float64), rng)
     assert ds.meta["sampler"] == sampler
@@ -88,8 +90,9 @@ def test_sobol_is_more_even_than_uniform(tmp_path, kuka):
     """Scrambled Sobol points fill the box more evenly: per-joint histogram counts vary less."""
     spreads = {}
     for sampler in ("uniform", "sobol"):
-        ds = load_dataset(generate_dataset(kuka, 4096, tmp_path / sampler, sampler=sampler, progress=False,
-                                           fsync=False))
+        ds = load_dataset(
+            generate_dataset(kuka, 4096, tmp_path / sampler, sampler=sampler, progress=False, fsync=False)
+        )
         lo, hi = kuka.limits[:, 0], kuka.limits[:, 1]
         u = ((ds.q - lo) / (hi - lo)).numpy()
         counts = np.stack([np.histogram(u[:, j], bins=64, range=(0, 1))[0] for j in range(6)])
@@ -129,16 +132,28 @@ def test_same_seed_same_arrays_across_chunk_and_block_boundaries(tmp_path, kuka,
     monkeypatch.setattr(gen_mod, "BLOCK_SIZE", 4096)  # several randomness blocks in a tiny dataset
     ref = None
     for chunk in (20000, 4096, 777):
-        out = generate_dataset(kuka, 12000, tmp_path / f"c{chunk}", seed=3, chunk_size=chunk, sampler=sampler,
-                               block_size=4096, progress=False, fsync=False)
+        out = generate_dataset(
+            kuka,
+            12000,
+            tmp_path / f"c{chunk}",
+            seed=3,
+            chunk_size=chunk,
+            sampler=sampler,
+            block_size=4096,
+            progress=False,
+            fsync=False,
+        )
         arrays = _arrays(out)
         if ref is None:
             ref = arrays
         else:
             for a, b in zip(arrays, ref, strict=True):
                 assert torch.equal(a, b), f"chunk {chunk} differs"
-    other = _arrays(generate_dataset(kuka, 12000, tmp_path / "s4", seed=4, block_size=4096, sampler=sampler,
-                                     progress=False, fsync=False))
+    other = _arrays(
+        generate_dataset(
+            kuka, 12000, tmp_path / "s4", seed=4, block_size=4096, sampler=sampler, progress=False, fsync=False
+        )
+    )
     assert not torch.equal(other[0], ref[0])
 
 
@@ -146,8 +161,9 @@ def test_same_arrays_with_one_or_two_threads(tmp_path, kuka):
     before = torch.get_num_threads()
     arrays = []
     for threads in (1, 2):
-        out = generate_dataset(kuka, 20000, tmp_path / f"t{threads}", seed=5, threads=threads, progress=False,
-                               fsync=False)
+        out = generate_dataset(
+            kuka, 20000, tmp_path / f"t{threads}", seed=5, threads=threads, progress=False, fsync=False
+        )
         arrays.append(_arrays(out))
     assert torch.get_num_threads() == before  # restored
     for a, b in zip(*arrays, strict=True):
@@ -471,8 +487,9 @@ def test_stored_branch_labels_and_branch_filter(tmp_path):
     assert ds.meta["branch"]["counts"] == torch.bincount(ds.branch.long(), minlength=8).tolist()
     ref = None
     for chunk in (5000, 1234):
-        out = generate_dataset(puma, 2000, tmp_path / f"b3_{chunk}", seed=1, branch=3, chunk_size=chunk,
-                               progress=False, fsync=False)
+        out = generate_dataset(
+            puma, 2000, tmp_path / f"b3_{chunk}", seed=1, branch=3, chunk_size=chunk, progress=False, fsync=False
+        )
         ds3 = load_dataset(out)
         assert len(ds3) == 2000 and bool((ds3.branch == 3).all())
         assert_close(puma.fk(ds3.q.clone()), ds3.pose, atol=1e-12, rtol=0)
@@ -512,8 +529,18 @@ def test_compiled_fk_is_reproducible_across_chunks_and_threads(tmp_path, kuka):
     """FK runs on fixed output blocks, so even the compiled kernel sees identical batches."""
     arrays = []
     for threads, chunk in ((2, 20000), (1, 777)):
-        out = generate_dataset(kuka, 9000, tmp_path / f"c{chunk}", seed=6, chunk_size=chunk, block_size=4096,
-                               compiled=True, threads=threads, progress=False, fsync=False)
+        out = generate_dataset(
+            kuka,
+            9000,
+            tmp_path / f"c{chunk}",
+            seed=6,
+            chunk_size=chunk,
+            block_size=4096,
+            compiled=True,
+            threads=threads,
+            progress=False,
+            fsync=False,
+        )
         arrays.append(_arrays(out))
     for a, b in zip(*arrays, strict=True):
         assert torch.equal(a, b)

@@ -15,32 +15,48 @@ DEG = math.pi / 180
 
 # methods.md 1.1, 1.2, 1.3 typed in again (not read from configs/), mm and degrees
 PUMA_DH = [  # alpha, a, d
-    (-90, 0, 0), (0, 431.8, 149.09), (90, -20.32, 0), (-90, 0, 433.07), (90, 0, 0), (0, 0, 56.25)]
+    (-90, 0, 0),
+    (0, 431.8, 149.09),
+    (90, -20.32, 0),
+    (-90, 0, 433.07),
+    (90, 0, 0),
+    (0, 0, 56.25),
+]
 KUKA_DH = [  # offset, d, a, alpha
-    (0, 675, 260, 90), (90, 0, 645, 0), (0, 0, 35, 90), (0, 670, 0, 90), (180, 0, 0, 90), (0, 115, 0, 0)]
+    (0, 675, 260, 90),
+    (90, 0, 645, 0),
+    (0, 0, 35, 90),
+    (0, 670, 0, 90),
+    (180, 0, 0, 90),
+    (0, 115, 0, 0),
+]
 D1, D2, D3, D4, D5, D6 = 100, 320, 290, 121, 310, 112.5
 REBOT_SCREWS = [  # omega, r
-    ((0, 0, 1), (0, 0, 0)), ((0, 1, 0), (D1, 0, D2)), ((0, 1, 0), (D1, 0, D2 + D3)),
-    ((1, 0, 0), (D1, 0, D2 + D3 + D4)), ((0, -1, 0), (D1 + D5, 0, D2 + D3 + D4)),
-    ((0, 0, 1), (D1 + D5, 0, D2 + D3 + D4 + D6))]
+    ((0, 0, 1), (0, 0, 0)),
+    ((0, 1, 0), (D1, 0, D2)),
+    ((0, 1, 0), (D1, 0, D2 + D3)),
+    ((1, 0, 0), (D1, 0, D2 + D3 + D4)),
+    ((0, -1, 0), (D1 + D5, 0, D2 + D3 + D4)),
+    ((0, 0, 1), (D1 + D5, 0, D2 + D3 + D4 + D6)),
+]
 
 
 def dh_matrix(theta, d, a, alpha):
     """Standard DH link transform Rz(theta) Tz(d) Tx(a) Rx(alpha), written out entry by entry."""
     ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return torch.tensor([[ct, -st * ca, st * sa, a * ct],
-                         [st, ct * ca, -ct * sa, a * st],
-                         [0, sa, ca, d],
-                         [0, 0, 0, 1]], dtype=torch.float64)
+    return torch.tensor(
+        [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1]],
+        dtype=torch.float64,
+    )
 
 
 def mdh_matrix(theta, d, a, alpha):
     """Modified (Craig) DH link transform Rx(alpha) Tx(a) Rz(theta) Tz(d), written out entry by entry."""
     ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return torch.tensor([[ct, -st, 0, a],
-                         [st * ca, ct * ca, -sa, -sa * d],
-                         [st * sa, ct * sa, ca, ca * d],
-                         [0, 0, 0, 1]], dtype=torch.float64)
+    return torch.tensor(
+        [[ct, -st, 0, a], [st * ca, ct * ca, -sa, -sa * d], [st * sa, ct * sa, ca, ca * d], [0, 0, 0, 1]],
+        dtype=torch.float64,
+    )
 
 
 def twist_exp(omega, r, theta):
@@ -121,10 +137,10 @@ def test_puma_zero_pose_is_the_table_by_hand():
 def test_kuka_zero_pose_is_the_table_by_hand():
     # theta = offsets (0, 90, 0, 0, 180, 0): arm up, forearm and tool forward along +x
     T = nik.load_robot("kuka_kr").fk(torch.zeros(6, dtype=torch.float64))
-    expected = torch.tensor([[0, 0, 1, (260 + 670 + 115) * 1e-3],
-                             [0, 1, 0, 0],
-                             [-1, 0, 0, (675 + 645 + 35) * 1e-3],
-                             [0, 0, 0, 1]], dtype=torch.float64)
+    expected = torch.tensor(
+        [[0, 0, 1, (260 + 670 + 115) * 1e-3], [0, 1, 0, 0], [-1, 0, 0, (675 + 645 + 35) * 1e-3], [0, 0, 0, 1]],
+        dtype=torch.float64,
+    )
     assert_close(T, expected, atol=1e-12, rtol=0)
 
 
@@ -138,7 +154,8 @@ def test_poe_home_pose_is_home():
 def test_mdh_convention_matches_explicit_craig_products(tmp_path):
     rows = [(0, 0, 0), (-90, 0, 243.5), (0, 431.8, -93.4), (-90, -20.32, 433.07), (90, 0, 0), (-90, 0, 0)]
     text = "name: puma_mdh\nconvention: mdh\nunit: mm\nangles: deg\njoints:\n" + "".join(
-        f"  - {{alpha: {al}, a: {a}, d: {d}}}\n" for al, a, d in rows)
+        f"  - {{alpha: {al}, a: {a}, d: {d}}}\n" for al, a, d in rows
+    )
     (tmp_path / "puma_mdh.yaml").write_text(text)
     robot = nik.load_robot(tmp_path / "puma_mdh.yaml")
     q = random_q(robot, 30)

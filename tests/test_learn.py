@@ -52,8 +52,19 @@ def kuka():
 
 
 def _run(method, dataset, root, *extra):
-    args = ["fit", "--config", str(ROOT / "configs" / "train" / f"{method}.yaml"), "--data.path", str(dataset),
-            "--trainer.default_root_dir", str(root), "--trainer.logger", "false", *QUIET, *extra]
+    args = [
+        "fit",
+        "--config",
+        str(ROOT / "configs" / "train" / f"{method}.yaml"),
+        "--data.path",
+        str(dataset),
+        "--trainer.default_root_dir",
+        str(root),
+        "--trainer.logger",
+        "false",
+        *QUIET,
+        *extra,
+    ]
     return _train_cli()(args)
 
 
@@ -143,8 +154,19 @@ def test_every_config_runs_fast_dev_run(method, dataset, tmp_path):
 
 
 def test_de_bp_hands_des_best_weights_to_bp_and_leaves_a_loadable_checkpoint(dataset, tmp_path, kuka):
-    cli = _run("de_bp", dataset, tmp_path, "--model.pop_size", "24", "--model.generations", "4",
-               "--trainer.max_epochs", "8", "--trainer.check_val_every_n_epoch", "2")
+    cli = _run(
+        "de_bp",
+        dataset,
+        tmp_path,
+        "--model.pop_size",
+        "24",
+        "--model.generations",
+        "4",
+        "--trainer.max_epochs",
+        "8",
+        "--trainer.check_val_every_n_epoch",
+        "2",
+    )
     model = cli.model
     assert model.de_state.generation == 4
     # BP's first loss is DE's best fitness, on the same (full) batch

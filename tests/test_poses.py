@@ -52,14 +52,21 @@ def test_quaternion_convention_is_w_x_y_z():
 def test_rpy_matches_paper_c_equation_3():
     R = random_rotations(100, seed=4)
     n, o, a = R[..., :, 0], R[..., :, 1], R[..., :, 2]
-    expected = torch.stack([torch.atan2(o[:, 2], a[:, 2]),
-                            torch.atan2(-n[:, 2], torch.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2)),
-                            torch.atan2(n[:, 1], n[:, 0])], dim=-1)
+    expected = torch.stack(
+        [
+            torch.atan2(o[:, 2], a[:, 2]),
+            torch.atan2(-n[:, 2], torch.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2)),
+            torch.atan2(n[:, 1], n[:, 0]),
+        ],
+        dim=-1,
+    )
     assert_close(poses.matrix_to_rpy(R), expected)
     # R = Rz(yaw) Ry(pitch) Rx(roll)
     r, p, y = 0.3, -0.4, 1.2
-    assert_close(poses.rpy_to_matrix(torch.tensor([r, p, y], dtype=torch.float64)),
-                 axis_angle([0, 0, 1], y) @ axis_angle([0, 1, 0], p) @ axis_angle([1, 0, 0], r))
+    assert_close(
+        poses.rpy_to_matrix(torch.tensor([r, p, y], dtype=torch.float64)),
+        axis_angle([0, 0, 1], y) @ axis_angle([0, 1, 0], p) @ axis_angle([1, 0, 0], r),
+    )
 
 
 def test_pose_error_is_zero_at_identity_and_has_finite_gradient():

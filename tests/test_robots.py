@@ -56,12 +56,19 @@ def test_user_defined_paper_a_puma_needs_no_code(tmp_path):
 
 def test_metres_and_radians_give_the_same_robot_as_mm_and_degrees(tmp_path):
     mm = nik.load_robot(write(tmp_path, PAPER_A_PUMA))
-    rows = [(-90, 0, 0, (-160, 160)), (0, 431.8, 149.09, (-225, 45)), (90, 0, 0, (-45, 225)),
-            (-90, 0, 433.07, (-110, 170)), (90, 0, 0, (-100, 100)), (0, 0, 56.25, (-266, 266))]
+    rows = [
+        (-90, 0, 0, (-160, 160)),
+        (0, 431.8, 149.09, (-225, 45)),
+        (90, 0, 0, (-45, 225)),
+        (-90, 0, 433.07, (-110, 170)),
+        (90, 0, 0, (-100, 100)),
+        (0, 0, 56.25, (-266, 266)),
+    ]
     r = math.pi / 180
     text = "name: si\nconvention: dh\nunit: m\nangles: rad\njoints:\n" + "".join(
         f"  - {{alpha: {al * r!r}, a: {a / 1000!r}, d: {d / 1000!r}, limits: [{lo * r!r}, {hi * r!r}]}}\n"
-        for al, a, d, (lo, hi) in rows)
+        for al, a, d, (lo, hi) in rows
+    )
     si = nik.load_robot(write(tmp_path, text, "si.yaml"))
     q = si.sample(50, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     assert_close(si.fk(q), mm.fk(q), atol=1e-12, rtol=0)
@@ -126,16 +133,20 @@ def test_missing_file_is_a_clear_error(tmp_path):
     [
         ("convention: dh\njoints:\n  - {alpha: 0, d: 0}\n", r"joints\[0\]: missing field 'a'"),
         ("convention: xyz\njoints:\n  - {alpha: 0, a: 1, d: 0}\n", "convention must be one of dh, mdh, poe"),
-        ("convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0, limits: [-90, 0, 90]}\n",
-         r"joints\[0\]\.limits: expected a list of 2 numbers"),
+        (
+            "convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0, limits: [-90, 0, 90]}\n",
+            r"joints\[0\]\.limits: expected a list of 2 numbers",
+        ),
         ("convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0, limits: [90, -90]}\n", "lower must be < upper"),
         ("convention: dh\njoints:\n  - {alpha: 0, a: 1, d: 0, lenght: 2}\n", r"unknown field\(s\) \['lenght'\]"),
         ("convention: dh\nunit: inch\njoints:\n  - {alpha: 0, a: 1, d: 0}\n", "unit must be 'mm' or 'm'"),
         ("convention: dh\njoints: []\n", "'joints' must be a non-empty list"),
         ("convention: dh\njoints:\n  - {alpha: 0, a: .nan, d: 0}\n", r"joints\[0\]\.a: expected a finite number"),
         ("convention: poe\njoints:\n  - {axis: [0, 0, 1], point: [0, 0, 0]}\n", "missing field 'home'"),
-        ("convention: poe\nhome: {position: [1, 0, 0]}\njoints:\n  - {axis: [0, 0], point: [0, 0, 0]}\n",
-         r"axis: expected a list of 3 numbers"),
+        (
+            "convention: poe\nhome: {position: [1, 0, 0]}\njoints:\n  - {axis: [0, 0], point: [0, 0, 0]}\n",
+            r"axis: expected a list of 3 numbers",
+        ),
         ("- just a list\n", "expected a mapping"),
         ("convention: dh\njoints: [\n", "not valid YAML"),
     ],

@@ -73,7 +73,12 @@ def test_every_input_form_gives_the_same_answer():
     quat = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
     rpy = torch.cat([T[:, :3, 3], matrix_to_rpy(T[:, :3, :3])], dim=-1)
     forms = [
-        (quat, None), (quat, "quat"), (rpy, None), (rpy, "rpy"), (T.numpy(), None), (T.tolist(), None),
+        (quat, None),
+        (quat, "quat"),
+        (rpy, None),
+        (rpy, "rpy"),
+        (T.numpy(), None),
+        (T.tolist(), None),
         (quat.numpy(), "quat"),
     ]
     for value, rep in forms:

@@ -31,11 +31,18 @@ METHODS = ["pso", "sapso", "ipso", "ga", "lm"]
 
 @pytest.fixture(scope="module")
 def planar():
-    return robot_from_config({
-        "name": "planar2", "convention": "dh", "unit": "m", "angles": "deg",
-        "joints": [{"alpha": 0, "a": 1.0, "d": 0, "limits": [-170, 170]},
-                   {"alpha": 0, "a": 1.0, "d": 0, "limits": [-150, 150]}],
-    })
+    return robot_from_config(
+        {
+            "name": "planar2",
+            "convention": "dh",
+            "unit": "m",
+            "angles": "deg",
+            "joints": [
+                {"alpha": 0, "a": 1.0, "d": 0, "limits": [-170, 170]},
+                {"alpha": 0, "a": 1.0, "d": 0, "limits": [-150, 150]},
+            ],
+        }
+    )
 
 
 @pytest.fixture(scope="module")
@@ -147,8 +154,9 @@ def test_objectives_match_hand_computation():
     torch.testing.assert_close(paper_a_objective(Tt, T), torch.tensor(360.0 + 1.0, dtype=torch.float64))
     torch.testing.assert_close(paper_d_position(Tt, T), torch.tensor(0.001, dtype=torch.float64))
     torch.testing.assert_close(paper_d_orientation(Tt, T), torch.tensor(2.0, dtype=torch.float64))
-    torch.testing.assert_close(pose_objective(Tt, T, rot_weight=0.1),
-                               torch.tensor(0.001 + 0.1 * math.pi / 2, dtype=torch.float64))
+    torch.testing.assert_close(
+        pose_objective(Tt, T, rot_weight=0.1), torch.tensor(0.001 + 0.1 * math.pi / 2, dtype=torch.float64)
+    )
     # arccos inputs beyond [-1, 1] by rounding are clamped, not NaN
     T2 = T.clone()
     T2[2, 2] = 1.0 + 1e-12

@@ -192,9 +192,7 @@ def _geometry(robot) -> PumaGeometry:
     def need(cond: bool, what: str) -> None:
         if not cond:
             table = ", ".join(f"(alpha={math.degrees(al):.6g} deg, a={ai:.6g} m, d={di:.6g} m)" for al, ai, di in dh)
-            raise ValueError(
-                f"puma560_ik: robot {name!r} is not PUMA-like: {what} (canonical DH rows 1..5: {table})"
-            )
+            raise ValueError(f"puma560_ik: robot {name!r} is not PUMA-like: {what} (canonical DH rows 1..5: {table})")
 
     need(abs(abs(s[0]) - 1) < 1e-9, "joint axes 1 and 2 are not perpendicular")
     need(abs(s[1]) < 1e-9, "joint axes 2 and 3 are not parallel")

@@ -34,21 +34,38 @@ def register(sub) -> None:
     g.add_argument("--out", required=True, help="dataset directory to create, e.g. data/kuka_kr_1m")
     g.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     g.add_argument("--overwrite", action="store_true", help="replace an existing dataset at --out")
-    g.add_argument("--sampler", choices=["uniform", "sobol"], default="uniform",
-                   help="uniform iid (default) or scrambled Sobol")
-    g.add_argument("--ranges", default="limits",
-                   help="'limits' (default) or a YAML file {angles: deg|rad, ranges: [[lo, hi], ...]}")
+    g.add_argument(
+        "--sampler", choices=["uniform", "sobol"], default="uniform", help="uniform iid (default) or scrambled Sobol"
+    )
+    g.add_argument(
+        "--ranges",
+        default="limits",
+        help="'limits' (default) or a YAML file {angles: deg|rad, ranges: [[lo, hi], ...]}",
+    )
     g.add_argument("--val-fraction", type=float, default=0.1, help="validation split fraction (default 0.1)")
     g.add_argument("--test-fraction", type=float, default=0.1, help="test split fraction (default 0.1)")
     g.add_argument("--dtype", choices=["float32", "float64"], default="float64", help="storage dtype (default float64)")
     g.add_argument("--device", default="cpu", help="device for FK: cpu (default) or cuda")
-    g.add_argument("--branch", type=int, default=None, metavar="K",
-                   help="keep only IK branch K (0..7: shoulder + 2 elbow + 4 wrist); PUMA-type arms only")
+    g.add_argument(
+        "--branch",
+        type=int,
+        default=None,
+        metavar="K",
+        help="keep only IK branch K (0..7: shoulder + 2 elbow + 4 wrist); PUMA-type arms only",
+    )
     g.add_argument("--chunk-size", type=_positive_int, default=None, help="samples per chunk (memory bound)")
-    g.add_argument("--fk", choices=["auto", "eager", "compiled"], default="auto",
-                   help="FK kernel: torch.compile'd or eager; auto (default) compiles for n >= 10,000,000")
-    g.add_argument("--threads", type=int, default=1,
-                   help="torch threads for the maths (default 1; writing runs in one more thread)")
+    g.add_argument(
+        "--fk",
+        choices=["auto", "eager", "compiled"],
+        default="auto",
+        help="FK kernel: torch.compile'd or eager; auto (default) compiles for n >= 10,000,000",
+    )
+    g.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads for the maths (default 1; writing runs in one more thread)",
+    )
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.set_defaults(func=_cmd_generate)
 
@@ -72,10 +89,21 @@ def _cmd_generate(args) -> int:
     robot = load_robot(args.robot)
     t0 = time.perf_counter()
     out = generate_dataset(
-        robot, args.n, args.out, seed=args.seed, sampler=args.sampler, ranges=args.ranges,
-        val_fraction=args.val_fraction, test_fraction=args.test_fraction, dtype=args.dtype, device=args.device,
-        branch=args.branch, overwrite=args.overwrite, chunk_size=args.chunk_size or DEFAULT_CHUNK,
-        compiled={"auto": "auto", "eager": False, "compiled": True}[args.fk], threads=args.threads,
+        robot,
+        args.n,
+        args.out,
+        seed=args.seed,
+        sampler=args.sampler,
+        ranges=args.ranges,
+        val_fraction=args.val_fraction,
+        test_fraction=args.test_fraction,
+        dtype=args.dtype,
+        device=args.device,
+        branch=args.branch,
+        overwrite=args.overwrite,
+        chunk_size=args.chunk_size or DEFAULT_CHUNK,
+        compiled={"auto": "auto", "eager": False, "compiled": True}[args.fk],
+        threads=args.threads,
         progress=None if not args.no_progress else False,
     )
     dt = time.perf_counter() - t0
@@ -110,8 +138,10 @@ def format_info(ds) -> str:
     lines.append("")
     lines.append(f"{'joint':<12}{'min (deg)':>12}{'max (deg)':>12}{'range lo (deg)':>16}{'range hi (deg)':>16}")
     for i, name in enumerate(names):
-        lines.append(f"{name:<12}{math.degrees(qmin[i]):>12.3f}{math.degrees(qmax[i]):>12.3f}"
-                     f"{math.degrees(rng[i, 0]):>16.3f}{math.degrees(rng[i, 1]):>16.3f}")
+        lines.append(
+            f"{name:<12}{math.degrees(qmin[i]):>12.3f}{math.degrees(qmax[i]):>12.3f}"
+            f"{math.degrees(rng[i, 0]):>16.3f}{math.degrees(rng[i, 1]):>16.3f}"
+        )
     lines.append("")
     lines.append(f"{'workspace':<12}{'min (mm)':>12}{'max (mm)':>12}{'extent (mm)':>14}")
     for i, ax in enumerate("xyz"):
@@ -121,8 +151,11 @@ def format_info(ds) -> str:
     if m.get("branch"):
         b = m["branch"]
         lines.append("")
-        filt = "all branches" if b["filter"] is None else f"only branch {b['filter']} ({branch_name(b['filter'])}), " \
-            f"{b['candidates']:,} candidates drawn"
+        filt = (
+            "all branches"
+            if b["filter"] is None
+            else f"only branch {b['filter']} ({branch_name(b['filter'])}), {b['candidates']:,} candidates drawn"
+        )
         lines.append(f"IK branch labels (shoulder + 2 elbow + 4 wrist): {filt}")
         total = max(1, sum(b["counts"]))
         for k, c in enumerate(b["counts"]):

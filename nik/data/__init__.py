@@ -1,7 +1,7 @@
 """Datasets of (joint vector, pose) pairs: generation, storage format, loading, IK branch labels.
 
-    generate_dataset(robot, n, out, seed=...)  -> writes data/NAME/ (q.npy, pose.npy, branch.npy, meta.json)
-    load_dataset(path, robot=None)             -> IKDataset (.q (N, dof), .pose (N, 4, 4), .meta, splits)
+generate_dataset(robot, n, out, seed=...)  -> writes data/NAME/ (q.npy, pose.npy, branch.npy, meta.json)
+load_dataset(path, robot=None)             -> IKDataset (.q (N, dof), .pose (N, 4, 4), .meta, splits)
 """
 
 from nik.data.branches import BRANCH_NAMES, BranchClassifier, branch_classifier, branch_labels, branch_name

@@ -222,6 +222,8 @@ def branch_labels(robot, q: torch.Tensor) -> torch.Tensor:
     """``q: (B, dof)`` -> ``(B,)`` uint8 branch labels; ValueError for arms without a classifier."""
     clf = branch_classifier(robot)
     if clf is None:
-        raise ValueError(f"robot {robot.name!r} has no IK branch classification (it needs 6 joints, parallel "
-                         "axes 2 and 3 and a spherical wrist, like puma560 and kuka_kr)")
+        raise ValueError(
+            f"robot {robot.name!r} has no IK branch classification (it needs 6 joints, parallel "
+            "axes 2 and 3 and a spherical wrist, like puma560 and kuka_kr)"
+        )
     return clf(q)

@@ -99,8 +99,10 @@ def resolve_ranges(robot, ranges=None) -> tuple[torch.Tensor, str]:
         if not lo < hi:
             raise ValueError(f"{where}: joint {i + 1} range [{_deg(lo)}, {_deg(hi)}] needs lo < hi")
         if lo < llo - _LIMIT_TOL or hi > lhi + _LIMIT_TOL:
-            raise ValueError(f"{where}: joint {i + 1} range [{_deg(lo)}, {_deg(hi)}] lies outside the joint limits "
-                             f"[{_deg(llo)}, {_deg(lhi)}] of robot {robot.name!r}")
+            raise ValueError(
+                f"{where}: joint {i + 1} range [{_deg(lo)}, {_deg(hi)}] lies outside the joint limits "
+                f"[{_deg(llo)}, {_deg(lhi)}] of robot {robot.name!r}"
+            )
     rng = torch.minimum(torch.maximum(rng, lim[:, :1]), lim[:, 1:])  # absorb the tolerance
     return rng, (str(ranges) if isinstance(ranges, (str, Path)) else "custom")
 
@@ -114,8 +116,10 @@ def _deg(v: float) -> str:
 
 def _block_seed(seed: int, block: int) -> int:
     """A 63-bit generator seed for block ``block`` of stream ``seed`` (SplitMix via SeedSequence)."""
-    return int(np.random.SeedSequence([int(seed) & 0xFFFFFFFFFFFFFFFF, int(block)]).generate_state(1, np.uint64)[0]
-               >> np.uint64(1))
+    return int(
+        np.random.SeedSequence([int(seed) & 0xFFFFFFFFFFFFFFFF, int(block)]).generate_state(1, np.uint64)[0]
+        >> np.uint64(1)
+    )
 
 
 class _UniformStream:
@@ -194,8 +198,16 @@ def _progress(total: int, enabled: bool | None, desc: str):
         ncols, nrows = size.columns or 100, size.lines or 24  # 0 x 0 on a pty without a size: tqdm would hide
     except OSError:
         ncols, nrows = 100, 24
-    return tqdm(total=total, desc=desc, unit="sample", unit_scale=True, disable=not enabled, ncols=min(ncols, 120),
-                nrows=nrows, file=sys.stderr)
+    return tqdm(
+        total=total,
+        desc=desc,
+        unit="sample",
+        unit_scale=True,
+        disable=not enabled,
+        ncols=min(ncols, 120),
+        nrows=nrows,
+        file=sys.stderr,
+    )
 
 
 def _split_sizes(n: int, val_fraction: float, test_fraction: float) -> dict[str, list[int]]:
@@ -205,8 +217,9 @@ def _split_sizes(n: int, val_fraction: float, test_fraction: float) -> dict[str,
     n_val, n_test = int(round(n * val_fraction)), int(round(n * test_fraction))
     n_train = n - n_val - n_test
     if n_train < 1:
-        raise ValueError(f"val_fraction + test_fraction = {val_fraction + test_fraction:g} leaves no training "
-                         f"samples out of n = {n}")
+        raise ValueError(
+            f"val_fraction + test_fraction = {val_fraction + test_fraction:g} leaves no training samples out of n = {n}"
+        )
     return {"train": [0, n_train], "val": [n_train, n_train + n_val], "test": [n_train + n_val, n]}
 
 
@@ -350,8 +363,10 @@ def generate_dataset(
             raise ValueError(f"branch must be an integer label 0..7, got {branch!r}")
         branch = int(branch)
         if classifier is None:
-            raise ValueError(f"--branch: robot {robot.name!r} has no IK branch classification (needs 6 joints, "
-                             "parallel axes 2 and 3 and a spherical wrist, like puma560 and kuka_kr)")
+            raise ValueError(
+                f"--branch: robot {robot.name!r} has no IK branch classification (needs 6 joints, "
+                "parallel axes 2 and 3 and a spherical wrist, like puma560 and kuka_kr)"
+            )
 
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
@@ -359,16 +374,57 @@ def generate_dataset(
     if threads is not None:
         torch.set_num_threads(threads)
     try:
-        return _generate(robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dtype_name, device, branch,
-                         classifier, overwrite, int(chunk_size), compiled, progress, fsync, int(block_size), stream,
-                         max_candidates)
+        return _generate(
+            robot,
+            n,
+            out,
+            seed,
+            sampler,
+            rng,
+            ranges_desc,
+            splits,
+            tdtype,
+            dtype_name,
+            device,
+            branch,
+            classifier,
+            overwrite,
+            int(chunk_size),
+            compiled,
+            progress,
+            fsync,
+            int(block_size),
+            stream,
+            max_candidates,
+        )
     finally:
         if threads is not None:
             torch.set_num_threads(previous_threads)
 
 
-def _generate(robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dtype_name, device, branch, classifier,
-              overwrite, chunk_size, compiled, progress, fsync, block_size, stream, max_candidates) -> Path:
+def _generate(
+    robot,
+    n,
+    out,
+    seed,
+    sampler,
+    rng,
+    ranges_desc,
+    splits,
+    tdtype,
+    dtype_name,
+    device,
+    branch,
+    classifier,
+    overwrite,
+    chunk_size,
+    compiled,
+    progress,
+    fsync,
+    block_size,
+    stream,
+    max_candidates,
+) -> Path:
     atomic = AtomicDirectory(out, overwrite=overwrite)
     atomic.prepare()  # validates the destination before any work, creates the temporary directory
     writers: list[NpyStreamWriter] = []
@@ -418,8 +474,9 @@ def _generate(robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dt
         while drawn < n:
             m = min(chunk, n - drawn) if branch is None else chunk  # rejection: fixed candidate chunks
             if cand + m > max_candidates:
-                raise DatasetError(f"branch {branch} ({branch_name(branch)}): only {drawn} of {n} samples found in "
-                                   f"{cand} candidates")
+                raise DatasetError(
+                    f"branch {branch} ({branch_name(branch)}): only {drawn} of {n} samples found in {cand} candidates"
+                )
             q = _to_joints(stream.draw(cand, cand + m), rng, tdtype)
             cand += m
             labels = classifier(q) if classifier is not None else None
@@ -427,8 +484,10 @@ def _generate(robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dt
                 sel = (labels == branch).nonzero().squeeze(-1)[: n - drawn]
                 q, labels = q[sel], labels[sel]
                 if drawn == 0 and q.shape[0] == 0 and cand >= 64 * fk_block:
-                    raise DatasetError(f"branch {branch} ({branch_name(branch)}) did not occur in {cand} samples "
-                                       f"within the ranges of robot {robot.name!r}; it is (nearly) unreachable there")
+                    raise DatasetError(
+                        f"branch {branch} ({branch_name(branch)}) did not occur in {cand} samples "
+                        f"within the ranges of robot {robot.name!r}; it is (nearly) unreachable there"
+                    )
             if q.shape[0]:
                 pending.append((q, labels))
                 n_pending += q.shape[0]
@@ -441,8 +500,12 @@ def _generate(robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dt
         io.drain()
         for w in writers:
             digest = w.close(fsync=fsync)
-            files[w.path.name] = {"sha256": digest, "bytes": w.path.stat().st_size, "shape": list(w.shape),
-                                  "dtype": str(w.dtype)}
+            files[w.path.name] = {
+                "sha256": digest,
+                "bytes": w.path.stat().st_size,
+                "shape": list(w.shape),
+                "dtype": str(w.dtype),
+            }
         meta = {
             "format": {"name": "nik-dataset", "version": FORMAT_VERSION},
             "n": n,
@@ -460,7 +523,9 @@ def _generate(robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dt
             "block_size": int(block_size),
             "splits": splits,
             "split_sizes": {k: b - a for k, (a, b) in splits.items()},
-            "branch": None if classifier is None else {
+            "branch": None
+            if classifier is None
+            else {
                 "filter": branch,
                 "candidates": cand,
                 "counts": counts.tolist(),

@@ -169,8 +169,8 @@ class AtomicDirectory:
         if out.exists() or out.is_symlink():
             if not self.overwrite:
                 raise FileExistsError(f"{out} already exists; pass --overwrite (overwrite=True) to replace it")
-            replaceable = out.is_dir() and not out.is_symlink() and (
-                (out / self.marker).is_file() or not any(out.iterdir())
+            replaceable = (
+                out.is_dir() and not out.is_symlink() and ((out / self.marker).is_file() or not any(out.iterdir()))
             )
             if not replaceable:
                 raise FileExistsError(f"refusing to overwrite {out}: it is not a nik dataset directory")
@@ -192,7 +192,7 @@ class AtomicDirectory:
         for p in entries:
             if not p.name.startswith(prefix):
                 continue
-            pid_text = p.name[len(prefix):].split("-", 1)[0]
+            pid_text = p.name[len(prefix) :].split("-", 1)[0]
             if pid_text.isdigit():
                 yield p, int(pid_text)
 
@@ -221,8 +221,10 @@ class AtomicDirectory:
         old = None
         if out.exists() or out.is_symlink():
             if not self.overwrite:  # appeared while we were writing
-                raise FileExistsError(f"{out} was created by someone else while this run was writing; pass "
-                                      "--overwrite (overwrite=True) to replace it")
+                raise FileExistsError(
+                    f"{out} was created by someone else while this run was writing; pass "
+                    "--overwrite (overwrite=True) to replace it"
+                )
             old = out.parent / f".{out.name}.old-{os.getpid()}-{secrets.token_hex(4)}"
             os.rename(out, old)
         os.rename(self.tmp, out)
@@ -270,8 +272,9 @@ def write_meta(directory: Path, meta: dict) -> None:
     path = Path(directory) / META_FILE
     text = json.dumps(meta, indent=1)
     # innermost lists of numbers on one line: G, limits and ranges stay readable
-    text = re.sub(r"\[\s+([-+0-9.eE,\s]+?)\s+\]",
-                  lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", text)
+    text = re.sub(
+        r"\[\s+([-+0-9.eE,\s]+?)\s+\]", lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", text
+    )
     with open(path, "w") as f:
         f.write(text + "\n")
         f.flush()
@@ -298,8 +301,17 @@ class IKDataset:
     read-only memory map: copy (``.clone()``) before writing into them.
     """
 
-    def __init__(self, q: torch.Tensor, pose: torch.Tensor, branch: torch.Tensor | None, meta: dict,
-                 path: Path, *, name: str | None = None, offset: int = 0):
+    def __init__(
+        self,
+        q: torch.Tensor,
+        pose: torch.Tensor,
+        branch: torch.Tensor | None,
+        meta: dict,
+        path: Path,
+        *,
+        name: str | None = None,
+        offset: int = 0,
+    ):
         self.q = q
         self.pose = pose
         self.branch = branch
@@ -330,8 +342,15 @@ class IKDataset:
         if name not in self.meta["splits"]:
             raise KeyError(f"no split {name!r}; this dataset has {sorted(self.meta['splits'])}")
         a, b = self.splits[name]
-        return IKDataset(self.q[a:b], self.pose[a:b], None if self.branch is None else self.branch[a:b],
-                         self.meta, self.path, name=name, offset=a)
+        return IKDataset(
+            self.q[a:b],
+            self.pose[a:b],
+            None if self.branch is None else self.branch[a:b],
+            self.meta,
+            self.path,
+            name=name,
+            offset=a,
+        )
 
     def indices(self, name: str) -> torch.Tensor:
         """``(n_split,)`` int64 row indices of split ``name`` in the whole dataset."""
@@ -358,8 +377,10 @@ class IKDataset:
 
     def __repr__(self) -> str:
         part = "" if self.name is None else f", split={self.name!r}"
-        return (f"IKDataset(path={str(self.path)!r}, robot={self.meta['robot']['name']!r}, n={len(self)}, "
-                f"dtype={self.meta['dtype']}{part})")
+        return (
+            f"IKDataset(path={str(self.path)!r}, robot={self.meta['robot']['name']!r}, n={len(self)}, "
+            f"dtype={self.meta['dtype']}{part})"
+        )
 
 
 def read_meta(path: str | Path) -> dict:
@@ -380,8 +401,10 @@ def read_meta(path: str | Path) -> dict:
         if not isinstance(meta, dict) or key not in meta:
             raise DatasetError(f"{mfile}: metadata lacks field {key!r}")
     if meta["format"].get("version") != FORMAT_VERSION:
-        raise DatasetError(f"{path}: dataset format version {meta['format'].get('version')} is not supported "
-                           f"(this nik reads version {FORMAT_VERSION})")
+        raise DatasetError(
+            f"{path}: dataset format version {meta['format'].get('version')} is not supported "
+            f"(this nik reads version {FORMAT_VERSION})"
+        )
     return meta
 
 
@@ -398,8 +421,10 @@ def _open_array(path: Path, fname: str, meta: dict, expected_shape: tuple, *, ve
     if verify:
         digest = sha256_file(fpath)
         if digest != info["sha256"]:
-            raise DatasetError(f"{fpath}: SHA-256 checksum mismatch (file altered or corrupt); "
-                               f"expected {info['sha256'][:16]}..., got {digest[:16]}...")
+            raise DatasetError(
+                f"{fpath}: SHA-256 checksum mismatch (file altered or corrupt); "
+                f"expected {info['sha256'][:16]}..., got {digest[:16]}..."
+            )
     try:
         arr = np.load(fpath, mmap_mode="r", allow_pickle=False)
     except (ValueError, OSError) as err:

@@ -13,12 +13,32 @@ from nik.learn.de import DECfg, DEState, de_ask, de_init, de_minimize, de_step, 
 from nik.learn.losses import evaluate, joint_mse, pose_loss
 from nik.learn.population import flat_params, init_population, population_fitness, population_raw, set_flat_params
 
-_LAZY = {"IKModule": "nik.learn.modules", "GradientIK": "nik.learn.modules", "DEIK": "nik.learn.modules",
-         "IKDataModule": "nik.learn.datamodule", "History": "nik.learn.callbacks"}
+_LAZY = {
+    "IKModule": "nik.learn.modules",
+    "GradientIK": "nik.learn.modules",
+    "DEIK": "nik.learn.modules",
+    "IKDataModule": "nik.learn.datamodule",
+    "History": "nik.learn.callbacks",
+}
 
-__all__ = ["DECfg", "DEState", "de_ask", "de_init", "de_minimize", "de_step", "de_tell", "evaluate", "joint_mse",
-           "pose_loss", "flat_params", "init_population", "population_fitness", "population_raw", "set_flat_params",
-           *sorted(_LAZY)]
+__all__ = [
+    "DECfg",
+    "DEState",
+    "de_ask",
+    "de_init",
+    "de_minimize",
+    "de_step",
+    "de_tell",
+    "evaluate",
+    "joint_mse",
+    "pose_loss",
+    "flat_params",
+    "init_population",
+    "population_fitness",
+    "population_raw",
+    "set_flat_params",
+    *sorted(_LAZY),
+]
 
 
 def __getattr__(name: str):

@@ -54,19 +54,44 @@ EXTRA = {
 
 
 def _net_args(cfg: dict) -> list[str]:
-    return ["--model.hidden", str(list(cfg["hidden"])), "--model.activation", cfg["activation"],
-            "--model.representation", cfg["representation"], "--model.output", cfg["output"]]
+    return [
+        "--model.hidden",
+        str(list(cfg["hidden"])),
+        "--model.activation",
+        cfg["activation"],
+        "--model.representation",
+        cfg["representation"],
+        "--model.output",
+        cfg["output"],
+    ]
 
 
 def run_one(data: Path, net_name: str, method: str, seed: int, budget: float, root: Path) -> tuple[dict, list]:
     budget_s = int(math.ceil(budget))
     """Train ``method`` on ``net_name`` for ``budget`` seconds; return (test metrics, validation history rows)."""
-    args = ["fit", "--config", str(method_config(method)), "--data.path", str(data),
-            "--seed_everything", str(seed), "--trainer.max_time", f"00:00:{budget_s // 60:02d}:{budget_s % 60:02d}",
-            "--trainer.max_epochs", "-1", "--trainer.logger", "false", "--trainer.enable_progress_bar", "false",
-            "--trainer.enable_model_summary", "false",
-            "--trainer.default_root_dir", str(root / net_name / method / f"seed{seed}"),
-            *_net_args(NETS[net_name]), *EXTRA.get((net_name, method), [])]
+    args = [
+        "fit",
+        "--config",
+        str(method_config(method)),
+        "--data.path",
+        str(data),
+        "--seed_everything",
+        str(seed),
+        "--trainer.max_time",
+        f"00:00:{budget_s // 60:02d}:{budget_s % 60:02d}",
+        "--trainer.max_epochs",
+        "-1",
+        "--trainer.logger",
+        "false",
+        "--trainer.enable_progress_bar",
+        "false",
+        "--trainer.enable_model_summary",
+        "false",
+        "--trainer.default_root_dir",
+        str(root / net_name / method / f"seed{seed}"),
+        *_net_args(NETS[net_name]),
+        *EXTRA.get((net_name, method), []),
+    ]
     t0 = time.perf_counter()
     cli = cli_main(args)
     wall = time.perf_counter() - t0
@@ -77,18 +102,34 @@ def run_one(data: Path, net_name: str, method: str, seed: int, budget: float, ro
     g = torch.Generator().manual_seed(1000 + seed)
     pick = torch.randperm(T.shape[0], generator=g)[:8]
     dq = (net.predict(T) - q).abs().rad2deg()
-    m.update({
-        "net": net_name, "method": method, "seed": seed, "params": net.n_params, "wall_s": model.wall_s,
-        "process_s": wall, "loss_evals": model.loss_evals, "sample_evals": model.sample_evals,
-        "paper8_max_joint_deg": float(dq[pick].max()),
-        "within_0.003deg_frac": float((dq.amax(-1) <= PAPER_TOL_DEG).double().mean()),
-        "de_generations": getattr(getattr(model, "de_state", None), "generation", ""),
-    })
+    m.update(
+        {
+            "net": net_name,
+            "method": method,
+            "seed": seed,
+            "params": net.n_params,
+            "wall_s": model.wall_s,
+            "process_s": wall,
+            "loss_evals": model.loss_evals,
+            "sample_evals": model.sample_evals,
+            "paper8_max_joint_deg": float(dq[pick].max()),
+            "within_0.003deg_frac": float((dq.amax(-1) <= PAPER_TOL_DEG).double().mean()),
+            "de_generations": getattr(getattr(model, "de_state", None), "generation", ""),
+        }
+    )
     from nik.learn.callbacks import History
 
     hist = next(cb for cb in cli.trainer.callbacks if isinstance(cb, History)).rows
-    rows = [{"net": net_name, "method": method, "seed": seed, "wall_s": r.get("wall_s", float("nan")),
-             "val_joint_mse": r.get("val_joint_mse", float("nan"))} for r in hist]
+    rows = [
+        {
+            "net": net_name,
+            "method": method,
+            "seed": seed,
+            "wall_s": r.get("wall_s", float("nan")),
+            "val_joint_mse": r.get("val_joint_mse", float("nan")),
+        }
+        for r in hist
+    ]
     return m, rows
 
 
@@ -124,8 +165,11 @@ def table(results: list[dict], budget: float, data: Path) -> str:
                 f"{_ms((r['paper8_max_joint_deg'] for r in rs), '.0f')} |"
             )
     best = max(float(r["within_0.003deg_frac"]) for r in results)
-    lines += ["", f"Paper C's claim (every joint within {PAPER_TOL_DEG} deg on 8 test poses): best fraction of test "
-              f"poses with every joint within {PAPER_TOL_DEG} deg over all runs = {best:.4f}."]
+    lines += [
+        "",
+        f"Paper C's claim (every joint within {PAPER_TOL_DEG} deg on 8 test poses): best fraction of test "
+        f"poses with every joint within {PAPER_TOL_DEG} deg over all runs = {best:.4f}.",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -141,12 +185,16 @@ def plot(history: list[dict], path: Path) -> None:
     for ax, net_name in zip(axes[0], nets, strict=True):
         for method in METHODS:
             for seed in sorted({h["seed"] for h in history}):
-                pts = [(h["wall_s"], h["val_joint_mse"]) for h in history
-                       if h["net"] == net_name and h["method"] == method and h["seed"] == seed]
+                pts = [
+                    (h["wall_s"], h["val_joint_mse"])
+                    for h in history
+                    if h["net"] == net_name and h["method"] == method and h["seed"] == seed
+                ]
                 if pts:
                     xs, ys = zip(*pts, strict=True)
-                    ax.plot(xs, ys, ".-", color=colors[method], alpha=0.8, markersize=3,
-                            label=method if seed == 0 else None)
+                    ax.plot(
+                        xs, ys, ".-", color=colors[method], alpha=0.8, markersize=3, label=method if seed == 0 else None
+                    )
         ax.set_yscale("log")
         ax.set_xlabel("wall-clock time (s)")
         ax.set_ylabel("validation joint MSE (paper C eq. 4, normalised outputs)")
@@ -167,8 +215,12 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     ap.add_argument("--nets", nargs="+", default=list(NETS), choices=list(NETS))
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/learners_kuka_kr"))
     ap.add_argument("--runs-dir", type=Path, default=Path("runs/compare"))
-    ap.add_argument("--threads", type=int, default=1,
-                    help="torch threads (default 1: on a shared CPU, 2 OpenMP threads stall on each other)")
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads (default 1: on a shared CPU, 2 OpenMP threads stall on each other)",
+    )
     return ap
 
 
@@ -184,9 +236,12 @@ def compare(args: argparse.Namespace) -> list[dict]:
                 m, rows = run_one(args.data, net_name, method, seed, args.budget, args.runs_dir)
                 results.append(m)
                 history += rows
-                print(f"{net_name:8s} {method:6s} seed {seed}: wall {m['wall_s']:6.1f} s, evals {m['loss_evals']:9d}, "
-                      f"joint RMSE {m['joint_rmse_deg']:7.3f} deg, pos median {m['pos_mm_median']:8.2f} mm, "
-                      f"rot median {m['rot_deg_median']:7.3f} deg", flush=True)
+                print(
+                    f"{net_name:8s} {method:6s} seed {seed}: wall {m['wall_s']:6.1f} s, evals {m['loss_evals']:9d}, "
+                    f"joint RMSE {m['joint_rmse_deg']:7.3f} deg, pos median {m['pos_mm_median']:8.2f} mm, "
+                    f"rot median {m['rot_deg_median']:7.3f} deg",
+                    flush=True,
+                )
                 _write(args, results, history)
     print(table(results, args.budget, args.data))
     return results
@@ -209,4 +264,3 @@ def _write(args, results, history) -> None:
         w.writerows(history)
     args.out.with_suffix(".md").write_text(table(results, args.budget, args.data))
     plot(history, args.out.with_suffix(".png"))
-

@@ -110,8 +110,10 @@ class IKDataModule(L.LightningDataModule):
             if name == "train" and self.max_train is not None:
                 pose, q = pose[: self.max_train], q[: self.max_train]
             if pose.shape[0] == 0:
-                raise ValueError(f"dataset {self.path}: the {name} split is empty"
-                                 + (f" for branch {self.branch}" if self.branch is not None else ""))
+                raise ValueError(
+                    f"dataset {self.path}: the {name} split is empty"
+                    + (f" for branch {self.branch}" if self.branch is not None else "")
+                )
             setattr(self, f"{name}_data", (pose.contiguous(), q.contiguous()))
 
     def _loader(self, tensors, batch_size: int | None, shuffle: bool) -> DataLoader:

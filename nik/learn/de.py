@@ -172,8 +172,16 @@ def de_tell(
     x = torch.where(win[:, None], trials, state.x)
     fitness = torch.where(win, trial_fitness, fit)
     evals = state.evals + trials.shape[0] + (0 if parent_fitness is None else parent_fitness.shape[0])
-    return DEState(x, fitness, torch.where(win, F, state.F), torch.where(win, CR, state.CR),
-                   state.lower, state.upper, state.generation + 1, evals)
+    return DEState(
+        x,
+        fitness,
+        torch.where(win, F, state.F),
+        torch.where(win, CR, state.CR),
+        state.lower,
+        state.upper,
+        state.generation + 1,
+        evals,
+    )
 
 
 def de_step(

@@ -65,8 +65,12 @@ class IKModule(L.LightningModule):
     # -- network ---------------------------------------------------------------
     def net_config(self) -> dict:
         h = self.hparams
-        return {"hidden": list(h.hidden), "activation": h.activation, "representation": h.representation,
-                "output": h.output}
+        return {
+            "hidden": list(h.hidden),
+            "activation": h.activation,
+            "representation": h.representation,
+            "output": h.output,
+        }
 
     def setup(self, stage: str) -> None:
         if self.net is not None:
@@ -118,9 +122,14 @@ class IKModule(L.LightningModule):
         m = evaluate(self.net, T, q, rot_weight=self.hparams.rot_weight)
         n = T.shape[0]
         values = {
-            "loss": float(loss), "joint_mse": m["joint_mse"], "pose_loss": m["pose_loss"],
-            "joint_rmse_deg": m["joint_rmse_deg"], "pose_pos_mm": m["pos_mm_mean"], "pose_rot_deg": m["rot_deg_mean"],
-            "pose_pos_mm_p95": m["pos_mm_p95"], "pose_rot_deg_p95": m["rot_deg_p95"],
+            "loss": float(loss),
+            "joint_mse": m["joint_mse"],
+            "pose_loss": m["pose_loss"],
+            "joint_rmse_deg": m["joint_rmse_deg"],
+            "pose_pos_mm": m["pos_mm_mean"],
+            "pose_rot_deg": m["rot_deg_mean"],
+            "pose_pos_mm_p95": m["pos_mm_p95"],
+            "pose_rot_deg_p95": m["rot_deg_p95"],
         }
         for k, v in values.items():
             self.log(f"{prefix}_{k}", v, batch_size=n, prog_bar=k == "loss")
@@ -136,8 +145,11 @@ class IKModule(L.LightningModule):
     # -- checkpoints -------------------------------------------------------------
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         extra = checkpoint_extra(self.net)
-        extra["counters"] = {"loss_evals": int(self.loss_evals), "sample_evals": int(self.sample_evals),
-                             "wall_s": float(self.wall_s)}
+        extra["counters"] = {
+            "loss_evals": int(self.loss_evals),
+            "sample_evals": int(self.sample_evals),
+            "wall_s": float(self.wall_s),
+        }
         checkpoint["nik"] = extra
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
@@ -218,8 +230,9 @@ class GradientIK(IKModule):
         elif h.optimizer == "adam":
             opt = torch.optim.Adam(params, lr=h.lr, weight_decay=h.weight_decay)
         else:
-            opt = torch.optim.LBFGS(params, lr=h.lr, max_iter=h.lbfgs_max_iter, history_size=h.lbfgs_history,
-                                    line_search_fn="strong_wolfe")
+            opt = torch.optim.LBFGS(
+                params, lr=h.lr, max_iter=h.lbfgs_max_iter, history_size=h.lbfgs_history, line_search_fn="strong_wolfe"
+            )
         if h.schedule == "none":
             return opt
         r = h.min_lr_ratio
@@ -309,8 +322,18 @@ class DEIK(IKModule):
         def fitness(W: torch.Tensor) -> torch.Tensor:
             self.loss_evals += W.shape[0]
             self.sample_evals += W.shape[0] * T.shape[0]
-            return population_fitness(net, W, x, y_target=y_t, T_target=T, loss=h.loss, rot_weight=h.rot_weight,
-                                      pose_weight=h.pose_weight, max_fk=h.max_fk, max_elements=h.max_elements)
+            return population_fitness(
+                net,
+                W,
+                x,
+                y_target=y_t,
+                T_target=T,
+                loss=h.loss,
+                rot_weight=h.rot_weight,
+                pose_weight=h.pose_weight,
+                max_fk=h.max_fk,
+                max_elements=h.max_elements,
+            )
 
         return fitness
 
@@ -371,9 +394,14 @@ class DEIK(IKModule):
         s = self.de_state
         if s is not None:
             checkpoint["nik_de"] = {
-                "x": s.x.detach().cpu(), "fitness": s.fitness.detach().cpu(), "F": s.F.detach().cpu(),
-                "CR": s.CR.detach().cpu(), "generation": int(s.generation), "evals": int(s.evals),
-                "generator": self.generator.get_state(), "history": list(self.history),
+                "x": s.x.detach().cpu(),
+                "fitness": s.fitness.detach().cpu(),
+                "F": s.F.detach().cpu(),
+                "CR": s.CR.detach().cpu(),
+                "generation": int(s.generation),
+                "evals": int(s.evals),
+                "generator": self.generator.get_state(),
+                "history": list(self.history),
                 "first_bp_loss": self.first_bp_loss,
             }
 

@@ -16,8 +16,7 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from nik.learn.losses import joint_mse, pose_loss
 
-__all__ = ["flat_params", "set_flat_params", "unflatten", "population_raw", "population_fitness",
-           "init_population"]
+__all__ = ["flat_params", "set_flat_params", "unflatten", "population_raw", "population_fitness", "init_population"]
 
 
 def flat_params(net: torch.nn.Module) -> torch.Tensor:
@@ -102,8 +101,9 @@ def population_fitness(
         if loss in ("joint", "both"):
             part = part + joint_mse(y, y_target[i : i + chunk])
         if loss in ("pose", "both"):
-            pl = pose_loss(net.decode(y), T_target[i : i + chunk], net.robot, length_scale=net.length_scale,
-                           rot_weight=rot_weight)
+            pl = pose_loss(
+                net.decode(y), T_target[i : i + chunk], net.robot, length_scale=net.length_scale, rot_weight=rot_weight
+            )
             part = part + (pose_weight if loss == "both" else 1.0) * pl
         total += part * xs.shape[0]
     return total / n

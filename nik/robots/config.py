@@ -35,8 +35,20 @@ __all__ = ["BUILTIN_DIR", "builtin_robots", "load_robot", "robot_from_config"]
 #: Folder of the built-in robot files (``configs/robots`` at the repository root).
 BUILTIN_DIR = Path(__file__).resolve().parents[2] / "configs" / "robots"
 
-_TOP_KEYS = {"name", "convention", "unit", "angles", "joints", "home", "base", "tool", "urdf", "end_link", "root_link",
-             "description"}
+_TOP_KEYS = {
+    "name",
+    "convention",
+    "unit",
+    "angles",
+    "joints",
+    "home",
+    "base",
+    "tool",
+    "urdf",
+    "end_link",
+    "root_link",
+    "description",
+}
 _DH_KEYS = {"alpha", "a", "d", "offset", "limits", "name", "theta"}
 _POE_KEYS = {"axis", "point", "offset", "limits", "name"}
 
@@ -98,8 +110,9 @@ def robot_from_file(path: str | Path, *, end_link: str | None = None) -> Robot:
     return robot_from_config(data, source=str(path), base_dir=path.parent, end_link=end_link)
 
 
-def robot_from_config(data, *, source: str = "robot config", base_dir: Path | None = None,
-                      end_link: str | None = None) -> Robot:
+def robot_from_config(
+    data, *, source: str = "robot config", base_dir: Path | None = None, end_link: str | None = None
+) -> Robot:
     """Build a :class:`Robot` from a parsed YAML mapping."""
     if not isinstance(data, dict):
         raise RobotDefinitionError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
@@ -110,8 +123,9 @@ def robot_from_config(data, *, source: str = "robot config", base_dir: Path | No
         urdf = Path(data["urdf"])
         if not urdf.is_absolute() and base_dir is not None:
             urdf = base_dir / urdf
-        return load_urdf(urdf, end_link=end_link or data.get("end_link"), root_link=data.get("root_link"),
-                         name=data.get("name"))
+        return load_urdf(
+            urdf, end_link=end_link or data.get("end_link"), root_link=data.get("root_link"), name=data.get("name")
+        )
 
     name = data.get("name") or Path(source).stem
     convention = data.get("convention")
@@ -145,12 +159,18 @@ def robot_from_config(data, *, source: str = "robot config", base_dir: Path | No
     if convention in ("dh", "mdh"):
         if "home" in data:
             raise RobotDefinitionError(f"{source}: 'home' belongs to convention poe, not {convention}")
-        alpha = [_number(_required(j, "alpha", f"{source}: joints[{i}]"), f"{source}: joints[{i}].alpha") * angle
-                 for i, j in enumerate(joints)]
-        a = [_number(_required(j, "a", f"{source}: joints[{i}]"), f"{source}: joints[{i}].a") * length
-             for i, j in enumerate(joints)]
-        d = [_number(_required(j, "d", f"{source}: joints[{i}]"), f"{source}: joints[{i}].d") * length
-             for i, j in enumerate(joints)]
+        alpha = [
+            _number(_required(j, "alpha", f"{source}: joints[{i}]"), f"{source}: joints[{i}].alpha") * angle
+            for i, j in enumerate(joints)
+        ]
+        a = [
+            _number(_required(j, "a", f"{source}: joints[{i}]"), f"{source}: joints[{i}].a") * length
+            for i, j in enumerate(joints)
+        ]
+        d = [
+            _number(_required(j, "d", f"{source}: joints[{i}]"), f"{source}: joints[{i}].d") * length
+            for i, j in enumerate(joints)
+        ]
         base = _frame(data.get("base"), length, angle, f"{source}: base")
         tool = _frame(data.get("tool"), length, angle, f"{source}: tool")
         builder = dh_chain if convention == "dh" else mdh_chain

@@ -128,8 +128,9 @@ def load_urdf(
     if name is None:
         m = re.search(r'<robot[^>]*\bname\s*=\s*"([^"]+)"', text)
         name = m.group(1) if m else path.stem
-    return Robot(name, builder.finish(), np.zeros(len(names)), np.array(limits), names, end_link=end_link,
-                 source=str(path))
+    return Robot(
+        name, builder.finish(), np.zeros(len(names)), np.array(limits), names, end_link=end_link, source=str(path)
+    )
 
 
 def _parse_urdf(text: str):

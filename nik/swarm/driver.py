@@ -220,8 +220,17 @@ def refine(
     else:
         objective = make_objective(cfg.objective, rot_weight=cfg.rot_weight)
         problem = make_problem(robot, T_target, objective, compiled=compiled)
-        run = run_swarm(problem, method, cfg, q_init, generator=generator, tol_pos=tol_pos, tol_rot=tol_rot,
-                        history=history, top_k=max(1, polish_starts))
+        run = run_swarm(
+            problem,
+            method,
+            cfg,
+            q_init,
+            generator=generator,
+            tol_pos=tol_pos,
+            tol_rot=tol_rot,
+            history=history,
+            top_k=max(1, polish_starts),
+        )
         q, iterations, hist = run.x, run.iterations, run.history
         if polish:
             pos, rot = pose_error(T_target, robot.fk(q))

@@ -108,8 +108,17 @@ def ipso_step(state: IPSOState, problem: SwarmProblem, cfg: IPSOCfg, *, generato
     w = mu + state.sigma[:, None, None] * r3
     gamma = constriction(cfg.c1, cfg.c2)
     base = PSOState(state.x, state.v, state.f, state.pbest_x, state.pbest_f, state.gbest_x, state.gbest_f, state.t)
-    x, v = move(base, problem, inertia=w, c1=cfg.c1, c2=cfg.c2, v_max=cfg.v_max, boundary=cfg.boundary,
-                gamma=gamma, generator=generator)
+    x, v = move(
+        base,
+        problem,
+        inertia=w,
+        c1=cfg.c1,
+        c2=cfg.c2,
+        v_max=cfg.v_max,
+        boundary=cfg.boundary,
+        gamma=gamma,
+        generator=generator,
+    )
     f = problem.fitness(x)
     pbest_x, pbest_f, gbest_x, gbest_f = best_update(x, f, state.pbest_x, state.pbest_f)
 

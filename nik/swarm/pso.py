@@ -100,8 +100,10 @@ def move(
     r1 = torch.rand(x.shape, generator=generator, dtype=x.dtype, device=x.device)
     r2 = torch.rand(x.shape, generator=generator, dtype=x.dtype, device=x.device)
     wrap = problem.wrap
-    v = inertia * state.v + c1 * r1 * angle_diff(state.pbest_x, x, wrap) + c2 * r2 * angle_diff(
-        state.gbest_x.unsqueeze(1), x, wrap
+    v = (
+        inertia * state.v
+        + c1 * r1 * angle_diff(state.pbest_x, x, wrap)
+        + c2 * r2 * angle_diff(state.gbest_x.unsqueeze(1), x, wrap)
     )
     if gamma != 1.0:
         v = gamma * v
@@ -125,8 +127,9 @@ def pso_init(
 def pso_step(state: PSOState, problem: SwarmProblem, cfg: PSOCfg, *, generator: torch.Generator) -> PSOState:
     """One PSO iteration for every target and particle (pure: returns a new state)."""
     w = cfg.w_start - cfg.w_drop * min(state.t, cfg.iters) / max(cfg.iters, 1)
-    x, v = move(state, problem, inertia=w, c1=cfg.c1, c2=cfg.c2, v_max=cfg.v_max, boundary=cfg.boundary,
-                generator=generator)
+    x, v = move(
+        state, problem, inertia=w, c1=cfg.c1, c2=cfg.c2, v_max=cfg.v_max, boundary=cfg.boundary, generator=generator
+    )
     f = problem.fitness(x)
     pbest_x, pbest_f, gbest_x, gbest_f = best_update(x, f, state.pbest_x, state.pbest_f)
     return PSOState(x, v, f, pbest_x, pbest_f, gbest_x, gbest_f, state.t + 1)

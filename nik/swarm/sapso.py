@@ -37,8 +37,9 @@ def sapso_init(problem: SwarmProblem, cfg: SAPSOCfg, q_init, *, generator: torch
 def sapso_step(state: PSOState, problem: SwarmProblem, cfg: SAPSOCfg, *, generator: torch.Generator) -> PSOState:
     """One SA-PSO iteration: PSO move, Metropolis acceptance per particle, best update."""
     w = cfg.w_start - cfg.w_drop * min(state.t, cfg.iters) / max(cfg.iters, 1)
-    x_new, v = move(state, problem, inertia=w, c1=cfg.c1, c2=cfg.c2, v_max=cfg.v_max, boundary=cfg.boundary,
-                    generator=generator)
+    x_new, v = move(
+        state, problem, inertia=w, c1=cfg.c1, c2=cfg.c2, v_max=cfg.v_max, boundary=cfg.boundary, generator=generator
+    )
     f_new = problem.fitness(x_new)
     temperature = cfg.t0 * cfg.cooling**state.t
     dE = f_new - state.f
