@@ -2,7 +2,7 @@
 
 Methods (one config each): ``bp``, ``adam``, ``lbfgs``, ``de``, ``de_bp``. LightningCLI supplies
 checkpoints, resume (``--ckpt_path``), loggers, progress bars, seeding (``seed_everything``) and the
-accelerator choice; see ``docs/readme_training.md``. The CLI itself is :func:`nik.learn.cli.cli_main`.
+accelerator choice; see ``the README (Training)``. The CLI itself is :func:`nik.learn.cli.cli_main`.
 """
 
 from __future__ import annotations

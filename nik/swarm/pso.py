@@ -35,7 +35,7 @@ class SwarmCfg:
     boundary: str = "reflect"  # reflect | clamp | resample, see nik.swarm.bounds
     objective: str = "pose"  # pose | paper_a | paper_d_position | paper_d_orientation
     rot_weight: float = 0.5  # m/rad, weight of the rotation angle in the 'pose' objective (measured: 0.1 traps
-    # the swarms in the wrong IK branch more often, see docs/readme_swarm.md)
+    # the swarms in the wrong IK branch more often, see the README, Swarm refinement)
     init: InitCfg = field(default_factory=InitCfg)
 
 
