@@ -195,12 +195,14 @@ def _central_solution(sols: torch.Tensor, valid: torch.Tensor, lo: torch.Tensor,
     return torch.gather(sols, 1, idx[:, None, None].expand(-1, 1, sols.shape[-1])).squeeze(1)
 
 
-def dedupe(q: torch.Tensor, *, tol: float = 1e-3) -> torch.Tensor:
-    """Drop from ``q: (K, dof)`` every row within ``tol`` (max abs wrapped joint difference, radians)
-    of an earlier row; the order of the rest is kept."""
+def dedupe(q: torch.Tensor, *, tol: float = 1e-3, prismatic: torch.Tensor | None = None) -> torch.Tensor:
+    """Drop from ``q: (K, dof)`` every row within ``tol`` (max abs joint difference, radians or metres;
+    wrapped modulo 2 pi except on ``prismatic: (dof,)`` joints) of an earlier row; the order of the rest is kept."""
     if q.shape[0] <= 1:
         return q
-    diff = torch.remainder(q[:, None] - q[None] + math.pi, 2 * math.pi) - math.pi
+    diff = q[:, None] - q[None]
+    wrapped = torch.remainder(diff + math.pi, 2 * math.pi) - math.pi
+    diff = wrapped if prismatic is None else torch.where(prismatic.to(q.device), diff, wrapped)
     close = diff.abs().amax(-1) < tol
     dup = torch.triu(close, diagonal=1).any(dim=0)
     return q[~dup]
@@ -503,4 +505,4 @@ class IKSolver:
         pos, rot = pose_error(Tk, robot.fk(q))
         ok = (pos <= tol_pos) & (rot <= tol_rot)
         q, score = q[ok], (pos + 0.1 * rot)[ok]
-        return dedupe(q[score.argsort()], tol=dedupe_tol)
+        return dedupe(q[score.argsort()], tol=dedupe_tol, prismatic=robot.prismatic)

@@ -173,6 +173,10 @@ def is_puma_like(robot) -> bool:
 
 def _geometry(robot) -> PumaGeometry:
     name = getattr(robot, "name", "robot")
+    prismatic = getattr(robot, "prismatic", None)
+    if prismatic is not None and bool(prismatic.any()):
+        joints = [i + 1 for i in range(robot.dof) if bool(prismatic[i])]
+        raise ValueError(f"puma560_ik: robot {name!r} has prismatic joint(s) {joints}; a PUMA-like arm is all revolute")
     if robot.dof != 6:
         raise ValueError(f"puma560_ik: robot {name!r} has {robot.dof} joints; a PUMA-like arm has 6")
     G0 = robot.G.numpy()

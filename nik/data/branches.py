@@ -65,7 +65,7 @@ def joint_frames(robot, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         (the origin of the frame the joint turns), metres; dtype of ``q``.
     """
     G, off = robot.G.to(q.device, q.dtype), robot.offsets.to(q.device, q.dtype)
-    _, axes, points = chain_joint_frames(q, G, off)
+    _, axes, points = chain_joint_frames(q, G, off, prismatic=getattr(robot, "prismatic_or_none", None))
     return axes.transpose(1, 2), points.transpose(1, 2)
 
 

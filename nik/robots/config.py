@@ -4,15 +4,34 @@ and :func:`load_robot`, which resolves built-in names and paths.
 YAML schema (see ``shared/spec/interface.md``)::
 
     name: my_arm
+    description: free text (for instance where the table comes from)
     convention: dh | mdh | poe
     unit: mm | m              # lengths (default m)
-    angles: deg | rad         # alpha, offset, limits (default rad)
+    angles: deg | rad         # angles: alpha, theta, revolute offset and limits (default rad)
     base: {position: [x, y, z], rpy: [r, p, y]}     # optional, dh/mdh only
     tool: {position: [x, y, z], rpy: [r, p, y]}     # optional, dh/mdh only
     joints:
-      - {alpha: -90, a: 0, d: 0, offset: 0, limits: [-160, 160], name: j1}   # dh / mdh
-      - {axis: [0, 0, 1], point: [0, 0, 0], limits: [-180, 180]}            # poe
+      - {alpha: -90, a: 0, d: 0, offset: 0, limits: [-160, 160], name: j1}   # dh / mdh, revolute
+      - {type: prismatic, alpha: 0, a: 0, d: 0, theta: 0, limits: [300, 900]}  # dh / mdh, prismatic
+      - {axis: [0, 0, 1], point: [0, 0, 0], limits: [-180, 180]}            # poe, revolute
+      - {type: prismatic, axis: [0, 0, 1], limits: [0, 500]}                 # poe, prismatic
     home: {position: [x, y, z], rotation: [[...], [...], [...]]}           # poe only
+
+Joint fields:
+
+- ``type``: ``revolute`` (default) or ``prismatic``.
+- ``name``: the joint's name (default ``joint<i>``, counting from 1); it appears in
+  :attr:`Robot.joint_names` and in the CLI's tables.
+- Revolute joint: the joint variable ``q`` (radians in the API) is the DH angle, ``theta = q + offset``;
+  ``offset`` (file's angle unit, default 0) may also be written ``theta`` (the same number: the DH
+  angle at ``q = 0``; give one of them, not both). ``limits`` (file's angle unit, default
+  ``[-180, 180]`` deg) bound ``q``.
+- Prismatic joint: the variable ``q`` (metres in the API) is added to the DH length,
+  ``d_total = d + offset + q`` (dh, mdh), or is a translation by ``q + offset`` along ``axis`` (poe).
+  ``d`` (default 0) and ``offset`` (default 0) are in the file's length unit, as are the ``limits``
+  (required: a slide has no natural default range), which bound ``q``. ``theta`` (dh, mdh; file's
+  angle unit, default 0) is the joint's constant DH angle. In poe, ``point`` may be given and plays
+  no part (a translation has no axis position).
 
 or, for an arm described by a URDF: ``{name: ..., urdf: path/relative/to/this/file.urdf,
 end_link: ..., root_link: ...}``. Unknown keys are errors, so a typo never goes unnoticed.
@@ -49,8 +68,9 @@ _TOP_KEYS = {
     "root_link",
     "description",
 }
-_DH_KEYS = {"alpha", "a", "d", "offset", "limits", "name", "theta"}
-_POE_KEYS = {"axis", "point", "offset", "limits", "name"}
+_DH_KEYS = {"alpha", "a", "d", "offset", "limits", "name", "theta", "type"}
+_POE_KEYS = {"axis", "point", "offset", "limits", "name", "type"}
+_JOINT_TYPES = ("revolute", "prismatic")
 
 
 def builtin_robots() -> list[str]:
@@ -146,15 +166,30 @@ def robot_from_config(
     n = len(joints)
     limits = np.empty((n, 2))
     offsets = np.zeros(n)
+    theta = np.zeros(n)  # constant DH angle of prismatic joints
+    prismatic = [False] * n
     names = []
     for i, j in enumerate(joints):
         where = f"{source}: joints[{i}]"
         if not isinstance(j, dict):
             raise RobotDefinitionError(f"{where}: expected a mapping, got {j!r}")
         _no_unknown(j, _DH_KEYS if convention in ("dh", "mdh") else _POE_KEYS, where)
-        limits[i] = _limits(j.get("limits", [-math.pi / angle, math.pi / angle]), where) * angle
-        offsets[i] = _number(j.get("offset", j.get("theta", 0.0)), f"{where}: offset") * angle
         names.append(str(j.get("name", f"joint{i + 1}")))
+        jtype = j.get("type", "revolute")
+        if jtype not in _JOINT_TYPES:
+            raise RobotDefinitionError(f"{where} ({names[-1]}): type must be 'revolute' or 'prismatic', got {jtype!r}")
+        if jtype == "prismatic":
+            prismatic[i] = True
+            limits[i] = _limits(_required(j, "limits", where), where) * length
+            offsets[i] = _number(j.get("offset", 0.0), f"{where}: offset") * length
+            theta[i] = _number(j.get("theta", 0.0), f"{where}: theta") * angle
+        else:
+            if "offset" in j and "theta" in j:
+                raise RobotDefinitionError(
+                    f"{where}: give 'offset' or 'theta' (the same quantity for a revolute joint), not both"
+                )
+            limits[i] = _limits(j.get("limits", [-math.pi / angle, math.pi / angle]), where) * angle
+            offsets[i] = _number(j.get("offset", j.get("theta", 0.0)), f"{where}: offset") * angle
 
     if convention in ("dh", "mdh"):
         if "home" in data:
@@ -168,13 +203,17 @@ def robot_from_config(
             for i, j in enumerate(joints)
         ]
         d = [
-            _number(_required(j, "d", f"{source}: joints[{i}]"), f"{source}: joints[{i}].d") * length
+            _number(
+                j.get("d", 0.0) if prismatic[i] else _required(j, "d", f"{source}: joints[{i}]"),
+                f"{source}: joints[{i}].d",
+            )
+            * length
             for i, j in enumerate(joints)
         ]
         base = _frame(data.get("base"), length, angle, f"{source}: base")
         tool = _frame(data.get("tool"), length, angle, f"{source}: tool")
         builder = dh_chain if convention == "dh" else mdh_chain
-        G = builder(alpha, a, d, base=base, tool=tool)
+        G = builder(alpha, a, d, base=base, tool=tool, prismatic=prismatic, theta=theta)
     else:
         for key in ("base", "tool"):
             if key in data:
@@ -186,10 +225,11 @@ def robot_from_config(
             if np.linalg.norm(axis) < 1e-9:
                 raise RobotDefinitionError(f"{where}.axis: must be non-zero")
             axes.append(axis / np.linalg.norm(axis))
-            points.append(_vector(_required(j, "point", where), 3, f"{where}.point") * length)
+            point = j.get("point", [0.0, 0.0, 0.0]) if prismatic[i] else _required(j, "point", where)
+            points.append(_vector(point, 3, f"{where}.point") * length)
         home = _frame(_required(data, "home", source), length, angle, f"{source}: home")
-        G = poe_chain(axes, points, home)
-    return Robot(str(name), G, offsets, limits, names, source=source)
+        G = poe_chain(axes, points, home, prismatic=prismatic)
+    return Robot(str(name), G, offsets, limits, names, source=source, prismatic=prismatic)
 
 
 # ---------------------------------------------------------------------------

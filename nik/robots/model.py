@@ -1,5 +1,6 @@
 """The :class:`Robot` model and the builders that reduce DH, modified DH and screw-axis
-(product of exponentials) tables to the FK normal form of :mod:`nik.kinematics`."""
+(product of exponentials) tables, with revolute and prismatic joints, to the FK normal form
+of :mod:`nik.kinematics`."""
 
 from __future__ import annotations
 
@@ -68,24 +69,28 @@ def axis_frame(axis: Sequence[float]) -> np.ndarray:
 
 
 class NormalFormBuilder:
-    """Collects a chain of fixed transforms and revolute joints into ``G: (n + 1, 4, 4)``.
+    """Collects a chain of fixed transforms and joints into ``G: (n + 1, 4, 4)``.
 
     ``fixed(M)`` right-multiplies a constant transform; ``joint(axis)`` inserts a revolute
-    joint about ``axis`` expressed in the current frame.
+    joint about ``axis`` (``P Rz(q) P^T``), ``joint(axis, prismatic=True)`` a prismatic joint
+    along it (``P Tz(q) P^T``), ``axis`` expressed in the current frame. :attr:`prismatic`
+    lists the joint types so far.
     """
 
     def __init__(self, base: np.ndarray | None = None):
         self._current = np.eye(4) if base is None else np.asarray(base, dtype=float)
         self._G: list[np.ndarray] = []
+        self.prismatic: list[bool] = []
 
     def fixed(self, M: np.ndarray) -> NormalFormBuilder:
         self._current = self._current @ M
         return self
 
-    def joint(self, axis: Sequence[float] = (0.0, 0.0, 1.0)) -> NormalFormBuilder:
+    def joint(self, axis: Sequence[float] = (0.0, 0.0, 1.0), *, prismatic: bool = False) -> NormalFormBuilder:
         P = axis_frame(axis)
         self._G.append(self._current @ P)
         self._current = P.T.copy()
+        self.prismatic.append(bool(prismatic))
         return self
 
     def finish(self, tool: np.ndarray | None = None) -> np.ndarray:
@@ -93,31 +98,61 @@ class NormalFormBuilder:
         return np.stack(self._G + [last])
 
 
-def dh_chain(alpha, a, d, *, base=None, tool=None) -> np.ndarray:
-    """Standard (distal) DH: ``A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``; SI units. Returns G."""
+def _flags(prismatic, n: int) -> list[bool]:
+    flags = [False] * n if prismatic is None else [bool(v) for v in prismatic]
+    if len(flags) != n:
+        raise ValueError(f"prismatic: expected {n} flags, got {len(flags)}")
+    return flags
+
+
+def dh_chain(alpha, a, d, *, base=None, tool=None, prismatic=None, theta=None) -> np.ndarray:
+    """Standard (distal) DH: ``A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``; SI units. Returns G.
+
+    Revolute joint ``i``: ``theta_i`` is the joint variable (plus its offset, outside G). Prismatic
+    joint ``i`` (``prismatic[i]``): ``theta_i`` is the constant ``theta[i]`` (radians, default 0) and
+    the variable is added to ``d_i``; as ``Rz`` and ``Tz`` commute, ``A_i = Tz(q) Tz(d_i) Rz(theta_i) ...``.
+    """
+    flags = _flags(prismatic, len(alpha))
+    theta = [0.0] * len(alpha) if theta is None else list(theta)
     b = NormalFormBuilder(base)
-    for al, ai, di in zip(alpha, a, d, strict=True):
-        b.joint().fixed(trans(z=di) @ trans(x=ai) @ rot_x(al))
+    for al, ai, di, th, pr in zip(alpha, a, d, theta, flags, strict=True):
+        if pr:
+            b.joint(prismatic=True).fixed(trans(z=di) @ rot_z(th) @ trans(x=ai) @ rot_x(al))
+        else:
+            b.joint().fixed(trans(z=di) @ trans(x=ai) @ rot_x(al))
     return b.finish(tool)
 
 
-def mdh_chain(alpha, a, d, *, base=None, tool=None) -> np.ndarray:
-    """Modified DH (Craig): ``A_i = Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i)``; SI units. Returns G."""
+def mdh_chain(alpha, a, d, *, base=None, tool=None, prismatic=None, theta=None) -> np.ndarray:
+    """Modified DH (Craig): ``A_i = Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i)``; SI units. Returns G.
+
+    Prismatic joints as in :func:`dh_chain`: constant ``theta[i]``, variable added to ``d_i``.
+    """
+    flags = _flags(prismatic, len(alpha))
+    theta = [0.0] * len(alpha) if theta is None else list(theta)
     b = NormalFormBuilder(base)
-    for al, ai, di in zip(alpha, a, d, strict=True):
-        b.fixed(rot_x(al) @ trans(x=ai)).joint().fixed(trans(z=di))
+    for al, ai, di, th, pr in zip(alpha, a, d, theta, flags, strict=True):
+        if pr:
+            b.fixed(rot_x(al) @ trans(x=ai) @ rot_z(th) @ trans(z=di)).joint(prismatic=True)
+        else:
+            b.fixed(rot_x(al) @ trans(x=ai)).joint().fixed(trans(z=di))
     return b.finish(tool)
 
 
-def poe_chain(axes, points, home: np.ndarray) -> np.ndarray:
+def poe_chain(axes, points, home: np.ndarray, *, prismatic=None) -> np.ndarray:
     """Space-frame product of exponentials: ``T = exp([xi_1] q_1) ... exp([xi_n] q_n) M``.
 
     Revolute screw ``i`` turns about the unit axis ``axes[i]`` through ``points[i]`` (metres):
-    ``exp([xi] q) = Tr(r) Rot(axis, q) Tr(-r)``. ``home`` is ``M``, the tool pose at q = 0.
+    ``exp([xi] q) = Tr(r) Rot(axis, q) Tr(-r)``. A prismatic screw (``prismatic[i]``) translates
+    by ``q`` metres along ``axes[i]`` (its point plays no part). ``home`` is ``M``, the tool pose at q = 0.
     """
+    flags = _flags(prismatic, len(axes))
     b = NormalFormBuilder()
-    for w, r in zip(axes, points, strict=True):
-        b.fixed(trans(*r)).joint(w).fixed(trans(*(-np.asarray(r, dtype=float))))
+    for w, r, pr in zip(axes, points, flags, strict=True):
+        if pr:
+            b.joint(w, prismatic=True)
+        else:
+            b.fixed(trans(*r)).joint(w).fixed(trans(*(-np.asarray(r, dtype=float))))
     return b.finish(home)
 
 
@@ -125,18 +160,21 @@ def poe_chain(axes, points, home: np.ndarray) -> np.ndarray:
 # Robot
 # ---------------------------------------------------------------------------
 class Robot:
-    """A serial revolute arm: names, joint limits and a batched, differentiable FK.
+    """A serial arm of revolute and prismatic joints: names, joint limits and a batched, differentiable FK.
 
-    Built by :func:`nik.load_robot` (or :meth:`from_definition`); all quantities SI.
+    Built by :func:`nik.load_robot` (or :meth:`from_definition`); all quantities SI: a revolute
+    joint's value is in radians, a prismatic joint's in metres.
 
     Attributes:
         name: robot name.
         dof: number of joints.
         joint_names: one name per joint.
-        limits: (dof, 2) float64 tensor, radians (lower, upper) of the joint variable ``q``.
+        limits: (dof, 2) float64 tensor (lower, upper) of the joint variable ``q``: radians, or metres
+            for prismatic joints.
+        prismatic: (dof,) bool tensor, True for prismatic joints (all False for a revolute arm).
         end_link: tool link name for URDF arms, else None.
         G: (dof + 1, 4, 4) float64 normal-form transforms (see :mod:`nik.kinematics`).
-        offsets: (dof,) float64, ``theta = q + offset``.
+        offsets: (dof,) float64, ``theta = q + offset`` (revolute) or ``d = q + offset`` (prismatic).
     """
 
     def __init__(
@@ -149,6 +187,7 @@ class Robot:
         *,
         end_link: str | None = None,
         source: str | None = None,
+        prismatic: Sequence[bool] | torch.Tensor | None = None,
     ):
         self.G = torch.as_tensor(np.asarray(G, dtype=float), dtype=torch.float64)
         n = self.G.shape[0] - 1
@@ -161,15 +200,30 @@ class Robot:
         self.joint_names = list(joint_names) if joint_names is not None else [f"joint{i + 1}" for i in range(n)]
         if len(self.joint_names) != n:
             raise ValueError(f"robot {name!r}: {len(self.joint_names)} joint names for {n} joints")
+        self.prismatic = torch.zeros(n, dtype=torch.bool)
+        if prismatic is not None:
+            flags = torch.as_tensor(np.asarray(prismatic, dtype=bool)).reshape(-1)
+            if flags.numel() != n:
+                raise ValueError(f"robot {name!r}: {flags.numel()} prismatic flags for {n} joints")
+            self.prismatic = flags
         self.end_link = end_link
         self.source = source
         self._cache: dict[tuple[torch.dtype, torch.device], tuple[torch.Tensor, torch.Tensor]] = {}
         self._kernel: FKKernel | None = None
 
     # -- identity -------------------------------------------------------
+    @property
+    def has_prismatic(self) -> bool:
+        """True when some joint is prismatic."""
+        return bool(self.prismatic.any())
+
     def to_definition(self) -> dict:
-        """A plain-data (JSON-able) description that :meth:`from_definition` rebuilds exactly."""
-        return {
+        """A plain-data (JSON-able) description that :meth:`from_definition` rebuilds exactly.
+
+        ``"prismatic"`` (one bool per joint) appears only when some joint is prismatic, so the
+        definitions of revolute arms are what they were before prismatic joints existed.
+        """
+        definition = {
             "name": self.name,
             "joint_names": list(self.joint_names),
             "end_link": self.end_link,
@@ -177,6 +231,9 @@ class Robot:
             "offsets": self.offsets.tolist(),
             "limits": self.limits.tolist(),
         }
+        if self.has_prismatic:
+            definition["prismatic"] = self.prismatic.tolist()
+        return definition
 
     @classmethod
     def from_definition(cls, definition: dict) -> Robot:
@@ -189,16 +246,23 @@ class Robot:
                 definition["limits"],
                 definition["joint_names"],
                 end_link=definition.get("end_link"),
+                prismatic=definition.get("prismatic"),
             )
         except (KeyError, TypeError) as err:
             raise ValueError(f"malformed robot definition: {err}") from err
 
     @property
     def definition_hash(self) -> str:
-        """SHA-256 (hex, 16 chars) of the kinematics and limits; the name is not part of it."""
+        """SHA-256 (hex, 16 chars) of the kinematics and limits; the name is not part of it.
+
+        The joint types enter only when some joint is prismatic, so every revolute arm keeps the
+        hash it had before prismatic joints existed (datasets and checkpoints carry it).
+        """
         h = hashlib.sha256()
         for arr in (self.G, self.offsets, self.limits):
             h.update(np.round(arr.numpy(), 12).astype("<f8").tobytes())
+        if self.has_prismatic:
+            h.update(b"prismatic:" + self.prismatic.numpy().astype("u1").tobytes())
         return h.hexdigest()[:16]
 
     def __repr__(self) -> str:
@@ -215,7 +279,8 @@ class Robot:
         """Forward kinematics.
 
         Args:
-            q: (..., dof) joint angles in radians; any leading batch shape, any float dtype/device.
+            q: (..., dof) joint values (radians; metres for prismatic joints); any leading batch shape,
+                any float dtype/device.
             compiled: run the ``torch.compile``'d kernel (fast for large batches; the first call compiles).
             check: validate ``q`` (shape, NaN/inf); hot loops that built ``q`` themselves pass False.
 
@@ -226,23 +291,29 @@ class Robot:
         if check:
             validate_joints(q, self.dof)
         if self._kernel is None:
-            self._kernel = FKKernel(self.G.numpy(), self.offsets.numpy())
+            self._kernel = FKKernel(self.G.numpy(), self.offsets.numpy(), prismatic=self.prismatic.tolist())
         return self._kernel(q.reshape(-1, self.dof), compiled=compiled).reshape(*q.shape[:-1], 4, 4)
 
     def fk_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """FK and geometric Jacobian in the base frame.
 
         Args:
-            q: (..., dof) radians.
+            q: (..., dof) radians (metres for prismatic joints).
 
         Returns:
-            ``T: (..., 4, 4)`` and ``J: (..., 6, dof)`` (rows: linear then angular velocity).
+            ``T: (..., 4, 4)`` and ``J: (..., 6, dof)`` (rows: linear then angular velocity; a prismatic
+            joint's column is its unit axis, then zeros).
         """
         validate_joints(q, self.dof)
         G, off = self._params(q)
         batch = q.shape[:-1]
-        T, J = chain_jacobian(q.reshape(-1, self.dof), G, off)
+        T, J = chain_jacobian(q.reshape(-1, self.dof), G, off, prismatic=self.prismatic_or_none)
         return to_homogeneous(T).reshape(*batch, 4, 4), J.reshape(*batch, 6, self.dof)
+
+    @property
+    def prismatic_or_none(self) -> torch.Tensor | None:
+        """:attr:`prismatic`, or None for an all-revolute arm (the kernels' fast path)."""
+        return self.prismatic if self.has_prismatic else None
 
     # -- joint space ----------------------------------------------------
     def sample(

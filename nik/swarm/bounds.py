@@ -3,8 +3,9 @@
 Every function is batched over any leading shape; ``lo, hi, wrap`` are ``(n,)`` for the
 ``n`` joints being searched.
 
-Joints whose range is at least ``2 pi`` *wrap*: a value past a bound is moved by whole turns
-(``2 pi k``) to the physically identical angle inside the range, and its velocity is kept.
+Revolute joints whose range is at least ``2 pi`` *wrap* (prismatic joints never do): a value past
+a bound is moved by whole turns (``2 pi k``) to the physically identical angle inside the range,
+and its velocity is kept.
 The other joints follow the boundary strategy:
 
 ``reflect``
@@ -31,9 +32,15 @@ BOUNDARY_STRATEGIES = ("reflect", "clamp", "resample")
 TWO_PI = 2.0 * math.pi
 
 
-def wrap_mask(limits: torch.Tensor, *, tol: float = 1e-6) -> torch.Tensor:
-    """``(n,)`` bool: joints whose range ``hi - lo`` (``limits: (n, 2)``, float64) is at least ``2 pi``."""
-    return (limits[:, 1] - limits[:, 0]) >= TWO_PI - tol
+def wrap_mask(limits: torch.Tensor, *, tol: float = 1e-6, prismatic: torch.Tensor | None = None) -> torch.Tensor:
+    """``(n,)`` bool: revolute joints whose range ``hi - lo`` (``limits: (n, 2)``, float64) is at least ``2 pi``.
+
+    ``prismatic: (n,)`` bool marks joints that never wrap (a slide of 7 m is not a turn); None: all revolute.
+    """
+    wrap = (limits[:, 1] - limits[:, 0]) >= TWO_PI - tol
+    if prismatic is not None:
+        wrap = wrap & ~torch.as_tensor(prismatic, dtype=torch.bool, device=wrap.device)
+    return wrap
 
 
 def wrap_into(x: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:

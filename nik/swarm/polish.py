@@ -99,15 +99,16 @@ def lm_solve(
     q = (q0 if q0.ndim == 3 else q0.unsqueeze(1)).to(dtype=dtype, device=device)
     B, K, n = q.shape
     lo, hi = robot.limits_as(T_target)
-    wrap = wrap_mask(robot.limits).to(device)
+    wrap = wrap_mask(robot.limits, prismatic=robot.prismatic).to(device)
     G = robot.G.to(device=device, dtype=dtype)
     off = robot.offsets.to(device=device, dtype=dtype)
+    prismatic = robot.prismatic_or_none
     Tt = T_target[..., :3, :].unsqueeze(1)  # (B, 1, 3, 4)
     rw = cfg.rot_weight
     row_w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=dtype, device=device)
 
     def evaluate(qq, tt):
-        T, J = chain_jacobian(qq.reshape(-1, n), G, off)
+        T, J = chain_jacobian(qq.reshape(-1, n), G, off, prismatic=prismatic)
         T, J = T.reshape(*qq.shape[:-1], 3, 4), J.reshape(*qq.shape[:-1], 6, n) * row_w[:, None]
         e, pos, rot = _error(tt, T, rw)
         return e, J, pos, rot

@@ -109,7 +109,7 @@ def make_problem(
     else:
         q_fixed = torch.as_tensor(q_fixed, dtype=dtype, device=device).expand(B, robot.dof).clone()
     lo, hi = robot.limits_as(T_target)
-    wrap = wrap_mask(robot.limits).to(device)
+    wrap = wrap_mask(robot.limits, prismatic=robot.prismatic).to(device)
     return SwarmProblem(
         robot=robot,
         T_target=T_target[..., :3, :].contiguous(),
