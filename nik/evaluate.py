@@ -97,11 +97,12 @@ def _timed(fn):
 def robot_to_urdf(robot: Robot) -> tuple[str, str]:
     """A URDF string with the same FK as ``robot`` (from its normal form), and its end link name.
 
-    Joint ``i`` sits at origin ``G_{i-1} Rz(offset_i)`` of its parent link and turns about z;
-    a fixed joint with origin ``G_n`` carries the tool link.
+    Joint ``i`` sits at origin ``G_{i-1} Rz(offset_i)`` (prismatic: ``G_{i-1} Tz(offset_i)``) of its
+    parent link and turns about (slides along) z; a fixed joint with origin ``G_n`` carries the tool link.
     """
     G, off = robot.G.numpy(), robot.offsets.numpy()
     lim = robot.limits.numpy()
+    prismatic = robot.prismatic.tolist()
 
     def origin(M: np.ndarray) -> str:
         rpy = matrix_to_rpy(torch.as_tensor(M[:3, :3])).numpy()
@@ -112,6 +113,11 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
     def rz(t: float) -> np.ndarray:
         M = np.eye(4)
         M[:2, :2] = [[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]]
+        return M
+
+    def tz(d: float) -> np.ndarray:
+        M = np.eye(4)
+        M[2, 3] = d
         return M
 
     def rx(t: float) -> np.ndarray:
@@ -136,7 +142,7 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
 
     parts = [f'<robot name="{robot.name}">', '<link name="link0"/>']
     for i in range(robot.dof):
-        first, *rest = rpy_safe(G[i] @ rz(off[i]))
+        first, *rest = rpy_safe(G[i] @ (tz(off[i]) if prismatic[i] else rz(off[i])))
         parent = f"link{i}"
         if rest:  # an intermediate fixed frame
             parts.append(f'<link name="link{i}_fixed"/>')
@@ -147,7 +153,8 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
             parent, first = f"link{i}_fixed", rest[0]
         parts.append(f'<link name="link{i + 1}"/>')
         parts.append(
-            f'<joint name="{robot.joint_names[i]}" type="revolute"><parent link="{parent}"/><child link="link{i + 1}"/>'
+            f'<joint name="{robot.joint_names[i]}" type="{"prismatic" if prismatic[i] else "revolute"}">'
+            f'<parent link="{parent}"/><child link="link{i + 1}"/>'
             f'{origin(first)}<axis xyz="0 0 1"/>'
             f'<limit lower="{lim[i, 0]:.17g}" upper="{lim[i, 1]:.17g}" effort="1" velocity="1"/></joint>'
         )

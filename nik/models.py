@@ -9,7 +9,8 @@
 3. the output is either ``angles`` (one per joint, in ``[-1, 1]`` for the training range:
    ``q = out_center + out_half * y``, like MATLAB's ``mapminmax``) or ``sincos`` (two per joint,
    ``q = atan2(s, c)`` taken within ``out_center +- pi``; such a joint cannot reach beyond one turn
-   around the centre of its range).
+   around the centre of its range). A prismatic joint is always linear: with ``sincos`` it keeps its
+   two outputs, reads the first as ``angles`` does and trains the second towards 0.
 
 The buffers are part of ``state_dict`` and so of every checkpoint, together with the robot
 definition and its hash (see :func:`load_checkpoint`).
@@ -103,6 +104,8 @@ class IKNet(nn.Module):
         self.representation = representation
         self.output = output
         self.act = ACTIVATIONS[activation]
+        # (dof,) bool, not a buffer (checkpoints keep their keys): the robot definition carries it
+        self.prismatic = robot.prismatic.clone() if robot.has_prismatic else None
         self.in_dim = POSE_DIMS[representation]
         self.out_dim = self.dof * (2 if output == "sincos" else 1)
         sizes = [self.in_dim, *hidden, self.out_dim]
@@ -182,14 +185,22 @@ class IKNet(nn.Module):
         phi = torch.atan2(s, c)
         # the angle within out_center +- pi
         d = phi - self.out_center
-        return self.out_center + torch.atan2(torch.sin(d), torch.cos(d))
+        q = self.out_center + torch.atan2(torch.sin(d), torch.cos(d))
+        if self.prismatic is not None:  # prismatic joints: linear in the first of their two outputs
+            q = torch.where(self.prismatic.to(q.device), self.out_center + self.out_half * s, q)
+        return q
 
     def encode(self, q: torch.Tensor) -> torch.Tensor:
         """Joint angles ``(..., dof)`` -> the raw output that decodes to them: the joint-space loss target."""
         q = q.to(self.out_center.dtype)
         if self.output == "angles":
             return (q - self.out_center) / self.out_half
-        return torch.stack([torch.sin(q), torch.cos(q)], dim=-1).flatten(-2)
+        s, c = torch.sin(q), torch.cos(q)
+        if self.prismatic is not None:
+            mask = self.prismatic.to(q.device)
+            s = torch.where(mask, (q - self.out_center) / self.out_half, s)
+            c = torch.where(mask, torch.zeros_like(c), c)
+        return torch.stack([s, c], dim=-1).flatten(-2)
 
     def forward(self, T: torch.Tensor) -> torch.Tensor:
         """``T: (B, 4, 4)`` -> ``q: (B, dof)`` radians, unclamped, differentiable (for training)."""

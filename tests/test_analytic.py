@@ -189,3 +189,13 @@ def test_bad_arguments(puma):
         puma560_ik(puma, torch.eye(4, dtype=torch.float64), wrist="euler")
     with pytest.raises(ValueError, match=r"\(\.\.\., 4, 4\)"):
         puma560_ik(puma, torch.zeros(3, 3))
+
+
+def test_an_arm_with_a_prismatic_joint_is_not_puma_like():
+    assert not is_puma_like(nik.load_robot("stanford"))
+    puma = nik.load_robot("puma560")
+    # the same chain with joint 6 declared prismatic: no longer a PUMA
+    slid = nik.Robot("puma_slide", puma.G, puma.offsets, puma.limits, prismatic=[False] * 5 + [True])
+    assert is_puma_like(puma) and not is_puma_like(slid)
+    with pytest.raises(ValueError, match=r"prismatic joint\(s\) \[6\]"):
+        puma560_params(slid)

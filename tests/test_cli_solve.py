@@ -102,6 +102,31 @@ def test_solve_json_gives_radians_and_degrees_that_reach_the_pose(capsys):
     assert doc["joint_names"] == robot.joint_names
 
 
+def test_solve_prints_prismatic_joints_in_mm(tmp_path, capsys):
+    robot = nik.load_robot("stanford")
+    T, rows = _pose_rows(robot, 2, 4)
+    assert main(["solve", "--robot", "stanford", "--pose", *map(repr, rows[0].tolist())]) == 0
+    out = capsys.readouterr().out
+    for label in ("waist (deg)", "boom (mm)", "wrist3 (deg)", "pos err (mm)"):
+        assert label in out
+    assert main(["solve", "--robot", "stanford", "--json", "--pose", *map(repr, rows[0].tolist())]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    (r,) = doc["results"]
+    assert doc["joint_units_display"] == ["deg", "deg", "mm", "deg", "deg", "deg"]
+    assert r["q_rad"][2] is None and r["q_deg"][2] is None  # a length is never labelled as an angle
+    q = torch.tensor(r["q_si"], dtype=torch.float64)
+    assert math.isclose(r["q_display"][2], r["q_si"][2] * 1e3) and math.isclose(r["q_display"][0], math.degrees(q[0]))
+    pos, rot = nik.pose_error(T[0], robot.fk(q))
+    assert float(pos) <= 1e-4 and float(rot) <= 1e-3
+    poses = _write_csv(tmp_path / "poses.csv", rows)
+    assert main(["solve", "--robot", "stanford", "--poses", str(poses), "--out", str(tmp_path / "sol.csv")]) == 0
+    with open(tmp_path / "sol.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert "boom_m" in table[0] and "boom_mm" in table[0] and "boom_deg" not in table[0]
+    for table_row in table:
+        assert math.isclose(float(table_row["boom_mm"]), float(table_row["boom_m"]) * 1e3, rel_tol=1e-9)
+
+
 @needs_training
 def test_solve_csv_in_csv_out_with_a_trained_checkpoint(checkpoint, tmp_path, capsys):
     robot = nik.load_robot("puma560")

@@ -546,3 +546,24 @@ def test_compiled_fk_is_reproducible_across_chunks_and_threads(tmp_path, kuka):
         assert torch.equal(a, b)
     assert load_dataset(tmp_path / "c777").meta["fk"]["compiled"] is True
     assert_close(kuka.fk(arrays[0][0]), arrays[0][1], atol=1e-12, rtol=0)
+
+
+def test_dataset_of_an_arm_with_a_prismatic_joint(tmp_path):
+    robot = nik.load_robot("stanford")
+    assert branch_classifier(robot) is None  # branch labels are for PUMA-like (all-revolute) arms
+    ranges = tmp_path / "ranges.yaml"
+    ranges.write_text("angles: deg\nranges: [[-90, 90], [-90, 90], [0.4, 0.8], [-90, 90], [-45, 45], [-90, 90]]\n")
+    out = generate_dataset(robot, 2000, tmp_path / "st", ranges=ranges, progress=False, fsync=False)
+    ds = load_dataset(out)
+    assert ds.branch is None
+    assert_close(ds.pose, robot.fk(ds.q), atol=1e-12, rtol=0)
+    # the prismatic joint's range is in metres (not scaled by 'angles: deg'), the others in degrees
+    rng = torch.tensor(ds.meta["ranges"]["radians"], dtype=torch.float64)
+    assert_close(rng[2], torch.tensor([0.4, 0.8], dtype=torch.float64))
+    assert_close(rng[0], torch.tensor([-math.pi / 2, math.pi / 2], dtype=torch.float64))
+    assert bool(((ds.q >= rng[:, 0]) & (ds.q <= rng[:, 1])).all())
+    assert nik.Robot.from_definition(ds.meta["robot"]["definition"]).prismatic.tolist() == robot.prismatic.tolist()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("angles: deg\nranges: [[-90, 90], [-90, 90], [0.1, 0.8], [-90, 90], [-45, 45], [-90, 90]]\n")
+    with pytest.raises(ValueError, match=r"joint 3 range \[100 mm, 800 mm\] lies outside the joint limits \[304.8 mm"):
+        generate_dataset(robot, 10, tmp_path / "bad", ranges=bad, progress=False, fsync=False)

@@ -1,14 +1,17 @@
 """FK of every built-in robot against independent references: explicit DH / modified-DH
 4x4 products and matrix exponentials written here from methods.md's tables, and
-pytorch-kinematics on the same URDF."""
+pytorch-kinematics on the same URDF. Prismatic joints: the Stanford arm against a plain numpy
+DH product and against pytorch-kinematics, and the kernels on random mixed chains."""
 
 import math
 
+import numpy as np
 import pytest
 import torch
 from torch.testing import assert_close
 
 import nik
+from nik.kinematics import FKKernel, chain_fk_eager, chain_jacobian, generate_fk_source, to_homogeneous
 from nik.robots.urdf import build_pk_chain, load_urdf
 
 DEG = math.pi / 180
@@ -247,3 +250,214 @@ def test_fk_rejects_nan_and_wrong_last_dimension():
         robot.fk(torch.full((2, 6), float("nan")))
     with pytest.raises(ValueError, match=r"\(\.\.\., 6\)"):
         robot.fk(torch.zeros(2, 7))
+
+
+# ---------------------------------------------------------------------------
+# Prismatic joints
+# ---------------------------------------------------------------------------
+# The Stanford arm of Corke's Robotics Toolbox (models.DH.Stanford), typed in again in metres and
+# radians: (type, theta, d, a, alpha); the joint variable replaces theta (R) or d (P).
+STANFORD = [
+    ("R", None, 0.412, 0.0, -math.pi / 2),
+    ("R", None, 0.154, 0.0, math.pi / 2),
+    ("P", -math.pi / 2, None, 0.0203, 0.0),
+    ("R", None, 0.0, 0.0, -math.pi / 2),
+    ("R", None, 0.0, 0.0, math.pi / 2),
+    ("R", None, 0.0, 0.0, 0.0),
+]
+
+
+def dh_numpy(theta, d, a, alpha):
+    """Rz(theta) @ Tz(d) @ Tx(a) @ Rx(alpha) as a product of four plain numpy 4x4 matrices."""
+    Rz, Tz, Tx, Rx = np.eye(4), np.eye(4), np.eye(4), np.eye(4)
+    Rz[:2, :2] = [[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]]
+    Tz[2, 3], Tx[0, 3] = d, a
+    Rx[1:3, 1:3] = [[math.cos(alpha), -math.sin(alpha)], [math.sin(alpha), math.cos(alpha)]]
+    return Rz @ Tz @ Tx @ Rx
+
+
+def stanford_reference(q):
+    T = np.eye(4)
+    for qi, (kind, theta, d, a, alpha) in zip(q, STANFORD, strict=True):
+        T = T @ (dh_numpy(qi, d, a, alpha) if kind == "R" else dh_numpy(theta, qi, a, alpha))
+    return T
+
+
+def stanford_urdf() -> str:
+    """The table above as a URDF: after each row, the next joint's origin is the row's constant part
+    Tz(d) Rz(theta) Tx(a) Rx(alpha) = translation (a cos theta, a sin theta, d), then rpy (alpha, 0, theta)."""
+    joints, parent, origin = [], "base", (0, 0, 0, 0, 0, 0)
+    for i, (kind, theta, d, a, alpha) in enumerate(STANFORD):
+        kind_name = "revolute" if kind == "R" else "prismatic"
+        lower, upper = (-2.9, 2.9) if kind == "R" else (0.3048, 1.27)
+        joints.append(f"""<joint name="j{i + 1}" type="{kind_name}"><parent link="{parent}"/><child link="l{i + 1}"/>
+          <origin xyz="{origin[0]!r} {origin[1]!r} {origin[2]!r}" rpy="{origin[3]!r} {origin[4]!r} {origin[5]!r}"/>
+          <axis xyz="0 0 1"/><limit lower="{lower}" upper="{upper}" effort="1" velocity="1"/></joint>""")
+        parent = f"l{i + 1}"
+        th, dd = (0.0, d) if kind == "R" else (theta, 0.0)
+        origin = (a * math.cos(th), a * math.sin(th), dd, alpha, 0.0, th)
+    links = "".join(f'<link name="l{i + 1}"/>' for i in range(len(STANFORD)))
+    xyz, rpy = " ".join(map(repr, origin[:3])), " ".join(map(repr, origin[3:]))
+    tool = f"""<link name="tool"/><joint name="jt" type="fixed"><parent link="l6"/><child link="tool"/>
+      <origin xyz="{xyz}" rpy="{rpy}"/></joint>"""
+    return f'<robot name="stanford_urdf"><link name="base"/>{links}{"".join(joints)}{tool}</robot>'
+
+
+def test_stanford_fk_matches_plain_numpy_dh_product_at_100_configurations():
+    robot = nik.load_robot("stanford")
+    assert robot.prismatic.tolist() == [False, False, True, False, False, False]
+    q = random_q(robot, 100)
+    expected = torch.from_numpy(np.stack([stanford_reference(qi) for qi in q.numpy()]))
+    assert_close(robot.fk(q), expected, atol=1e-9, rtol=0)
+    # the slide really moves the tool: 0.5 m more travel, 0.5 m further along the boom axis
+    q2 = q.clone()
+    q2[:, 2] += 0.5
+    boom_axis = torch.from_numpy(np.stack([(stanford_reference(qi[:2].tolist() + [0.0, 0, 0, 0]))[:3, 2] for qi in q]))
+    assert_close(robot.fk(q2, check=False)[:, :3, 3] - robot.fk(q)[:, :3, 3], 0.5 * boom_axis, atol=1e-12, rtol=0)
+
+
+def test_prismatic_urdf_fk_matches_pytorch_kinematics(tmp_path):
+    (tmp_path / "stanford.urdf").write_text(stanford_urdf())
+    robot = load_urdf(tmp_path / "stanford.urdf", end_link="tool")
+    assert robot.prismatic.tolist() == [False, False, True, False, False, False]
+    assert_close(robot.limits[2], torch.tensor([0.3048, 1.27], dtype=torch.float64))
+    chain = build_pk_chain(stanford_urdf(), "tool").to(dtype=torch.float64)
+    q = random_q(robot, 100)
+    assert_close(robot.fk(q), chain.forward_kinematics(q).get_matrix(), atol=1e-9, rtol=0)
+    # the same arm from the YAML table, with exact (float64) URDF origins
+    exact = load_urdf(tmp_path / "stanford.urdf", end_link="tool", origins="float64")
+    yaml_robot = nik.load_robot("stanford")
+    q = random_q(yaml_robot, 100)
+    assert_close(exact.fk(q), yaml_robot.fk(q), atol=1e-9, rtol=0)
+
+
+def test_prismatic_urdf_joint_without_limits_is_a_clear_error(tmp_path):
+    text = stanford_urdf().replace('<limit lower="0.3048" upper="1.27" effort="1" velocity="1"/>', "")
+    (tmp_path / "nolimit.urdf").write_text(text)
+    with pytest.raises(nik.RobotDefinitionError, match="prismatic joint 'j3' needs <limit"):
+        load_urdf(tmp_path / "nolimit.urdf", end_link="tool")
+
+
+def test_stanford_fk_is_differentiable_gradcheck():
+    robot = nik.load_robot("stanford")
+    q = random_q(robot, 3).requires_grad_()
+    assert torch.autograd.gradcheck(robot.fk, (q,))
+
+
+def test_stanford_jacobian_matches_autograd_and_its_prismatic_column_is_the_axis():
+    robot = nik.load_robot("stanford")
+    for q in random_q(robot, 5, seed=3):
+        T, J = robot.fk_and_jacobian(q)
+        lin = torch.autograd.functional.jacobian(lambda x: robot.fk(x)[:3, 3], q)
+        assert_close(J[:3], lin, atol=1e-12, rtol=0)
+        dR = torch.autograd.functional.jacobian(lambda x: robot.fk(x)[:3, :3], q)
+        W = torch.einsum("abk,cb->kac", dR, T[:3, :3])
+        assert_close(J[3:], torch.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], dim=0), atol=1e-12, rtol=0)
+        boom_axis = torch.from_numpy(stanford_reference(q[:2].tolist() + [0.0, 0, 0, 0])[:3, 2])
+        assert_close(J[:3, 2], boom_axis, atol=1e-12, rtol=0)
+        assert_close(J[3:, 2], torch.zeros(3, dtype=torch.float64), atol=0, rtol=0)
+
+
+def _random_chain(n: int, seed: int):
+    g = torch.Generator().manual_seed(seed)
+    G = torch.zeros(n + 1, 4, 4, dtype=torch.float64)
+    Q, _ = torch.linalg.qr(torch.randn(n + 1, 3, 3, generator=g, dtype=torch.float64))
+    G[:, :3, :3] = Q * torch.linalg.det(Q).sign()[:, None, None]
+    G[:, :3, 3] = torch.randn(n + 1, 3, generator=g, dtype=torch.float64) * 0.3
+    G[:, 3, 3] = 1.0
+    offsets = torch.randn(n, generator=g, dtype=torch.float64)
+    prismatic = torch.rand(n, generator=g) < 0.5
+    prismatic[0], prismatic[1] = True, False  # both kinds in every chain
+    return G, offsets, prismatic
+
+
+def _normal_form_by_hand(q, G, offsets, prismatic):
+    """G_0 J_1 G_1 ... J_n G_n with J_i = Rz or Tz as explicit 4x4 matrices, one configuration."""
+    T = G[0].clone()
+    for i in range(len(offsets)):
+        v = float(q[i] + offsets[i])
+        J = torch.eye(4, dtype=torch.float64)
+        if prismatic[i]:
+            J[2, 3] = v
+        else:
+            J[:2, :2] = torch.tensor([[math.cos(v), -math.sin(v)], [math.sin(v), math.cos(v)]], dtype=torch.float64)
+        T = T @ J @ G[i + 1]
+    return T
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_mixed_chain_kernels_match_the_product_by_hand(seed):
+    G, offsets, prismatic = _random_chain(5, seed)
+    q = torch.randn(20, 5, generator=torch.Generator().manual_seed(seed + 10), dtype=torch.float64)
+    expected = torch.stack([_normal_form_by_hand(qi, G, offsets, prismatic) for qi in q])
+    assert_close(to_homogeneous(chain_fk_eager(q, G, offsets, prismatic=prismatic)), expected, atol=1e-12, rtol=0)
+    kernel = FKKernel(G.numpy(), offsets.numpy(), prismatic=prismatic)
+    assert_close(kernel(q), expected, atol=1e-12, rtol=0)
+    T, J = chain_jacobian(q, G, offsets, prismatic=prismatic)
+    lin = torch.func.vmap(
+        torch.func.jacrev(lambda x: chain_fk_eager(x[None], G, offsets, prismatic=prismatic)[0, :, 3])
+    )(q)
+    assert_close(J[:, :3], lin, atol=1e-12, rtol=0)
+    assert_close(J[:, 3:, prismatic], torch.zeros_like(J[:, 3:, prismatic]), atol=0, rtol=0)
+
+
+@pytest.mark.parametrize("name", ["puma560", "kuka_kr", "rebot_v_6r", "panda", "ur5"])
+def test_generated_fk_of_revolute_arms_does_not_depend_on_the_prismatic_keyword(name):
+    robot = nik.load_robot(name)
+    assert not bool(robot.prismatic.any())
+    G, off = robot.G.numpy(), robot.offsets.numpy()
+    assert generate_fk_source(G, off, prismatic=[False] * robot.dof) == generate_fk_source(G, off)
+    q = random_q(robot, 10)
+    assert_close(
+        chain_fk_eager(q, robot.G, robot.offsets, prismatic=robot.prismatic), robot.fk(q)[:, :3], atol=1e-12, rtol=0
+    )
+
+
+def test_mdh_and_poe_prismatic_joints_match_explicit_products(tmp_path):
+    # mdh: R - P - R; the prismatic variable adds to d in Rx(alpha) Tx(a) Rz(theta) Tz(d)
+    rows = [("R", 0, 0, 0.1, 0), ("P", 30, 0.2, 0.05, -90), ("R", 0, 0.3, 0.0, 90)]  # kind, theta, a, d, alpha
+    text = "name: rpr\nconvention: mdh\nunit: m\nangles: deg\njoints:\n" + "".join(
+        f"  - {{type: {'prismatic' if k == 'P' else 'revolute'}, alpha: {al}, a: {a}, d: {d}"
+        + (f", theta: {th}, limits: [-0.5, 0.5]}}\n" if k == "P" else "}\n")
+        for k, th, a, d, al in rows
+    )
+    robot = nik.load_robot(write_yaml(tmp_path, text))
+    q = random_q(robot, 20)
+    for qi, T in zip(q, robot.fk(q), strict=True):
+        expected = torch.eye(4, dtype=torch.float64)
+        for v, (k, th, a, d, al) in zip(qi.tolist(), rows, strict=True):
+            theta, dd = (v, d) if k == "R" else (th * DEG, d + v)
+            expected = expected @ mdh_matrix(theta, dd, a, al * DEG)
+        assert_close(T, expected, atol=1e-12, rtol=0)
+    # poe: a slide along (1, 1, 0)/sqrt(2) between two revolute screws; exp of the prismatic twist by matrix_exp
+    text = """name: rpr_poe
+convention: poe
+unit: mm
+angles: deg
+home: {position: [500, 0, 300]}
+joints:
+  - {axis: [0, 0, 1], point: [0, 0, 0]}
+  - {type: prismatic, axis: [1, 1, 0], offset: 50, limits: [-200, 400]}
+  - {axis: [0, 1, 0], point: [500, 0, 300]}
+"""
+    robot = nik.load_robot(write_yaml(tmp_path, text))
+    assert_close(robot.limits[1], torch.tensor([-0.2, 0.4], dtype=torch.float64))
+    q = random_q(robot, 20)
+    for qi, T in zip(q, robot.fk(q), strict=True):
+        X = torch.zeros(4, 4, dtype=torch.float64)
+        X[:3, 3] = torch.tensor([1.0, 1.0, 0.0], dtype=torch.float64) / math.sqrt(2)
+        M = torch.eye(4, dtype=torch.float64)
+        M[:3, 3] = torch.tensor([0.5, 0.0, 0.3], dtype=torch.float64)
+        expected = (
+            twist_exp((0, 0, 1), (0, 0, 0), float(qi[0]))
+            @ torch.linalg.matrix_exp(X * (float(qi[1]) + 0.05))
+            @ twist_exp((0, 1, 0), (0.5, 0, 0.3), float(qi[2]))
+            @ M
+        )
+        assert_close(T, expected, atol=1e-12, rtol=0)
+
+
+def write_yaml(tmp_path, text, name="arm.yaml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path

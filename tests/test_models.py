@@ -59,6 +59,22 @@ def test_sincos_decodes_within_one_turn_of_the_range_centre(kuka):
     torch.testing.assert_close(net.decode(net.encode(q)), q, atol=1e-6, rtol=0)
 
 
+@pytest.mark.parametrize("output", ["angles", "sincos"])
+def test_prismatic_joint_is_decoded_linearly(output):
+    robot = nik.load_robot("stanford")
+    net = IKNet(robot, output=output)
+    q = robot.sample(64, generator=torch.Generator().manual_seed(0), dtype=torch.float32)
+    torch.testing.assert_close(net.decode(net.encode(q)), q, atol=1e-5, rtol=0)
+    y = torch.zeros(1, net.out_dim)
+    y[0, 2 if output == "angles" else 4] = 1.0  # the slide's (first) output at +1
+    q_top = net.decode(y)[0, 2]
+    torch.testing.assert_close(q_top, robot.limits[2, 1].float())  # linear: +1 is the top of the range
+    if output == "sincos":
+        y[0, 5] = 5.0  # the slide's second output plays no part
+        torch.testing.assert_close(net.decode(y)[0, 2], q_top)
+        assert float(net.encode(q)[:, 5].abs().max()) == 0.0
+
+
 def test_bad_configuration_is_refused(kuka):
     with pytest.raises(ValueError, match="activation"):
         IKNet(kuka, activation="sigmoidish")

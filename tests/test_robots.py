@@ -169,3 +169,105 @@ def test_corrupt_urdf_is_a_clear_error(tmp_path):
 
 def test_robot_errors_are_value_errors():
     assert issubclass(RobotDefinitionError, ValueError)
+
+
+# ---------------------------------------------------------------------------
+# Joint types, names and theta
+# ---------------------------------------------------------------------------
+STANFORD_M_RAD = """\
+name: stanford_si
+convention: dh
+unit: m
+angles: rad
+joints:
+  - {alpha: -1.5707963267948966, a: 0, d: 0.412, limits: [-2.9670597283903604, 2.9670597283903604]}
+  - {alpha: 1.5707963267948966, a: 0, d: 0.154, limits: [-2.9670597283903604, 2.9670597283903604]}
+  - {type: prismatic, alpha: 0, a: 0.0203, theta: -1.5707963267948966, limits: [0.3048, 1.27]}
+  - {type: revolute, alpha: -1.5707963267948966, a: 0, d: 0, limits: [-2.9670597283903604, 2.9670597283903604]}
+  - {alpha: 1.5707963267948966, a: 0, d: 0, limits: [-1.5707963267948966, 1.5707963267948966]}
+  - {alpha: 0, a: 0, d: 0, limits: [-2.9670597283903604, 2.9670597283903604]}
+"""
+
+
+def test_yaml_prismatic_joint_in_metres_equals_the_builtin_in_mm(tmp_path):
+    # before prismatic joints existed this file was refused: "joints[2]: unknown field(s) ['type']"
+    robot = nik.load_robot(write(tmp_path, STANFORD_M_RAD))
+    builtin = nik.load_robot("stanford")
+    assert robot.prismatic.tolist() == builtin.prismatic.tolist() == [False, False, True, False, False, False]
+    assert_close(robot.limits, builtin.limits, atol=1e-12, rtol=0)
+    assert_close(builtin.limits[2], torch.tensor([0.3048, 1.27], dtype=torch.float64), atol=1e-15, rtol=0)
+    q = builtin.sample(50, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    assert_close(robot.fk(q), builtin.fk(q), atol=1e-12, rtol=0)
+    assert builtin.joint_names == ["waist", "shoulder", "boom", "wrist1", "wrist2", "wrist3"]
+
+
+def test_prismatic_offset_is_a_length_added_to_d(tmp_path):
+    base = (
+        "name: slide\nconvention: dh\nunit: mm\nangles: deg\njoints:\n  - {alpha: 0, a: 0, d: 0, limits: [-90, 90]}\n"
+    )
+    plain = nik.load_robot(write(tmp_path, base + "  - {type: prismatic, alpha: 0, a: 0, d: 100, limits: [0, 500]}\n"))
+    shifted = nik.load_robot(
+        write(tmp_path, base + "  - {type: prismatic, alpha: 0, a: 0, d: 60, offset: 40, limits: [0, 500]}\n", "b.yaml")
+    )
+    assert_close(shifted.offsets, torch.tensor([0.0, 0.04], dtype=torch.float64))
+    assert_close(shifted.limits[1], torch.tensor([0.0, 0.5], dtype=torch.float64))
+    q = torch.tensor([[0.3, 0.25]], dtype=torch.float64)
+    assert_close(shifted.fk(q), plain.fk(q), atol=1e-15, rtol=0)
+    assert_close(plain.fk(q)[0, 2, 3], torch.tensor(0.35, dtype=torch.float64), atol=1e-15, rtol=0)
+
+
+def test_revolute_theta_is_the_offset_and_name_names_the_joint(tmp_path):
+    with_theta = nik.load_robot(write(tmp_path, PAPER_A_PUMA.replace("offset: 0,", "theta: 30, name: base,")))
+    with_offset = nik.load_robot(write(tmp_path, PAPER_A_PUMA.replace("offset: 0,", "offset: 30,"), "b.yaml"))
+    assert with_theta.joint_names[0] == "base" and with_theta.joint_names[1] == "joint2"
+    assert_close(with_theta.offsets, with_offset.offsets, atol=0, rtol=0)
+    assert math.isclose(float(with_theta.offsets[0]), math.radians(30))
+
+
+@pytest.mark.parametrize(
+    "joint, message",
+    [
+        (
+            "{type: slider, alpha: 0, a: 0, d: 0}",
+            r"joints\[1\] \(joint2\): type must be 'revolute' or 'prismatic', got 'slider'",
+        ),
+        ("{type: prismatic, alpha: 0, a: 0, d: 0}", r"joints\[1\]: missing field 'limits'"),
+        ("{alpha: 0, a: 0, d: 0, offset: 10, theta: 10}", r"joints\[1\]: give 'offset' or 'theta'"),
+    ],
+)
+def test_bad_joint_type_fields_name_the_joint(tmp_path, joint, message):
+    text = f"name: x\nconvention: dh\njoints:\n  - {{alpha: 0, a: 0, d: 0}}\n  - {joint}\n"
+    with pytest.raises(RobotDefinitionError, match=message):
+        nik.load_robot(write(tmp_path, text))
+
+
+# Hashes of the built-in arms computed before prismatic joints existed (commit 551f566): datasets and
+# checkpoints carry them, so they must never change.
+BUILTIN_HASHES = {
+    "kuka_kr": "7794b517321d26a1",
+    "panda": "5342c808e10da6e3",
+    "puma560": "fb981885b160f3ba",
+    "rebot_v_6r": "8d3894bcab69275a",
+    "ur5": "aaa9508f945aac99",
+}
+
+
+@pytest.mark.parametrize("name", sorted(BUILTIN_HASHES))
+def test_definition_hash_of_revolute_builtins_is_unchanged(name):
+    robot = nik.load_robot(name)
+    assert robot.definition_hash == BUILTIN_HASHES[name]
+    assert "prismatic" not in robot.to_definition()
+
+
+def test_definition_round_trip_keeps_joint_types_and_they_enter_the_hash():
+    robot = nik.load_robot("stanford")
+    definition = robot.to_definition()
+    again = nik.Robot.from_definition(definition)
+    assert again.prismatic.tolist() == robot.prismatic.tolist()
+    assert again.definition_hash == robot.definition_hash
+    q = robot.sample(10, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    assert_close(again.fk(q), robot.fk(q), atol=0, rtol=0)
+    del definition["prismatic"]
+    as_revolute = nik.Robot.from_definition(definition)
+    assert not bool(as_revolute.prismatic.any())
+    assert as_revolute.definition_hash != robot.definition_hash

@@ -23,6 +23,7 @@ from nik.swarm import (
     pso_step,
     refine,
     so3_log,
+    wrap_mask,
 )
 from nik.swarm.ipso import constriction, expected_normal_norm
 
@@ -202,3 +203,41 @@ def test_bad_arguments(planar):
         refine(planar, T, q_init=torch.zeros(2, 2, dtype=T.dtype))
     with pytest.raises(ValueError, match="cfg"):
         refine(planar, T, method="pso", cfg=default_cfg("ga"))
+
+
+@pytest.fixture(scope="module")
+def slider():
+    """Revolute - prismatic (a 7 m slide: a range over 2 pi that must not wrap) - revolute, screw axes."""
+    return robot_from_config(
+        {
+            "name": "slider",
+            "convention": "poe",
+            "unit": "m",
+            "angles": "deg",
+            "home": {"position": [1.0, 0.0, 0.5]},
+            "joints": [
+                {"axis": [0, 0, 1], "point": [0, 0, 0], "limits": [-170, 170]},
+                {"type": "prismatic", "axis": [1, 0, 0], "limits": [-3.0, 4.0]},
+                {"axis": [0, 1, 0], "point": [1.0, 0, 0.5], "limits": [-120, 120]},
+            ],
+        }
+    )
+
+
+def test_prismatic_joints_never_wrap(slider):
+    limits = torch.tensor([[-4.0, 4.0], [-4.0, 4.0]], dtype=torch.float64)  # both ranges exceed 2 pi
+    assert wrap_mask(limits).tolist() == [True, True]
+    assert wrap_mask(limits, prismatic=torch.tensor([False, True])).tolist() == [True, False]
+    _, T = _targets(slider, 2)
+    problem = make_problem(slider, T, make_objective("pose"))
+    assert problem.wrap.tolist() == [False, False, False]
+
+
+@pytest.mark.parametrize("method", ["ipso", "lm"])
+def test_solvers_reach_targets_of_an_arm_with_a_long_slide(slider, method):
+    q, T = _targets(slider, 4, seed=3)
+    res = refine(slider, T, method=method, seed=0, polish=method != "lm")
+    assert bool(res.success.all()), (res.pos_err, res.rot_err)
+    assert bool(slider.within_limits(res.q).all())
+    # the slide's value is a length: the answer's translation equals the configuration's
+    torch.testing.assert_close(res.q[:, 1], q[:, 1], atol=1e-3, rtol=0)

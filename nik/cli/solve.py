@@ -21,8 +21,9 @@ def register(sub) -> None:
         help="solve inverse kinematics for one pose or a CSV of poses",
         description="Joint angles reaching the given tool poses: network guess (with --checkpoint), else the closed "
         "form (PUMA-like arms), else a multi-start; then the --refine method to tolerance. Prints joint angles in "
-        "degrees, the position error in mm, the rotation error in degrees and the success flag. Exit status: 0 when "
-        "every pose was reached within tolerance, 1 when some was not, 2 on an error.",
+        "degrees (prismatic joints: their travel in mm), the position error in mm, the rotation error in degrees "
+        "and the success flag. Exit status: 0 when every pose was reached within tolerance, 1 when some was not, "
+        "2 on an error.",
     )
     s.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
     s.add_argument("--checkpoint", default=None, help="trained network (.ckpt) for the initial guess")
@@ -38,7 +39,12 @@ def register(sub) -> None:
     src.add_argument("--poses", metavar="FILE.csv", help="CSV with header x,y,z,qw,qx,qy,qz (one pose per row)")
     s.add_argument("--unit", choices=["m", "mm"], default="m", help="unit of the input positions (default m)")
     s.add_argument("--out", metavar="FILE.csv", help="write the solutions as CSV (header included)")
-    s.add_argument("--json", action="store_true", help="print JSON (radians and degrees, errors in SI and mm/deg)")
+    s.add_argument(
+        "--json",
+        action="store_true",
+        help="print JSON (joints in SI and in deg/mm as q_si and q_display; q_rad and q_deg for revolute joints, "
+        "null for prismatic ones; errors in SI and mm/deg)",
+    )
     s.add_argument("--tol-mm", type=float, default=0.1, help="position tolerance in mm (default 0.1)")
     s.add_argument(
         "--tol-deg",
@@ -51,7 +57,7 @@ def register(sub) -> None:
         nargs="+",
         type=float,
         metavar="DEG",
-        help="current joint angles in degrees: return the solution nearest to them",
+        help="current joint angles in degrees (prismatic joints: mm): return the solution nearest to them",
     )
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--max-iters", type=int, default=None, help="iteration limit of the refinement")
@@ -129,17 +135,27 @@ def read_poses_csv(path: str | Path):
     return torch.tensor(rows, dtype=torch.float64)
 
 
-def write_solutions_csv(path: str | Path, joint_names, result) -> None:
-    """Write one row per target: ``index``, joints in radians and degrees, errors (mm, deg), success, iterations."""
+def _units(prismatic, n: int) -> tuple[list[str], list[str], list[float]]:
+    """Per joint: SI unit, display unit and the factor SI -> display (rad -> deg, or m -> mm for prismatic)."""
+    flags = [False] * n if prismatic is None else [bool(v) for v in prismatic]
+    si = ["m" if p else "rad" for p in flags]
+    shown = ["mm" if p else "deg" for p in flags]
+    return si, shown, [1e3 if p else 180.0 / math.pi for p in flags]
+
+
+def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None) -> None:
+    """Write one row per target: ``index``, joints in radians and degrees (prismatic joints: metres and mm,
+    columns ``<name>_m`` / ``<name>_mm``), errors (mm, deg), success, iterations."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    si, shown, factor = _units(prismatic, len(joint_names))
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(
             [
                 "index",
-                *[f"{j}_rad" for j in joint_names],
-                *[f"{j}_deg" for j in joint_names],
+                *[f"{j}_{u}" for j, u in zip(joint_names, si, strict=True)],
+                *[f"{j}_{u}" for j, u in zip(joint_names, shown, strict=True)],
                 "pos_err_mm",
                 "rot_err_deg",
                 "success",
@@ -152,7 +168,7 @@ def write_solutions_csv(path: str | Path, joint_names, result) -> None:
                 [
                     i,
                     *[f"{v:.12g}" for v in q],
-                    *[f"{math.degrees(v):.10g}" for v in q],
+                    *[f"{v * f:.10g}" for v, f in zip(q, factor, strict=True)],
                     f"{float(result.pos_err[i]) * 1e3:.6g}",
                     f"{math.degrees(float(result.rot_err[i])):.6g}",
                     int(bool(result.success[i])),
@@ -183,7 +199,8 @@ def _cmd_solve(args) -> int:
     if args.q_near is not None:
         if len(args.q_near) != robot.dof:
             raise ValueError(f"--q-near: {robot.name} has {robot.dof} joints, got {len(args.q_near)} angles")
-        q_near = torch.tensor([math.radians(v) for v in args.q_near], dtype=torch.float64)
+        _, _, factor = _units(robot.prismatic.tolist(), robot.dof)
+        q_near = torch.tensor([v / f for v, f in zip(args.q_near, factor, strict=True)], dtype=torch.float64)
     T = as_poses(poses, "quat", name="--pose" if args.pose is not None else str(args.poses))
     solver = IKSolver(robot, checkpoint=args.checkpoint, refine=args.refine)
     res = solver.solve(
@@ -195,16 +212,20 @@ def _cmd_solve(args) -> int:
         max_iters=args.max_iters,
     )
     if args.out:
-        write_solutions_csv(args.out, robot.joint_names, res)
+        write_solutions_csv(args.out, robot.joint_names, res, prismatic=robot.prismatic.tolist())
     if args.json:
+        flags = robot.prismatic.tolist()
+        si, shown, factor = _units(flags, robot.dof)
         results = []
         for i in range(len(res)):
             q = res.q[i].tolist()
             results.append(
                 {
                     "index": i,
-                    "q_rad": q,
-                    "q_deg": [math.degrees(v) for v in q],
+                    "q_rad": [None if p else v for v, p in zip(q, flags, strict=True)],
+                    "q_deg": [None if p else math.degrees(v) for v, p in zip(q, flags, strict=True)],
+                    "q_si": q,
+                    "q_display": [v * f for v, f in zip(q, factor, strict=True)],
                     "pos_err_m": float(res.pos_err[i]),
                     "pos_err_mm": float(res.pos_err[i]) * 1e3,
                     "rot_err_rad": float(res.rot_err[i]),
@@ -218,6 +239,8 @@ def _cmd_solve(args) -> int:
                 {
                     "robot": robot.name,
                     "joint_names": robot.joint_names,
+                    "joint_units_si": si,
+                    "joint_units_display": shown,
                     "refine": args.refine,
                     "initial_guess": res.source,
                     "tol_mm": args.tol_mm,
@@ -240,15 +263,23 @@ def _cmd_solve(args) -> int:
 
 
 def _print_table(robot, res, *, limit: int = 50) -> None:
+    """Joints in degrees, prismatic joints in mm (each column header says which), errors in mm and degrees."""
     names = robot.joint_names
+    _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
     width = max(9, *(len(n) for n in names))
-    header = ["#", *[f"{n} (deg)" for n in names], "pos err (mm)", "rot err (deg)", "success"]
+    header = [
+        "#",
+        *[f"{n} ({u})" for n, u in zip(names, shown, strict=True)],
+        "pos err (mm)",
+        "rot err (deg)",
+        "success",
+    ]
     widths = [4, *[max(width + 6, 10)] * len(names), 13, 14, 8]
     print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
     for i in range(min(len(res), limit)):
         cells = [
             str(i),
-            *[f"{math.degrees(v):.4f}" for v in res.q[i].tolist()],
+            *[f"{v * f:.4f}" for v, f in zip(res.q[i].tolist(), factor, strict=True)],
             f"{float(res.pos_err[i]) * 1e3:.3g}",
             f"{math.degrees(float(res.rot_err[i])):.3g}",
             "yes" if bool(res.success[i]) else "NO",

@@ -194,9 +194,9 @@ def branch_classifier(robot) -> BranchClassifier | None:
     """The branch classifier of ``robot``, or None if the arm is not of the PUMA type.
 
     The structure is checked numerically at a few fixed configurations: 6 joints, axes 2 and
-    3 parallel, axis 1 not parallel to axis 2, axes 4, 5, 6 meeting in one point.
+    3 parallel, axis 1 not parallel to axis 2, axes 4, 5, 6 meeting in one point, all revolute.
     """
-    if robot.dof != 6:
+    if robot.dof != 6 or bool(getattr(robot, "prismatic", torch.zeros(1, dtype=torch.bool)).any()):
         return None
     g = torch.Generator().manual_seed(12345)
     q = robot.sample(8, generator=g, dtype=torch.float64)

@@ -54,8 +54,9 @@ def resolve_ranges(robot, ranges=None) -> tuple[torch.Tensor, str]:
 
     Args:
         ranges: ``None`` or ``"limits"`` (the robot's joint limits); a path to a YAML file
-            ``{angles: deg|rad, ranges: [[lo, hi], ...]}`` (one pair per joint); or an array
-            ``(dof, 2)`` in radians.
+            ``{angles: deg|rad, ranges: [[lo, hi], ...]}`` (one pair per joint; ``angles`` applies to
+            revolute joints, prismatic joints' ranges are in metres); or an array ``(dof, 2)`` in
+            radians (metres for prismatic joints).
 
     Raises:
         ValueError: wrong number of joints, lo >= hi, or a range outside the joint limits.
@@ -92,16 +93,18 @@ def resolve_ranges(robot, ranges=None) -> tuple[torch.Tensor, str]:
         raise ValueError(f"{where}: {arr.shape[0]} ranges for robot {robot.name!r} with {robot.dof} joints")
     if not np.isfinite(arr).all():
         raise ValueError(f"{where}: ranges must be finite numbers")
-    rng = torch.tensor(arr * scale, dtype=torch.float64)
+    prismatic = robot.prismatic.tolist()
+    rng = torch.tensor(arr * np.where(prismatic, 1.0, scale)[:, None], dtype=torch.float64)
     for i in range(robot.dof):
         lo, hi = rng[i].tolist()
         llo, lhi = lim[i].tolist()
+        show = _mm if prismatic[i] else _deg
         if not lo < hi:
-            raise ValueError(f"{where}: joint {i + 1} range [{_deg(lo)}, {_deg(hi)}] needs lo < hi")
+            raise ValueError(f"{where}: joint {i + 1} range [{show(lo)}, {show(hi)}] needs lo < hi")
         if lo < llo - _LIMIT_TOL or hi > lhi + _LIMIT_TOL:
             raise ValueError(
-                f"{where}: joint {i + 1} range [{_deg(lo)}, {_deg(hi)}] lies outside the joint limits "
-                f"[{_deg(llo)}, {_deg(lhi)}] of robot {robot.name!r}"
+                f"{where}: joint {i + 1} range [{show(lo)}, {show(hi)}] lies outside the joint limits "
+                f"[{show(llo)}, {show(lhi)}] of robot {robot.name!r}"
             )
     rng = torch.minimum(torch.maximum(rng, lim[:, :1]), lim[:, 1:])  # absorb the tolerance
     return rng, (str(ranges) if isinstance(ranges, (str, Path)) else "custom")
@@ -112,6 +115,10 @@ def resolve_ranges(robot, ranges=None) -> tuple[torch.Tensor, str]:
 # ---------------------------------------------------------------------------
 def _deg(v: float) -> str:
     return f"{math.degrees(v):.6g} deg"
+
+
+def _mm(v: float) -> str:
+    return f"{v * 1e3:.6g} mm"
 
 
 def _block_seed(seed: int, block: int) -> int:

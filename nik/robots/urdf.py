@@ -69,7 +69,7 @@ def load_urdf(
     name: str | None = None,
     origins: str = "pk",
 ) -> Robot:
-    """Load a serial revolute arm from a URDF file.
+    """Load a serial arm of revolute and prismatic joints from a URDF file.
 
     Args:
         path: the ``.urdf`` file.
@@ -84,7 +84,9 @@ def load_urdf(
             ``"float64"`` recomputes every ``<origin>`` from the file in float64 (exact FK, which then
             differs from pytorch-kinematics' by that much).
 
-    Continuous joints get limits [-pi, pi]; prismatic joints between base and tool are refused.
+    Continuous joints get limits [-pi, pi]. A prismatic joint between base and tool becomes a
+    prismatic joint of the robot (its value in metres along its axis, limits from the file, which
+    must give them); fixed joints are merged into the constant transforms.
     """
     if origins not in ("pk", "float64"):
         raise ValueError(f"origins must be 'pk' or 'float64', got {origins!r}")
@@ -115,21 +117,34 @@ def load_urdf(
                 if offset is not None:
                     builder.fixed(offset.get_matrix()[0].double().numpy())
         jtype = frame.joint.joint_type
-        if jtype == "prismatic":
-            raise RobotDefinitionError(f"{path}: joint {frame.joint.name!r} is prismatic; nik supports revolute joints")
-        if jtype == "revolute":
+        if jtype in ("revolute", "prismatic"):
             axis = frame.joint.axis.double().numpy() if urdf is None else _axis(urdf.joint_map[frame.joint.name])
-            builder.joint(axis)
+            builder.joint(axis, prismatic=jtype == "prismatic")
             names.append(frame.joint.name)
             lim = frame.joint.limits
-            limits.append([-math.pi, math.pi] if lim is None or lim[0] >= lim[1] else [float(lim[0]), float(lim[1])])
+            if lim is None or lim[0] >= lim[1]:
+                if jtype == "prismatic":
+                    raise RobotDefinitionError(
+                        f"{path}: prismatic joint {frame.joint.name!r} needs <limit lower=... upper=...> "
+                        "with lower < upper (metres)"
+                    )
+                limits.append([-math.pi, math.pi])
+            else:
+                limits.append([float(lim[0]), float(lim[1])])
     if not names:
-        raise RobotDefinitionError(f"{path}: no revolute joint between the root and {end_link!r}")
+        raise RobotDefinitionError(f"{path}: no revolute or prismatic joint between the root and {end_link!r}")
     if name is None:
         m = re.search(r'<robot[^>]*\bname\s*=\s*"([^"]+)"', text)
         name = m.group(1) if m else path.stem
     return Robot(
-        name, builder.finish(), np.zeros(len(names)), np.array(limits), names, end_link=end_link, source=str(path)
+        name,
+        builder.finish(),
+        np.zeros(len(names)),
+        np.array(limits),
+        names,
+        end_link=end_link,
+        source=str(path),
+        prismatic=builder.prismatic,
     )
 
 
