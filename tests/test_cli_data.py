@@ -166,3 +166,16 @@ def test_subprocess_exit_code_and_no_traceback(tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=REPO)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == ["nik generate: error: --n must be a positive integer, got 0"]
+
+
+def test_info_shows_a_prismatic_joint_in_mm(tmp_path, capsys):
+    out = tmp_path / "stanford"
+    code, _, err = run(capsys, "generate", "--robot", "stanford", "--n", "1000", "--out", str(out), "--no-progress")
+    assert code == 0, err
+    code, stdout, err = run(capsys, "data", "info", str(out))
+    assert code == 0, err
+    (boom,) = [ln.split() for ln in stdout.splitlines() if ln.startswith("boom")]
+    assert boom[-1] == "mm" and 304.8 <= float(boom[1]) < float(boom[2]) <= 1270.0
+    assert float(boom[3]) == 304.8 and float(boom[4]) == 1270.0
+    (waist,) = [ln.split() for ln in stdout.splitlines() if ln.startswith("waist")]
+    assert waist[-1] == "deg" and float(waist[3]) == -170.0

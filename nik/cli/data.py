@@ -135,12 +135,18 @@ def format_info(ds) -> str:
     qmin, qmax = _chunked_minmax(q)
     pmin, pmax = _chunked_minmax(pos)
     rng = np.asarray(m["ranges"]["radians"])
+    prismatic = rob["definition"].get("prismatic") or [False] * m["dof"]
     lines.append("")
-    lines.append(f"{'joint':<12}{'min (deg)':>12}{'max (deg)':>12}{'range lo (deg)':>16}{'range hi (deg)':>16}")
+    if any(prismatic):  # slides in mm, said in a last column
+        head = f"{'joint':<12}{'min':>12}{'max':>12}{'range lo':>16}{'range hi':>16}  unit"
+    else:
+        head = f"{'joint':<12}{'min (deg)':>12}{'max (deg)':>12}{'range lo (deg)':>16}{'range hi (deg)':>16}"
+    lines.append(head)
     for i, name in enumerate(names):
+        f = 1e3 if prismatic[i] else 180.0 / math.pi
         lines.append(
-            f"{name:<12}{math.degrees(qmin[i]):>12.3f}{math.degrees(qmax[i]):>12.3f}"
-            f"{math.degrees(rng[i, 0]):>16.3f}{math.degrees(rng[i, 1]):>16.3f}"
+            f"{name:<12}{qmin[i] * f:>12.3f}{qmax[i] * f:>12.3f}{rng[i, 0] * f:>16.3f}{rng[i, 1] * f:>16.3f}"
+            + (f"  {'mm' if prismatic[i] else 'deg'}" if any(prismatic) else "")
         )
     lines.append("")
     lines.append(f"{'workspace':<12}{'min (mm)':>12}{'max (mm)':>12}{'extent (mm)':>14}")
