@@ -19,6 +19,7 @@ from nik.learn import (
     pose_loss,
     set_flat_params,
 )
+from nik.learn.population import sample_chunk
 from nik.models import IKNet, load_checkpoint
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -134,6 +135,24 @@ def test_population_fitness_matches_one_network_at_a_time(kuka, loss):
     torch.testing.assert_close(got, torch.stack(want), rtol=1e-5, atol=1e-6)
 
 
+def test_a_slice_of_the_population_scored_with_the_whole_populations_chunk_gives_the_same_bits(kuka):
+    # how DE splits a generation across processes: rank r scores W[slice r] and the pieces are gathered
+    g = torch.Generator().manual_seed(3)
+    q = kuka.sample(400, generator=g).float()
+    T = kuka.fk(q.double()).float()
+    net = IKNet(kuka, hidden=[8]).fit_normalisation(T, q).float()
+    W = init_population(net, 25, generator=g)
+    x, y_t = net.features(T), net.encode(q)
+    cap = 25 * 8 * 64  # several sample chunks
+    whole = population_fitness(net, W, x, y_target=y_t, max_elements=cap)
+    chunk = sample_chunk(net, 25, x.shape[1], max_elements=cap)
+    parts = [
+        population_fitness(net, W[s], x, y_target=y_t, max_elements=cap, chunk=chunk)
+        for s in (slice(0, 13), slice(13, 25))
+    ]
+    assert torch.equal(torch.cat(parts), whole)
+
+
 def test_pose_loss_is_zero_at_the_answer_and_geodesic_to_second_order(kuka):
     q = kuka.sample(4, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
     T = kuka.fk(q)
@@ -179,6 +198,24 @@ def test_de_bp_hands_des_best_weights_to_bp_and_leaves_a_loadable_checkpoint(dat
     assert torch.equal(net.predict(T), model.net.predict(T))
     with pytest.raises(nik.CheckpointError, match="puma560"):
         load_checkpoint(ckpts[0], robot="puma560")
+
+
+@pytest.mark.parametrize("method, generations", [("de", 4), ("de_bp", 3)])
+def test_max_steps_counts_de_generations(method, dataset, tmp_path, generations):
+    # 5 steps: the initial population, then generations (de_bp: 3 generations, then 1 BP step);
+    # max_epochs only caps the old behaviour, where DE generations did not count as steps
+    cli = _run(
+        method,
+        dataset,
+        tmp_path,
+        *("--model.pop_size", "8", "--model.generations", "3" if method == "de_bp" else "null"),
+        *("--trainer.max_steps", "5", "--trainer.max_epochs", "30", "--trainer.check_val_every_n_epoch", "5"),
+    )
+    assert cli.trainer.global_step == 5
+    assert cli.model.de_state.generation == generations
+    assert cli.trainer.current_epoch == 5
+    if method == "de_bp":
+        assert cli.model.first_bp_loss is not None
 
 
 @pytest.mark.parametrize("method", ["de", "adam"])
