@@ -395,12 +395,9 @@ def generate_dataset(
     if dtype_name not in _DTYPES:
         raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
     tdtype = _DTYPES[dtype_name]
-    try:
-        device = torch.device(device)
-    except (RuntimeError, TypeError) as err:
-        raise ValueError(f"unknown device {device!r}") from err
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError("device 'cuda' requested but CUDA is not available")
+    from nik.device import resolve_device
+
+    device = resolve_device(device)
     if compiled == "auto":
         compiled = n >= COMPILE_THRESHOLD
     elif not isinstance(compiled, bool):

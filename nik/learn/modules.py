@@ -375,8 +375,8 @@ class DEIK(IKModule):
         """Under several processes: every rank must see the same batch (DE's fitness is one function)."""
         if self.trainer.world_size == 1:
             return
-        mark = torch.stack([T.double().sum(), q.double().sum(), torch.tensor(float(T.shape[0]), dtype=torch.float64)])
-        marks = self.all_gather(mark.to(T.device))
+        n = torch.tensor(float(T.shape[0]), dtype=torch.float64, device=T.device)
+        marks = self.all_gather(torch.stack([T.double().sum(), q.double().sum(), n]))
         if not bool((marks == marks[0]).all()):
             raise ValueError(
                 "DE across processes needs the same training batch on every rank; set "
@@ -394,7 +394,10 @@ class DEIK(IKModule):
         b = self.hparams.bound
         if b is None:
             return None, None
-        return torch.tensor(-float(b), dtype=like.dtype), torch.tensor(float(b), dtype=like.dtype)
+        return (
+            torch.tensor(-float(b), dtype=like.dtype, device=like.device),
+            torch.tensor(float(b), dtype=like.dtype, device=like.device),
+        )
 
     def training_step(self, batch, batch_idx):
         h = self.hparams
@@ -407,6 +410,8 @@ class DEIK(IKModule):
             idx = torch.randperm(T.shape[0], generator=self.generator)[: h.fitness_samples].to(T.device)
             T, q = T.index_select(0, idx), q.index_select(0, idx)
         fitness = self._fitness_fn(T, q)
+        if self.de_state is not None and self.de_state.x.device != T.device:  # resumed from a checkpoint
+            self.de_state = DEState(*(v.to(T.device) if isinstance(v, torch.Tensor) else v for v in self.de_state))
         if self.de_state is None:
             x0 = init_population(self.net, self.cfg.pop_size, generator=self.generator)
             x0[0] = flat_params(self.net)  # the net's own initial weights are one of the individuals
