@@ -49,8 +49,14 @@ def test_merged_shards_equal_the_single_process_dataset(tmp_path, sampler, dtype
 def test_shards_are_whole_blocks_spread_evenly():
     assert [shard_rows(3500, (i, 3), 1000) for i in range(3)] == [(0, 1000), (1000, 2000), (2000, 3500)]
     assert [shard_rows(4000, (i, 2), 1000) for i in range(2)] == [(0, 2000), (2000, 4000)]
-    with pytest.raises(ValueError, match="at most 4 shards"):
-        shard_rows(3500, (0, 5), 1000)
+    # more shards than blocks: some are empty, and the shards still tile the rows
+    assert [shard_rows(2500, (i, 5), 1000) for i in range(5)] == [
+        (0, 0),
+        (0, 1000),
+        (1000, 1000),
+        (1000, 2000),
+        (2000, 2500),
+    ]
     for bad in ("3/3", "-1/2", "1", "a/b", (2, 1)):
         with pytest.raises(ValueError, match="I/N"):
             shard_rows(3500, bad, 1000)
@@ -61,6 +67,14 @@ def three(tmp_path_factory):
     root = tmp_path_factory.mktemp("shards")
     kuka = nik.load_robot("kuka_kr")
     return [_gen(kuka, root / f"s{i}", shard=(i, 3)) for i in range(3)]
+
+
+def test_more_shards_than_blocks_gives_empty_shards_that_merge_too(tmp_path):
+    kuka = nik.load_robot("kuka_kr")
+    whole = _gen(kuka, tmp_path / "whole", block_size=4096)  # 3500 samples: one block
+    shards = [_gen(kuka, tmp_path / f"s{i}", shard=(i, 3), block_size=4096) for i in range(3)]
+    assert [len(np.load(s / "q.npy")) for s in shards] == [0, 0, 3500]
+    _assert_same_dataset(whole, merge_shards(tmp_path / "merged", shards, fsync=False))
 
 
 def test_a_shard_is_not_loadable_as_a_dataset(three):

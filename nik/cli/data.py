@@ -136,7 +136,8 @@ def _cmd_generate(args) -> int:
         from nik.data import read_meta
 
         a, b = read_meta(out)["shard"]["rows"]
-        what = f"shard {shard[0]}/{shard[1]} (rows {a}..{b - 1} of {args.n}) of {robot.name} samples"
+        rows = f"rows {a}..{b - 1} of {args.n}" if b > a else f"empty: {args.n} samples fill fewer blocks than shards"
+        what = f"shard {shard[0]}/{shard[1]} ({rows}) of {robot.name} samples"
         print(f"wrote {what} to {out} in {dt:.1f} s ({(b - a) / dt:,.0f} samples/s)")
         return 0
     print(f"wrote {args.n} samples of {robot.name} to {out} in {dt:.1f} s ({args.n / dt:,.0f} samples/s)")

@@ -259,17 +259,10 @@ def parse_shard(shard) -> tuple[int, int]:
 def shard_rows(n: int, shard, block_size: int = BLOCK_SIZE) -> tuple[int, int]:
     """Rows ``[start, stop)`` of shard ``(i, k)`` of an ``n``-sample dataset: whole randomness blocks,
     as evenly spread over the ``k`` shards as blocks allow (so FK sees the same batches as in one run).
-
-    Raises:
-        ValueError: more shards than blocks (``ceil(n / block_size)``).
+    With fewer blocks (``ceil(n / block_size)``) than shards, some shards are empty (``start == stop``).
     """
     i, k = parse_shard(shard)
     blocks = -(-int(n) // int(block_size))
-    if k > blocks:
-        raise ValueError(
-            f"{k} shards of n = {n} samples: a shard holds whole blocks of {block_size} samples and there are "
-            f"only {blocks}; use at most {blocks} shards"
-        )
     return min(n, i * blocks // k * block_size), min(n, (i + 1) * blocks // k * block_size)
 
 
