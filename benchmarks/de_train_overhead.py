@@ -71,7 +71,6 @@ def through_train_py(data: str, generations: int) -> float:
     with tempfile.TemporaryDirectory() as root:
         cli = cli_main(
             [
-                "fit",
                 "--config",
                 str(ROOT / "configs" / "train" / "de.yaml"),
                 "--data.path",
