@@ -33,6 +33,16 @@ from nik.models import IKNet, checkpoint_extra
 __all__ = ["IKModule", "GradientIK", "DEIK"]
 
 
+def _all_gather(t: torch.Tensor) -> torch.Tensor:
+    """``(world, *t.shape)``: ``t`` of every rank, in rank order (torch.distributed directly: Lightning's
+    ``all_gather`` goes through a deprecated autograd collective and warns on every rank)."""
+    import torch.distributed as dist
+
+    parts = [torch.empty_like(t) for _ in range(dist.get_world_size())]
+    dist.all_gather(parts, t.contiguous())
+    return torch.stack(parts)
+
+
 class IKModule(L.LightningModule):
     """Shared part: the network, the objective, metrics, counters and the checkpoint block.
 
@@ -367,7 +377,7 @@ class DEIK(IKModule):
             part = torch.full((per,), float("nan"), dtype=W.dtype, device=W.device)
             if mine.shape[0]:
                 part[: mine.shape[0]] = local(mine, chunk)
-            return self.all_gather(part).reshape(-1)[:m]
+            return _all_gather(part).reshape(-1)[:m]
 
         return fitness
 
@@ -376,7 +386,7 @@ class DEIK(IKModule):
         if self.trainer.world_size == 1:
             return
         n = torch.tensor(float(T.shape[0]), dtype=torch.float64, device=T.device)
-        marks = self.all_gather(torch.stack([T.double().sum(), q.double().sum(), n]))
+        marks = _all_gather(torch.stack([T.double().sum(), q.double().sum(), n]))
         if not bool((marks == marks[0]).all()):
             raise ValueError(
                 "DE across processes needs the same training batch on every rank; set "
