@@ -102,6 +102,8 @@ def test_two_process_gradient_training_logs_reduced_metrics_and_leaves_one_loada
             for s in (slice(0, 25), slice(25, 50))
         ]
     assert logged == pytest.approx(whole, rel=1e-5)
+    history = list(csv.DictReader(open(root / "history.csv")))  # written once, by rank 0
+    assert float(history[-1]["val_joint_mse"]) == pytest.approx(whole, rel=1e-5)
     assert abs(halves[0] - halves[1]) > 1e-3 * whole  # so a rank-0-only value would have been caught
     # both ranks counted: 4 training batches per epoch split 2 + 2, summed over ranks
     assert float(rows[-1]["loss_evals"]) == 8

@@ -77,8 +77,8 @@ class History(L.Callback):
         self.rows.append(row)
 
     def on_fit_end(self, trainer, pl_module) -> None:
-        if not self.filename or not self.rows or trainer.fast_dev_run:
-            return
+        if not self.filename or not self.rows or trainer.fast_dev_run or not trainer.is_global_zero:
+            return  # under DDP the metrics are reduced over ranks: rank 0 writes the one file
         path = Path(trainer.default_root_dir) / self.filename
         path.parent.mkdir(parents=True, exist_ok=True)
         keys = sorted({k for r in self.rows for k in r})
