@@ -85,9 +85,12 @@ def _row(method: str, robot: Robot, T: torch.Tensor, q: torch.Tensor, seconds: f
     return row, (pos_mm, rot_deg)
 
 
-def _timed(fn):
+def _timed(fn, device: torch.device | None = None):
+    sync = torch.cuda.synchronize if device is not None and device.type == "cuda" else (lambda: None)
+    sync()
     t0 = time.perf_counter()
     out = fn()
+    sync()
     return out, time.perf_counter() - t0
 
 
@@ -190,7 +193,7 @@ def _pk_solve(
     text, end = robot_to_urdf(robot)
     chain = build_pk_chain(text, end).to(dtype=T.dtype, device=T.device)
     # the chain must reproduce nik's FK, else the comparison is meaningless
-    qc = robot.sample(16, generator=torch.Generator().manual_seed(0), dtype=T.dtype)
+    qc = robot.sample(16, generator=torch.Generator().manual_seed(0), dtype=T.dtype, device=T.device)
     ref = robot.fk(qc)
     got = chain.forward_kinematics(qc).get_matrix()
     if float((ref - got).abs().max()) > 1e-6:  # pytorch-kinematics parses origins in float32 (about 1e-8 m)
@@ -202,11 +205,11 @@ def _pk_solve(
         rot_tolerance=tol_rot,
         num_retries=retries,
         max_iterations=max_iterations,
-        joint_limits=robot.limits.to(T.dtype),
+        joint_limits=robot.limits.to(device=T.device, dtype=T.dtype),
         early_stopping_any_converged=True,
     )
     target = pk.Transform3d(matrix=T)
-    sol, seconds = _timed(lambda: ik.solve(target))
+    sol, seconds = _timed(lambda: ik.solve(target), T.device)
     err = sol.err_pos + 0.1 * sol.err_rot  # (B, retries)
     idx = err.argmin(-1)
     q = torch.gather(sol.solutions, 1, idx[:, None, None].expand(-1, 1, robot.dof)).squeeze(1)
@@ -231,6 +234,7 @@ def evaluate(
     tol_rot: float = 1e-3,
     seed: int = 0,
     progress=None,
+    device: str | torch.device = "cpu",
 ) -> EvalReport:
     """Evaluate every pipeline on the first ``n`` poses of a dataset's ``split``.
 
@@ -244,21 +248,24 @@ def evaluate(
         include_pk: add pytorch-kinematics' ``PseudoInverseIK`` as a peer.
         tol_pos, tol_rot: tolerances the refinements stop at (metres, radians).
         progress: optional callable ``progress(message)`` told before each row.
+        device: where every pipeline computes (``"cpu"``, ``"cuda"``); timings synchronise the GPU.
 
     Returns:
         :class:`EvalReport`.
     """
     from nik.data import load_dataset
+    from nik.device import resolve_device
     from nik.solver import IKSolver
 
+    dev = resolve_device(device)
     robot = load_robot(robot) if not isinstance(robot, Robot) else robot
     ds = load_dataset(data, robot=robot)
     part = ds.split(split)
     if len(part) == 0:
         raise ValueError(f"{data}: the {split!r} split is empty")
     n = min(int(n), len(part))
-    T = part.pose[:n].to(torch.float64).clone()
-    report = EvalReport(robot=robot.name, data=str(data), n=n, threads=torch.get_num_threads())
+    T = part.pose[:n].to(device=dev, dtype=torch.float64).clone()
+    report = EvalReport(robot=robot.name, data=str(data), n=n, threads=torch.get_num_threads(), device=str(dev))
     say = progress or (lambda msg: None)
 
     def add(method: str, q: torch.Tensor, seconds: float, note: str = "") -> None:
@@ -268,18 +275,18 @@ def evaluate(
 
     if checkpoint is not None:
         say("network")
-        raw = IKSolver(robot, checkpoint=checkpoint, refine="none")
-        res, sec = _timed(lambda: raw.solve(T, seed=seed))
+        raw = IKSolver(robot, checkpoint=checkpoint, device=dev, refine="none")
+        res, sec = _timed(lambda: raw.solve(T, seed=seed), dev)
         add("network", res.q, sec)
         for method in refinements:
             say(f"network + {method}")
-            solver = IKSolver(robot, checkpoint=checkpoint, refine=method, fallback=False)
-            res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
+            solver = IKSolver(robot, checkpoint=checkpoint, device=dev, refine=method, fallback=False)
+            res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
             polish = " + LM polish" if method != "lm" else ""
             add(f"network + {method}", res.q, sec, f"mean {res.iterations.float().mean():.1f} iterations{polish}")
         say("network + lm + LM restarts")
-        solver = IKSolver(robot, checkpoint=checkpoint, refine="lm", fallback="multistart")
-        res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
+        solver = IKSolver(robot, checkpoint=checkpoint, device=dev, refine="lm", fallback="multistart")
+        res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
         add(
             "network + lm + LM restarts",
             res.q,
@@ -290,7 +297,7 @@ def evaluate(
         report.notes.append("no checkpoint given: the network rows are missing")
     say(f"uniform-init {swarm}")
     solver = IKSolver(robot, refine=swarm, analytic=False, fallback="none")
-    res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed))
+    res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
     its = float(res.iterations.float().mean())
     add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
     from nik.analytic import is_puma_like
@@ -298,7 +305,7 @@ def evaluate(
     if is_puma_like(robot):
         say("analytic")
         solver = IKSolver(robot, refine="none")
-        res, sec = _timed(lambda: solver.solve(T))
+        res, sec = _timed(lambda: solver.solve(T), dev)
         add("analytic (closed form)", res.q, sec, "all 8 solutions, FK-verified; the most central valid one")
     else:
         report.notes.append(f"{robot.name} is not PUMA-like: no closed-form row")

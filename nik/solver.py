@@ -222,6 +222,8 @@ class IKSolver:
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
         swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
         analytic: use the closed form for PUMA-like arms when no checkpoint is given (default True).
+        device: where the network lives (``"cpu"``, ``"cuda"``); :meth:`solve` computes on the device of
+            its input poses (``T.to("cuda")``) and the network's guess is moved there.
         fallback: a second chance for targets still outside tolerance after the refinement:
             ``"analytic"``, the closed-form solution nearest the first answer (PUMA-like arms only);
             ``"multistart"``, Levenberg-Marquardt from ``LMCfg.starts`` uniform starts;
@@ -241,7 +243,11 @@ class IKSolver:
         swarm_cfg=None,
         analytic: bool = True,
         fallback: bool | str = "auto",
+        device: str | torch.device | None = None,
     ):
+        from nik.device import resolve_device
+
+        self.device = resolve_device(device)
         if refine not in REFINE_METHODS:
             raise ValueError(f"IKSolver: refine must be one of {list(REFINE_METHODS)}, got {refine!r}")
         self.robot = load_robot(robot) if not isinstance(robot, Robot) else robot
@@ -255,7 +261,7 @@ class IKSolver:
         if checkpoint is not None:
             from nik.models import load_checkpoint
 
-            self.net = load_checkpoint(checkpoint, robot=self.robot)
+            self.net = load_checkpoint(checkpoint, robot=self.robot).to(self.device)
         self._analytic = False
         if analytic:
             from nik.analytic import is_puma_like

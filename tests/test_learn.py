@@ -19,6 +19,7 @@ from nik.learn import (
     pose_loss,
     set_flat_params,
 )
+from nik.learn.population import sample_chunk
 from nik.models import IKNet, load_checkpoint
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -109,6 +110,37 @@ def test_de_config_is_checked():
         DECfg(CR=1.5)
 
 
+def test_des_initial_population_is_pytorchs_default_init_and_selection_never_worsens_anyone(kuka):
+    # paper C's DE on the 6-8-6 net: the +-10 bound is a box, not the initial spread (uniform in +-10
+    # would saturate tanh); every individual starts like nn.Linear's default init, and greedy selection
+    # keeps each individual's fitness non-increasing while the population improves
+    g = torch.Generator().manual_seed(6)
+    q = kuka.sample(400, generator=g)
+    T = kuka.fk(q)
+    net = IKNet(kuka, hidden=[8], activation="tanh", representation="rpy").fit_normalisation(T, q)
+    W = init_population(net, 220, generator=g)
+    w1 = W[:, : 8 * 6]
+    assert float(w1.abs().max()) <= 1 / 6**0.5 + 1e-12  # fan_in 6
+    pre = torch.einsum("nd,phd->pnh", net.features(T), w1.reshape(220, 8, 6))
+    assert float((pre.abs() > 3).double().mean()) < 0.01  # tanh is not saturated
+    x, y = net.features(T), net.encode(q)
+
+    def fitness(V):
+        return population_fitness(net, V, x, y_target=y)
+
+    from nik.learn import de_init, de_step
+
+    cfg = DECfg()
+    state = de_init(W, fitness(W), cfg, lower=torch.tensor(-10.0), upper=torch.tensor(10.0))
+    start = state.fitness.clone()
+    for _ in range(5):
+        before = state.fitness.clone()
+        state = de_step(state, fitness, cfg, generator=g)
+        assert bool((state.fitness <= before).all())
+        torch.testing.assert_close(fitness(state.x), state.fitness)  # the stored fitness is the population's
+    assert float(state.fitness.mean()) < float(start.mean())
+
+
 # -- batched population against a per-individual reference -------------------------
 @pytest.mark.parametrize("loss", ["joint", "pose", "both"])
 def test_population_fitness_matches_one_network_at_a_time(kuka, loss):
@@ -132,6 +164,24 @@ def test_population_fitness_matches_one_network_at_a_time(kuka, loss):
                 value = value + pose_loss(net.decode(y), T, kuka, length_scale=net.length_scale)
         want.append(value)
     torch.testing.assert_close(got, torch.stack(want), rtol=1e-5, atol=1e-6)
+
+
+def test_a_slice_of_the_population_scored_with_the_whole_populations_chunk_gives_the_same_bits(kuka):
+    # how DE splits a generation across processes: rank r scores W[slice r] and the pieces are gathered
+    g = torch.Generator().manual_seed(3)
+    q = kuka.sample(400, generator=g).float()
+    T = kuka.fk(q.double()).float()
+    net = IKNet(kuka, hidden=[8]).fit_normalisation(T, q).float()
+    W = init_population(net, 25, generator=g)
+    x, y_t = net.features(T), net.encode(q)
+    cap = 25 * 8 * 64  # several sample chunks
+    whole = population_fitness(net, W, x, y_target=y_t, max_elements=cap)
+    chunk = sample_chunk(net, 25, x.shape[1], max_elements=cap)
+    parts = [
+        population_fitness(net, W[s], x, y_target=y_t, max_elements=cap, chunk=chunk)
+        for s in (slice(0, 13), slice(13, 25))
+    ]
+    assert torch.equal(torch.cat(parts), whole)
 
 
 def test_pose_loss_is_zero_at_the_answer_and_geodesic_to_second_order(kuka):
@@ -181,6 +231,24 @@ def test_de_bp_hands_des_best_weights_to_bp_and_leaves_a_loadable_checkpoint(dat
         load_checkpoint(ckpts[0], robot="puma560")
 
 
+@pytest.mark.parametrize("method, generations", [("de", 4), ("de_bp", 3)])
+def test_max_steps_counts_de_generations(method, dataset, tmp_path, generations):
+    # 5 steps: the initial population, then generations (de_bp: 3 generations, then 1 BP step);
+    # max_epochs only caps the old behaviour, where DE generations did not count as steps
+    cli = _run(
+        method,
+        dataset,
+        tmp_path,
+        *("--model.pop_size", "8", "--model.generations", "3" if method == "de_bp" else "null"),
+        *("--trainer.max_steps", "5", "--trainer.max_epochs", "30", "--trainer.check_val_every_n_epoch", "5"),
+    )
+    assert cli.trainer.global_step == 5
+    assert cli.model.de_state.generation == generations
+    assert cli.trainer.current_epoch == 5
+    if method == "de_bp":
+        assert cli.model.first_bp_loss is not None
+
+
 @pytest.mark.parametrize("method", ["de", "adam"])
 def test_same_seed_same_run(method, dataset, tmp_path):
     extra = ["--trainer.max_epochs", "3", "--trainer.check_val_every_n_epoch", "3"]
@@ -202,3 +270,24 @@ def test_nik_compare_is_registered_with_the_cli():
     args = build_parser().parse_args(["compare", "--data", "data/x", "--budget", "5", "--methods", "de", "bp"])
     assert args.command == "compare" and args.budget == 5.0 and args.methods == ["de", "bp"]
     assert callable(args.func)
+
+
+def test_threads_callback_sets_torch_threads_for_the_fit_and_shares_cores_among_ddp_ranks():
+    import os
+
+    import lightning as L
+
+    from nik.learn.callbacks import Threads
+
+    before = torch.get_num_threads()
+    one = L.Trainer(accelerator="cpu", devices=1, logger=False, enable_checkpointing=False)
+    cb = Threads(1)
+    cb.setup(one, None, "fit")
+    assert torch.get_num_threads() == 1
+    cb.teardown(one, None, "fit")
+    assert torch.get_num_threads() == before
+    assert Threads().chosen(one) is None  # one process: torch's own choice
+    two = L.Trainer(accelerator="cpu", devices=2, strategy="ddp", logger=False, enable_checkpointing=False)
+    assert Threads().chosen(two) == max(1, (os.cpu_count() or 1) // 2)
+    with pytest.raises(ValueError, match="positive integer"):
+        Threads(0)

@@ -66,6 +66,13 @@ def register(sub) -> None:
         default=1,
         help="torch threads for the maths (default 1; writing runs in one more thread)",
     )
+    g.add_argument(
+        "--shard",
+        default=None,
+        metavar="I/N",
+        help="write only shard I (0..N-1) of N of this dataset (whole blocks of 65,536 samples); "
+        "join the N shards with nik data merge",
+    )
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.set_defaults(func=_cmd_generate)
 
@@ -75,6 +82,18 @@ def register(sub) -> None:
     info.add_argument("path", help="dataset directory, e.g. data/kuka_kr_1m")
     info.add_argument("--no-verify", action="store_true", help="skip the checksum verification")
     info.set_defaults(func=_cmd_info)
+    merge = dsub.add_parser(
+        "merge",
+        help="join the shards of nik generate --shard I/N into one dataset",
+        description="Join shard directories (nik generate ... --shard I/N, made anywhere) into one dataset, "
+        "identical to the one nik generate writes without --shard. Checks that the shards belong together, "
+        "that each appears once and none is missing, and their checksums.",
+    )
+    merge.add_argument("out", help="dataset directory to create, e.g. data/kuka_kr_1m")
+    merge.add_argument("shards", nargs="+", metavar="SHARD_DIR", help="the N shard directories, in any order")
+    merge.add_argument("--overwrite", action="store_true", help="replace an existing dataset at OUT")
+    merge.add_argument("--no-verify", action="store_true", help="skip the shards' checksum verification")
+    merge.set_defaults(func=_cmd_merge)
     d.set_defaults(func=lambda args: (d.print_help(), 2)[1])
 
 
@@ -87,6 +106,11 @@ def _cmd_generate(args) -> int:
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
     robot = load_robot(args.robot)
+    shard = None
+    if args.shard is not None:
+        from nik.data import parse_shard
+
+        shard = parse_shard(args.shard)
     t0 = time.perf_counter()
     out = generate_dataset(
         robot,
@@ -105,8 +129,17 @@ def _cmd_generate(args) -> int:
         compiled={"auto": "auto", "eager": False, "compiled": True}[args.fk],
         threads=args.threads,
         progress=None if not args.no_progress else False,
+        shard=shard,
     )
     dt = time.perf_counter() - t0
+    if shard is not None:
+        from nik.data import read_meta
+
+        a, b = read_meta(out)["shard"]["rows"]
+        rows = f"rows {a}..{b - 1} of {args.n}" if b > a else f"empty: {args.n} samples fill fewer blocks than shards"
+        what = f"shard {shard[0]}/{shard[1]} ({rows}) of {robot.name} samples"
+        print(f"wrote {what} to {out} in {dt:.1f} s ({(b - a) / dt:,.0f} samples/s)")
+        return 0
     print(f"wrote {args.n} samples of {robot.name} to {out} in {dt:.1f} s ({args.n / dt:,.0f} samples/s)")
     return 0
 
@@ -190,6 +223,15 @@ def _chunked_max_norm(a, chunk: int = 1 << 20) -> float:
         part = np.asarray(a[i : i + chunk], dtype=np.float64)
         best = max(best, float(np.sqrt((part**2).sum(1)).max()))
     return best
+
+
+def _cmd_merge(args) -> int:
+    from nik.data import merge_shards, read_meta
+
+    out = merge_shards(args.out, args.shards, overwrite=args.overwrite, verify=not args.no_verify)
+    n = read_meta(out)["n"]
+    print(f"merged {len(args.shards)} shards into {out} ({n} samples)")
+    return 0
 
 
 def _cmd_info(args) -> int:

@@ -61,6 +61,7 @@ def register(sub) -> None:
     )
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--max-iters", type=int, default=None, help="iteration limit of the refinement")
+    s.add_argument("--device", default="cpu", help="where to compute: cpu (default), cuda or cuda:N")
     s.set_defaults(func=_cmd_solve)
 
     e = sub.add_parser(
@@ -91,6 +92,7 @@ def register(sub) -> None:
     )
     e.add_argument("--no-pk", action="store_true", help="leave out the pytorch-kinematics row")
     e.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    e.add_argument("--device", default="cpu", help="where every pipeline computes: cpu (default), cuda or cuda:N")
     e.set_defaults(func=_cmd_evaluate)
 
 
@@ -184,7 +186,7 @@ def _cmd_solve(args) -> int:
     import torch
 
     from nik.robots import load_robot
-    from nik.solver import IKSolver, as_poses
+    from nik.solver import IKResult, IKSolver, as_poses
 
     robot = load_robot(args.robot)
     if args.pose is not None:
@@ -202,15 +204,16 @@ def _cmd_solve(args) -> int:
         _, _, factor = _units(robot.prismatic.tolist(), robot.dof)
         q_near = torch.tensor([v / f for v, f in zip(args.q_near, factor, strict=True)], dtype=torch.float64)
     T = as_poses(poses, "quat", name="--pose" if args.pose is not None else str(args.poses))
-    solver = IKSolver(robot, checkpoint=args.checkpoint, refine=args.refine)
+    solver = IKSolver(robot, checkpoint=args.checkpoint, refine=args.refine, device=args.device)
     res = solver.solve(
-        T,
+        T.to(solver.device),
         tol_pos=args.tol_mm * 1e-3,
         tol_rot=math.radians(args.tol_deg),
         seed=args.seed,
         q_near=q_near,
         max_iters=args.max_iters,
     )
+    res = IKResult(*(getattr(res, f).cpu() for f in ("q", "pos_err", "rot_err", "success", "iterations")), res.source)
     if args.out:
         write_solutions_csv(args.out, robot.joint_names, res, prismatic=robot.prismatic.tolist())
     if args.json:
@@ -311,6 +314,7 @@ def _cmd_evaluate(args) -> int:
         swarm=args.swarm,
         include_pk=not args.no_pk,
         seed=args.seed,
+        device=args.device,
         progress=lambda msg: print(f"evaluating: {msg}", file=sys.stderr, flush=True),
     )
     out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name

@@ -13,6 +13,11 @@ writing always run on the same output blocks (rows ``[k B, (k + 1) B)``), so eve
 FK kernel, whose rounding may depend on the batch, sees identical batches. The same
 arguments therefore give bit-identical arrays for any chunk size and thread count (tested;
 across machines, FK may differ in the last bit with the CPU's math library).
+
+Shards: ``shard=(i, k)`` writes only shard ``i`` of ``k`` of that dataset: the rows of a contiguous
+range of whole blocks (:func:`shard_rows`), drawn and computed exactly as the whole run would, so
+shards made anywhere (different processes or machines) join with :func:`nik.data.merge_shards`
+into the dataset the run without ``shard`` writes, byte for byte except the creation time.
 """
 
 from __future__ import annotations
@@ -34,7 +39,16 @@ from nik.data.branches import branch_classifier, branch_name
 from nik.data.storage import FORMAT_VERSION, AtomicDirectory, NpyStreamWriter, write_meta
 from nik.errors import DatasetError
 
-__all__ = ["BLOCK_SIZE", "COMPILE_THRESHOLD", "DEFAULT_CHUNK", "generate_dataset", "resolve_ranges", "sample_stream"]
+__all__ = [
+    "BLOCK_SIZE",
+    "COMPILE_THRESHOLD",
+    "DEFAULT_CHUNK",
+    "generate_dataset",
+    "parse_shard",
+    "resolve_ranges",
+    "sample_stream",
+    "shard_rows",
+]
 
 #: Samples per randomness block (part of the reproducibility contract; recorded in meta.json).
 BLOCK_SIZE = 65536
@@ -230,6 +244,35 @@ def _split_sizes(n: int, val_fraction: float, test_fraction: float) -> dict[str,
     return {"train": [0, n_train], "val": [n_train, n_train + n_val], "test": [n_train + n_val, n]}
 
 
+def parse_shard(shard) -> tuple[int, int]:
+    """``"I/N"`` or ``(I, N)`` -> ``(I, N)`` with ``0 <= I < N``; ValueError otherwise."""
+    if isinstance(shard, str):
+        parts = shard.split("/")
+        try:
+            shard = tuple(int(p) for p in parts)
+        except ValueError:
+            shard = ()
+        if len(shard) != 2:
+            raise ValueError(f"shard must be I/N with integers 0 <= I < N (e.g. 0/4), got {'/'.join(parts)!r}")
+    try:
+        i, k = (int(v) for v in shard)
+    except (TypeError, ValueError):
+        raise ValueError(f"shard must be (I, N) or 'I/N' with 0 <= I < N, got {shard!r}") from None
+    if not 0 <= i < k:
+        raise ValueError(f"shard I/N needs 0 <= I < N (shards are numbered from 0), got {i}/{k}")
+    return i, k
+
+
+def shard_rows(n: int, shard, block_size: int = BLOCK_SIZE) -> tuple[int, int]:
+    """Rows ``[start, stop)`` of shard ``(i, k)`` of an ``n``-sample dataset: whole randomness blocks,
+    as evenly spread over the ``k`` shards as blocks allow (so FK sees the same batches as in one run).
+    With fewer blocks (``ceil(n / block_size)``) than shards, some shards are empty (``start == stop``).
+    """
+    i, k = parse_shard(shard)
+    blocks = -(-int(n) // int(block_size))
+    return min(n, i * blocks // k * block_size), min(n, (i + 1) * blocks // k * block_size)
+
+
 class _BackgroundIO:
     """Runs file writes (and their SHA-256) in one background thread, in submission order.
 
@@ -284,6 +327,7 @@ def generate_dataset(
     fsync: bool = True,
     block_size: int = BLOCK_SIZE,
     threads: int | None = 1,
+    shard=None,
 ) -> Path:
     """Generate ``n`` (joint vector, pose) pairs and write them to the directory ``out``.
 
@@ -325,6 +369,9 @@ def generate_dataset(
             ``None``: leave torch's setting). Writing and hashing run in one more thread, so the
             default 1 keeps 2 cores busy without oversubscribing them (oversubscribed, torch's
             thread pool slows down several-fold). The result does not depend on it.
+        shard: ``(i, k)`` or ``"i/k"``: write only shard ``i`` (0-based) of ``k`` of this dataset, the
+            rows :func:`shard_rows` gives; join the shards with :func:`nik.data.merge_shards`
+            (``nik data merge``). Not with ``branch`` (rejection makes every row depend on all before it).
 
     Returns:
         The dataset directory ``out`` (a :class:`pathlib.Path`).
@@ -348,12 +395,9 @@ def generate_dataset(
     if dtype_name not in _DTYPES:
         raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
     tdtype = _DTYPES[dtype_name]
-    try:
-        device = torch.device(device)
-    except (RuntimeError, TypeError) as err:
-        raise ValueError(f"unknown device {device!r}") from err
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError("device 'cuda' requested but CUDA is not available")
+    from nik.device import resolve_device
+
+    device = resolve_device(device)
     if compiled == "auto":
         compiled = n >= COMPILE_THRESHOLD
     elif not isinstance(compiled, bool):
@@ -374,6 +418,16 @@ def generate_dataset(
                 f"--branch: robot {robot.name!r} has no IK branch classification (needs 6 joints, "
                 "parallel axes 2 and 3 and a spherical wrist, like puma560 and kuka_kr)"
             )
+
+    rows = (0, n)
+    if shard is not None:
+        shard = parse_shard(shard)
+        if branch is not None:
+            raise ValueError(
+                "shard: a branch-filtered dataset cannot be sharded (which candidates are kept depends on every "
+                "earlier one); generate it in one run"
+            )
+        rows = shard_rows(n, shard, int(block_size))
 
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
@@ -403,6 +457,8 @@ def generate_dataset(
             int(block_size),
             stream,
             max_candidates,
+            shard,
+            rows,
         )
     finally:
         if threads is not None:
@@ -431,7 +487,11 @@ def _generate(
     block_size,
     stream,
     max_candidates,
+    shard=None,
+    rows=None,
 ) -> Path:
+    row_start, row_stop = rows if rows is not None else (0, n)
+    m_rows = row_stop - row_start  # rows this run writes (n unless a shard)
     atomic = AtomicDirectory(out, overwrite=overwrite)
     atomic.prepare()  # validates the destination before any work, creates the temporary directory
     writers: list[NpyStreamWriter] = []
@@ -440,18 +500,19 @@ def _generate(
     try:
         tmp = atomic.tmp
         np_dtype = np.float32 if tdtype == torch.float32 else np.float64
-        wq = NpyStreamWriter(tmp / "q.npy", np_dtype, (n, robot.dof))
-        wp = NpyStreamWriter(tmp / "pose.npy", np_dtype, (n, 4, 4))
+        wq = NpyStreamWriter(tmp / "q.npy", np_dtype, (m_rows, robot.dof))
+        wp = NpyStreamWriter(tmp / "pose.npy", np_dtype, (m_rows, 4, 4))
         writers += [wq, wp]
         wb = None
         if classifier is not None:
-            wb = NpyStreamWriter(tmp / "branch.npy", np.uint8, (n,))
+            wb = NpyStreamWriter(tmp / "branch.npy", np.uint8, (m_rows,))
             writers.append(wb)
 
-        bar = _progress(n, progress, f"nik generate {robot.name}")
+        desc = f"nik generate {robot.name}" + ("" if shard is None else f" shard {shard[0]}/{shard[1]}")
+        bar = _progress(m_rows, progress, desc)
         chunk, fk_block = int(chunk_size), int(block_size)
-        cand = 0  # candidates drawn
-        drawn = 0  # samples accepted so far (== n when done)
+        cand = row_start  # candidates drawn (a shard starts at its first row: no filter, one candidate per row)
+        drawn = row_start  # samples accepted so far (== row_stop when done)
         pending: list[tuple[torch.Tensor, torch.Tensor | None]] = []  # accepted, not yet written
         n_pending = 0
         counts = np.zeros(8, dtype=np.int64)
@@ -478,8 +539,8 @@ def _generate(
             if bar is not None:
                 bar.update(m)
 
-        while drawn < n:
-            m = min(chunk, n - drawn) if branch is None else chunk  # rejection: fixed candidate chunks
+        while drawn < row_stop:
+            m = min(chunk, row_stop - drawn) if branch is None else chunk  # rejection: fixed candidate chunks
             if cand + m > max_candidates:
                 raise DatasetError(
                     f"branch {branch} ({branch_name(branch)}): only {drawn} of {n} samples found in {cand} candidates"
@@ -499,7 +560,7 @@ def _generate(
                 pending.append((q, labels))
                 n_pending += q.shape[0]
                 drawn += q.shape[0]
-            while n_pending >= fk_block or (drawn == n and n_pending > 0):
+            while n_pending >= fk_block or (drawn == row_stop and n_pending > 0):
                 write_block(min(fk_block, n_pending))
             q = labels = None  # free the chunk before drawing the next
 
@@ -534,7 +595,7 @@ def _generate(
             if classifier is None
             else {
                 "filter": branch,
-                "candidates": cand,
+                "candidates": cand - row_start,
                 "counts": counts.tolist(),
                 "names": [branch_name(k) for k in range(8)],
                 "definition": "nik.data.branches (shoulder front/back, elbow up/down, wrist noflip/flip)",
@@ -546,6 +607,9 @@ def _generate(
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "files": files,
         }
+        if shard is not None:
+            # a part, not a dataset: load_dataset refuses it, nik data merge joins the parts
+            meta["shard"] = {"index": shard[0], "count": shard[1], "rows": [row_start, row_stop]}
         write_meta(tmp, meta)
         if bar is not None:
             bar.close()

@@ -462,6 +462,12 @@ def load_dataset(path: str | Path, *, robot=None, verify: bool = True, mmap: boo
     """
     path = Path(path)
     meta = read_meta(path)
+    if "shard" in meta:
+        sh = meta["shard"]
+        raise DatasetError(
+            f"{path} is shard {sh['index']}/{sh['count']} of a dataset, not a dataset; join all "
+            f"{sh['count']} shards with: nik data merge OUT SHARD_DIR..."
+        )
     if robot is not None:
         from nik.robots import load_robot
 

@@ -8,6 +8,11 @@ reports the same metrics at validation/test: ``val_loss`` (the training objectiv
 closure calls and DE individuals included), ``sample_evals`` (network forward passes on single
 samples so far) and ``wall_s`` (seconds since the fit started).
 
+Several processes (``--trainer.strategy ddp --trainer.devices N``): gradient modules train as usual
+under DDP (each rank its share of the batches, gradients averaged); validation metrics are reduced
+across ranks (``sync_dist``), the counters are summed over ranks and ``wall_s`` is the slowest rank's.
+DE splits each generation's population across the ranks (see :class:`DEIK`).
+
 Checkpoints carry ``checkpoint["nik"]`` (robot definition, hash, architecture; plain data) so that
 :func:`nik.models.load_checkpoint` reads them with ``torch.load(weights_only=True)``.
 """
@@ -22,10 +27,20 @@ import torch
 
 from nik.learn.de import DECfg, DEState, de_init, de_step
 from nik.learn.losses import LOSSES, evaluate, joint_mse, pose_loss
-from nik.learn.population import flat_params, init_population, population_fitness, set_flat_params
+from nik.learn.population import flat_params, init_population, population_fitness, sample_chunk, set_flat_params
 from nik.models import IKNet, checkpoint_extra
 
 __all__ = ["IKModule", "GradientIK", "DEIK"]
+
+
+def _all_gather(t: torch.Tensor) -> torch.Tensor:
+    """``(world, *t.shape)``: ``t`` of every rank, in rank order (torch.distributed directly: Lightning's
+    ``all_gather`` goes through a deprecated autograd collective and warns on every rank)."""
+    import torch.distributed as dist
+
+    parts = [torch.empty_like(t) for _ in range(dist.get_world_size())]
+    dist.all_gather(parts, t.contiguous())
+    return torch.stack(parts)
 
 
 class IKModule(L.LightningModule):
@@ -111,9 +126,12 @@ class IKModule(L.LightningModule):
         return self._wall_before + (0.0 if self._t0 is None else time.perf_counter() - self._t0)
 
     def _log_counters(self) -> None:
-        self.log("loss_evals", float(self.loss_evals), on_step=False, on_epoch=True)
-        self.log("sample_evals", float(self.sample_evals), on_step=False, on_epoch=True)
-        self.log("wall_s", self.wall_s, on_step=False, on_epoch=True)
+        # work done by this rank: summed over ranks; the wall clock of the slowest rank
+        self.log("loss_evals", float(self.loss_evals), on_step=False, on_epoch=True, sync_dist=True, reduce_fx="sum")
+        self.log(
+            "sample_evals", float(self.sample_evals), on_step=False, on_epoch=True, sync_dist=True, reduce_fx="sum"
+        )
+        self.log("wall_s", self.wall_s, on_step=False, on_epoch=True, sync_dist=True, reduce_fx="max")
 
     def _eval_step(self, batch, prefix: str) -> None:
         T, q = batch
@@ -132,7 +150,7 @@ class IKModule(L.LightningModule):
             "pose_rot_deg_p95": m["rot_deg_p95"],
         }
         for k, v in values.items():
-            self.log(f"{prefix}_{k}", v, batch_size=n, prog_bar=k == "loss")
+            self.log(f"{prefix}_{k}", v, batch_size=n, prog_bar=k == "loss", sync_dist=True)
         if prefix == "val":
             self._log_counters()
 
@@ -203,7 +221,7 @@ class GradientIK(IKModule):
 
     def training_step(self, batch, batch_idx):
         loss = self.batch_loss(batch)
-        self.log("train_loss", loss, on_step=False, on_epoch=True, batch_size=batch[0].shape[0])
+        self.log("train_loss", loss, on_step=False, on_epoch=True, batch_size=batch[0].shape[0], sync_dist=True)
         return loss
 
     def _progress(self) -> float:
@@ -251,8 +269,15 @@ class DEIK(IKModule):
     Each training step is one DE generation on that step's batch (``data.batch_size: null``: the
     whole training split, as in paper C), evaluated for all ``pop_size`` networks in one batched
     computation (:func:`nik.learn.population.population_fitness`). After every generation the
-    network holds the best individual, so validation and checkpoints see it. With ``bp_steps`` set,
-    DE stops after ``generations`` generations and training continues by BP from the best individual.
+    network holds the best individual, so validation and checkpoints see it. With ``bp`` set, DE stops
+    after ``generations`` generations and training continues by BP from the best individual. A
+    generation counts as one trainer step: ``trainer.max_steps`` bounds generations plus BP steps.
+
+    Several processes (DDP): every rank holds the whole state and draws the same trials from the same
+    generator; rank ``r`` evaluates the ``r``-th slice of them, the fitness is gathered
+    (``all_gather``) and every rank selects alike. Each slice is evaluated with the sample chunking
+    of the whole population, so the result is bit-identical to one process. All ranks need the same
+    batch: set ``trainer.use_distributed_sampler: false`` (the DE configs do; checked every step).
 
     Args (beyond :class:`IKModule`):
         pop_size, F, CR, strategy, jde: see :class:`nik.learn.de.DECfg` (paper C: 220, 0.6, 0.5, rand1bin, no).
@@ -312,14 +337,21 @@ class DEIK(IKModule):
         super().on_fit_start()
         if self.generator is None:
             # drawn from the global RNG, which seed_everything has seeded: same seed, same run
-            self.generator = torch.Generator().manual_seed(int(torch.randint(0, 2**62, (1,))))
+            seed = int(torch.randint(0, 2**62, (1,)))
+            # every rank draws the same trials: rank 0's seed for all
+            seed = self.trainer.strategy.broadcast(seed, src=0)
+            self.generator = torch.Generator().manual_seed(seed)
 
     def _fitness_fn(self, T: torch.Tensor, q: torch.Tensor):
+        """``fitness(W: (M, P)) -> (M,)`` on the samples ``T, q``; under several processes each rank
+        evaluates its slice of ``W`` and the pieces are gathered, so every rank gets all ``M`` values."""
         h, net = self.hparams, self.net
         x = net.features(T)
         y_t = net.encode(q) if h.loss != "pose" else None
+        world = self.trainer.world_size if self._trainer is not None else 1
+        rank = self.trainer.global_rank if world > 1 else 0
 
-        def fitness(W: torch.Tensor) -> torch.Tensor:
+        def local(W: torch.Tensor, chunk: int) -> torch.Tensor:
             self.loss_evals += W.shape[0]
             self.sample_evals += W.shape[0] * T.shape[0]
             return population_fitness(
@@ -331,28 +363,65 @@ class DEIK(IKModule):
                 loss=h.loss,
                 rot_weight=h.rot_weight,
                 pose_weight=h.pose_weight,
-                max_fk=h.max_fk,
-                max_elements=h.max_elements,
+                chunk=chunk,
             )
 
+        def fitness(W: torch.Tensor) -> torch.Tensor:
+            m = W.shape[0]
+            # the chunking of all M networks, whichever slice this rank evaluates: same bits as one process
+            chunk = sample_chunk(net, m, x.shape[1], loss=h.loss, max_elements=h.max_elements, max_fk=h.max_fk)
+            if world == 1:
+                return local(W, chunk)
+            per = -(-m // world)
+            mine = W[rank * per : min((rank + 1) * per, m)]
+            part = torch.full((per,), float("nan"), dtype=W.dtype, device=W.device)
+            if mine.shape[0]:
+                part[: mine.shape[0]] = local(mine, chunk)
+            return _all_gather(part).reshape(-1)[:m]
+
         return fitness
+
+    def _check_same_batch(self, T: torch.Tensor, q: torch.Tensor) -> None:
+        """Under several processes: every rank must see the same batch (DE's fitness is one function)."""
+        if self.trainer.world_size == 1:
+            return
+        n = torch.tensor(float(T.shape[0]), dtype=torch.float64, device=T.device)
+        marks = _all_gather(torch.stack([T.double().sum(), q.double().sum(), n]))
+        if not bool((marks == marks[0]).all()):
+            raise ValueError(
+                "DE across processes needs the same training batch on every rank; set "
+                "trainer.use_distributed_sampler: false (configs/train/de.yaml and de_bp.yaml do)"
+            )
+
+    def _count_step(self) -> None:
+        """A DE generation is a trainer step (so ``trainer.max_steps`` stops DE): an optimizer step that
+        changes nothing (no parameter has a gradient) advances ``trainer.global_step``."""
+        opt = self.optimizers()
+        opt.zero_grad(set_to_none=True)
+        opt.step()
 
     def _bounds(self, like: torch.Tensor):
         b = self.hparams.bound
         if b is None:
             return None, None
-        return torch.tensor(-float(b), dtype=like.dtype), torch.tensor(float(b), dtype=like.dtype)
+        return (
+            torch.tensor(-float(b), dtype=like.dtype, device=like.device),
+            torch.tensor(float(b), dtype=like.dtype, device=like.device),
+        )
 
     def training_step(self, batch, batch_idx):
         h = self.hparams
         T, q = batch
         if not self.in_de_phase:
             return self._bp_step(batch)
+        self._check_same_batch(T, q)
         subsample = h.fitness_samples is not None and h.fitness_samples < T.shape[0]
         if subsample:
             idx = torch.randperm(T.shape[0], generator=self.generator)[: h.fitness_samples].to(T.device)
             T, q = T.index_select(0, idx), q.index_select(0, idx)
         fitness = self._fitness_fn(T, q)
+        if self.de_state is not None and self.de_state.x.device != T.device:  # resumed from a checkpoint
+            self.de_state = DEState(*(v.to(T.device) if isinstance(v, torch.Tensor) else v for v in self.de_state))
         if self.de_state is None:
             x0 = init_population(self.net, self.cfg.pop_size, generator=self.generator)
             x0[0] = flat_params(self.net)  # the net's own initial weights are one of the individuals
@@ -365,10 +434,12 @@ class DEIK(IKModule):
         set_flat_params(self.net, self.de_state.best_x)
         best = self.de_state.best_fitness
         self.history.append(best)
-        self.log("train_loss", best, on_step=False, on_epoch=True, batch_size=T.shape[0])
-        self.log("de_generation", float(self.de_state.generation), on_step=False, on_epoch=True)
+        # the same on every rank (sync_dist only keeps Lightning from asking for it)
+        self.log("train_loss", best, on_step=False, on_epoch=True, batch_size=T.shape[0], sync_dist=True)
+        self.log("de_generation", float(self.de_state.generation), on_step=False, on_epoch=True, sync_dist=True)
         if not h.bp and h.generations is not None and self.de_state.generation >= h.generations:
             self.trainer.should_stop = True
+        self._count_step()
         return None
 
     def _bp_step(self, batch):
@@ -379,7 +450,9 @@ class DEIK(IKModule):
             self.first_bp_loss = float(loss.detach())
         self.manual_backward(loss)
         opt.step()
-        self.log("train_loss", loss.detach(), on_step=False, on_epoch=True, batch_size=batch[0].shape[0])
+        self.log(
+            "train_loss", loss.detach(), on_step=False, on_epoch=True, batch_size=batch[0].shape[0], sync_dist=True
+        )
         return loss
 
     def configure_optimizers(self):

@@ -16,7 +16,15 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from nik.learn.losses import joint_mse, pose_loss
 
-__all__ = ["flat_params", "set_flat_params", "unflatten", "population_raw", "population_fitness", "init_population"]
+__all__ = [
+    "flat_params",
+    "set_flat_params",
+    "unflatten",
+    "population_raw",
+    "population_fitness",
+    "sample_chunk",
+    "init_population",
+]
 
 
 def flat_params(net: torch.nn.Module) -> torch.Tensor:
@@ -57,6 +65,19 @@ def population_raw(net, W: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     return h
 
 
+def sample_chunk(
+    net, n_pop: int, in_dim: int, *, loss: str = "joint", max_elements: int = 2**21, max_fk: int = 2**18
+) -> int:
+    """Samples per chunk of :func:`population_fitness` for ``n_pop`` networks on ``in_dim`` inputs:
+    the largest chunk whose widest activation ``n_pop x chunk x width`` stays within ``max_elements``
+    (and, for a pose loss, whose FK batch ``n_pop x chunk`` stays within ``max_fk``)."""
+    width = max(max(net.hidden, default=1), net.out_dim, in_dim)
+    chunk = max(1, max_elements // (n_pop * width))
+    if loss != "joint":
+        chunk = min(chunk, max(1, max_fk // n_pop))
+    return chunk
+
+
 @torch.no_grad()
 def population_fitness(
     net,
@@ -70,6 +91,7 @@ def population_fitness(
     pose_weight: float = 1.0,
     max_elements: int = 2**21,
     max_fk: int = 2**18,
+    chunk: int | None = None,
 ) -> torch.Tensor:
     """Loss of every network of the population on the same samples.
 
@@ -82,6 +104,10 @@ def population_fitness(
         loss: ``joint`` (paper C eq. 4), ``pose`` (through FK), or ``both`` (joint + pose_weight * pose).
         max_elements: cap on ``NP * chunk * widest layer`` (memory bound).
         max_fk: cap on ``NP * chunk`` FK evaluations at once (pose loss).
+        chunk: samples per chunk (default: :func:`sample_chunk` of this ``NP``). The chunk decides the
+            order of the sums over samples; each network's fitness is otherwise computed on its own,
+            so a slice of the population evaluated with the whole population's chunk gives the same
+            bits as the whole (how DE splits a population across processes).
 
     Returns:
         (NP,) fitness, the mean over the N samples exactly as the single-network loss computes it.
@@ -89,10 +115,8 @@ def population_fitness(
     if loss not in ("joint", "pose", "both"):
         raise ValueError(f"unknown loss {loss!r}; expected joint, pose or both")
     n_pop, n = W.shape[0], x.shape[0]
-    width = max(max(net.hidden, default=1), net.out_dim, x.shape[1])
-    chunk = max(1, max_elements // (n_pop * width))
-    if loss != "joint":
-        chunk = min(chunk, max(1, max_fk // n_pop))
+    if chunk is None:
+        chunk = sample_chunk(net, n_pop, x.shape[1], loss=loss, max_elements=max_elements, max_fk=max_fk)
     total = torch.zeros(n_pop, dtype=W.dtype, device=W.device)
     for i in range(0, n, chunk):
         xs = x[i : i + chunk]
