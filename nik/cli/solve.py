@@ -270,6 +270,10 @@ def _cmd_evaluate(args) -> int:
         raise ValueError(f"--refinements: unknown method(s) {bad}; expected some of {','.join(REFINEMENTS)}")
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
+    if args.checkpoint is not None:  # refuse a bad checkpoint in one line, before any progress output
+        from nik.models import load_checkpoint
+
+        load_checkpoint(args.checkpoint, robot=robot)
     report = evaluate(
         robot,
         data=args.data,
