@@ -2,14 +2,17 @@
 
 Methods (one config each): ``bp``, ``adam``, ``lbfgs``, ``de``, ``de_bp``. LightningCLI supplies
 checkpoints, resume (``--ckpt_path``), loggers, progress bars, seeding (``seed_everything``) and the
-accelerator choice; see ``the README (Training)``. The CLI itself is :func:`nik.learn.cli.cli_main`.
+accelerator choice; see ``the README (Training)``. Every run keeps ``<default_root_dir>/last.ckpt``
+(``runs/<method>/last.ckpt`` with the shipped configs). The CLI itself is :func:`nik.learn.cli.cli_main`.
 """
 
 from __future__ import annotations
 
 import sys
 
-from nik.learn.cli import cli_main
+from nik.learn.cli import cli_main, main
+
+__all__ = ["cli_main", "main"]
 
 if __name__ == "__main__":
-    cli_main(sys.argv[1:])
+    sys.exit(main())

@@ -4,13 +4,14 @@
 way (FK of the returned joints against the target): the network alone, the network plus each
 refinement, the uniform-init swarm (no network), the closed form (PUMA-like arms) and
 pytorch-kinematics' ``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
-table, a JSON copy and the error histogram.
+table, a JSON copy and a cumulative error plot.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -21,7 +22,7 @@ import torch
 from nik.poses import matrix_to_rpy, pose_error, rpy_to_matrix
 from nik.robots import Robot, load_robot
 
-__all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "robot_to_urdf", "write_report"]
+__all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "plot_errors", "robot_to_urdf", "write_report"]
 
 #: Refinement methods evaluated after the network, in table order.
 REFINEMENTS = ("lm", "pso", "sapso", "ipso", "ga")
@@ -44,7 +45,7 @@ class EvalRow:
 
 @dataclass
 class EvalReport:
-    """All rows plus the raw errors (for the histogram) and what was left out and why."""
+    """All rows plus the raw errors (for the plot) and what was left out and why."""
 
     robot: str
     data: str
@@ -332,11 +333,15 @@ def _fmt(x: float) -> str:
     return f"{x:.1e}"
 
 
+def _threads(n: int) -> str:
+    return f"{n} thread" if n == 1 else f"{n} threads"
+
+
 def markdown_table(report: EvalReport) -> str:
     """The report as a Markdown table (errors in mm and degrees, success in percent)."""
     lines = [
         f"Robot `{report.robot}`, {report.n} poses of the test split of `{report.data}`, "
-        f"CPU ({report.threads} threads), float64.",
+        f"CPU ({_threads(report.threads)}), float64.",
         "",
         "| method | success 1 mm / 1 deg | success 0.1 mm / 0.1 deg | position error mm (p50 / p95 / p99 / max) "
         "| rotation error deg (p50 / p95 / p99 / max) | joints outside limits | ms / target | note |",
@@ -354,32 +359,89 @@ def markdown_table(report: EvalReport) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(report: EvalReport, out: str | Path) -> dict[str, Path]:
-    """Write ``evaluation.md``, ``evaluation.json`` and ``errors.png`` (histograms) into ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {"markdown": out / "evaluation.md", "json": out / "evaluation.json", "histogram": out / "errors.png"}
-    paths["markdown"].write_text(markdown_table(report))
-    data = {k: v for k, v in asdict(report).items() if k != "errors"}
-    paths["json"].write_text(json.dumps(data, indent=2))
+#: Line styles of the cumulative plot, cycled independently of the colours so that no two of the
+#: first 40 methods look alike and a line lying on another still shows its markers.
+_LINESTYLES = ("-", "--", "-.", ":")
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">")
+
+
+def line_style(i: int, n: int, colours: list[str]) -> dict:
+    """Matplotlib style of the ``i``-th of ``n`` lines: colour, line style and marker each cycle on their
+    own (10 colours, 4 line styles, 10 markers), markers staggered so that lines on top of each other
+    show theirs at different places."""
+    return {
+        "color": colours[i % len(colours)],
+        "linestyle": _LINESTYLES[i % len(_LINESTYLES)],
+        "marker": _MARKERS[i % len(_MARKERS)],
+        "markevery": (0.03 + 0.15 * i / max(n, 1), 1 / 6),
+        "markersize": 5,
+        "linewidth": 1.4,
+    }
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def plot_errors(report: EvalReport, path: str | Path) -> Path:
+    """Cumulative error plot: for each method the percentage of targets whose position error (mm, left)
+    and rotation error (deg, right) is at most x, x on a log axis. Every method has its own colour, line
+    style and marker (markers staggered along the line), so a line that lies on another stays visible.
+    Errors below 1e-12 are drawn at 1e-12. Returns ``path`` (written to a temporary name, then renamed)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-    for method, (pos_mm, rot_deg) in report.errors.items():
-        for ax, vals in zip(axes, (pos_mm, rot_deg), strict=True):
-            v = np.log10(np.maximum(vals, 1e-12))
-            ax.hist(v, bins=60, range=(-12, 3), histtype="step", label=method)
-    axes[0].set_xlabel("log10 position error (mm); below 1e-12 drawn at -12")
-    axes[1].set_xlabel("log10 rotation error (deg); below 1e-12 drawn at -12")
-    for ax, thr in zip(axes, (math.log10(0.1), math.log10(0.1)), strict=True):
-        ax.axvline(thr, color="k", linestyle=":", linewidth=1)
-        ax.set_ylabel("targets")
-    axes[1].legend(fontsize=7)
-    fig.suptitle(f"{report.robot}: IK errors on {report.n} test poses (dotted: 0.1 mm / 0.1 deg)")
+    path = Path(path)
+    floor = 1e-12
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), sharey=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    methods = list(report.errors)
+    for i, method in enumerate(methods):
+        style = {**line_style(i, len(methods), colours), "drawstyle": "steps-post", "label": method}
+        for ax, vals in zip(axes, report.errors[method], strict=True):
+            v = np.sort(np.maximum(np.asarray(vals, dtype=float), floor))
+            if v.size == 0:
+                continue
+            y = 100.0 * np.arange(1, v.size + 1) / v.size
+            ax.plot(v, y, **style)
+    for ax, what, unit in zip(axes, ("position", "rotation"), ("mm", "deg"), strict=True):
+        ax.set_xscale("log")
+        ax.set_xlim(floor / 2, None)
+        ax.set_ylim(0, 101)
+        ax.set_xlabel(f"{what} error ({unit}), log scale; below 1e-12 drawn at 1e-12")
+        ax.axvline(0.1, color="k", linestyle=":", linewidth=1)
+        ax.axvline(1.0, color="0.6", linestyle=":", linewidth=1)
+        ax.grid(True, which="major", alpha=0.3)
+    axes[0].set_ylabel("targets with error <= x (%)")
+    axes[1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+    fig.suptitle(
+        f"{report.robot}: cumulative IK errors on {report.n} test poses (dotted: 0.1 and 1 mm / deg; higher and "
+        "further left is better)",
+        fontsize=10,
+    )
     fig.tight_layout()
-    fig.savefig(paths["histogram"], dpi=110)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+def write_report(report: EvalReport, out: str | Path) -> dict[str, Path]:
+    """Write ``evaluation.md``, ``evaluation.json`` and ``errors.png`` (:func:`plot_errors`) into ``out``.
+
+    Returns the paths under ``markdown``, ``json`` and ``plot`` (also under ``histogram``, its former name).
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"markdown": out / "evaluation.md", "json": out / "evaluation.json", "plot": out / "errors.png"}
+    paths["histogram"] = paths["plot"]
+    _write_atomic(paths["markdown"], markdown_table(report))
+    data = {k: v for k, v in asdict(report).items() if k != "errors"}
+    _write_atomic(paths["json"], json.dumps(data, indent=2))
+    plot_errors(report, paths["plot"])
     return paths

@@ -18,6 +18,7 @@ definition and its hash (see :func:`load_checkpoint`).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -263,11 +264,15 @@ def load_checkpoint(
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
     try:
-        ckpt = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as err:
-        raise CheckpointError(f"cannot read checkpoint {path}: {type(err).__name__}: {err}") from err
+        with warnings.catch_warnings():  # torch warns about the pickle protocol of files it then refuses
+            warnings.simplefilter("ignore")
+            ckpt = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as err:  # torch's own text spans several lines and suggests weights_only=False: not ours
+        raise CheckpointError(
+            f"{path} is not a loadable nik checkpoint (torch.load(weights_only=True) refused it: {type(err).__name__})"
+        ) from err
     if not isinstance(ckpt, dict) or "nik" not in ckpt or "state_dict" not in ckpt:
-        raise CheckpointError(f"{path} is not a nik checkpoint (no 'nik' block with the robot and network)")
+        raise CheckpointError(f"{path} is not a loadable nik checkpoint (no 'nik' block with the robot and network)")
     extra = ckpt["nik"]
     try:
         stored = Robot.from_definition(extra["robot"])

@@ -106,7 +106,7 @@ def test_checkpoint_for_another_robot_is_refused(kuka, tmp_path):
 def test_not_a_checkpoint_is_refused(tmp_path):
     path = tmp_path / "junk.ckpt"
     torch.save({"state_dict": {}}, path)
-    with pytest.raises(nik.CheckpointError, match="not a nik checkpoint"):
+    with pytest.raises(nik.CheckpointError, match="not a loadable nik checkpoint"):
         load_checkpoint(path)
     with pytest.raises(FileNotFoundError):
         load_checkpoint(tmp_path / "missing.ckpt")

@@ -69,7 +69,7 @@ def register(sub) -> None:
         help="evaluate network, refinements, swarm, closed form and pytorch-kinematics on a test split",
         description="Solve the test poses of a dataset with every pipeline and write a Markdown table "
         "(success at 1 mm / 1 deg and 0.1 mm / 0.1 deg, error percentiles, joints outside limits, time per "
-        "target), a JSON copy and an error histogram (PNG).",
+        "target), a JSON copy and a cumulative error plot (PNG).",
     )
     e.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
     e.add_argument(
@@ -304,6 +304,10 @@ def _cmd_evaluate(args) -> int:
         raise ValueError(f"--refinements: unknown method(s) {bad}; expected some of {','.join(REFINEMENTS)}")
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
+    if args.checkpoint is not None:  # refuse a bad checkpoint in one line, before any progress output
+        from nik.models import load_checkpoint
+
+        load_checkpoint(args.checkpoint, robot=robot)
     report = evaluate(
         robot,
         data=args.data,
@@ -320,5 +324,5 @@ def _cmd_evaluate(args) -> int:
     out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name
     paths = write_report(report, out)
     print(markdown_table(report))
-    print(f"wrote {paths['markdown']}, {paths['json']}, {paths['histogram']}")
+    print(f"wrote {paths['markdown']}, {paths['json']}, {paths['plot']}")
     return 0

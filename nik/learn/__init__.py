@@ -19,6 +19,7 @@ _LAZY = {
     "DEIK": "nik.learn.modules",
     "IKDataModule": "nik.learn.datamodule",
     "History": "nik.learn.callbacks",
+    "StableLastCheckpoint": "nik.learn.callbacks",
     "Threads": "nik.learn.callbacks",
 }
 

@@ -1,5 +1,6 @@
-"""Callbacks: a wall-clock history of the validation metrics (for loss-versus-time plots), and the
-number of torch threads per process."""
+"""Callbacks: a wall-clock history of the validation metrics (for loss-versus-time plots), the
+number of torch threads per process, and a checkpoint at a stable path (``<default_root_dir>/last.ckpt``)
+that the docs and scripts can name."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ from pathlib import Path
 
 import lightning as L
 import torch
+from lightning.pytorch.callbacks import Checkpoint
 
-__all__ = ["History", "Threads"]
+__all__ = ["History", "StableLastCheckpoint", "Threads"]
 
 
 class Threads(L.Callback):
@@ -59,7 +61,7 @@ class History(L.Callback):
 
     Args:
         filename: if set, the rows are also written as CSV to ``<trainer.default_root_dir>/<filename>``
-            when the fit ends.
+            when the fit ends (written to a temporary name, then renamed).
 
     ``rows`` holds one dict per validation (floats).
     """
@@ -81,8 +83,62 @@ class History(L.Callback):
             return  # under DDP the metrics are reduced over ranks: rank 0 writes the one file
         path = Path(trainer.default_root_dir) / self.filename
         path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
         keys = sorted({k for r in self.rows for k in r})
-        with open(path, "w", newline="") as f:
+        with open(tmp, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=keys)
             w.writeheader()
             w.writerows(self.rows)
+        os.replace(tmp, path)
+
+
+class StableLastCheckpoint(Checkpoint):
+    """Keeps ``<trainer.default_root_dir>/<filename>`` (default ``last.ckpt``) up to date: a full Lightning
+    checkpoint (resumable with ``--ckpt_path``, loadable by :func:`nik.models.load_checkpoint`) written at
+    the end of every training epoch that ran a validation, and when training ends, so every run of
+    ``train.py`` has one path that does not depend on the logger's ``version_N`` folders.
+
+    The file is written to a hidden temporary name in the same folder and renamed over the old one, so a
+    reader never sees a half-written checkpoint and an interrupted save leaves the previous one intact.
+    ``train.py`` adds this callback to every run; the best checkpoints by ``val_loss`` stay with
+    Lightning's ``ModelCheckpoint`` (``<default_root_dir>/<logger dirs>/checkpoints/``).
+
+    It is a :class:`~lightning.pytorch.callbacks.Checkpoint`, so Lightning runs it after the other callbacks
+    (``ModelCheckpoint`` included), and it saves at the epoch's end, after the validation: the file holds
+    their state after that validation, and resuming from it neither repeats the epoch nor a save.
+    """
+
+    def __init__(self, filename: str = "last.ckpt"):
+        super().__init__()
+        if not filename or Path(filename).name != filename:
+            raise ValueError(f"StableLastCheckpoint: filename must be a plain file name, got {filename!r}")
+        self.filename = filename
+        self._saved_step: int | None = None
+        self._validated = False
+
+    def path(self, trainer) -> Path:
+        """Where the checkpoint goes: ``<trainer.default_root_dir>/<filename>``."""
+        return Path(trainer.default_root_dir) / self.filename
+
+    def _save(self, trainer) -> None:
+        if trainer.fast_dev_run or trainer.sanity_checking or self._saved_step == trainer.global_step:
+            return
+        path = self.path(trainer)
+        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        # full state, for resume; every rank calls it (collective), only global rank 0 writes
+        trainer.save_checkpoint(tmp, weights_only=False)
+        if trainer.is_global_zero:
+            os.replace(tmp, path)
+        self._saved_step = trainer.global_step
+
+    def on_validation_end(self, trainer, pl_module) -> None:
+        if not trainer.sanity_checking:
+            self._validated = True
+
+    def on_train_epoch_end(self, trainer, pl_module) -> None:
+        if self._validated:
+            self._validated = False
+            self._save(trainer)
+
+    def on_train_end(self, trainer, pl_module) -> None:
+        self._save(trainer)

@@ -1,7 +1,15 @@
-"""The LightningCLI behind ``python train.py``: ``fit | validate | test --config configs/train/<method>.yaml``."""
+"""The LightningCLI behind ``python train.py``: ``fit | validate | test --config configs/train/<method>.yaml``.
+
+Every run writes ``<trainer.default_root_dir>/last.ckpt`` (see :class:`nik.learn.callbacks.StableLastCheckpoint`);
+the shipped configs set ``default_root_dir`` to ``runs/<method>``. The default logger is a ``CSVLogger`` in
+``default_root_dir``. A ``--ckpt_path`` that is not a loadable nik checkpoint is refused with a
+:class:`nik.CheckpointError` before training starts.
+"""
 
 from __future__ import annotations
 
+import logging
+import warnings
 from pathlib import Path
 
 __all__ = ["TRAIN_CONFIG_DIR", "METHODS", "cli_main", "method_config"]
@@ -9,6 +17,8 @@ __all__ = ["TRAIN_CONFIG_DIR", "METHODS", "cli_main", "method_config"]
 #: The shipped training configs (``configs/train`` at the repository root), one per method.
 TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
 METHODS = ("bp", "adam", "lbfgs", "de", "de_bp")
+#: ``--ckpt_path`` values that Lightning resolves itself (not files).
+_SPECIAL_CKPT = ("last", "best", "hpc", "registry")
 
 
 def method_config(method: str) -> Path:
@@ -18,15 +28,90 @@ def method_config(method: str) -> Path:
     return TRAIN_CONFIG_DIR / f"{method}.yaml"
 
 
+class _DropTips(logging.Filter):
+    """Drops Lightning's advertising tips ("💡 Tip: ... try installing litlogger / litmodels")."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith("💡 Tip")
+
+
+def _quiet_lightning() -> None:
+    """Silence what nik's use of Lightning does not need to show. Narrow on purpose:
+
+    - the litlogger / litmodels tips (Lightning's ``rank_zero_info`` advertisements);
+    - torch 2.13's ``FutureWarning`` that ``LeafSpec`` is deprecated, raised inside Lightning 2.6's own
+      ``lightning/pytorch/utilities/_pytree.py`` (a dependency's use of torch, not nik's).
+    """
+    for name in ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero"):
+        log = logging.getLogger(name)
+        if not any(isinstance(f, _DropTips) for f in log.filters):
+            log.addFilter(_DropTips())
+    warnings.filterwarnings(
+        "ignore", message=r"`isinstance\(treespec, LeafSpec\)` is deprecated", category=FutureWarning
+    )
+
+
+def check_resume_checkpoint(path: str | Path) -> None:
+    """Refuse a ``--ckpt_path`` that is missing or not a loadable nik checkpoint (one line, no traceback
+    from deep inside Lightning). Raises :class:`FileNotFoundError` or :class:`nik.CheckpointError`."""
+    from nik.models import load_checkpoint
+
+    load_checkpoint(path)  # weights_only=True: no code from the file runs
+
+
+def _ckpt_path_arg(args: list[str]) -> str | None:
+    """The value of ``--ckpt_path`` in ``args`` (``--ckpt_path X`` or ``--ckpt_path=X``), else None."""
+    for i, a in enumerate(args):
+        if a == "--ckpt_path" and i + 1 < len(args):
+            return args[i + 1]
+        if a.startswith("--ckpt_path="):
+            return a.split("=", 1)[1]
+    return None
+
+
+def _cli_class():
+    from jsonargparse import Namespace
+    from lightning.pytorch.cli import LightningCLI
+
+    class NikCLI(LightningCLI):
+        def before_instantiate_classes(self) -> None:
+            cfg = self.config[self.subcommand] if self.subcommand else self.config
+            trainer = cfg["trainer"]
+            root = trainer.get("default_root_dir") or "."
+            if trainer.get("logger") in (None, True):  # Lightning's default, said explicitly: CSV, no tensorboard
+                trainer["logger"] = Namespace(
+                    class_path="lightning.pytorch.loggers.CSVLogger", init_args=Namespace(save_dir=str(root))
+                )
+            if trainer.get("enable_checkpointing") is not False:  # every run keeps <default_root_dir>/last.ckpt
+                trainer["callbacks"] = [
+                    *(trainer.get("callbacks") or []),
+                    Namespace(class_path="nik.learn.callbacks.StableLastCheckpoint", init_args=Namespace()),
+                ]
+            ckpt = cfg.get("ckpt_path")
+            if ckpt is not None and str(ckpt) not in _SPECIAL_CKPT:
+                check_resume_checkpoint(ckpt)
+
+    return NikCLI
+
+
 def cli_main(args: list[str] | None = None, *, run: bool = True):
     """Run the training CLI with ``args`` (``sys.argv[1:]`` when None); returns the ``LightningCLI``
-    (``cli.model``, ``cli.datamodule``, ``cli.trainer``). Lightning is imported here, not at module import."""
-    from lightning.pytorch.cli import LightningCLI
+    (``cli.model``, ``cli.datamodule``, ``cli.trainer``). Lightning is imported here, not at module import.
+
+    Raises:
+        CheckpointError, FileNotFoundError: ``--ckpt_path`` names a file that is missing or not a loadable
+            nik checkpoint (checked with ``weights_only=True`` before Lightning reads it).
+    """
+    import sys
 
     from nik.learn.datamodule import IKDataModule
     from nik.learn.modules import IKModule
 
-    return LightningCLI(
+    ckpt = _ckpt_path_arg(sys.argv[1:] if args is None else list(args))
+    if ckpt is not None and ckpt not in _SPECIAL_CKPT:
+        check_resume_checkpoint(ckpt)
+    _quiet_lightning()
+    return _cli_class()(
         IKModule,
         IKDataModule,
         subclass_mode_model=True,
@@ -34,3 +119,18 @@ def cli_main(args: list[str] | None = None, *, run: bool = True):
         run=run,
         save_config_kwargs={"overwrite": True},
     )
+
+
+def main(args: list[str] | None = None) -> int:
+    """``train.py``'s entry point: :func:`cli_main`, with nik's input errors (a bad ``--ckpt_path``, a
+    missing or corrupt dataset) printed as one line ``train.py: error: ...`` and exit status 2."""
+    import sys
+
+    from nik.errors import NikError
+
+    try:
+        cli_main(args)
+    except (NikError, FileNotFoundError) as err:
+        print(f"train.py: error: {err}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,159 @@
+"""The README's examples run as written: every ```shell block in document order (with the large sizes
+shrunk by :data:`SHRINK`), then every ```python block, in a copy of the repository with no data and no runs.
+
+The first two ```bash blocks are CI's set-up and test commands and are not run here.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+FENCE = re.compile(r"^```(\S*)\n(.*?)^```[ \t]*$", re.M | re.S)
+
+#: (what the README says, what the test runs): sizes, epochs, budgets and run counts shrunk so that the
+#: whole README runs in about a minute. Each entry must match somewhere (checked), so the table cannot
+#: silently go stale when the README changes.
+SHRINK = [
+    ("--n 1000000 ", "--n 3000 "),
+    ("--n 200000 ", "--n 2000 "),
+    ("--n 100000 ", "--n 2000 "),
+    ("--n 50000 ", "--n 2000 "),
+    ("--n 500 --refinements lm", "--n 20 --refinements lm"),
+    ("--n 1000 --out runs/eval/puma560", "--n 20 --refinements lm,ipso --no-pk --out runs/eval/puma560"),
+    ("--trainer.max_epochs 5\n", "--trainer.max_epochs 1 --model.hidden [32]\n"),
+    ("--trainer.max_epochs 6 ", "--trainer.max_epochs 1 --model.hidden [32] "),
+    ("--trainer.max_epochs 20\n", "--trainer.max_epochs 1 --model.hidden [32]\n"),
+    (
+        "--config configs/train/de_bp.yaml --data.path data/kuka_kr_100k\n",
+        "--config configs/train/de_bp.yaml --data.path data/kuka_kr_100k --model.pop_size 16 "
+        "--model.generations 3 --trainer.max_epochs 5 --trainer.check_val_every_n_epoch 1\n",
+    ),
+    ("de_generation.py --threads 2\n", "de_generation.py --threads 2 --repeats 1 --samples 100\n"),
+    ("--samples 10000 1000\n", "--samples 100 --repeats 1\n"),
+    (
+        "--budget 45 --seeds 0 1 2",
+        "--budget 0.5 --seeds 0 --nets paper --methods adam --runs-dir runs/compare_readme",
+    ),
+    ("paper_d.py --out runs/paper_d", "paper_d.py --runs 1 --out runs/paper_d"),
+    ("paper_a.py --n 100", "paper_a.py --n 2 --iters 20"),
+    ("refine.py --n 1000 --swarm-n 100 --boundary", "refine.py --n 4 --swarm-n 1 --skip-uniform"),
+    (
+        "python -m pytest tests/test_swarm.py",
+        "python -m pytest -q -p no:cacheprovider --collect-only tests/test_swarm.py",
+    ),
+]
+
+
+def fenced_blocks(text: str) -> list[tuple[str, str]]:
+    """``(language, body)`` of every fenced block of ``text``, in order."""
+    return [(m.group(1), m.group(2)) for m in FENCE.finditer(text)]
+
+
+def shrink(script: str) -> str:
+    for old, new in SHRINK:
+        assert old in script, f"README no longer contains {old!r}: update SHRINK in tests/test_readme.py"
+        script = script.replace(old, new)
+    return script
+
+
+def test_every_fence_names_its_language_and_ci_blocks_come_first():
+    blocks = fenced_blocks(README.read_text())
+    langs = [lang for lang, _ in blocks]
+    assert "" not in langs, "a README block has no language; use shell, python, text or yaml"
+    assert set(langs) <= {"bash", "shell", "python", "text", "yaml"}
+    assert langs[:2] == ["bash", "bash"] and langs.count("bash") == 2
+    assert "pip install" in blocks[0][1] and "pytest" in blocks[1][1]
+
+
+def _copy_repo(dst: Path) -> Path:
+    ignore = shutil.ignore_patterns(
+        ".git", ".venv", "runs", "__pycache__", ".pytest_cache", "*.egg-info", ".ruff_cache"
+    )
+    shutil.copytree(ROOT, dst, ignore=ignore)
+    data = dst / "data"
+    for p in data.iterdir() if data.is_dir() else []:  # a fresh clone has only data/README*
+        if not p.name.lower().startswith("readme"):
+            shutil.rmtree(p) if p.is_dir() else p.unlink()
+    return dst
+
+
+def _env(work: Path) -> dict:
+    """PATH with this interpreter's folder first (``python`` and the ``nik`` entry point of the venv; a
+    ``nik`` shim when the entry point is not installed) and the copy's code importable."""
+    bindir = Path(sys.executable).parent
+    shim = work / ".readme-bin"
+    shim.mkdir()
+    py = shim / "python"  # a script, not a symlink: a venv's interpreter must be started by its own path
+    py.write_text(f'#!/bin/sh\nexec "{sys.executable}" "$@"\n')
+    py.chmod(0o755)
+    if not (bindir / "nik").exists():
+        nik = shim / "nik"
+        nik.write_text(
+            f'#!/bin/sh\nexec "{sys.executable}" -c "import sys; from nik.cli import main; sys.exit(main())" "$@"\n'
+        )
+        nik.chmod(0o755)
+    path = os.pathsep.join([str(shim), str(bindir), os.environ.get("PATH", "")])
+    return {**os.environ, "PATH": path, "PYTHONPATH": str(work), "OMP_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
+
+
+_PYTHON_DRIVER = """
+import sys, traceback
+blocks = sys.argv[1:]
+for i, path in enumerate(blocks):
+    src = open(path).read()
+    try:
+        exec(compile(src, path, "exec"), {"__name__": "__readme__"})
+    except Exception:
+        traceback.print_exc()
+        print(f"README python block {i} ({path}) failed", file=sys.stderr)
+        sys.exit(1)
+"""
+
+
+def test_readme_shell_then_python_blocks_run_in_a_fresh_copy(tmp_path):
+    blocks = fenced_blocks(README.read_text())
+    shell = [body for lang, body in blocks if lang == "shell"]
+    assert shell, "the README has no ```shell blocks"
+    work = _copy_repo(tmp_path / "nik")
+    env = _env(work)
+    parts = ["set -euo pipefail"]
+    for i, body in enumerate(shell):
+        parts += [f"echo '### README shell block {i}' >&2", body]
+    script = shrink("\n".join(parts) + "\n")
+    (work / "readme.sh").write_text(script)
+    done = subprocess.run(["bash", "readme.sh"], cwd=work, env=env, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, f"README shell blocks failed:\n{done.stdout[-3000:]}\n{done.stderr[-5000:]}"
+    assert (work / "runs" / "adam" / "last.ckpt").is_file()
+    assert (work / "runs" / "solver_eval_puma560" / "last.ckpt").is_file()
+    assert (work / "runs" / "eval" / "puma560" / "errors.png").is_file()
+
+    # YAML examples with a name are saved as <name>.yaml, as the text around them says
+    for lang, body in blocks:
+        name = re.search(r"^name:\s*(\S+)", body, re.M)
+        if lang == "yaml" and name:
+            (work / f"{name.group(1)}.yaml").write_text(body)
+    paths = []
+    for i, (_lang, body) in enumerate(b for b in blocks if b[0] == "python"):
+        path = work / f"readme_block_{i}.py"
+        path.write_text(textwrap.dedent(body))
+        paths.append(str(path))
+    done = subprocess.run(
+        [sys.executable, "-c", _PYTHON_DRIVER, *paths], cwd=work, env=env, capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, f"README python blocks failed:\n{done.stdout[-2000:]}\n{done.stderr[-4000:]}"
+
+
+@pytest.mark.parametrize("old", [old for old, _ in SHRINK])
+def test_shrink_table_entries_still_match_the_readme(old):
+    shell = "\n".join(body for lang, body in fenced_blocks(README.read_text()) if lang == "shell")
+    assert old in shell
