@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["reach_radius", "reach_center", "reach_ratio", "within_reach"]
+__all__ = ["MM_HINT_FACTOR", "reach_center", "reach_radius", "reach_ratio", "unreachable_message", "within_reach"]
 
 #: Relative slack on the bound against rounding (a target on the boundary must not be flagged).
 REACH_SLACK = 1e-9
@@ -50,3 +50,29 @@ def reach_ratio(robot, T: torch.Tensor) -> torch.Tensor:
 def within_reach(robot, T: torch.Tensor) -> torch.Tensor:
     """``(B,)`` bool: False where no configuration can reach the position of ``T: (B, 4, 4)``."""
     return reach_ratio(robot, T) <= 1.0 + REACH_SLACK
+
+
+#: From this factor beyond the reach on, the message asks whether the position was given in millimetres.
+MM_HINT_FACTOR = 100.0
+
+
+def unreachable_message(robot, T: torch.Tensor, reachable: torch.Tensor, *, unit_hint: str = "") -> str | None:
+    """One line about the targets of ``T: (B, 4, 4)`` that ``reachable: (B,)`` flags as out of reach
+    (None when every target is within reach). When the farthest lies ``MM_HINT_FACTOR`` times or more
+    beyond the reach, the line asks whether the positions were given in millimetres (``unit_hint``
+    names the remedy, e.g. ``"pass --unit mm"``)."""
+    bad = ~reachable
+    n_bad = int(bad.sum())
+    if n_bad == 0:
+        return None
+    ratio = reach_ratio(robot, T)
+    worst = float(ratio[bad].max())
+    r_mm = reach_radius(robot) * 1e3
+    msg = (
+        f"{n_bad} of {len(reachable)} target(s) lie beyond the reach of {robot.name} (no configuration reaches "
+        f"farther than {r_mm:.0f} mm from its first joint axis; farthest target at {worst:.3g} x that distance)"
+    )
+    if worst >= MM_HINT_FACTOR:
+        hint = f" ({unit_hint})" if unit_hint else ""
+        msg += f"; were the positions given in millimetres? nik expects metres{hint}"
+    return msg

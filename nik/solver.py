@@ -6,11 +6,14 @@ The pipeline of :meth:`IKSolver.solve`, for a batch of B target poses:
    PUMA-like arm (:func:`nik.analytic.is_puma_like`), the closed-form solution (the valid one
    nearest ``q_near``, or the one farthest inside the joint ranges); else a multi-start (the swarm
    starts from particles spread uniformly inside the limits, LM from ``LMCfg.starts`` uniform starts);
-2. **refinement** (``refine`` = ``ipso`` | ``pso`` | ``sapso`` | ``ga`` | ``lm``) of the targets the
-   guess leaves outside tolerance, through :func:`nik.swarm.refine` (swarm methods finish with an
-   LM polish unless ``polish=False``); ``refine="none"`` returns the raw guess;
-3. **result**: joint angles inside the limits, their true errors measured by FK, and an honest
-   success flag.
+2. **refinement** of the targets the guess leaves outside tolerance: by default (``refine="lm"``)
+   Levenberg-Marquardt (:func:`nik.swarm.lm_solve`) from the guess, then restarts from uniform starts
+   only for the targets that still fail and are not provably out of reach (:mod:`nik.reach`); the
+   swarm methods (``ipso`` | ``pso`` | ``sapso`` | ``ga``) through :func:`nik.swarm.refine` (finished by
+   an LM polish unless ``polish=False``); ``refine="none"`` returns the raw guess;
+3. **result**: joint angles inside the limits, their true errors measured by FK, an honest
+   success flag and ``reachable`` (False where the reach bound proves the target out of reach;
+   :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
 
 Units are SI (metres, radians) throughout.
 """
@@ -18,6 +21,7 @@ Units are SI (metres, radians) throughout.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,7 +37,9 @@ from nik.poses import (
     validate_joints,
     validate_pose,
 )
+from nik.reach import unreachable_message, within_reach
 from nik.robots import Robot, load_robot
+from nik.threads import threads_for
 
 __all__ = ["REFINE_METHODS", "IKResult", "IKSolver", "as_poses", "nearest_solution"]
 
@@ -42,6 +48,9 @@ REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 #: Largest accepted deviation of a quaternion's norm from 1; nearer ones are normalised.
 QUAT_NORM_TOL = 1e-2
+
+#: Relative tolerance (radians per radian of limit) within which an angle counts as on a joint limit.
+LIMIT_ROUNDING = 1e-9
 
 
 @dataclass
@@ -55,6 +64,8 @@ class IKResult:
         success: (B,) bool, ``pos_err <= tol_pos`` and ``rot_err <= tol_rot``.
         iterations: (B,) long, refinement iterations spent (0 where the guess was already within tolerance).
         source: where the initial guess came from: ``network``, ``analytic`` or ``multistart``.
+        reachable: (B,) bool, False where no configuration can reach the target (provable reach
+            bound, :func:`nik.reach.within_reach`); such targets get ``success=False`` and a best effort.
     """
 
     q: torch.Tensor
@@ -63,6 +74,7 @@ class IKResult:
     success: torch.Tensor
     iterations: torch.Tensor
     source: str = ""
+    reachable: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -155,9 +167,13 @@ def _near_representative(sols: torch.Tensor, q_near: torch.Tensor, lo: torch.Ten
     k = torch.round((target - sols) / two_pi)
     best = sols
     best_d = (sols - target).abs()
+    # a turn that lands within rounding of a limit counts as inside (and is clamped onto it): q_near
+    # often sits exactly on a limit (a previous answer, clamped), and sols + 2 pi k differs from it by 1e-15
+    tol = LIMIT_ROUNDING * (1.0 + torch.maximum(lo.abs(), hi.abs()))
     for shift in (k - 1, k, k + 1):
         cand = sols + shift * two_pi
-        ok = (cand >= lo) & (cand <= hi)
+        ok = (cand >= lo - tol) & (cand <= hi + tol)
+        cand = torch.minimum(torch.maximum(cand, lo), hi)
         d = torch.where(ok, (cand - target).abs(), torch.full_like(cand, float("inf")))
         take = d < best_d
         best = torch.where(take, cand, best)
@@ -206,6 +222,67 @@ def dedupe(q: torch.Tensor, *, tol: float = 1e-3) -> torch.Tensor:
     return q[~dup]
 
 
+def check_tolerances(tol_pos: float, tol_rot: float) -> None:
+    """Raise ``ValueError`` unless both tolerances are numbers >= 0 (NaN and negatives are refused)."""
+    for name, value, unit in (("tol_pos", tol_pos, "metres"), ("tol_rot", tol_rot, "radians")):
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}") from None
+        if math.isnan(v) or v < 0:
+            raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}")
+
+
+# ---------------------------------------------------------------------------
+# Refiners: (T, q0) -> result with q, pos_err, rot_err, iterations
+# ---------------------------------------------------------------------------
+@dataclass
+class RefineResult:
+    """What a refiner returns for B targets: ``q (B, dof)``, ``pos_err``, ``rot_err`` ``(B,)`` by FK,
+    ``iterations (B,)`` long."""
+
+    q: torch.Tensor
+    pos_err: torch.Tensor
+    rot_err: torch.Tensor
+    iterations: torch.Tensor
+
+
+def lm_refine(
+    robot: Robot,
+    T: torch.Tensor,
+    q0: torch.Tensor | None,
+    *,
+    tol_pos: float,
+    tol_rot: float,
+    seed: int = 0,
+    max_iters: int | None = None,
+    cfg=None,
+    restarts: bool = True,
+    reachable: torch.Tensor | None = None,
+) -> RefineResult:
+    """Levenberg-Marquardt from ``q0: (B, dof)`` (None: a multistart guess), restarting only the
+    targets that fail and are within reach (``restarts=False``: none). ``T: (B, 4, 4)``."""
+    from nik.swarm.polish import LMCfg, lm_solve
+
+    cfg = cfg if isinstance(cfg, LMCfg) else LMCfg()
+    g = torch.Generator(device=T.device).manual_seed(int(seed))
+    q, it = lm_solve(
+        robot,
+        T,
+        q0,
+        cfg=cfg,
+        tol_pos=tol_pos,
+        tol_rot=tol_rot,
+        max_iters=max_iters,
+        restarts=None if restarts else 0,
+        generator=g,
+        reachable=reachable,
+    )
+    q = robot.clamp(q)
+    pos, rot = pose_error(T, robot.fk(q, check=False))
+    return RefineResult(q, pos, rot, it)
+
+
 # ---------------------------------------------------------------------------
 # The solver
 # ---------------------------------------------------------------------------
@@ -216,7 +293,8 @@ class IKSolver:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
         checkpoint: a trained network (``.ckpt`` from ``train.py`` or :func:`nik.models.save_checkpoint`),
             loaded safely by :func:`nik.models.load_checkpoint`; one made for another robot is refused.
-        refine: ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` | ``lm``.
+        refine: ``lm`` (the default: Levenberg-Marquardt from the guess, restarts only for the targets
+            that fail; the fastest) | ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` (swarms, then LM polish).
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
         swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
         analytic: use the closed form for PUMA-like arms when no checkpoint is given (default True).
@@ -233,7 +311,7 @@ class IKSolver:
         self,
         robot: Robot | str | Path,
         checkpoint: str | Path | None = None,
-        refine: str = "ipso",
+        refine: str = "lm",
         *,
         polish: bool = True,
         swarm_cfg=None,
@@ -319,7 +397,20 @@ class IKSolver:
             q[none] = torch.gather(clamped, 1, idx[:, None, None].expand(-1, 1, clamped.shape[-1])).squeeze(1)
         return self.robot.clamp(q)
 
-    def _refine(self, T, q_init, *, tol_pos, tol_rot, seed, max_iters):
+    def _refine(self, T, q_init, *, tol_pos, tol_rot, seed, max_iters, reachable=None):
+        if self.refine == "lm":
+            return lm_refine(
+                self.robot,
+                T,
+                q_init,
+                tol_pos=tol_pos,
+                tol_rot=tol_rot,
+                seed=seed,
+                max_iters=max_iters,
+                cfg=self.swarm_cfg,
+                restarts=self.fallback == "multistart",
+                reachable=reachable,
+            )
         from nik.swarm import refine as swarm_refine
 
         kwargs = {}
@@ -377,8 +468,25 @@ class IKSolver:
 
         Returns:
             :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``.
+
+        Raises:
+            ValueError: bad poses, a negative or NaN tolerance, a malformed ``q_near``.
+
+        Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
+        and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
+        check_tolerances(tol_pos, tol_rot)
         T = as_poses(T_target, representation)
+        reachable = within_reach(self.robot, T)
+        msg = unreachable_message(self.robot, T, reachable)
+        if msg is not None:
+            warnings.warn(msg, UserWarning, stacklevel=2)
+        with threads_for(T.shape[0]):
+            res = self._solve(T, tol_pos, tol_rot, seed, q_near, max_iters, reachable)
+        res.reachable = reachable
+        return res
+
+    def _solve(self, T, tol_pos, tol_rot, seed, q_near, max_iters, reachable) -> IKResult:
         B = T.shape[0]
         robot = self.robot
         q_near_t = self._q_near(q_near, B, T)
@@ -411,11 +519,19 @@ class IKSolver:
         if todo.numel():
             Tt = T[todo]
             init = None if q0 is None else q0[todo]
-            res = self._refine(Tt, init, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
+            res = self._refine(
+                Tt, init, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters, reachable=reachable[todo]
+            )
             cand_q, cand_pos, cand_rot, cand_it = res.q, res.pos_err, res.rot_err, res.iterations
             if use_near:
                 near = self._refine(
-                    Tt, q_near_t[todo], tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters
+                    Tt,
+                    q_near_t[todo],
+                    tol_pos=tol_pos,
+                    tol_rot=tol_rot,
+                    seed=seed,
+                    max_iters=max_iters,
+                    reachable=reachable[todo],
                 )
                 ok_a = (cand_pos <= tol_pos) & (cand_rot <= tol_rot)
                 ok_b = (near.pos_err <= tol_pos) & (near.rot_err <= tol_rot)
@@ -441,18 +557,20 @@ class IKSolver:
         q = robot.clamp(q)
         pos, rot = pose_error(T, robot.fk(q))
         success = (pos <= tol_pos) & (rot <= tol_rot)
-        first_pass_is_fallback = (self.net is None and self._analytic) or (self.net is None and self.refine == "lm")
-        if self.fallback != "none" and not first_pass_is_fallback and not bool(success.all()):
-            idx = (~success).nonzero().squeeze(1)
+        # the LM refinement already restarts its failures (the multistart fallback); the closed form
+        # without a network is the first pass itself
+        first_pass_is_fallback = (self.net is None and self._analytic) or (
+            self.refine == "lm" and self.fallback == "multistart"
+        )
+        if self.fallback != "none" and not first_pass_is_fallback and not bool((success | ~reachable).all()):
+            idx = (~success & reachable).nonzero().squeeze(1)
             if self.fallback == "analytic":  # the closed-form solution nearest the first answer (or q_near)
                 near = q_near_t[idx] if q_near_t is not None else q[idx]
                 fq = self._analytic_guess(T[idx], near)
                 fpos, frot = pose_error(T[idx], robot.fk(fq))
                 fit = torch.zeros_like(iterations[idx])
             else:  # Levenberg-Marquardt from uniform starts
-                from nik.swarm import refine as swarm_refine
-
-                res = swarm_refine(robot, T[idx], method="lm", q_init=None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
+                res = lm_refine(robot, T[idx], None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
                 fq, fpos, frot, fit = res.q, res.pos_err, res.rot_err, res.iterations.to(torch.long)
             better = (fpos + 0.1 * frot) < (pos[idx] + 0.1 * rot[idx])
             keep = idx[better]
