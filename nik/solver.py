@@ -512,7 +512,10 @@ class IKSolver:
             pos = torch.full((B,), float("inf"), dtype=T.dtype, device=T.device)
             rot = pos.clone()
         else:
-            todo = (~((pos <= tol_pos) & (rot <= tol_rot))).nonzero().squeeze(1)
+            todo = ~((pos <= tol_pos) & (rot <= tol_rot))
+            if source == "analytic":  # out of reach: the clamped closed form nearest the target is the best effort
+                todo &= reachable
+            todo = todo.nonzero().squeeze(1)
         use_near = q_near_t is not None and not self._analytic
         if use_near:
             todo = torch.arange(B, device=T.device)  # q_near: also look for a solution near q_near everywhere

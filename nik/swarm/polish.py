@@ -16,20 +16,21 @@ radians per joint, then brought inside the limits (wrapping joints wrap, the oth
 A step is kept only if it lowers ``|e|^2``; lambda then shrinks by ``lambda_down``, otherwise it
 grows by ``lambda_up``. One iteration costs one FK + Jacobian per row.
 
-Per-target work (:func:`lm_solve`):
+Per-target work (:func:`lm_solve`, :func:`lm_run`):
 
-1. a first run from the given guesses ``(B, K, dof)`` (or, without guesses, from the best of
-   ``first_starts`` uniform configurations by FK error);
-2. a target leaves the batch as soon as one of its starts is within tolerance, or when all its
-   starts *stall* (``stall_iters`` iterations in a row that lower ``|e|^2`` by less than the
-   fraction ``stall_rel``), or after ``iters`` iterations;
-3. only the targets still outside tolerance and not provably out of reach
-   (:func:`nik.reach.within_reach`) are restarted: up to ``restart_rounds`` rounds of
-   ``restart_starts`` uniform starts each (``restart_iters`` iterations at most per round).
+1. every target starts from its guesses ``(B, K, dof)`` (or, without guesses, from the best of
+   ``first_starts`` uniform configurations by pose error);
+2. a target leaves the batch as soon as one of its starts is within tolerance;
+3. a start is *spent* when it stalls (``stall_iters`` iterations in a row that lower ``|e|^2`` by
+   less than the fraction ``stall_rel``) or after ``iters`` iterations; a spent start of a target
+   that is not provably out of reach (:func:`nik.reach.within_reach`) and has restarts left is
+   replaced, in the same batch, by a fresh uniform start (at most ``restarts`` per target). So
+   only failing targets draw restarts, the batch stays large, and a provably unreachable target
+   costs one start (stopped early by the stall test).
 
-The answer of a target is its converged start with the lowest error, or else its start with the
-lowest error over every round (best effort). Random starts come from one ``torch.Generator``:
-same seed, same result.
+The answer of a target is its converged start with the lowest error, or else the start with the
+lowest error it saw (best effort). Random starts come from one ``torch.Generator``: same seed,
+same result.
 """
 
 from __future__ import annotations
@@ -51,13 +52,13 @@ __all__ = ["LMCfg", "LMRun", "lm_run", "lm_solve", "so3_log"]
 class LMCfg:
     """Levenberg-Marquardt settings (``method="lm"``, ``polish=True`` and the solver's default refinement)."""
 
-    iters: int = 60  # iteration limit of the first run (each: one FK + Jacobian per start)
-    starts: int = 32  # kept for compatibility: the old number of uniform starts (see first_starts / restarts)
-    first_starts: int = 16  # without guesses: the first run starts from the best of this many uniform configurations
-    restart_rounds: int = 6  # rounds of restarts for targets still outside tolerance (0: none)
-    restart_starts: int = 4  # uniform starts per failing target and round
-    restart_iters: int = 40  # iteration limit of one restart round
-    stall_iters: int = 6  # a start stops after this many iterations in a row without progress...
+    iters: int = 25  # iteration limit of one start (each iteration: one FK + Jacobian per start)
+    starts: int = 32  # kept for compatibility (the old number of uniform starts); see first_starts / restarts
+    first_starts: int = 16  # without guesses: the first start is the best of this many uniform configurations
+    restarts: int = 2  # fresh uniform starts a failing target draws in the first pass (one when its start is spent)
+    tail_starts: int = 8  # then, targets still failing: this many uniform starts side by side...
+    tail_restarts: int = 8  # ...and this many more fresh starts per target
+    stall_iters: int = 4  # a start stops after this many iterations in a row without progress...
     stall_rel: float = 1e-3  # ...progress meaning |e|^2 lowered by at least this fraction
     rot_weight: float = 0.5  # m/rad, weight of the rotation error rows
     lambda0: float = 1e-3  # initial damping (relative to diag(J^T J))
@@ -132,14 +133,25 @@ def lm_run(
     tol_pos: float,
     tol_rot: float,
     iters: int,
+    restarts: int = 0,
+    first_iters: int | None = None,
+    sampler=None,
+    reachable: torch.Tensor | None = None,
     prismatic: torch.Tensor | None = None,
 ) -> LMRun:
-    """One Levenberg-Marquardt run (no restarts) from ``q0: (B, K, dof)`` towards ``T_target: (B, 3|4, 4)``.
+    """Levenberg-Marquardt from ``q0: (B, K, dof)`` towards ``T_target: (B, 3|4, 4)``, restarting in place.
+
+    Each of the ``B x K`` rows is one start. A row that stalls (``cfg.stall_iters`` iterations without
+    progress) or runs ``iters`` iterations without converging is, while its target has restarts left
+    (``restarts`` per target) and is ``reachable``, replaced in the same batch by a fresh start
+    ``sampler(m) -> (m, dof)``; it costs no extra evaluation (the new start is evaluated where the
+    candidate step would be); the starts of ``q0`` run ``first_iters`` iterations at most (default
+    ``iters``). A target leaves the batch as soon as one of its rows converges, or when
+    none of its rows can go on. Only failing targets ever draw restarts.
 
     ``G, offsets`` are the normal form (:mod:`nik.kinematics`) in the dtype/device of ``T_target``;
-    ``lo, hi: (dof,)`` limits, ``wrap: (dof,)`` bool. A target leaves the batch when one of its
-    starts converges or all of them stall; ``prismatic`` (None: all revolute) is passed to the kernel
-    when some joint is prismatic.
+    ``lo, hi: (dof,)`` limits, ``wrap: (dof,)`` bool; ``prismatic`` (None: all revolute) is passed to
+    the kernel when some joint is prismatic.
     """
     B, K, n = q0.shape
     dtype, device = T_target.dtype, T_target.device
@@ -148,6 +160,8 @@ def lm_run(
     any_wrap = bool(wrap.any())
     kw = {"prismatic": prismatic} if prismatic is not None and bool(prismatic.any()) else {}
     eye_eps = cfg.eps * torch.eye(n, dtype=dtype, device=device)
+    if sampler is None:
+        restarts = 0
 
     def bounds(q):
         if any_wrap:
@@ -164,14 +178,27 @@ def lm_run(
     e, J, E, pos, rot = evaluate(q, Tt)
     lam = torch.full((B, K), cfg.lambda0, dtype=dtype, device=device)
     stall = torch.zeros((B, K), dtype=torch.int32, device=device)
+    # the starts given run first_iters iterations at most, fresh ones iters
+    first = iters if first_iters is None else int(first_iters)
+    age = torch.full((B, K), iters - first, dtype=torch.int32, device=device)
+    left = torch.full((B,), int(restarts), dtype=torch.int32, device=device)
+    if reachable is not None:
+        left = torch.where(reachable.to(device), left, torch.zeros_like(left))
+    best_q, best_E = q.clone(), E.clone()  # per row, over its restarts
     out_q = q[:, 0].clone()
     out_E = E[:, 0].clone()
     out_conv = torch.zeros(B, dtype=torch.bool, device=device)
     out_it = torch.zeros(B, dtype=torch.long, device=device)
     active = torch.arange(B, device=device)
+    total = max(first, 0) + int(restarts) * iters  # hard per-target budget
 
-    def finish(rows, q_, E_, conv_):
-        """Write the answers of the targets ``rows`` (indices into ``active``) and return nothing."""
+    def finish(rows):
+        """Write the answers of the targets ``rows`` (indices into the active batch)."""
+        q_, E_, conv_ = q[rows], E[rows], ((pos <= tol_pos) & (rot <= tol_rot))[rows]
+        bq, bE = best_q[rows], best_E[rows]
+        better = (E_ < bE) | conv_
+        q_ = torch.where(better[..., None], q_, bq)
+        E_ = torch.where(better, E_, bE)
         score = torch.where(conv_, E_, E_ + float("inf"))
         anyc = conv_.any(1)
         score = torch.where(anyc[:, None], score, E_)
@@ -181,22 +208,30 @@ def lm_run(
         out_E[tgt] = torch.gather(E_, 1, i[:, None]).squeeze(1)
         out_conv[tgt] = anyc
 
-    for it in range(iters + 1):
+    for it in range(total + 1):
         conv = (pos <= tol_pos) & (rot <= tol_rot)
-        done = conv.any(1) | (stall >= cfg.stall_iters).all(1)
-        if it == iters:
+        spent = (stall >= cfg.stall_iters) | (age >= iters)
+        # rows to restart: spent, target not converged, restarts left (drawn in row order)
+        want = spent & ~conv.any(1, keepdim=True)
+        if restarts:
+            rank = torch.cumsum(want.to(torch.int32), dim=1)
+            restart = want & (rank <= left[:, None])
+        else:
+            restart = torch.zeros_like(want)
+        done = conv.any(1) | (spent & ~restart).all(1)
+        if it == total:
             done = torch.ones_like(done)
         if bool(done.any()):
             rows = done.nonzero().squeeze(1)
-            finish(rows, q[rows], E[rows], conv[rows])
+            finish(rows)
             if bool(done.all()):
                 break
             keep = (~done).nonzero().squeeze(1)
-            active, q, e, J, E, pos, rot, lam, stall, Tt = (
-                t.index_select(0, keep) for t in (active, q, e, J, E, pos, rot, lam, stall, Tt)
+            active, q, e, J, E, pos, rot, lam, stall, age, left, best_q, best_E, restart, Tt = (
+                t.index_select(0, keep)
+                for t in (active, q, e, J, E, pos, rot, lam, stall, age, left, best_q, best_E, restart, Tt)
             )
-        # J^T J and J^T e by broadcasting: faster than bmm for these tiny matrices on CPU
-        A = (J[..., :, :, None] * J[..., :, None, :]).sum(-3)
+        A = (J[..., :, :, None] * J[..., :, None, :]).sum(-3)  # J^T J by broadcasting: faster than bmm here
         g = (J * e[..., :, None]).sum(-2).unsqueeze(-1)
         # active set: a joint held at a limit that the descent direction pushes further out is left out
         gs = g.squeeze(-1)
@@ -213,10 +248,21 @@ def lm_run(
         dq = dq * torch.clamp(cfg.max_step / big.clamp_min(1e-30), max=1.0)
         dq = torch.where(ok[..., None] & torch.isfinite(dq), dq, torch.zeros_like(dq))
         qc = bounds(q + dq)
+        n_restart = int(restart.sum())
+        if n_restart:
+            # remember the best of the spent start, then put a fresh start in its place
+            better = restart & (E < best_E)
+            best_q = torch.where(better[..., None], q, best_q)
+            best_E = torch.where(better, E, best_E)
+            fresh = torch.zeros_like(qc)
+            fresh[restart] = sampler(n_restart).to(dtype=dtype, device=device)
+            qc = torch.where(restart[..., None], fresh, qc)
+            left = left - restart.sum(1, dtype=torch.int32)
         ec, Jc, Ec, posc, rotc = evaluate(qc, Tt)
-        acc = (Ec < E) & ok
+        acc = ((Ec < E) & ok) | restart
         gain = torch.where(acc, E - Ec, torch.zeros_like(E))
-        stall = torch.where(gain >= cfg.stall_rel * E, torch.zeros_like(stall), stall + 1)
+        stall = torch.where((gain >= cfg.stall_rel * E) | restart, torch.zeros_like(stall), stall + 1)
+        age = torch.where(restart, torch.zeros_like(age), age + 1)
         a3 = acc[..., None]
         q = torch.where(a3, qc, q)
         e = torch.where(a3, ec, e)
@@ -225,6 +271,8 @@ def lm_run(
         pos = torch.where(acc, posc, pos)
         rot = torch.where(acc, rotc, rot)
         lam = torch.where(acc, lam * cfg.lambda_down, lam * cfg.lambda_up).clamp(cfg.lambda_min, cfg.lambda_max)
+        if n_restart:
+            lam = torch.where(restart, torch.full_like(lam, cfg.lambda0), lam)
         out_it[active] += 1
     return LMRun(out_q, out_E, out_conv, out_it)
 
@@ -242,28 +290,29 @@ def lm_solve(
     generator: torch.Generator | None = None,
     reachable: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Levenberg-Marquardt from guesses, then restarts for the targets that fail.
+    """Levenberg-Marquardt from guesses, with restarts only for the targets that fail.
 
     Args:
         T_target: (B, 4, 4) (or (B, 3, 4)) wanted poses, metres.
         q0: (B, dof) or (B, K, dof) starts, radians (brought inside the limits first); None: the best
             of ``cfg.first_starts`` uniform configurations per target.
         tol_pos, tol_rot: stop a target when a start is within both (metres, radians).
-        max_iters: iteration limit of the first run (default ``cfg.iters``).
-        restarts: rounds of restarts (default ``cfg.restart_rounds``; 0: none).
+        max_iters: iteration limit of the given starts (default ``cfg.iters``; restarts run ``cfg.iters``).
+        restarts: fresh uniform starts a failing target may draw (default ``cfg.restarts``; 0: none).
         generator: source of the random starts (default: a generator seeded with 0).
-        reachable: (B,) bool, targets worth restarting (default :func:`nik.reach.within_reach`).
+        reachable: (B,) bool, targets allowed to restart (default :func:`nik.reach.within_reach`):
+            a provably unreachable target gets its first start only (best effort, success False).
 
     Returns:
-        ``q: (B, dof)`` inside the limits, and ``iterations: (B,)`` long (all rounds together).
+        ``q: (B, dof)`` inside the limits, and ``iterations: (B,)`` long.
     """
     cfg = cfg or LMCfg()
-    iters = cfg.iters if max_iters is None else int(max_iters)
-    rounds = cfg.restart_rounds if restarts is None else int(restarts)
+    first_iters = cfg.iters if max_iters is None else int(max_iters)
+    iters = cfg.iters
+    n_restarts = cfg.restarts if restarts is None else int(restarts)
     dtype, device = T_target.dtype, T_target.device
     if generator is None:
         generator = torch.Generator(device=device).manual_seed(0)
-    n = robot.dof
     G, off = robot._params(T_target)
     lo, hi = robot.limits_as(T_target)
     wrap = wrap_mask(robot.limits).to(device)
@@ -271,27 +320,57 @@ def lm_solve(
     if prismatic is not None:
         prismatic = prismatic.to(device)
         wrap = wrap & ~prismatic
-    Tt = T_target[..., :3, :]
     if q0 is None:
         q0 = _best_of_uniform(robot, T_target, cfg.first_starts, generator)
     q0 = (q0 if q0.ndim == 3 else q0.unsqueeze(1)).to(dtype=dtype, device=device)
-    common = {"cfg": cfg, "tol_pos": tol_pos, "tol_rot": tol_rot, "prismatic": prismatic}
-    run = lm_run(Tt, q0, G, off, lo, hi, wrap, iters=iters, **common)
-    q, E, conv, it = run.q, run.E, run.converged, run.iterations
-    if rounds > 0 and not bool(conv.all()):
-        if reachable is None:
-            reachable = within_reach(robot, T_target) if T_target.shape[-2] == 4 else torch.ones_like(conv)
-        for _ in range(rounds):
-            todo = (~conv & reachable).nonzero().squeeze(1)
-            if todo.numel() == 0:
-                break
-            S = cfg.restart_starts
-            starts = robot.sample(todo.numel() * S, generator=generator, dtype=dtype, device=device)
-            r = lm_run(Tt[todo], starts.reshape(-1, S, n), G, off, lo, hi, wrap, iters=cfg.restart_iters, **common)
-            better = r.converged | (r.E < E[todo])
-            take = todo[better]
-            q[take], E[take], conv[take] = r.q[better], r.E[better], r.converged[better]
-            it[todo] += r.iterations
+    if n_restarts > 0 and reachable is None:
+        reachable = within_reach(robot, T_target) if T_target.shape[-2] == 4 else None
+    run = lm_run(
+        T_target[..., :3, :],
+        q0,
+        G,
+        off,
+        lo,
+        hi,
+        wrap,
+        cfg=cfg,
+        tol_pos=tol_pos,
+        tol_rot=tol_rot,
+        iters=iters,
+        first_iters=first_iters,
+        restarts=n_restarts,
+        sampler=lambda m: robot.sample(m, generator=generator, dtype=dtype, device=device),
+        reachable=reachable,
+        prismatic=prismatic,
+    )
+    q, it = run.q, run.iterations
+    todo = ~run.converged
+    if reachable is not None:
+        todo &= reachable
+    todo = todo.nonzero().squeeze(1)
+    if n_restarts > 0 and cfg.tail_starts > 0 and todo.numel():
+        # the few hard targets left: many starts side by side (few sequential iterations)
+        S = cfg.tail_starts
+        starts = robot.sample(todo.numel() * S, generator=generator, dtype=dtype, device=device)
+        tail = lm_run(
+            T_target[todo][..., :3, :],
+            starts.reshape(-1, S, robot.dof),
+            G,
+            off,
+            lo,
+            hi,
+            wrap,
+            cfg=cfg,
+            tol_pos=tol_pos,
+            tol_rot=tol_rot,
+            iters=iters,
+            restarts=cfg.tail_restarts,
+            sampler=lambda m: robot.sample(m, generator=generator, dtype=dtype, device=device),
+            prismatic=prismatic,
+        )
+        better = tail.converged | (tail.E < run.E[todo])
+        q[todo[better]] = tail.q[better]
+        it[todo] += tail.iterations
     return q, it
 
 
