@@ -266,6 +266,8 @@ def lm_refine(
 
     cfg = cfg if isinstance(cfg, LMCfg) else LMCfg()
     g = torch.Generator(device=T.device).manual_seed(int(seed))
+    if T.shape[0] == 1 and T.device.type == "cpu":
+        return _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, g)
     q, it = lm_solve(
         robot,
         T,
@@ -281,6 +283,50 @@ def lm_refine(
     q = robot.clamp(q)
     pos, rot = pose_error(T, robot.fk(q, check=False))
     return RefineResult(q, pos, rot, it)
+
+
+def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, g) -> RefineResult:
+    """:func:`lm_refine` for one pose on the CPU: the numpy lean path (:mod:`nik.swarm.lm_single`)."""
+    from nik.swarm.lm_single import SingleLM, best_of, lm_solve_one
+    from nik.swarm.lm_single import _residual as _residual_one
+
+    model = _SINGLE_CACHE.get(id(robot))
+    if model is None or model[0] is not robot:
+        model = (robot, SingleLM.from_robot(robot))
+        _SINGLE_CACHE[id(robot)] = model
+    model = model[1]
+    Tn = T[0].detach().to(torch.float64).numpy()
+
+    def sample():
+        return robot.sample(1, generator=g, dtype=torch.float64)[0].numpy()
+
+    if q0 is None:
+        start = best_of(
+            model, Tn, robot.sample(cfg.first_starts, generator=g, dtype=torch.float64).numpy(), cfg.rot_weight
+        )
+    else:
+        start = q0.reshape(-1, robot.dof)[0].detach().to(torch.float64).numpy()
+    n_restarts = cfg.restarts + cfg.tail_starts * (1 + cfg.tail_restarts) if restarts else 0
+    if reachable is not None and not bool(reachable[0]):
+        n_restarts = 0
+    q, it = lm_solve_one(
+        model,
+        Tn,
+        start,
+        cfg=cfg,
+        tol_pos=tol_pos,
+        tol_rot=tol_rot,
+        first_iters=cfg.iters if max_iters is None else int(max_iters),
+        restarts=n_restarts,
+        sample=sample,
+    )
+    _, _, pos, rot = _residual_one(Tn, model.fk_many(q[None])[0], cfg.rot_weight)
+    q = torch.as_tensor(q, dtype=T.dtype).reshape(1, -1)
+    err = torch.tensor([pos, rot], dtype=T.dtype)
+    return RefineResult(q, err[:1], err[1:], torch.tensor([it], dtype=torch.long))
+
+
+_SINGLE_CACHE: dict = {}
 
 
 # ---------------------------------------------------------------------------
