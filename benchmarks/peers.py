@@ -73,7 +73,15 @@ def run_nik(robot, T, *, solver=None):
     return res.q, dt
 
 
+def available(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
 def rtb_model(robot):
+    if not available("roboticstoolbox"):
+        return None, float("nan")
     import roboticstoolbox as rtb
 
     with redirect_stdout(io.StringIO()):
@@ -133,7 +141,7 @@ def compare(robot_name: str, n: int, threads: int, rounds: int, *, with_pk: bool
     robot = nik.load_robot(robot_name)
     T = targets(robot, n, seed)
     ets, gap = rtb_model(robot)
-    pkc = pk_solver(robot) if with_pk else None
+    pkc = pk_solver(robot) if with_pk and available("pytorch_kinematics") else None
     solver = nik.IKSolver(robot)
     torch.set_num_threads(threads)
     nik.set_threads(threads)
@@ -142,14 +150,15 @@ def compare(robot_name: str, n: int, threads: int, rounds: int, *, with_pk: bool
     for _ in range(rounds):
         last["nik"] = run_nik(robot, T, solver=solver)
         runs["nik"].append(last["nik"][1])
-        last["rtb ik_LM"] = run_rtb(ets, T)
-        runs["rtb ik_LM"].append(last["rtb ik_LM"][1])
+        if ets is not None:
+            last["rtb ik_LM"] = run_rtb(ets, T)
+            runs["rtb ik_LM"].append(last["rtb ik_LM"][1])
         if pkc is not None:
             last["pk PseudoInverseIK"] = run_pk(robot, pkc, T)
             runs["pk PseudoInverseIK"].append(last["pk PseudoInverseIK"][1])
     nik.set_threads(None)
     rows = []
-    ref = statistics.median(runs["rtb ik_LM"])
+    ref = statistics.median(runs["rtb ik_LM"]) if runs["rtb ik_LM"] else float("nan")
     for name, times in runs.items():
         if not times:
             continue
@@ -167,7 +176,10 @@ def compare(robot_name: str, n: int, threads: int, rounds: int, *, with_pk: bool
                 "vs_rtb": ref / med,
             }
         )
-    print(f"  ({robot_name}: rtb FK agrees with nik within {gap:.1e} m)", flush=True)
+    if ets is None:
+        print("  (roboticstoolbox-python is not installed: pip install -e .[bench]; its rows are left out)")
+    else:
+        print(f"  ({robot_name}: rtb FK agrees with nik within {gap:.1e} m)", flush=True)
     return rows
 
 
@@ -203,13 +215,14 @@ def latency(robot_name: str, n: int, seed: int) -> dict:
         q, dt = run_nik(robot, T[i : i + 1], solver=solver)
         t_nik.append(dt)
         q_nik.append(q)
-        _, dt = run_rtb(ets, T[i : i + 1])
-        t_rtb.append(dt)
+        if ets is not None:
+            _, dt = run_rtb(ets, T[i : i + 1])
+            t_rtb.append(dt)
     succ, _ = score(robot, T, torch.cat(q_nik))
     return {
         "robot": robot_name,
         "nik_ms": statistics.median(t_nik) * 1e3,
-        "rtb_ms": statistics.median(t_rtb) * 1e3,
+        "rtb_ms": statistics.median(t_rtb) * 1e3 if t_rtb else float("nan"),
         "success": succ,
     }
 
