@@ -79,6 +79,15 @@ def available(module: str) -> bool:
     return importlib.util.find_spec(module) is not None
 
 
+def run_nik_from_guess(robot, T, q_guess):
+    """nik's LM (with its restarts) from given guesses: what the pipeline does after a network."""
+    from nik.solver import lm_refine
+
+    t = time.perf_counter()
+    res = lm_refine(robot, T, q_guess, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=0)
+    return res.q, time.perf_counter() - t
+
+
 def rtb_model(robot):
     if not available("roboticstoolbox"):
         return None, float("nan")
@@ -137,19 +146,28 @@ def run_pk(robot, pkc, T, *, retries: int = 10, max_iterations: int = 50):
 # ---------------------------------------------------------------------------
 # Scenarios
 # ---------------------------------------------------------------------------
-def compare(robot_name: str, n: int, threads: int, rounds: int, *, with_pk: bool, seed: int) -> list[dict]:
+def compare(
+    robot_name: str, n: int, threads: int, rounds: int, *, with_pk: bool, seed: int, proxy: float
+) -> list[dict]:
     robot = nik.load_robot(robot_name)
     T = targets(robot, n, seed)
+    q_true = robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    noise = torch.randn(q_true.shape, generator=torch.Generator().manual_seed(seed + 1), dtype=torch.float64)
+    q_proxy = robot.clamp(q_true + proxy * noise)  # a network-quality guess (stand-in until one ships)
     ets, gap = rtb_model(robot)
     pkc = pk_solver(robot) if with_pk and available("pytorch_kinematics") else None
     solver = nik.IKSolver(robot)
     torch.set_num_threads(threads)
     nik.set_threads(threads)
-    runs = {"nik": [], "rtb ik_LM": [], "pk PseudoInverseIK": []}
+    proxy_name = f"nik LM from truth + N(0, {proxy:g} rad) (network stand-in)"
+    runs = {"nik": [], proxy_name: [], "rtb ik_LM": [], "pk PseudoInverseIK": []}
     last = {}
     for _ in range(rounds):
         last["nik"] = run_nik(robot, T, solver=solver)
         runs["nik"].append(last["nik"][1])
+        if proxy > 0:
+            last[proxy_name] = run_nik_from_guess(robot, T, q_proxy)
+            runs[proxy_name].append(last[proxy_name][1])
         if ets is not None:
             last["rtb ik_LM"] = run_rtb(ets, T)
             runs["rtb ik_LM"].append(last["rtb ik_LM"][1])
@@ -236,6 +254,13 @@ def main(argv=None) -> int:
     p.add_argument("--pk-max-n", type=int, default=10000, help="leave pytorch-kinematics out above this size")
     p.add_argument("--latency-n", type=int, default=200, help="single poses for the latency row")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--proxy-noise",
+        type=float,
+        default=0.1,
+        help="also time nik's LM from the true joints plus this much noise (rad), a stand-in for a network "
+        "guess (0: leave the row out)",
+    )
     p.add_argument("--quick", action="store_true", help="smoke run: 200 targets, 1 thread, 1 round")
     p.add_argument("--out", default=None, help="write OUT.md (tables) and OUT.txt (raw output)")
     args = p.parse_args(argv)
@@ -256,7 +281,9 @@ def main(argv=None) -> int:
     for th in thread_list:
         for n in sizes:
             for rb in robots:
-                rows += compare(rb, n, th, args.rounds, with_pk=n <= args.pk_max_n, seed=args.seed)
+                rows += compare(
+                    rb, n, th, args.rounds, with_pk=n <= args.pk_max_n, seed=args.seed, proxy=args.proxy_noise
+                )
     torch.set_num_threads(1)
     md = [
         "| robot | targets | threads | solver | ms / target | success % | joints outside limits | speed vs rtb |",

@@ -454,7 +454,7 @@ class IKSolver:
                 seed=seed,
                 max_iters=max_iters,
                 cfg=self.swarm_cfg,
-                restarts=self.fallback == "multistart",
+                restarts=self.fallback == "multistart" or q_init is None,  # no guess: the restarts are the multistart
                 reachable=reachable,
             )
         from nik.swarm import refine as swarm_refine
@@ -665,7 +665,7 @@ class IKSolver:
         if self.net is not None:
             starts = torch.cat([robot.clamp(self.net.predict(T)), starts])
         Tk = T.expand(starts.shape[0], 4, 4)
-        q, _ = lm_solve(robot, Tk, starts, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=100)
+        q, _ = lm_solve(robot, Tk, starts, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=100, restarts=0)
         q = robot.clamp(q)
         pos, rot = pose_error(Tk, robot.fk(q))
         ok = (pos <= tol_pos) & (rot <= tol_rot)

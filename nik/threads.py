@@ -1,10 +1,12 @@
 """How many torch intra-op threads nik's work uses.
 
-Measured (issue 10): on a busy machine two or more intra-op threads on small batches can stall
-(the same eager call took 0.05 s or 1.2 s), and a batch below a few thousand targets gains little
-from threads anyway, since each tensor op is short. So, unless :func:`set_threads` was called,
-nik runs a call on fewer than :data:`SMALL_BATCH` targets with one thread and leaves larger ones
-to torch's setting (``torch.get_num_threads()``). :func:`set_threads` fixes the count for every call.
+Measured (issue 10, ``benchmarks/results/peers.md``): on a busy 2-core machine, two intra-op
+threads made the same LM solve 5-60x slower than one (panda, 1,000 targets: 0.37 -> 21.9 ms per
+target; 10,000 targets: 0.20 -> 1.15 ms), because OpenMP threads wait on each other when the cores
+are taken; and each op on a batch of a few thousand targets is too short to gain from threads
+anyway. So, unless :func:`set_threads` was called, nik runs a call on fewer than
+:data:`SMALL_BATCH` targets with one thread and leaves larger ones to torch's setting
+(``torch.get_num_threads()``). :func:`set_threads` fixes the count for every call.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import torch
 __all__ = ["SMALL_BATCH", "get_threads", "set_threads", "threads_for"]
 
 #: Below this many targets a call runs on one thread unless :func:`set_threads` chose a count.
-SMALL_BATCH = 4096
+SMALL_BATCH = 100_000
 
 _threads: int | None = None
 

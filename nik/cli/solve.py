@@ -106,7 +106,7 @@ def add_threads_argument(parser, *, default=None) -> None:
         default=default,
         metavar="N",
         help="torch threads for the maths (default: "
-        + ("1" if default == 1 else "1 below 4096 poses, torch's setting above")
+        + ("1" if default == 1 else "1 below 100,000 poses, torch's setting above")
         + "; more threads help only large batches on an idle machine)",
     )
 
