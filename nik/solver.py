@@ -454,7 +454,8 @@ class IKSolver:
                 seed=seed,
                 max_iters=max_iters,
                 cfg=self.swarm_cfg,
-                restarts=self.fallback == "multistart" or q_init is None,  # no guess: the restarts are the multistart
+                # without a guess the restarts are the multistart itself
+                restarts=self.fallback == "multistart" or q_init is None,
                 reachable=reachable,
             )
         from nik.swarm import refine as swarm_refine
@@ -603,8 +604,10 @@ class IKSolver:
             q, pos, rot = q.clone(), pos.clone(), rot.clone()
             q[todo], pos[todo], rot[todo] = cand_q.to(q.dtype), cand_pos.to(pos.dtype), cand_rot.to(rot.dtype)
             iterations[todo] = cand_it.to(torch.long)
-        q = robot.clamp(q)
-        pos, rot = pose_error(T, robot.fk(q))
+        if not (B == 1 and T.device.type == "cpu" and self.refine == "lm"):
+            # (the one-pose lean path returns q inside the limits with its errors measured by FK already)
+            q = robot.clamp(q)
+            pos, rot = pose_error(T, robot.fk(q))
         success = (pos <= tol_pos) & (rot <= tol_rot)
         # the LM refinement already restarts its failures (the multistart fallback); the closed form
         # without a network is the first pass itself
