@@ -56,8 +56,8 @@ class LMCfg:
     starts: int = 32  # kept for compatibility (the old number of uniform starts); see first_starts / restarts
     first_starts: int = 16  # without guesses: the first start is the best of this many uniform configurations
     restarts: int = 2  # fresh uniform starts a failing target draws in the first pass (one when its start is spent)
-    tail_starts: int = 8  # then, targets still failing: this many uniform starts side by side...
-    tail_restarts: int = 8  # ...and this many more fresh starts per target
+    tail_starts: int = 16  # then the targets still failing (0.3 % on panda): this many uniform starts side by side...
+    tail_restarts: int = 16  # ...and this many more fresh starts per target
     stall_iters: int = 4  # a start stops after this many iterations in a row without progress...
     stall_rel: float = 1e-3  # ...progress meaning |e|^2 lowered by at least this fraction
     rot_weight: float = 0.5  # m/rad, weight of the rotation error rows
