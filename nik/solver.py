@@ -15,6 +15,11 @@ The pipeline of :meth:`IKSolver.solve`, for a batch of B target poses:
    success flag and ``reachable`` (False where the reach bound proves the target out of reach;
    :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
 
+The parts are small callables that :class:`IKSolver` composes: guess providers
+``(robot, T, ...) -> q (B, dof)`` in :mod:`nik.guesses` (closed form, network, multistart), refiners
+``(robot, T, q0) -> RefineResult`` in :mod:`nik.refiners` (LM; the swarms through
+:func:`nik.swarm.refine`), and the final check here (FK errors, success, reachability).
+
 Units are SI (metres, radians) throughout.
 """
 
@@ -28,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from nik.guesses import analytic_guess, multistart_guess, nearest_solution, network_guess
 from nik.poses import (
     POSE_DIMS,
     make_pose,
@@ -38,19 +44,17 @@ from nik.poses import (
     validate_pose,
 )
 from nik.reach import unreachable_message, within_reach
+from nik.refiners import RefineResult, lm_refine
 from nik.robots import Robot, load_robot
 from nik.threads import threads_for
 
-__all__ = ["REFINE_METHODS", "IKResult", "IKSolver", "as_poses", "nearest_solution"]
+__all__ = ["REFINE_METHODS", "IKResult", "IKSolver", "RefineResult", "as_poses", "lm_refine", "nearest_solution"]
 
 #: Values of ``IKSolver(refine=...)``.
 REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 #: Largest accepted deviation of a quaternion's norm from 1; nearer ones are normalised.
 QUAT_NORM_TOL = 1e-2
-
-#: Relative tolerance (radians per radian of limit) within which an angle counts as on a joint limit.
-LIMIT_ROUNDING = 1e-9
 
 
 @dataclass
@@ -156,61 +160,6 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
     return validate_pose(make_pose(R, p), name=name)
 
 
-# ---------------------------------------------------------------------------
-# Choosing among solutions
-# ---------------------------------------------------------------------------
-def _near_representative(sols: torch.Tensor, q_near: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """Each angle of ``sols: (B, K, dof)`` moved by a multiple of 2 pi, staying inside ``[lo, hi]``,
-    as near as possible to ``q_near: (B, dof)`` (matters for joints with more than a full turn of range)."""
-    two_pi = 2 * math.pi
-    target = q_near[:, None]
-    k = torch.round((target - sols) / two_pi)
-    best = sols
-    best_d = (sols - target).abs()
-    # a turn that lands within rounding of a limit counts as inside (and is clamped onto it): q_near
-    # often sits exactly on a limit (a previous answer, clamped), and sols + 2 pi k differs from it by 1e-15
-    tol = LIMIT_ROUNDING * (1.0 + torch.maximum(lo.abs(), hi.abs()))
-    for shift in (k - 1, k, k + 1):
-        cand = sols + shift * two_pi
-        ok = (cand >= lo - tol) & (cand <= hi + tol)
-        cand = torch.minimum(torch.maximum(cand, lo), hi)
-        d = torch.where(ok, (cand - target).abs(), torch.full_like(cand, float("inf")))
-        take = d < best_d
-        best = torch.where(take, cand, best)
-        best_d = torch.where(take, d, best_d)
-    return best
-
-
-def nearest_solution(
-    sols: torch.Tensor, valid: torch.Tensor, q_near: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Among ``sols: (B, K, dof)`` with ``valid: (B, K)``, the one nearest ``q_near: (B, dof)``.
-
-    Distance: Euclidean norm of the joint differences after each angle is moved by multiples of
-    2 pi (inside the limits) as near ``q_near`` as it goes, i.e. the joint motion to reach it.
-
-    Returns:
-        ``q: (B, dof)`` and ``found: (B,)`` bool (False where no solution is valid; ``q`` is then
-        the nearest of all).
-    """
-    rep = _near_representative(sols, q_near, lo, hi)
-    dist = torch.linalg.vector_norm(rep - q_near[:, None], dim=-1)
-    found = valid.any(-1)
-    dist = torch.where(valid | ~found[:, None], dist, torch.full_like(dist, float("inf")))
-    idx = dist.argmin(-1)
-    q = torch.gather(rep, 1, idx[:, None, None].expand(-1, 1, rep.shape[-1])).squeeze(1)
-    return q, found
-
-
-def _central_solution(sols: torch.Tensor, valid: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """Among valid ``sols: (B, K, dof)``, the one whose worst joint is farthest inside its range."""
-    margin = torch.minimum(sols - lo, hi - sols) / (hi - lo)
-    score = margin.amin(-1)
-    score = torch.where(valid, score, torch.full_like(score, -float("inf")))
-    idx = score.argmax(-1)
-    return torch.gather(sols, 1, idx[:, None, None].expand(-1, 1, sols.shape[-1])).squeeze(1)
-
-
 def dedupe(q: torch.Tensor, *, tol: float = 1e-3) -> torch.Tensor:
     """Drop from ``q: (K, dof)`` every row within ``tol`` (max abs wrapped joint difference, radians)
     of an earlier row; the order of the rest is kept."""
@@ -231,102 +180,6 @@ def check_tolerances(tol_pos: float, tol_rot: float) -> None:
             raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}") from None
         if math.isnan(v) or v < 0:
             raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}")
-
-
-# ---------------------------------------------------------------------------
-# Refiners: (T, q0) -> result with q, pos_err, rot_err, iterations
-# ---------------------------------------------------------------------------
-@dataclass
-class RefineResult:
-    """What a refiner returns for B targets: ``q (B, dof)``, ``pos_err``, ``rot_err`` ``(B,)`` by FK,
-    ``iterations (B,)`` long."""
-
-    q: torch.Tensor
-    pos_err: torch.Tensor
-    rot_err: torch.Tensor
-    iterations: torch.Tensor
-
-
-def lm_refine(
-    robot: Robot,
-    T: torch.Tensor,
-    q0: torch.Tensor | None,
-    *,
-    tol_pos: float,
-    tol_rot: float,
-    seed: int = 0,
-    max_iters: int | None = None,
-    cfg=None,
-    restarts: bool = True,
-    reachable: torch.Tensor | None = None,
-) -> RefineResult:
-    """Levenberg-Marquardt from ``q0: (B, dof)`` (None: a multistart guess), restarting only the
-    targets that fail and are within reach (``restarts=False``: none). ``T: (B, 4, 4)``."""
-    from nik.swarm.polish import LMCfg, lm_solve
-
-    cfg = cfg if isinstance(cfg, LMCfg) else LMCfg()
-    g = torch.Generator(device=T.device).manual_seed(int(seed))
-    if T.shape[0] == 1 and T.device.type == "cpu":
-        return _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, g)
-    q, it = lm_solve(
-        robot,
-        T,
-        q0,
-        cfg=cfg,
-        tol_pos=tol_pos,
-        tol_rot=tol_rot,
-        max_iters=max_iters,
-        restarts=None if restarts else 0,
-        generator=g,
-        reachable=reachable,
-    )
-    q = robot.clamp(q)
-    pos, rot = pose_error(T, robot.fk(q, check=False))
-    return RefineResult(q, pos, rot, it)
-
-
-def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, g) -> RefineResult:
-    """:func:`lm_refine` for one pose on the CPU: the numpy lean path (:mod:`nik.swarm.lm_single`)."""
-    from nik.swarm.lm_single import SingleLM, best_of, lm_solve_one
-    from nik.swarm.lm_single import _residual as _residual_one
-
-    model = _SINGLE_CACHE.get(id(robot))
-    if model is None or model[0] is not robot:
-        model = (robot, SingleLM.from_robot(robot))
-        _SINGLE_CACHE[id(robot)] = model
-    model = model[1]
-    Tn = T[0].detach().to(torch.float64).numpy()
-
-    def sample():
-        return robot.sample(1, generator=g, dtype=torch.float64)[0].numpy()
-
-    if q0 is None:
-        start = best_of(
-            model, Tn, robot.sample(cfg.first_starts, generator=g, dtype=torch.float64).numpy(), cfg.rot_weight
-        )
-    else:
-        start = q0.reshape(-1, robot.dof)[0].detach().to(torch.float64).numpy()
-    n_restarts = cfg.restarts + cfg.tail_starts * (1 + cfg.tail_restarts) if restarts else 0
-    if reachable is not None and not bool(reachable[0]):
-        n_restarts = 0
-    q, it = lm_solve_one(
-        model,
-        Tn,
-        start,
-        cfg=cfg,
-        tol_pos=tol_pos,
-        tol_rot=tol_rot,
-        first_iters=cfg.iters if max_iters is None else int(max_iters),
-        restarts=n_restarts,
-        sample=sample,
-    )
-    _, _, pos, rot = _residual_one(Tn, model.fk_many(q[None])[0], cfg.rot_weight)
-    q = torch.as_tensor(q, dtype=T.dtype).reshape(1, -1)
-    err = torch.tensor([pos, rot], dtype=T.dtype)
-    return RefineResult(q, err[:1], err[1:], torch.tensor([it], dtype=torch.long))
-
-
-_SINGLE_CACHE: dict = {}
 
 
 # ---------------------------------------------------------------------------
@@ -417,31 +270,10 @@ class IKSolver:
         return q
 
     def _multistart_guess(self, T: torch.Tensor, seed: int, n_starts: int = 64) -> torch.Tensor:
-        """Best of ``n_starts`` uniform configurations per target (the guess of ``refine='none'``)."""
-        g = torch.Generator(device=T.device).manual_seed(int(seed))
-        B = T.shape[0]
-        q = self.robot.sample(B * n_starts, generator=g, dtype=T.dtype, device=T.device).reshape(B, n_starts, -1)
-        pos, rot = pose_error(T[:, None], self.robot.fk(q))
-        idx = (pos + 0.1 * rot).argmin(-1)
-        return torch.gather(q, 1, idx[:, None, None].expand(-1, 1, q.shape[-1])).squeeze(1)
+        return multistart_guess(self.robot, T, seed=seed, n_starts=n_starts)
 
     def _analytic_guess(self, T: torch.Tensor, q_near: torch.Tensor | None) -> torch.Tensor:
-        from nik.analytic import puma560_ik
-
-        sols, valid = puma560_ik(self.robot, T)
-        lo, hi = self.robot.limits_as(T)
-        if q_near is not None:
-            q, _ = nearest_solution(sols, valid, q_near, lo, hi)
-            return self.robot.clamp(q)
-        q = _central_solution(sols, valid, lo, hi)
-        none = ~valid.any(-1)
-        if bool(none.any()):  # unreachable or outside the limits: the clamped solution that comes closest
-            clamped = self.robot.clamp(sols[none])
-            pos, rot = pose_error(T[none, None], self.robot.fk(clamped))
-            idx = (pos + 0.1 * rot).argmin(-1)
-            q = q.clone()
-            q[none] = torch.gather(clamped, 1, idx[:, None, None].expand(-1, 1, clamped.shape[-1])).squeeze(1)
-        return self.robot.clamp(q)
+        return analytic_guess(self.robot, T, q_near=q_near)
 
     def _refine(self, T, q_init, *, tol_pos, tol_rot, seed, max_iters, reachable=None):
         if self.refine == "lm":
@@ -482,7 +314,7 @@ class IKSolver:
         T = as_poses(T_target, representation)
         q_near = self._q_near(q_near, T.shape[0], T)
         if self.net is not None:
-            return self.robot.clamp(self.net.predict(T))
+            return network_guess(self.net, self.robot, T)
         if self._analytic:
             return self._analytic_guess(T, q_near)
         return self._multistart_guess(T, seed)
@@ -539,7 +371,7 @@ class IKSolver:
         q_near_t = self._q_near(q_near, B, T)
         source = self.initial_source
         if self.net is not None:
-            q0 = robot.clamp(self.net.predict(T))
+            q0 = network_guess(self.net, robot, T)
         elif self._analytic:
             q0 = self._analytic_guess(T, q_near_t)
         elif self.refine in ("none",):
