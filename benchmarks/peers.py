@@ -45,9 +45,17 @@ TOL_ROT = math.radians(0.1)  # rad
 URDF = {"panda": ROOT / "configs/robots/urdf/panda.urdf", "ur5": ROOT / "configs/robots/urdf/ur5.urdf"}
 
 
+#: Targets come from their own random stream: were it the solvers' (nik's seed 0), a multistart would
+#: draw the very configurations the targets were made from.
+TARGET_SEED_BASE = 1_000_003
+
+
+def target_joints(robot, n: int, seed: int) -> torch.Tensor:
+    return robot.sample(n, generator=torch.Generator().manual_seed(TARGET_SEED_BASE + seed), dtype=torch.float64)
+
+
 def targets(robot, n: int, seed: int) -> torch.Tensor:
-    q = robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
-    return robot.fk(q)
+    return robot.fk(target_joints(robot, n, seed))
 
 
 def score(robot, T, q) -> tuple[float, int]:
@@ -151,7 +159,7 @@ def compare(
 ) -> list[dict]:
     robot = nik.load_robot(robot_name)
     T = targets(robot, n, seed)
-    q_true = robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    q_true = target_joints(robot, n, seed)
     noise = torch.randn(q_true.shape, generator=torch.Generator().manual_seed(seed + 1), dtype=torch.float64)
     q_proxy = robot.clamp(q_true + proxy * noise)  # a network-quality guess (stand-in until one ships)
     ets, gap = rtb_model(robot)

@@ -83,9 +83,9 @@ def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, rea
         return robot.sample(1, generator=g, dtype=torch.float64)[0].numpy()
 
     if q0 is None:
-        start = best_of(
-            model, Tn, robot.sample(cfg.first_starts, generator=g, dtype=torch.float64).numpy(), cfg.rot_weight
-        )
+        # one vectorised FK of many candidates costs about one LM iteration here: take more than the batch does
+        cand = robot.sample(SINGLE_FIRST_STARTS, generator=g, dtype=torch.float64).numpy()
+        start = best_of(model, Tn, cand, cfg.rot_weight)
     else:
         start = q0.reshape(-1, robot.dof)[0].detach().to(torch.float64).numpy()
     n_restarts = cfg.restarts + cfg.tail_starts * (1 + cfg.tail_restarts) if restarts else 0
@@ -109,3 +109,6 @@ def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, rea
 
 
 _SINGLE_CACHE: dict = {}
+
+#: Uniform candidates whose best (by pose error) starts the one-pose LM when there is no guess.
+SINGLE_FIRST_STARTS = 64

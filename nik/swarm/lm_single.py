@@ -36,6 +36,14 @@ class SingleLM:
     wrap: np.ndarray  # (n,) bool
     prismatic: np.ndarray  # (n,) bool
 
+    @property
+    def any_prismatic(self) -> bool:
+        return bool(self._any_pm)
+
+    def __post_init__(self):
+        self._any_pm = bool(self.prismatic.any())
+        self._any_wrap = bool(self.wrap.any())
+
     @classmethod
     def from_robot(cls, robot) -> SingleLM:
         from nik.swarm.bounds import wrap_mask
@@ -64,16 +72,17 @@ class SingleLM:
         th = q + self.offsets
         c, s = np.cos(th), np.sin(th)
         pm = self.prismatic
-        if pm.any():
+        any_pm = self.any_prismatic
+        if any_pm:
             c = np.where(pm, th, c)  # the prismatic P_i carries the displacement, Q_i is zero
             s = np.where(pm, 0.0, s)
         M = c[:, None, None] * self.P + s[:, None, None] * self.Q + self.R
         T = self.G0
-        frames = []
-        for i in range(q.shape[0]):
-            frames.append(T)
+        n = q.shape[0]
+        F = np.empty((n, 4, 4))  # frame before each joint
+        for i in range(n):
+            F[i] = T
             T = T @ M[i]
-        F = np.stack(frames)  # (n, 4, 4): frame before each joint
         z = F[:, :3, 2].T  # (3, n)
         r = T[:3, 3, None] - F[:, :3, 3].T
         J = np.empty((6, q.shape[0]))
@@ -81,7 +90,7 @@ class SingleLM:
         J[1] = z[2] * r[0] - z[0] * r[2]
         J[2] = z[0] * r[1] - z[1] * r[0]
         J[3:] = z
-        if pm.any():
+        if any_pm:
             J[:3] = np.where(pm, z, J[:3])
             J[3:] = np.where(pm, 0.0, z)
         return T, J
@@ -98,7 +107,7 @@ class SingleLM:
         return T
 
     def bounds(self, q: np.ndarray) -> np.ndarray:
-        if self.wrap.any():
+        if self._any_wrap:
             two_pi = 2 * math.pi
             up = np.maximum(np.ceil((self.lo - q) / two_pi), 0)
             down = np.maximum(np.ceil((q - self.hi) / two_pi), 0)
