@@ -5,7 +5,8 @@ The pipeline of :meth:`IKSolver.solve`, for a batch of B target poses:
 1. **initial guess**: the trained network's prediction when a checkpoint is given; else, for a
    PUMA-like arm (:func:`nik.analytic.is_puma_like`), the closed-form solution (the valid one
    nearest ``q_near``, or the one farthest inside the joint ranges); else a multi-start (the swarm
-   starts from particles spread uniformly inside the limits, LM from ``LMCfg.starts`` uniform starts);
+   starts from particles spread uniformly inside the limits, LM from the best of
+   ``LMCfg.first_starts`` uniform configurations);
 2. **refinement** of the targets the guess leaves outside tolerance: by default (``refine="lm"``)
    Levenberg-Marquardt (:func:`nik.swarm.lm_solve`) from the guess, then restarts from uniform starts
    only for the targets that still fail and are not provably out of reach (:mod:`nik.reach`); the
@@ -199,11 +200,13 @@ class IKSolver:
         analytic: use the closed form for PUMA-like arms when no checkpoint is given (default True).
         fallback: a second chance for targets still outside tolerance after the refinement:
             ``"analytic"``, the closed-form solution nearest the first answer (PUMA-like arms only);
-            ``"multistart"``, Levenberg-Marquardt from ``LMCfg.starts`` uniform starts;
+            ``"multistart"``, Levenberg-Marquardt from fresh uniform starts (with ``refine="lm"`` these
+            are the LM's own restarts, drawn only for the targets that fail and are within reach);
             ``"auto"`` (or True, the default), analytic where available, else multistart;
-            ``"none"`` (or False). It is not used where it would repeat the first pass (no network
-            on a PUMA-like arm, or ``refine="lm"`` without a network), nor with ``refine="none"``.
-            The evaluation turns it off to measure what the network's guess alone delivers.
+            ``"none"`` (or False: with ``refine="lm"`` and a guess, no restarts). It is not used where it
+            would repeat the first pass (no network on a PUMA-like arm), nor with ``refine="none"``,
+            nor for targets proven out of reach. The evaluation turns it off to measure what the
+            network's guess alone delivers.
     """
 
     def __init__(
