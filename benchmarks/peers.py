@@ -101,7 +101,8 @@ def rtb_model(robot):
         return None, float("nan")
     import roboticstoolbox as rtb
 
-    with redirect_stdout(io.StringIO()):
+    with redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # Robot.URDF: still the documented way in 1.x
         ets = rtb.Robot.URDF(str(URDF[robot.name].resolve())).ets(end=robot.end_link)
     q = robot.sample(32, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
     gap = max(float(np.abs(ets.eval(qi) - Ti).max()) for qi, Ti in zip(q.numpy(), robot.fk(q).numpy(), strict=True))
