@@ -242,3 +242,17 @@ def test_lm_same_generator_seed_same_answer():
     a = lm_solve(robot, T, None, generator=torch.Generator().manual_seed(5))
     b = lm_solve(robot, T, None, generator=torch.Generator().manual_seed(5))
     assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+
+
+def test_lm_compiled_kernel_gives_the_eager_answers():
+    import dataclasses
+
+    from nik.swarm import LMCfg, lm_solve
+
+    robot = nik.load_robot("ur5")
+    q, T = _targets(robot, 6, 23)
+    guess = robot.clamp(q + 0.05)
+    eager = lm_solve(robot, T, guess, restarts=0)
+    compiled = lm_solve(robot, T, guess, cfg=dataclasses.replace(LMCfg(), compiled=True), restarts=0)
+    torch.testing.assert_close(compiled[0], eager[0], atol=1e-9, rtol=0)
+    assert torch.equal(compiled[1], eager[1])

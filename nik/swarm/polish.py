@@ -35,6 +35,7 @@ same result.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import torch
@@ -68,6 +69,11 @@ class LMCfg:
     lambda_max: float = 1e6
     eps: float = 1e-9  # added to diag(J^T J), m^2
     max_step: float = 0.5  # rad, largest change of any joint in one step
+    compiled: bool = False  # FK + Jacobian + error through torch.compile (needs a C compiler; eager fallback).
+    #   Measured (panda, one thread): 2.3x faster per evaluation at a fixed 10,000 rows, but end to end
+    #   slower (10,000 targets: 0.018 vs 0.011 ms per target from guesses, 0.19 vs 0.13 multistart; the
+    #   batch shrinks as targets finish, and guards/recompiles cost more than they save), plus a
+    #   one-off compile of 15-25 s. Hence off by default.
 
 
 def so3_log(R: torch.Tensor) -> torch.Tensor:
@@ -101,6 +107,40 @@ def _residual(Tt: torch.Tensor, T: torch.Tensor, rw: float):
     pos2 = (dp * dp).sum(-1)
     E = pos2 + (rw * theta) ** 2
     return torch.cat([dp, w], dim=-1), E, pos2.sqrt(), theta
+
+
+def _evaluate_eager(q, Tt, G, offsets, row_w, rw: float, **kw):
+    """FK, weighted Jacobian and error of ``q: (B, K, n)`` against ``Tt: (B, 1, 3, 4)``:
+    ``e (B, K, 6)``, ``J (B, K, 6, n)``, ``E, pos, rot (B, K)``."""
+    B, K, n = q.shape
+    T, J = chain_jacobian(q.reshape(-1, n), G, offsets, **kw)
+    e, E, pos, rot = _residual(Tt, T.reshape(B, K, 3, 4), rw)
+    return e, J.reshape(B, K, 6, n) * row_w, E, pos, rot
+
+
+_compiled_evaluate = None
+_compile_failed = False
+
+
+def _evaluator(compiled: bool):
+    """:func:`_evaluate_eager`, or its ``torch.compile`` (dynamic shapes) with an eager fallback: when
+    compiling or running fails, a warning is given once and the eager version is used from then on."""
+    if not compiled or _compile_failed:
+        return _evaluate_eager
+
+    def run(*args):
+        global _compiled_evaluate, _compile_failed
+        if not _compile_failed:
+            try:
+                if _compiled_evaluate is None:
+                    _compiled_evaluate = torch.compile(_evaluate_eager, dynamic=True)
+                return _compiled_evaluate(*args)
+            except Exception as err:  # pragma: no cover - depends on the platform's compiler
+                _compile_failed = True
+                warnings.warn(f"compiled LM kernel failed ({type(err).__name__}: {err}); using eager", stacklevel=2)
+        return _evaluate_eager(*args)
+
+    return run
 
 
 @dataclass
@@ -168,10 +208,12 @@ def lm_run(
             q = torch.where(wrap, wrap_into(q, lo, hi), q)
         return torch.minimum(torch.maximum(q, lo), hi)
 
+    kernel = _evaluator(cfg.compiled and not kw)
+
     def evaluate(q, Tt):
-        T, J = chain_jacobian(q.reshape(-1, n), G, offsets, **kw)
-        e, E, pos, rot = _residual(Tt, T.reshape(q.shape[0], K, 3, 4), rw)
-        return e, J.reshape(q.shape[0], K, 6, n) * row_w, E, pos, rot
+        if kw:
+            return _evaluate_eager(q, Tt, G, offsets, row_w, rw, **kw)
+        return kernel(q, Tt, G, offsets, row_w, rw)
 
     Tt = T_target[:, None, :3, :]
     q = bounds(q0)
