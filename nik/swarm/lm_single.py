@@ -144,7 +144,7 @@ def lm_solve_one(
     rw = cfg.rot_weight
     row_w = np.array([1.0, 1.0, 1.0, rw, rw, rw])[:, None]
     n = q0.shape[0]
-    eye_eps = cfg.eps * np.eye(n)
+    diag = np.diag_indices(n)
     best_q, best_E = None, math.inf
     q = model.bounds(q0)
     limit = first_iters
@@ -160,14 +160,15 @@ def lm_solve_one(
         for _ in range(limit):
             if pos <= tol_pos and rot <= tol_rot:
                 return q, total
-            A = J.T @ J
-            g = J.T @ e
-            free = ~(((q <= model.lo) & (g < 0)) | ((q >= model.hi) & (g > 0)))
-            if not free.all():
+            JT = J.T
+            A = JT @ J
+            g = JT @ e
+            at_lo, at_hi = q <= model.lo, q >= model.hi
+            if at_lo.any() or at_hi.any():  # active set (as in the batched version)
+                free = ~((at_lo & (g < 0)) | (at_hi & (g > 0)))
                 A = A * np.outer(free, free) + np.diag(~free * 1.0)
                 g = g * free
-            d = np.diagonal(A)
-            A = A + np.diag(lam * (d + cfg.eps)) + eye_eps
+            A[diag] += lam * (A[diag] + cfg.eps) + cfg.eps
             try:  # (one LAPACK call: two triangular solves after a Cholesky cost more in numpy at n <= 7)
                 dq = np.linalg.solve(A, g)
                 big = float(np.abs(dq).max())
