@@ -7,7 +7,8 @@ Rows:
   (a) every swarm from uniform init (paper settings), without and with LM polish;
   (b) every swarm seeded near a guess (the true joints + N(0, noise^2) per joint, clamped), without
       and with LM polish, plus a short seeded improved PSO (10 iterations) + polish;
-  (c) LM alone: from the guess, and multi-start from LMCfg.starts (default 32) uniform starts;
+  (c) LM alone: from the guess, and multi-start (best of LMCfg.first_starts uniform configurations, then
+      fresh uniform starts only for the targets that fail; see nik.swarm.lm_solve);
   (d) pytorch-kinematics PseudoInverseIK on the same targets: 10 per-target uniform random
       initial configs ((N, R, dof) initial_config), early_stopping_any_converged=True, joint limits
       given, same tolerances; and seeded from the same guess (R = 1). Its answers are re-measured
@@ -160,7 +161,7 @@ def main(argv=None):
     res, dt = timed(lambda: refine(robot, T, method="lm", tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=args.seed))
     report(
         rows,
-        f"(c) LM, {LMCfg().starts} uniform starts",
+        f"(c) LM, multistart (best of {LMCfg().first_starts} + restarts)",
         robot,
         T,
         res.q,

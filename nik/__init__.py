@@ -27,8 +27,10 @@ _SUBMODULES = {
     "robots",
     "solver",
     "swarm",
+    "reach",
+    "threads",
 }
-_LAZY = {"IKSolver": "nik.solver", "IKResult": "nik.solver"}
+_LAZY = {"IKSolver": "nik.solver", "IKResult": "nik.solver", "set_threads": "nik.threads"}
 
 __all__ = [
     "CheckpointError",
@@ -42,6 +44,7 @@ __all__ = [
     "builtin_robots",
     "load_robot",
     "pose_error",
+    "set_threads",
     *sorted(_SUBMODULES),
 ]
 

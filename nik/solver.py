@@ -5,12 +5,21 @@ The pipeline of :meth:`IKSolver.solve`, for a batch of B target poses:
 1. **initial guess**: the trained network's prediction when a checkpoint is given; else, for a
    PUMA-like arm (:func:`nik.analytic.is_puma_like`), the closed-form solution (the valid one
    nearest ``q_near``, or the one farthest inside the joint ranges); else a multi-start (the swarm
-   starts from particles spread uniformly inside the limits, LM from ``LMCfg.starts`` uniform starts);
-2. **refinement** (``refine`` = ``ipso`` | ``pso`` | ``sapso`` | ``ga`` | ``lm``) of the targets the
-   guess leaves outside tolerance, through :func:`nik.swarm.refine` (swarm methods finish with an
-   LM polish unless ``polish=False``); ``refine="none"`` returns the raw guess;
-3. **result**: joint angles inside the limits, their true errors measured by FK, and an honest
-   success flag.
+   starts from particles spread uniformly inside the limits, LM from the best of
+   ``LMCfg.first_starts`` uniform configurations);
+2. **refinement** of the targets the guess leaves outside tolerance: by default (``refine="lm"``)
+   Levenberg-Marquardt (:func:`nik.swarm.lm_solve`) from the guess, then restarts from uniform starts
+   only for the targets that still fail and are not provably out of reach (:mod:`nik.reach`); the
+   swarm methods (``ipso`` | ``pso`` | ``sapso`` | ``ga``) through :func:`nik.swarm.refine` (finished by
+   an LM polish unless ``polish=False``); ``refine="none"`` returns the raw guess;
+3. **result**: joint angles inside the limits, their true errors measured by FK, an honest
+   success flag and ``reachable`` (False where the reach bound proves the target out of reach;
+   :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
+
+The parts are small callables that :class:`IKSolver` composes: guess providers
+``(robot, T, ...) -> q (B, dof)`` in :mod:`nik.guesses` (closed form, network, multistart), refiners
+``(robot, T, q0) -> RefineResult`` in :mod:`nik.refiners` (LM; the swarms through
+:func:`nik.swarm.refine`), and the final check here (FK errors, success, reachability).
 
 Units are SI (metres, radians) throughout.
 """
@@ -18,12 +27,14 @@ Units are SI (metres, radians) throughout.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from nik.guesses import analytic_guess, multistart_guess, nearest_solution, network_guess
 from nik.poses import (
     POSE_DIMS,
     make_pose,
@@ -33,9 +44,12 @@ from nik.poses import (
     validate_joints,
     validate_pose,
 )
+from nik.reach import unreachable_message, within_reach
+from nik.refiners import RefineResult, lm_refine
 from nik.robots import Robot, load_robot
+from nik.threads import threads_for
 
-__all__ = ["REFINE_METHODS", "IKResult", "IKSolver", "as_poses", "nearest_solution"]
+__all__ = ["REFINE_METHODS", "IKResult", "IKSolver", "RefineResult", "as_poses", "lm_refine", "nearest_solution"]
 
 #: Values of ``IKSolver(refine=...)``.
 REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
@@ -55,6 +69,8 @@ class IKResult:
         success: (B,) bool, ``pos_err <= tol_pos`` and ``rot_err <= tol_rot``.
         iterations: (B,) long, refinement iterations spent (0 where the guess was already within tolerance).
         source: where the initial guess came from: ``network``, ``analytic`` or ``multistart``.
+        reachable: (B,) bool, False where no configuration can reach the target (provable reach
+            bound, :func:`nik.reach.within_reach`); such targets get ``success=False`` and a best effort.
     """
 
     q: torch.Tensor
@@ -63,9 +79,16 @@ class IKResult:
     success: torch.Tensor
     iterations: torch.Tensor
     source: str = ""
+    reachable: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
+
+    def to(self, device: str | torch.device) -> IKResult:
+        """The same result with every tensor on ``device``."""
+        moved = {f.name: getattr(self, f.name) for f in fields(self)}
+        moved = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in moved.items()}
+        return IKResult(**moved)
 
 
 # ---------------------------------------------------------------------------
@@ -144,57 +167,6 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
     return validate_pose(make_pose(R, p), name=name)
 
 
-# ---------------------------------------------------------------------------
-# Choosing among solutions
-# ---------------------------------------------------------------------------
-def _near_representative(sols: torch.Tensor, q_near: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """Each angle of ``sols: (B, K, dof)`` moved by a multiple of 2 pi, staying inside ``[lo, hi]``,
-    as near as possible to ``q_near: (B, dof)`` (matters for joints with more than a full turn of range)."""
-    two_pi = 2 * math.pi
-    target = q_near[:, None]
-    k = torch.round((target - sols) / two_pi)
-    best = sols
-    best_d = (sols - target).abs()
-    for shift in (k - 1, k, k + 1):
-        cand = sols + shift * two_pi
-        ok = (cand >= lo) & (cand <= hi)
-        d = torch.where(ok, (cand - target).abs(), torch.full_like(cand, float("inf")))
-        take = d < best_d
-        best = torch.where(take, cand, best)
-        best_d = torch.where(take, d, best_d)
-    return best
-
-
-def nearest_solution(
-    sols: torch.Tensor, valid: torch.Tensor, q_near: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Among ``sols: (B, K, dof)`` with ``valid: (B, K)``, the one nearest ``q_near: (B, dof)``.
-
-    Distance: Euclidean norm of the joint differences after each angle is moved by multiples of
-    2 pi (inside the limits) as near ``q_near`` as it goes, i.e. the joint motion to reach it.
-
-    Returns:
-        ``q: (B, dof)`` and ``found: (B,)`` bool (False where no solution is valid; ``q`` is then
-        the nearest of all).
-    """
-    rep = _near_representative(sols, q_near, lo, hi)
-    dist = torch.linalg.vector_norm(rep - q_near[:, None], dim=-1)
-    found = valid.any(-1)
-    dist = torch.where(valid | ~found[:, None], dist, torch.full_like(dist, float("inf")))
-    idx = dist.argmin(-1)
-    q = torch.gather(rep, 1, idx[:, None, None].expand(-1, 1, rep.shape[-1])).squeeze(1)
-    return q, found
-
-
-def _central_solution(sols: torch.Tensor, valid: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """Among valid ``sols: (B, K, dof)``, the one whose worst joint is farthest inside its range."""
-    margin = torch.minimum(sols - lo, hi - sols) / (hi - lo)
-    score = margin.amin(-1)
-    score = torch.where(valid, score, torch.full_like(score, -float("inf")))
-    idx = score.argmax(-1)
-    return torch.gather(sols, 1, idx[:, None, None].expand(-1, 1, sols.shape[-1])).squeeze(1)
-
-
 def dedupe(q: torch.Tensor, *, tol: float = 1e-3, prismatic: torch.Tensor | None = None) -> torch.Tensor:
     """Drop from ``q: (K, dof)`` every row within ``tol`` (max abs joint difference, radians or metres;
     wrapped modulo 2 pi except on ``prismatic: (dof,)`` joints) of an earlier row; the order of the rest is kept."""
@@ -208,6 +180,17 @@ def dedupe(q: torch.Tensor, *, tol: float = 1e-3, prismatic: torch.Tensor | None
     return q[~dup]
 
 
+def check_tolerances(tol_pos: float, tol_rot: float) -> None:
+    """Raise ``ValueError`` unless both tolerances are numbers >= 0 (NaN and negatives are refused)."""
+    for name, value, unit in (("tol_pos", tol_pos, "metres"), ("tol_rot", tol_rot, "radians")):
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}") from None
+        if math.isnan(v) or v < 0:
+            raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}")
+
+
 # ---------------------------------------------------------------------------
 # The solver
 # ---------------------------------------------------------------------------
@@ -218,7 +201,8 @@ class IKSolver:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
         checkpoint: a trained network (``.ckpt`` from ``train.py`` or :func:`nik.models.save_checkpoint`),
             loaded safely by :func:`nik.models.load_checkpoint`; one made for another robot is refused.
-        refine: ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` | ``lm``.
+        refine: ``lm`` (the default: Levenberg-Marquardt from the guess, restarts only for the targets
+            that fail; the fastest) | ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` (swarms, then LM polish).
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
         swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
         analytic: use the closed form for PUMA-like arms when no checkpoint is given (default True).
@@ -226,18 +210,20 @@ class IKSolver:
             its input poses (``T.to("cuda")``) and the network's guess is moved there.
         fallback: a second chance for targets still outside tolerance after the refinement:
             ``"analytic"``, the closed-form solution nearest the first answer (PUMA-like arms only);
-            ``"multistart"``, Levenberg-Marquardt from ``LMCfg.starts`` uniform starts;
+            ``"multistart"``, Levenberg-Marquardt from fresh uniform starts (with ``refine="lm"`` these
+            are the LM's own restarts, drawn only for the targets that fail and are within reach);
             ``"auto"`` (or True, the default), analytic where available, else multistart;
-            ``"none"`` (or False). It is not used where it would repeat the first pass (no network
-            on a PUMA-like arm, or ``refine="lm"`` without a network), nor with ``refine="none"``.
-            The evaluation turns it off to measure what the network's guess alone delivers.
+            ``"none"`` (or False: with ``refine="lm"`` and a guess, no restarts). It is not used where it
+            would repeat the first pass (no network on a PUMA-like arm), nor with ``refine="none"``,
+            nor for targets proven out of reach. The evaluation turns it off to measure what the
+            network's guess alone delivers.
     """
 
     def __init__(
         self,
         robot: Robot | str | Path,
         checkpoint: str | Path | None = None,
-        refine: str = "ipso",
+        refine: str = "lm",
         *,
         polish: bool = True,
         swarm_cfg=None,
@@ -301,33 +287,26 @@ class IKSolver:
         return q
 
     def _multistart_guess(self, T: torch.Tensor, seed: int, n_starts: int = 64) -> torch.Tensor:
-        """Best of ``n_starts`` uniform configurations per target (the guess of ``refine='none'``)."""
-        g = torch.Generator(device=T.device).manual_seed(int(seed))
-        B = T.shape[0]
-        q = self.robot.sample(B * n_starts, generator=g, dtype=T.dtype, device=T.device).reshape(B, n_starts, -1)
-        pos, rot = pose_error(T[:, None], self.robot.fk(q))
-        idx = (pos + 0.1 * rot).argmin(-1)
-        return torch.gather(q, 1, idx[:, None, None].expand(-1, 1, q.shape[-1])).squeeze(1)
+        return multistart_guess(self.robot, T, seed=seed, n_starts=n_starts)
 
     def _analytic_guess(self, T: torch.Tensor, q_near: torch.Tensor | None) -> torch.Tensor:
-        from nik.analytic import puma560_ik
+        return analytic_guess(self.robot, T, q_near=q_near)
 
-        sols, valid = puma560_ik(self.robot, T)
-        lo, hi = self.robot.limits_as(T)
-        if q_near is not None:
-            q, _ = nearest_solution(sols, valid, q_near, lo, hi)
-            return self.robot.clamp(q)
-        q = _central_solution(sols, valid, lo, hi)
-        none = ~valid.any(-1)
-        if bool(none.any()):  # unreachable or outside the limits: the clamped solution that comes closest
-            clamped = self.robot.clamp(sols[none])
-            pos, rot = pose_error(T[none, None], self.robot.fk(clamped))
-            idx = (pos + 0.1 * rot).argmin(-1)
-            q = q.clone()
-            q[none] = torch.gather(clamped, 1, idx[:, None, None].expand(-1, 1, clamped.shape[-1])).squeeze(1)
-        return self.robot.clamp(q)
-
-    def _refine(self, T, q_init, *, tol_pos, tol_rot, seed, max_iters):
+    def _refine(self, T, q_init, *, tol_pos, tol_rot, seed, max_iters, reachable=None):
+        if self.refine == "lm":
+            return lm_refine(
+                self.robot,
+                T,
+                q_init,
+                tol_pos=tol_pos,
+                tol_rot=tol_rot,
+                seed=seed,
+                max_iters=max_iters,
+                cfg=self.swarm_cfg,
+                # without a guess the restarts are the multistart itself
+                restarts=self.fallback == "multistart" or q_init is None,
+                reachable=reachable,
+            )
         from nik.swarm import refine as swarm_refine
 
         kwargs = {}
@@ -352,7 +331,7 @@ class IKSolver:
         T = as_poses(T_target, representation)
         q_near = self._q_near(q_near, T.shape[0], T)
         if self.net is not None:
-            return self.robot.clamp(self.net.predict(T))
+            return network_guess(self.net, self.robot, T)
         if self._analytic:
             return self._analytic_guess(T, q_near)
         return self._multistart_guess(T, seed)
@@ -385,14 +364,31 @@ class IKSolver:
 
         Returns:
             :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``.
+
+        Raises:
+            ValueError: bad poses, a negative or NaN tolerance, a malformed ``q_near``.
+
+        Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
+        and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
+        check_tolerances(tol_pos, tol_rot)
         T = as_poses(T_target, representation)
+        reachable = within_reach(self.robot, T)
+        msg = unreachable_message(self.robot, T, reachable)
+        if msg is not None:
+            warnings.warn(msg, UserWarning, stacklevel=2)
+        with threads_for(T.shape[0]):
+            res = self._solve(T, tol_pos, tol_rot, seed, q_near, max_iters, reachable)
+        res.reachable = reachable
+        return res
+
+    def _solve(self, T, tol_pos, tol_rot, seed, q_near, max_iters, reachable) -> IKResult:
         B = T.shape[0]
         robot = self.robot
         q_near_t = self._q_near(q_near, B, T)
         source = self.initial_source
         if self.net is not None:
-            q0 = robot.clamp(self.net.predict(T))
+            q0 = network_guess(self.net, robot, T)
         elif self._analytic:
             q0 = self._analytic_guess(T, q_near_t)
         elif self.refine in ("none",):
@@ -412,18 +408,29 @@ class IKSolver:
             pos = torch.full((B,), float("inf"), dtype=T.dtype, device=T.device)
             rot = pos.clone()
         else:
-            todo = (~((pos <= tol_pos) & (rot <= tol_rot))).nonzero().squeeze(1)
+            todo = ~((pos <= tol_pos) & (rot <= tol_rot))
+            if source == "analytic":  # out of reach: the clamped closed form nearest the target is the best effort
+                todo &= reachable
+            todo = todo.nonzero().squeeze(1)
         use_near = q_near_t is not None and not self._analytic
         if use_near:
             todo = torch.arange(B, device=T.device)  # q_near: also look for a solution near q_near everywhere
         if todo.numel():
             Tt = T[todo]
             init = None if q0 is None else q0[todo]
-            res = self._refine(Tt, init, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
+            res = self._refine(
+                Tt, init, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters, reachable=reachable[todo]
+            )
             cand_q, cand_pos, cand_rot, cand_it = res.q, res.pos_err, res.rot_err, res.iterations
             if use_near:
                 near = self._refine(
-                    Tt, q_near_t[todo], tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters
+                    Tt,
+                    q_near_t[todo],
+                    tol_pos=tol_pos,
+                    tol_rot=tol_rot,
+                    seed=seed,
+                    max_iters=max_iters,
+                    reachable=reachable[todo],
                 )
                 ok_a = (cand_pos <= tol_pos) & (cand_rot <= tol_rot)
                 ok_b = (near.pos_err <= tol_pos) & (near.rot_err <= tol_rot)
@@ -446,21 +453,25 @@ class IKSolver:
             q, pos, rot = q.clone(), pos.clone(), rot.clone()
             q[todo], pos[todo], rot[todo] = cand_q.to(q.dtype), cand_pos.to(pos.dtype), cand_rot.to(rot.dtype)
             iterations[todo] = cand_it.to(torch.long)
-        q = robot.clamp(q)
-        pos, rot = pose_error(T, robot.fk(q))
+        if not (B == 1 and T.device.type == "cpu" and self.refine == "lm"):
+            # (the one-pose lean path returns q inside the limits with its errors measured by FK already)
+            q = robot.clamp(q)
+            pos, rot = pose_error(T, robot.fk(q))
         success = (pos <= tol_pos) & (rot <= tol_rot)
-        first_pass_is_fallback = (self.net is None and self._analytic) or (self.net is None and self.refine == "lm")
-        if self.fallback != "none" and not first_pass_is_fallback and not bool(success.all()):
-            idx = (~success).nonzero().squeeze(1)
+        # the LM refinement already restarts its failures (the multistart fallback); the closed form
+        # without a network is the first pass itself
+        first_pass_is_fallback = (self.net is None and self._analytic) or (
+            self.refine == "lm" and self.fallback == "multistart"
+        )
+        if self.fallback != "none" and not first_pass_is_fallback and not bool((success | ~reachable).all()):
+            idx = (~success & reachable).nonzero().squeeze(1)
             if self.fallback == "analytic":  # the closed-form solution nearest the first answer (or q_near)
                 near = q_near_t[idx] if q_near_t is not None else q[idx]
                 fq = self._analytic_guess(T[idx], near)
                 fpos, frot = pose_error(T[idx], robot.fk(fq))
                 fit = torch.zeros_like(iterations[idx])
             else:  # Levenberg-Marquardt from uniform starts
-                from nik.swarm import refine as swarm_refine
-
-                res = swarm_refine(robot, T[idx], method="lm", q_init=None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
+                res = lm_refine(robot, T[idx], None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
                 fq, fpos, frot, fit = res.q, res.pos_err, res.rot_err, res.iterations.to(torch.long)
             better = (fpos + 0.1 * frot) < (pos[idx] + 0.1 * rot[idx])
             keep = idx[better]
@@ -506,7 +517,7 @@ class IKSolver:
         if self.net is not None:
             starts = torch.cat([robot.clamp(self.net.predict(T)), starts])
         Tk = T.expand(starts.shape[0], 4, 4)
-        q, _ = lm_solve(robot, Tk, starts, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=100)
+        q, _ = lm_solve(robot, Tk, starts, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=100, restarts=0)
         q = robot.clamp(q)
         pos, rot = pose_error(Tk, robot.fk(q))
         ok = (pos <= tol_pos) & (rot <= tol_rot)

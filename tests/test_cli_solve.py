@@ -248,3 +248,24 @@ def test_evaluate_writes_table_json_and_histogram(checkpoint, dataset, tmp_path,
     assert rows["network + lm"]["success_1mm_1deg"] >= rows["network"]["success_1mm_1deg"]
     assert (out / "errors.png").stat().st_size > 1000
     assert "| method |" in capsys.readouterr().out
+
+
+def test_pose_beyond_the_reach_is_explained_in_one_line_with_the_millimetre_question(capsys):
+    robot = nik.load_robot("ur5")
+    _, rows = _pose_rows(robot, 1, 31)
+    pose_mm = [str(v * 1000.0) if i < 3 else str(v) for i, v in enumerate(rows[0].tolist())]
+    assert main(["solve", "--robot", "ur5", "--threads", "1", "--pose", *pose_mm]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "beyond the reach of ur5" in err[0] and "--unit mm" in err[0]
+    # the same numbers with --unit mm are solved, and nothing is said about the reach
+    assert main(["solve", "--robot", "ur5", "--unit", "mm", "--pose", *pose_mm]) == 0
+    assert "beyond the reach" not in capsys.readouterr().err
+
+
+def test_threads_option_is_accepted_by_the_computing_commands():
+    from nik.cli import build_parser
+
+    parser = build_parser()
+    for argv in (["solve", "--robot", "ur5", "--pose", *["0"] * 7], ["evaluate", "--robot", "ur5", "--data", "d"]):
+        assert parser.parse_args([*argv, "--threads", "2"]).threads == 2
+    assert parser.parse_args(["generate", "--robot", "ur5", "--n", "1", "--out", "x", "--threads", "2"]).threads == 2

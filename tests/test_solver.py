@@ -302,3 +302,72 @@ def test_solve_all_keeps_distinct_slide_lengths_apart():
     assert dedupe(q).shape[0] == 1  # revolute: 2 pi apart is the same configuration
     kept = dedupe(q, prismatic=torch.tensor([False, False, True]))
     assert kept.shape[0] == 2  # a slide 2 pi metres longer is another configuration
+
+
+# ---------------------------------------------------------------------------
+# issue 11 item 5: q_near exactly on a limit of a joint with more than a full turn of range
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize(("name", "joints"), [("puma560", [5]), ("kuka_kr", [3, 5])])
+def test_q_near_on_a_multi_turn_joint_limit_returns_the_solution_at_q_near(name, joints):
+    robot = nik.load_robot(name)
+    q = robot.sample(50, generator=torch.Generator().manual_seed(11), dtype=torch.float64)
+    side = torch.arange(50) % 2 == 0  # half on the lower limit, half on the upper one
+    for j in joints:
+        q[:, j] = torch.where(side, robot.limits[j, 0], robot.limits[j, 1])
+    T = robot.fk(q)
+    res = nik.IKSolver(robot).solve(T, q_near=q)
+    assert bool(res.success.all())
+    # the configuration q_near itself solves every pose, so the nearest answer is q_near (to rounding)
+    assert float((res.q - q).abs().max()) < 1e-6
+
+
+# ---------------------------------------------------------------------------
+# issue 11 item 6: tolerances
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize(("field", "value"), [("tol_pos", -1e-4), ("tol_pos", float("nan")), ("tol_rot", -0.1)])
+def test_negative_or_nan_tolerance_is_refused(field, value):
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 2, 3)
+    with pytest.raises(ValueError, match=field):
+        nik.IKSolver(robot).solve(T, **{field: value})
+    with pytest.raises(ValueError, match="tol_rot"):
+        nik.IKSolver(robot).solve(T, tol_rot=float("nan"))
+
+
+# ---------------------------------------------------------------------------
+# issue 10: reachability, restarts, limits, determinism of the default (LM) pipeline
+# ---------------------------------------------------------------------------
+def test_default_refinement_is_lm():
+    assert nik.IKSolver(nik.load_robot("ur5")).refine == "lm"
+
+
+def test_targets_out_of_reach_are_flagged_warned_and_not_successful():
+    robot = nik.load_robot("panda")
+    q, T = _targets(robot, 6, 4)
+    far = T.clone()
+    far[:2, :3, 3] = T[:2, :3, 3] * 50.0  # far beyond the panda's reach of < 1 m
+    with pytest.warns(UserWarning, match="beyond the reach of panda"):
+        res = nik.IKSolver(robot).solve(far, seed=0)
+    assert res.reachable.tolist() == [False, False, True, True, True, True]
+    assert not bool(res.success[:2].any())
+    assert bool(res.success[2:].all())
+    assert bool(robot.within_limits(res.q).all())
+
+
+def test_a_target_given_in_millimetres_gets_the_millimetre_hint():
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 1, 5)
+    T_mm = T.clone()
+    T_mm[:, :3, 3] = T[:, :3, 3] * 1000.0 + 300.0
+    with pytest.warns(UserWarning, match="millimetres"):
+        nik.IKSolver(robot).solve(T_mm)
+
+
+def test_same_seed_gives_identical_results_and_answers_stay_inside_the_limits():
+    robot = nik.load_robot("panda")
+    _, T = _targets(robot, 40, 6)
+    a = nik.IKSolver(robot).solve(T, seed=3)
+    b = nik.IKSolver(robot).solve(T, seed=3)
+    assert torch.equal(a.q, b.q) and torch.equal(a.iterations, b.iterations)
+    assert bool(robot.within_limits(a.q).all())
+    assert float(a.success.float().mean()) >= 0.95

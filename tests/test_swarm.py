@@ -241,3 +241,57 @@ def test_solvers_reach_targets_of_an_arm_with_a_long_slide(slider, method):
     assert bool(slider.within_limits(res.q).all())
     # the slide's value is a length: the answer's translation equals the configuration's
     torch.testing.assert_close(res.q[:, 1], q[:, 1], atol=1e-3, rtol=0)
+
+
+# ---------------------------------------------------------------------------
+# LM: restarts only for the targets that fail
+# ---------------------------------------------------------------------------
+def test_lm_restarts_touch_only_the_targets_that_fail_within_reach():
+    from nik.swarm import lm_solve
+
+    robot = nik.load_robot("ur5")
+    q, T = _targets(robot, 12, 21)
+    q0 = q.clone()
+    q0[6:] = robot.clamp(q[6:] + 2.5)  # far guesses: two iterations will not do
+    T = T.clone()
+    T[10:, :3, 3] *= 10.0  # two targets provably out of reach
+    kw = {"tol_pos": 1e-4, "tol_rot": 1e-3, "max_iters": 2}
+    q_a, it_a = lm_solve(robot, T, q0, restarts=0, **kw)
+    q_b, it_b = lm_solve(robot, T, q0, generator=torch.Generator().manual_seed(0), **kw)
+    pos, rot = nik.pose_error(T, robot.fk(q_a))
+    first = (pos <= 1e-4) & (rot <= 1e-3)
+    assert bool(first[:6].all()) and not bool(first[6:].any())
+    # converged and out-of-reach targets: untouched by the restarts
+    keep = first.clone()
+    keep[10:] = True
+    assert torch.equal(q_b[keep], q_a[keep]) and torch.equal(it_b[keep], it_a[keep])
+    # the failing reachable ones were restarted: never worse, and most reached
+    assert bool((it_b[6:10] > it_a[6:10]).all())
+    pos_b, rot_b = nik.pose_error(T[6:10], robot.fk(q_b[6:10]))
+    assert bool((pos_b + 0.5 * rot_b <= pos[6:10] + 0.5 * rot[6:10]).all())
+    assert int(((pos_b <= 1e-4) & (rot_b <= 1e-3)).sum()) >= 3
+    assert bool(robot.within_limits(q_b).all())
+
+
+def test_lm_same_generator_seed_same_answer():
+    from nik.swarm import lm_solve
+
+    robot = nik.load_robot("panda")
+    _, T = _targets(robot, 30, 22)
+    a = lm_solve(robot, T, None, generator=torch.Generator().manual_seed(5))
+    b = lm_solve(robot, T, None, generator=torch.Generator().manual_seed(5))
+    assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+
+
+def test_lm_compiled_kernel_gives_the_eager_answers():
+    import dataclasses
+
+    from nik.swarm import LMCfg, lm_solve
+
+    robot = nik.load_robot("ur5")
+    q, T = _targets(robot, 6, 23)
+    guess = robot.clamp(q + 0.05)
+    eager = lm_solve(robot, T, guess, restarts=0)
+    compiled = lm_solve(robot, T, guess, cfg=dataclasses.replace(LMCfg(), compiled=True), restarts=0)
+    torch.testing.assert_close(compiled[0], eager[0], atol=1e-9, rtol=0)
+    assert torch.equal(compiled[1], eager[1])

@@ -37,6 +37,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        threads = getattr(args, "threads", None)
+        if threads is not None:
+            from nik.threads import set_threads
+
+            set_threads(threads)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("nik: interrupted", file=sys.stderr)

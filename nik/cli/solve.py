@@ -7,9 +7,10 @@ import csv
 import json
 import math
 import sys
+import warnings
 from pathlib import Path
 
-__all__ = ["register", "read_poses_csv", "write_solutions_csv"]
+__all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solutions_csv"]
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 REFINE_CHOICES = ("none", "pso", "sapso", "ipso", "ga", "lm")
@@ -27,7 +28,12 @@ def register(sub) -> None:
     )
     s.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
     s.add_argument("--checkpoint", default=None, help="trained network (.ckpt) for the initial guess")
-    s.add_argument("--refine", choices=REFINE_CHOICES, default="ipso", help="refinement method (default ipso)")
+    s.add_argument(
+        "--refine",
+        choices=REFINE_CHOICES,
+        default="lm",
+        help="refinement method (default lm: Levenberg-Marquardt, restarts only for the poses that fail)",
+    )
     src = s.add_mutually_exclusive_group(required=True)
     src.add_argument(
         "--pose",
@@ -37,7 +43,9 @@ def register(sub) -> None:
         help="one pose: position (metres, or --unit mm) and unit quaternion (w, x, y, z)",
     )
     src.add_argument("--poses", metavar="FILE.csv", help="CSV with header x,y,z,qw,qx,qy,qz (one pose per row)")
-    s.add_argument("--unit", choices=["m", "mm"], default="m", help="unit of the input positions (default m)")
+    s.add_argument(
+        "--unit", choices=["m", "mm"], default="m", help="unit of the input positions (default m; mm converts them)"
+    )
     s.add_argument("--out", metavar="FILE.csv", help="write the solutions as CSV (header included)")
     s.add_argument(
         "--json",
@@ -62,6 +70,7 @@ def register(sub) -> None:
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--max-iters", type=int, default=None, help="iteration limit of the refinement")
     s.add_argument("--device", default="cpu", help="where to compute: cpu (default), cuda or cuda:N")
+    add_threads_argument(s)
     s.set_defaults(func=_cmd_solve)
 
     e = sub.add_parser(
@@ -93,7 +102,21 @@ def register(sub) -> None:
     e.add_argument("--no-pk", action="store_true", help="leave out the pytorch-kinematics row")
     e.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     e.add_argument("--device", default="cpu", help="where every pipeline computes: cpu (default), cuda or cuda:N")
+    add_threads_argument(e, default=1)
     e.set_defaults(func=_cmd_evaluate)
+
+
+def add_threads_argument(parser, *, default=None) -> None:
+    """``--threads N``: torch intra-op threads (applied by :func:`nik.cli.main` through :func:`nik.set_threads`)."""
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=default,
+        metavar="N",
+        help="torch threads for the maths (default: "
+        + ("1" if default == 1 else "1 below 100,000 poses, torch's setting above")
+        + "; more threads help only large batches on an idle machine)",
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -185,8 +208,9 @@ def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None
 def _cmd_solve(args) -> int:
     import torch
 
+    from nik.reach import unreachable_message
     from nik.robots import load_robot
-    from nik.solver import IKResult, IKSolver, as_poses
+    from nik.solver import IKSolver, as_poses
 
     robot = load_robot(args.robot)
     if args.pose is not None:
@@ -205,15 +229,21 @@ def _cmd_solve(args) -> int:
         q_near = torch.tensor([v / f for v, f in zip(args.q_near, factor, strict=True)], dtype=torch.float64)
     T = as_poses(poses, "quat", name="--pose" if args.pose is not None else str(args.poses))
     solver = IKSolver(robot, checkpoint=args.checkpoint, refine=args.refine, device=args.device)
-    res = solver.solve(
-        T.to(solver.device),
-        tol_pos=args.tol_mm * 1e-3,
-        tol_rot=math.radians(args.tol_deg),
-        seed=args.seed,
-        q_near=q_near,
-        max_iters=args.max_iters,
-    )
-    res = IKResult(*(getattr(res, f).cpu() for f in ("q", "pos_err", "rot_err", "success", "iterations")), res.source)
+    with warnings.catch_warnings():  # the reach warning becomes the one line below
+        warnings.simplefilter("ignore", UserWarning)
+        res = solver.solve(
+            T.to(solver.device),
+            tol_pos=args.tol_mm * 1e-3,
+            tol_rot=math.radians(args.tol_deg),
+            seed=args.seed,
+            q_near=q_near,
+            max_iters=args.max_iters,
+        )
+    res = res.to("cpu")
+    hint = "pass --unit mm" if args.unit == "m" else ""
+    msg = unreachable_message(robot, T, res.reachable, unit_hint=hint)
+    if msg is not None:
+        print(f"nik solve: {msg}", file=sys.stderr)
     if args.out:
         write_solutions_csv(args.out, robot.joint_names, res, prismatic=robot.prismatic.tolist())
     if args.json:
@@ -234,6 +264,7 @@ def _cmd_solve(args) -> int:
                     "rot_err_rad": float(res.rot_err[i]),
                     "rot_err_deg": math.degrees(float(res.rot_err[i])),
                     "success": bool(res.success[i]),
+                    "reachable": bool(res.reachable[i]),
                     "iterations": int(res.iterations[i]),
                 }
             )

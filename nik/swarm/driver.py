@@ -167,7 +167,8 @@ def refine(
         T_target: (B, 4, 4) wanted tool poses, metres; dtype and device of the computation.
         method: ``ipso`` (paper D's improved PSO), ``pso`` (classic), ``sapso`` (paper A),
             ``ga`` (paper D's baseline) or ``lm`` (no swarm: damped least squares from the guesses,
-            or from ``LMCfg.starts`` uniform starts when ``q_init`` is None).
+            or from the best of ``LMCfg.first_starts`` uniform configurations when ``q_init`` is None;
+            restarts for the targets that fail, see :func:`nik.swarm.lm_solve`).
         q_init: None (uniform particles inside the limits, the papers' behaviour) or guesses
             ``(B, dof)`` / ``(B, K, dof)``, radians: particles start around them (``cfg.init``).
         cfg: the method's config (:class:`PSOCfg`, :class:`SAPSOCfg`, :class:`IPSOCfg`,
@@ -211,12 +212,9 @@ def refine(
     hist = None
 
     if method == "lm":
-        if q_init is None:
-            q0 = robot.sample(B * cfg.starts, generator=generator, dtype=dtype, device=device)
-            q0 = q0.reshape(B, cfg.starts, dof)
-        else:
-            q0 = q_init
-        q, iterations = lm_solve(robot, T_target, q0, cfg=cfg, tol_pos=tol_pos, tol_rot=tol_rot)
+        q, iterations = lm_solve(
+            robot, T_target, q_init, cfg=cfg, tol_pos=tol_pos, tol_rot=tol_rot, generator=generator
+        )
     else:
         objective = make_objective(cfg.objective, rot_weight=cfg.rot_weight)
         problem = make_problem(robot, T_target, objective, compiled=compiled)
@@ -238,7 +236,9 @@ def refine(
             if bool(need.any()):
                 idx = need.nonzero().squeeze(1)
                 starts = torch.cat([q[idx, None], run.top_x[idx]], dim=1) if polish_starts > 1 else q[idx, None]
-                qp, itp = lm_solve(robot, T_target[idx], starts, cfg=polish_cfg, tol_pos=tol_pos, tol_rot=tol_rot)
+                qp, itp = lm_solve(
+                    robot, T_target[idx], starts, cfg=polish_cfg, tol_pos=tol_pos, tol_rot=tol_rot, generator=generator
+                )
                 q = q.clone()
                 q[idx] = qp
                 polish_it[idx] = itp

@@ -1,0 +1,345 @@
+"""nik against its peers on the same random targets: Robotics Toolbox ``ik_LM`` (C++, one target per
+call, its own random restarts) and pytorch-kinematics ``PseudoInverseIK`` (batched, 10 random retries).
+
+Targets are the FK poses of random configurations inside the limits (seeded), so every one is reachable.
+Success: within 0.1 mm and 0.1 deg by nik's float64 FK of the returned joints, with no joint outside its
+limits (the "outside" column counts joints beyond a limit by more than 1e-9 rad). Each peer is timed on the
+same targets in interleaved rounds (nik, rtb, pk, nik, rtb, pk, ...); the table gives the median per target.
+nik runs its default pipeline, ``IKSolver(robot).solve(T)`` (shipped network when one exists, else a
+multi-start; then Levenberg-Marquardt with restarts for the leftovers).
+
+Also measured: the 10 %-unreachable scenario (1,000 targets of which 100 at 3 x the reach bound: total
+time against the 900 reachable ones alone) and the single-pose latency (one pose per call, median).
+
+Robotics Toolbox models are built from the same URDF files nik ships (``rtb.Robot.URDF(path).ets(end=...)``)
+and their FK is checked against nik's before timing. Install the peers with ``pip install -e .[bench]``.
+
+    python benchmarks/peers.py                       # the full run (about 5 minutes on an idle machine)
+    python benchmarks/peers.py --quick               # a smoke run (seconds)
+    python benchmarks/peers.py --out benchmarks/results/peers   # also writes peers.md and peers.txt
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import math
+import statistics
+import sys
+import time
+import warnings
+from contextlib import redirect_stdout
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import nik  # noqa: E402
+from nik.reach import reach_center, reach_radius  # noqa: E402
+
+TOL_POS = 1e-4  # m
+TOL_ROT = math.radians(0.1)  # rad
+URDF = {"panda": ROOT / "configs/robots/urdf/panda.urdf", "ur5": ROOT / "configs/robots/urdf/ur5.urdf"}
+
+
+#: Targets come from their own random stream: were it the solvers' (nik's seed 0), a multistart would
+#: draw the very configurations the targets were made from.
+TARGET_SEED_BASE = 1_000_003
+
+
+def target_joints(robot, n: int, seed: int) -> torch.Tensor:
+    return robot.sample(n, generator=torch.Generator().manual_seed(TARGET_SEED_BASE + seed), dtype=torch.float64)
+
+
+def targets(robot, n: int, seed: int) -> torch.Tensor:
+    return robot.fk(target_joints(robot, n, seed))
+
+
+def score(robot, T, q) -> tuple[float, int]:
+    """(success %, joints outside the limits) of answers ``q: (B, dof)`` for ``T: (B, 4, 4)``."""
+    q = torch.as_tensor(np.asarray(q), dtype=torch.float64)
+    lo, hi = robot.limits[:, 0], robot.limits[:, 1]
+    outside = (q < lo - 1e-9) | (q > hi + 1e-9)
+    pos, rot = nik.pose_error(T, robot.fk(q))
+    ok = (pos <= TOL_POS) & (rot <= TOL_ROT) & ~outside.any(-1)
+    return float(ok.double().mean()) * 100, int(outside.sum())
+
+
+# ---------------------------------------------------------------------------
+# The solvers: each (robot, T) -> (q (B, dof), seconds)
+# ---------------------------------------------------------------------------
+def run_nik(robot, T, *, solver=None):
+    solver = solver or nik.IKSolver(robot)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the unreachable scenario warns, by design
+        t = time.perf_counter()
+        res = solver.solve(T, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=0)
+        dt = time.perf_counter() - t
+    return res.q, dt
+
+
+def available(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+def run_nik_from_guess(robot, T, q_guess):
+    """nik's LM (with its restarts) from given guesses: what the pipeline does after a network."""
+    from nik.solver import lm_refine
+
+    t = time.perf_counter()
+    res = lm_refine(robot, T, q_guess, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=0)
+    return res.q, time.perf_counter() - t
+
+
+def rtb_model(robot):
+    if not available("roboticstoolbox"):
+        return None, float("nan")
+    import roboticstoolbox as rtb
+
+    with redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # Robot.URDF: still the documented way in 1.x
+        ets = rtb.Robot.URDF(str(URDF[robot.name].resolve())).ets(end=robot.end_link)
+    q = robot.sample(32, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    gap = max(float(np.abs(ets.eval(qi) - Ti).max()) for qi, Ti in zip(q.numpy(), robot.fk(q).numpy(), strict=True))
+    if gap > 1e-6:
+        raise RuntimeError(f"rtb model of {robot.name} disagrees with nik's FK by {gap:.2e} m")
+    return ets, gap
+
+
+def run_rtb(ets, T):
+    Tn = T.numpy()
+    np.random.seed(0)  # ik_LM draws its restarts from numpy's global generator
+    q = np.zeros((Tn.shape[0], ets.n))
+    t = time.perf_counter()
+    for i in range(Tn.shape[0]):
+        q[i] = ets.ik_LM(Tn[i], tol=1e-10, joint_limits=True).q  # E = |e|^2 / 2 <= 1e-10: |e| <= 1.4e-5
+    return torch.from_numpy(q), time.perf_counter() - t
+
+
+def pk_solver(robot):
+    import pytorch_kinematics as pk
+
+    from nik.evaluate import robot_to_urdf
+    from nik.robots.urdf import build_pk_chain
+
+    text, end = robot_to_urdf(robot)
+    chain = build_pk_chain(text, end).to(dtype=torch.float64)
+    return pk, chain
+
+
+def run_pk(robot, pkc, T, *, retries: int = 10, max_iterations: int = 50):
+    pk, chain = pkc
+    torch.manual_seed(0)  # pk draws its retries from the global generator
+    ik = pk.PseudoInverseIK(
+        chain,
+        pos_tolerance=TOL_POS,
+        rot_tolerance=TOL_ROT,
+        num_retries=retries,
+        max_iterations=max_iterations,
+        joint_limits=robot.limits,
+        early_stopping_any_converged=True,
+    )
+    t = time.perf_counter()
+    sol = ik.solve(pk.Transform3d(matrix=T))
+    dt = time.perf_counter() - t
+    err = sol.err_pos + sol.err_rot + (~sol.converged) * 1e6
+    best = err.argmin(dim=1)
+    return sol.solutions[torch.arange(T.shape[0]), best], dt
+
+
+# ---------------------------------------------------------------------------
+# Scenarios
+# ---------------------------------------------------------------------------
+def compare(
+    robot_name: str, n: int, threads: int, rounds: int, *, with_pk: bool, seed: int, proxy: float
+) -> list[dict]:
+    robot = nik.load_robot(robot_name)
+    T = targets(robot, n, seed)
+    q_true = target_joints(robot, n, seed)
+    noise = torch.randn(q_true.shape, generator=torch.Generator().manual_seed(seed + 1), dtype=torch.float64)
+    q_proxy = robot.clamp(q_true + proxy * noise)  # a network-quality guess (stand-in until one ships)
+    ets, gap = rtb_model(robot)
+    pkc = pk_solver(robot) if with_pk and available("pytorch_kinematics") else None
+    solver = nik.IKSolver(robot)
+    torch.set_num_threads(threads)
+    nik.set_threads(threads)
+    proxy_name = f"nik LM from truth + N(0, {proxy:g} rad) (network stand-in)"
+    runs = {"nik": [], proxy_name: [], "rtb ik_LM": [], "pk PseudoInverseIK": []}
+    last = {}
+    for _ in range(rounds):
+        last["nik"] = run_nik(robot, T, solver=solver)
+        runs["nik"].append(last["nik"][1])
+        if proxy > 0:
+            last[proxy_name] = run_nik_from_guess(robot, T, q_proxy)
+            runs[proxy_name].append(last[proxy_name][1])
+        if ets is not None:
+            last["rtb ik_LM"] = run_rtb(ets, T)
+            runs["rtb ik_LM"].append(last["rtb ik_LM"][1])
+        if pkc is not None:
+            last["pk PseudoInverseIK"] = run_pk(robot, pkc, T)
+            runs["pk PseudoInverseIK"].append(last["pk PseudoInverseIK"][1])
+    nik.set_threads(None)
+    rows = []
+    ref = statistics.median(runs["rtb ik_LM"]) if runs["rtb ik_LM"] else float("nan")
+    for name, times in runs.items():
+        if not times:
+            continue
+        succ, outside = score(robot, T, last[name][0])
+        med = statistics.median(times)
+        rows.append(
+            {
+                "robot": robot_name,
+                "n": n,
+                "threads": threads,
+                "solver": name + (f" ({solver.initial_source})" if name == "nik" else ""),
+                "ms": med / n * 1e3,
+                "success": succ,
+                "outside": outside,
+                "vs_rtb": ref / med,
+            }
+        )
+    if ets is None:
+        print("  (roboticstoolbox-python is not installed: pip install -e .[bench]; its rows are left out)")
+    else:
+        print(f"  ({robot_name}: rtb FK agrees with nik within {gap:.1e} m)", flush=True)
+    return rows
+
+
+def unreachable_scenario(robot_name: str, rounds: int, seed: int) -> dict:
+    """1,000 targets of which 100 at 3 x the reach bound; nik's time against the 900 reachable ones alone."""
+    robot = nik.load_robot(robot_name)
+    T = targets(robot, 1000, seed)
+    c = reach_center(robot)
+    far = T[:100].clone()
+    u = far[:, :3, 3] - c
+    far[:, :3, 3] = c + 3.0 * reach_radius(robot) * u / torch.linalg.vector_norm(u, dim=-1, keepdim=True)
+    mixed = torch.cat([T[100:], far])
+    solver = nik.IKSolver(robot)
+    t_reach, t_mixed = [], []
+    for _ in range(rounds):
+        t_reach.append(run_nik(robot, T[100:], solver=solver)[1])
+        q, dt = run_nik(robot, mixed, solver=solver)
+        t_mixed.append(dt)
+    succ, _ = score(robot, mixed[:900], q[:900])
+    a, b = statistics.median(t_reach), statistics.median(t_mixed)
+    return {"robot": robot_name, "reachable_s": a, "mixed_s": b, "ratio": b / a, "success_900": succ}
+
+
+def latency(robot_name: str, n: int, seed: int) -> dict:
+    """One pose per call, median over ``n`` poses (after one warm-up call), nik and rtb."""
+    robot = nik.load_robot(robot_name)
+    T = targets(robot, n, seed)
+    solver = nik.IKSolver(robot)
+    ets, _ = rtb_model(robot)
+    run_nik(robot, T[:1], solver=solver)
+    t_nik, t_rtb, q_nik = [], [], []
+    for i in range(n):
+        q, dt = run_nik(robot, T[i : i + 1], solver=solver)
+        t_nik.append(dt)
+        q_nik.append(q)
+        if ets is not None:
+            _, dt = run_rtb(ets, T[i : i + 1])
+            t_rtb.append(dt)
+    succ, _ = score(robot, T, torch.cat(q_nik))
+    return {
+        "robot": robot_name,
+        "nik_ms": statistics.median(t_nik) * 1e3,
+        "rtb_ms": statistics.median(t_rtb) * 1e3 if t_rtb else float("nan"),
+        "success": succ,
+    }
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--robots", default="panda,ur5", help="comma-separated (panda,ur5: the arms with shipped URDFs)")
+    p.add_argument("--sizes", default="1000,10000", help="comma-separated numbers of targets")
+    p.add_argument("--threads", default="1,2", help="comma-separated torch thread counts")
+    p.add_argument("--rounds", type=int, default=2, help="interleaved rounds per row (median)")
+    p.add_argument("--pk-max-n", type=int, default=10000, help="leave pytorch-kinematics out above this size")
+    p.add_argument("--latency-n", type=int, default=200, help="single poses for the latency row")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--proxy-noise",
+        type=float,
+        default=0.1,
+        help="also time nik's LM from the true joints plus this much noise (rad), a stand-in for a network "
+        "guess (0: leave the row out)",
+    )
+    p.add_argument("--quick", action="store_true", help="smoke run: 200 targets, 1 thread, 1 round")
+    p.add_argument("--out", default=None, help="write OUT.md (tables) and OUT.txt (raw output)")
+    args = p.parse_args(argv)
+    if args.quick:
+        args.sizes, args.threads, args.rounds, args.latency_n = "200", "1", 1, 20
+    robots = [r.strip() for r in args.robots.split(",") if r.strip()]
+    sizes = [int(s) for s in args.sizes.split(",")]
+    thread_list = [int(s) for s in args.threads.split(",")]
+    log = io.StringIO()
+
+    def say(line: str = "") -> None:
+        print(line, flush=True)
+        log.write(line + "\n")
+
+    say(f"nik {nik.__version__}, torch {torch.__version__}, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}")
+    say(f"success: within {TOL_POS * 1e3:g} mm and {math.degrees(TOL_ROT):g} deg by float64 FK, inside the limits")
+    rows = []
+    for th in thread_list:
+        for n in sizes:
+            for rb in robots:
+                rows += compare(
+                    rb, n, th, args.rounds, with_pk=n <= args.pk_max_n, seed=args.seed, proxy=args.proxy_noise
+                )
+    torch.set_num_threads(1)
+    md = [
+        "| robot | targets | threads | solver | ms / target | success % | joints outside limits | speed vs rtb |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        md.append(
+            f"| {r['robot']} | {r['n']:,} | {r['threads']} | {r['solver']} | {r['ms']:.4f} | {r['success']:.2f} | "
+            f"{r['outside']} | {r['vs_rtb']:.2f}x |"
+        )
+    unreach = [unreachable_scenario(rb, max(args.rounds, 2), args.seed) for rb in ["kuka_kr", "panda"]]
+    md += [
+        "",
+        "10 % unreachable (1,000 targets, 100 at 3 x the reach; nik, one thread):",
+        "",
+        "| robot | 900 reachable alone (s) | 1,000 with 100 unreachable (s) | ratio | success on the 900 % |",
+        "|---|---|---|---|---|",
+    ]
+    for u in unreach:
+        md.append(
+            f"| {u['robot']} | {u['reachable_s']:.3f} | {u['mixed_s']:.3f} | {u['ratio']:.2f} "
+            f"| {u['success_900']:.2f} |"
+        )
+    lat = latency("panda", args.latency_n, args.seed)
+    md += [
+        "",
+        f"Single pose per call (panda, median of {args.latency_n} calls, one thread):",
+        "",
+        "| robot | nik ms | rtb ik_LM ms | nik success % |",
+        "|---|---|---|---|",
+        f"| {lat['robot']} | {lat['nik_ms']:.3f} | {lat['rtb_ms']:.3f} | {lat['success']:.1f} |",
+    ]
+    say()
+    for line in md:
+        say(line)
+    if args.out:
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        cmd = "python benchmarks/peers.py " + " ".join(argv if argv is not None else sys.argv[1:])
+        text = f"# nik vs Robotics Toolbox vs pytorch-kinematics\n\nCommand: `{cmd.strip()}`\n\n" + "\n".join(md) + "\n"
+        for path, body in ((out.with_suffix(".md"), text), (out.with_suffix(".txt"), log.getvalue())):
+            tmp = path.with_suffix(path.suffix + ".tmp")
+            tmp.write_text(body)
+            tmp.replace(path)
+        print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.txt')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
