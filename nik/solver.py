@@ -209,13 +209,29 @@ def dedupe(q: torch.Tensor, *, tol: float = 1e-3) -> torch.Tensor:
 # ---------------------------------------------------------------------------
 # The solver
 # ---------------------------------------------------------------------------
+def _shipped_network(robot: Robot):
+    """The network shipped for ``robot`` when one exists for its name and definition hash, else None."""
+    from nik.pretrained import available, read_meta
+
+    if robot.name not in available() or read_meta(robot.name).get("robot_hash") != robot.definition_hash:
+        return None
+    from nik.models import load_pretrained
+
+    return load_pretrained(robot)
+
+
 class IKSolver:
     """Inverse kinematics for one robot: guess, refine, report honestly.
 
     Args:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
-        checkpoint: a trained network (``.ckpt`` from ``train.py`` or :func:`nik.models.save_checkpoint`),
-            loaded safely by :func:`nik.models.load_checkpoint`; one made for another robot is refused.
+        checkpoint: ``"auto"`` (default): the network shipped with nik for this robot
+            (:func:`nik.models.load_pretrained`) when one exists for its name and definition hash, else none;
+            on a PUMA-like arm with ``analytic=True`` the closed form stays the guess and no network is
+            loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
+            :func:`nik.models.save_checkpoint`), loaded safely by :func:`nik.models.load_checkpoint`; one
+            made for another robot is refused. ``None``: no network. A multi-solution network
+            (:mod:`nik.multinet`) guesses its best hypothesis by FK; :meth:`solve_all` starts LM from all of them.
         refine: ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` | ``lm``.
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
         swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
@@ -232,7 +248,7 @@ class IKSolver:
     def __init__(
         self,
         robot: Robot | str | Path,
-        checkpoint: str | Path | None = None,
+        checkpoint: str | Path | None = "auto",
         refine: str = "ipso",
         *,
         polish: bool = True,
@@ -250,15 +266,18 @@ class IKSolver:
         if fallback not in ("auto", "analytic", "multistart", "none"):
             raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
         self.net = None
-        if checkpoint is not None:
-            from nik.models import load_checkpoint
-
-            self.net = load_checkpoint(checkpoint, robot=self.robot)
         self._analytic = False
         if analytic:
             from nik.analytic import is_puma_like
 
             self._analytic = is_puma_like(self.robot)
+        if isinstance(checkpoint, str) and checkpoint == "auto":
+            if not self._analytic:
+                self.net = _shipped_network(self.robot)
+        elif checkpoint is not None:
+            from nik.models import load_checkpoint
+
+            self.net = load_checkpoint(checkpoint, robot=self.robot)
         if fallback == "analytic" and not self._analytic:
             raise ValueError(f"IKSolver: fallback='analytic' needs a PUMA-like arm; {self.robot.name} is not")
         if fallback == "auto":
@@ -475,8 +494,9 @@ class IKSolver:
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
 
-        PUMA-like arms: the valid closed-form solutions (at most 8; exact). Other arms: LM from
-        ``n_starts`` uniform starts (plus the network's guess when a checkpoint is given); the
+        PUMA-like arms (``analytic=True``): the valid closed-form solutions (at most 8; exact). Otherwise
+        LM from every hypothesis of the network (each IK branch of a branch network, each head of a
+        multi-head one; the guess of a plain network) and then ``n_starts`` uniform starts; the
         successful ones (within ``tol_pos`` metres / ``tol_rot`` radians) are de-duplicated
         (two solutions are the same when no joint differs by more than ``dedupe_tol`` radians,
         modulo 2 pi). For a redundant arm (7 joints) the solutions form a continuum; K is then
@@ -495,8 +515,9 @@ class IKSolver:
 
         g = torch.Generator(device=T.device).manual_seed(int(seed))
         starts = robot.sample(n_starts, generator=g, dtype=T.dtype, device=T.device)
-        if self.net is not None:
-            starts = torch.cat([robot.clamp(self.net.predict(T)), starts])
+        if self.net is not None:  # every hypothesis of the network first (one for a plain IKNet)
+            hyp = self.net.hypotheses(T)[0] if hasattr(self.net, "hypotheses") else self.net.predict(T)
+            starts = torch.cat([robot.clamp(hyp), starts])
         Tk = T.expand(starts.shape[0], 4, 4)
         q, _ = lm_solve(robot, Tk, starts, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=100)
         q = robot.clamp(q)

@@ -19,13 +19,19 @@ def register(sub) -> None:
     s = sub.add_parser(
         "solve",
         help="solve inverse kinematics for one pose or a CSV of poses",
-        description="Joint angles reaching the given tool poses: network guess (with --checkpoint), else the closed "
-        "form (PUMA-like arms), else a multi-start; then the --refine method to tolerance. Prints joint angles in "
-        "degrees, the position error in mm, the rotation error in degrees and the success flag. Exit status: 0 when "
+        description="Joint angles reaching the given tool poses: the closed form (PUMA-like arms), else the "
+        "network shipped with nik for the robot (or --checkpoint), else a multi-start; then the --refine method "
+        "to tolerance. Prints joint angles in degrees, the position error in mm, the rotation error in degrees and "
+        "the success flag. Exit status: 0 when "
         "every pose was reached within tolerance, 1 when some was not, 2 on an error.",
     )
     s.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
-    s.add_argument("--checkpoint", default=None, help="trained network (.ckpt) for the initial guess")
+    s.add_argument(
+        "--checkpoint",
+        default="auto",
+        help="trained network (.ckpt) for the initial guess; 'auto' (default): the network shipped with nik for "
+        "this robot, if any (not used where the closed form applies); 'none': no network",
+    )
     s.add_argument("--refine", choices=REFINE_CHOICES, default="ipso", help="refinement method (default ipso)")
     src = s.add_mutually_exclusive_group(required=True)
     src.add_argument(
@@ -185,7 +191,8 @@ def _cmd_solve(args) -> int:
             raise ValueError(f"--q-near: {robot.name} has {robot.dof} joints, got {len(args.q_near)} angles")
         q_near = torch.tensor([math.radians(v) for v in args.q_near], dtype=torch.float64)
     T = as_poses(poses, "quat", name="--pose" if args.pose is not None else str(args.poses))
-    solver = IKSolver(robot, checkpoint=args.checkpoint, refine=args.refine)
+    checkpoint = None if str(args.checkpoint).lower() == "none" else args.checkpoint
+    solver = IKSolver(robot, checkpoint=checkpoint, refine=args.refine)
     res = solver.solve(
         T,
         tol_pos=args.tol_mm * 1e-3,
