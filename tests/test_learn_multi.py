@@ -57,6 +57,7 @@ def test_shipped_config_trains_in_two_phases_and_exports(robot, cls, tmp_path):
     hist = next(cb for cb in cli.trainer.callbacks if type(cb).__name__ == "History").rows
     assert len(hist) == 4 and hist[-1]["val_pos_mm"] < hist[0]["val_pos_mm"]  # it learns
     assert (tmp_path / "curve.png").stat().st_size > 0
+    assert (tmp_path / "final.ckpt").is_file()  # the network as the fit ended
     ckpt = tmp_path / "last.ckpt"
     net = load_checkpoint(ckpt, robot=robot)  # loadable as a solver checkpoint too
     T = cli.datamodule.val_data[0][:20].double()

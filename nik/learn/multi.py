@@ -29,7 +29,7 @@ import torch
 from nik.learn.modules import GradientIK
 from nik.multinet import BranchIKNet, MultiHypIKNet, hypothesis_pose_error
 
-__all__ = ["MultiSolutionIK", "CurvePlot", "pose_loss_per_sample", "plot_history"]
+__all__ = ["MultiSolutionIK", "CurvePlot", "FinalCheckpoint", "pose_loss_per_sample", "plot_history"]
 
 
 def pose_loss_per_sample(q: torch.Tensor, T: torch.Tensor, robot, *, length_scale, rot_weight: float = 1.0):
@@ -266,3 +266,17 @@ class CurvePlot(L.Callback):
 
     def on_fit_end(self, trainer, pl_module) -> None:
         self._plot(trainer, pl_module)
+
+
+class FinalCheckpoint(L.Callback):
+    """Saves the network as it is when the fit ends (also when ``trainer.max_time`` stops it inside an epoch,
+    after the last epoch-end checkpoint) to ``<trainer.default_root_dir>/<filename>``."""
+
+    def __init__(self, filename: str = "final.ckpt"):
+        super().__init__()
+        self.filename = filename
+
+    def on_fit_end(self, trainer, pl_module) -> None:
+        if trainer.fast_dev_run:
+            return
+        trainer.save_checkpoint(Path(trainer.default_root_dir) / self.filename)

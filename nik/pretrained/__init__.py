@@ -104,7 +104,9 @@ def save(net, directory: str | Path, *, training: dict | None = None, validation
         "training": training or {},
         "validation": validation_error(net, seed=val["seed"], n=val["n"]),
     }
-    _atomic_write(d / f"{name}.safetensors", lambda p: save_file(state, str(p), metadata={"robot": name}))
+    _atomic_write(
+        d / f"{name}.safetensors", lambda p: (save_file(state, str(p), metadata={"robot": name}), p.chmod(0o644))
+    )
     _atomic_write(d / f"{name}.json", lambda p: p.write_text(json.dumps(meta, indent=2, sort_keys=False) + "\n"))
     return d / f"{name}.json"
 
