@@ -231,7 +231,9 @@ class IKSolver:
             loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
             :func:`nik.models.save_checkpoint`), loaded safely by :func:`nik.models.load_checkpoint`; one
             made for another robot is refused. ``None``: no network. A multi-solution network
-            (:mod:`nik.multinet`) guesses its best hypothesis by FK; :meth:`solve_all` starts LM from all of them.
+            (:mod:`nik.multinet`) guesses its best hypothesis by FK; targets the refinement leaves outside
+            tolerance then get LM from each of its other hypotheses (before any ``fallback``);
+            :meth:`solve_all` starts LM from all of them.
         refine: ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` | ``lm``.
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
         swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
@@ -357,6 +359,37 @@ class IKSolver:
             **kwargs,
         )
 
+    def _other_hypotheses(self, T, q, pos, rot, success, iterations, *, tol_pos, tol_rot, seed, max_iters):
+        """Targets still outside tolerance after refining the best hypothesis of a multi-solution network:
+        LM from each of its other hypotheses (one batch of ``(failing targets) x (K - 1)`` starts); the best
+        answer per target is kept where it improves on the current one."""
+        from nik.swarm import refine as swarm_refine
+
+        idx = (~success).nonzero().squeeze(1)
+        hyp = self.net.ranked_hypotheses(T[idx])[0][:, 1:]  # (b, K - 1, dof), the best one was refined already
+        b, k, dof = hyp.shape
+        Tk = T[idx].repeat_interleave(k, dim=0)
+        res = swarm_refine(
+            self.robot,
+            Tk,
+            method="lm",
+            q_init=hyp.reshape(b * k, dof),
+            tol_pos=tol_pos,
+            tol_rot=tol_rot,
+            max_iters=max_iters,
+            seed=seed,
+        )
+        score = (res.pos_err + 0.1 * res.rot_err).reshape(b, k)
+        j = score.argmin(-1)
+        pick = torch.arange(b, device=T.device) * k + j
+        hq, hpos, hrot = self.robot.clamp(res.q[pick]).to(q.dtype), res.pos_err[pick], res.rot_err[pick]
+        better = (hpos + 0.1 * hrot) < (pos[idx] + 0.1 * rot[idx])
+        keep = idx[better]
+        q, pos, rot, iterations = q.clone(), pos.clone(), rot.clone(), iterations.clone()
+        q[keep], pos[keep], rot[keep] = hq[better], hpos[better].to(pos.dtype), hrot[better].to(rot.dtype)
+        iterations[idx] += res.iterations.reshape(b, k).amax(-1).to(torch.long)
+        return q, pos, rot, (pos <= tol_pos) & (rot <= tol_rot), iterations
+
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
         """The raw initial guess ``(B, dof)`` (network, analytic or best-of-64 uniform), inside the limits."""
@@ -460,6 +493,10 @@ class IKSolver:
         q = robot.clamp(q)
         pos, rot = pose_error(T, robot.fk(q))
         success = (pos <= tol_pos) & (rot <= tol_rot)
+        if getattr(self.net, "n_hypotheses", 1) > 1 and not bool(success.all()):
+            q, pos, rot, success, iterations = self._other_hypotheses(
+                T, q, pos, rot, success, iterations, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters
+            )
         first_pass_is_fallback = (self.net is None and self._analytic) or (self.net is None and self.refine == "lm")
         if self.fallback != "none" and not first_pass_is_fallback and not bool(success.all()):
             idx = (~success).nonzero().squeeze(1)
