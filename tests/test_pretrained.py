@@ -38,8 +38,10 @@ def test_shipped_file_matches_its_robot_and_reproduces_its_recorded_validation_e
 
 
 def test_unknown_robot_names_the_robots_that_have_one():
-    with pytest.raises(CheckpointError, match="puma560.*pretrained networks exist for: .*panda"):
-        load_pretrained("puma560") if "puma560" not in SHIPPED else load_pretrained("rrbot")
+    definition = nik.load_robot("ur5").to_definition()
+    definition["name"] = "my_arm"
+    with pytest.raises(CheckpointError, match="my_arm.*pretrained networks exist for: .*panda"):
+        load_pretrained(nik.Robot.from_definition(definition))
 
 
 def _tiny(tmp_path, name="ur5"):
