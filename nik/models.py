@@ -39,6 +39,8 @@ __all__ = [
     "load_checkpoint",
     "save_checkpoint",
     "checkpoint_extra",
+    "load_pretrained",
+    "pretrained_robots",
 ]
 
 #: Activation functions by name; the same callables serve the single net and the batched population.
@@ -286,10 +288,40 @@ def load_checkpoint(
                 f"checkpoint {path} was trained for robot {stored.name!r} (hash {stored.definition_hash}), "
                 f"not for robot {robot.name!r} (hash {robot.definition_hash})"
             )
-    net = IKNet(stored, **cfg)
+    if "kind" in cfg:  # a multi-solution network (nik.multinet), e.g. from configs/train/<robot>.yaml
+        from nik.multinet import build_net
+
+        net = build_net(stored, cfg)
+    else:
+        net = IKNet(stored, **cfg)
     state = {k[len("net.") :]: v for k, v in ckpt["state_dict"].items() if k.startswith("net.")}
     try:
         net.load_state_dict(state)
     except RuntimeError as err:
         raise CheckpointError(f"{path}: weights do not fit the stored architecture {cfg}: {err}") from err
-    return net.eval()
+    return net.to(torch.float32).eval() if "kind" in cfg else net.eval()
+
+
+# ---------------------------------------------------------------------------
+# Shipped networks
+# ---------------------------------------------------------------------------
+def pretrained_robots() -> list[str]:
+    """Names of the robots with a network shipped in ``nik/pretrained`` (sorted)."""
+    from nik.pretrained import available
+
+    return available()
+
+
+def load_pretrained(robot: Robot | str | Path):
+    """The network shipped with nik for ``robot`` (a :class:`nik.Robot`, built-in name or robot file), eval mode.
+
+    It is a multi-solution network (:mod:`nik.multinet`): ``net.hypotheses(T)`` gives ``(B, K, dof)``
+    joint hypotheses, ``net.predict(T)`` the best of them by FK. Read from safetensors (no pickle).
+
+    Raises:
+        CheckpointError: no network is shipped for this robot (the message names the robots that have
+            one), or the shipped one was trained for a different definition of it (hash mismatch).
+    """
+    from nik.pretrained import load
+
+    return load(robot)

@@ -194,13 +194,31 @@ def check_tolerances(tol_pos: float, tol_rot: float) -> None:
 # ---------------------------------------------------------------------------
 # The solver
 # ---------------------------------------------------------------------------
+def _shipped_network(robot: Robot):
+    """The network shipped for ``robot`` when one exists for its name and definition hash, else None."""
+    from nik.pretrained import available, read_meta
+
+    if robot.name not in available() or read_meta(robot.name).get("robot_hash") != robot.definition_hash:
+        return None
+    from nik.models import load_pretrained
+
+    return load_pretrained(robot)
+
+
 class IKSolver:
     """Inverse kinematics for one robot: guess, refine, report honestly.
 
     Args:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
-        checkpoint: a trained network (``.ckpt`` from ``train.py`` or :func:`nik.models.save_checkpoint`),
-            loaded safely by :func:`nik.models.load_checkpoint`; one made for another robot is refused.
+        checkpoint: ``"auto"`` (default): the network shipped with nik for this robot
+            (:func:`nik.models.load_pretrained`) when one exists for its name and definition hash, else none;
+            on a PUMA-like arm with ``analytic=True`` the closed form stays the guess and no network is
+            loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
+            :func:`nik.models.save_checkpoint`), loaded safely by :func:`nik.models.load_checkpoint`; one
+            made for another robot is refused. ``None``: no network. A multi-solution network
+            (:mod:`nik.multinet`) guesses its best hypothesis by FK; targets the refinement leaves outside
+            tolerance then get LM from each of its other hypotheses (before any ``fallback``);
+            :meth:`solve_all` starts LM from all of them.
         refine: ``lm`` (the default: Levenberg-Marquardt from the guess, restarts only for the targets
             that fail; the fastest) | ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` (swarms, then LM polish).
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
@@ -222,7 +240,7 @@ class IKSolver:
     def __init__(
         self,
         robot: Robot | str | Path,
-        checkpoint: str | Path | None = None,
+        checkpoint: str | Path | None = "auto",
         refine: str = "lm",
         *,
         polish: bool = True,
@@ -244,15 +262,20 @@ class IKSolver:
         if fallback not in ("auto", "analytic", "multistart", "none"):
             raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
         self.net = None
-        if checkpoint is not None:
-            from nik.models import load_checkpoint
-
-            self.net = load_checkpoint(checkpoint, robot=self.robot).to(self.device)
         self._analytic = False
         if analytic:
             from nik.analytic import is_puma_like
 
             self._analytic = is_puma_like(self.robot)
+        if isinstance(checkpoint, str) and checkpoint == "auto":
+            if not self._analytic:
+                self.net = _shipped_network(self.robot)
+        elif checkpoint is not None:
+            from nik.models import load_checkpoint
+
+            self.net = load_checkpoint(checkpoint, robot=self.robot)
+        if self.net is not None:
+            self.net = self.net.to(self.device)
         if fallback == "analytic" and not self._analytic:
             raise ValueError(f"IKSolver: fallback='analytic' needs a PUMA-like arm; {self.robot.name} is not")
         if fallback == "auto":
@@ -324,6 +347,27 @@ class IKSolver:
             seed=seed,
             **kwargs,
         )
+
+    def _other_hypotheses(self, T, q, pos, rot, success, iterations, *, tol_pos, tol_rot, seed, max_iters):
+        """Targets still outside tolerance after refining the best hypothesis of a multi-solution network:
+        LM from its other hypotheses, as ``K - 1`` starts per failing target in one batch (no uniform
+        restarts); the answer is kept where it improves on the current one."""
+        from nik.swarm import lm_solve
+
+        idx = (~success).nonzero().squeeze(1)
+        hyp = self.net.ranked_hypotheses(T[idx])[0][:, 1:]  # (b, K - 1, dof), the best one was refined already
+        g = torch.Generator(device=T.device).manual_seed(int(seed))
+        hq, it = lm_solve(
+            self.robot, T[idx], hyp, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=max_iters, restarts=0, generator=g
+        )
+        hq = self.robot.clamp(hq).to(q.dtype)
+        hpos, hrot = pose_error(T[idx], self.robot.fk(hq))
+        better = (hpos + 0.1 * hrot) < (pos[idx] + 0.1 * rot[idx])
+        keep = idx[better]
+        q, pos, rot, iterations = q.clone(), pos.clone(), rot.clone(), iterations.clone()
+        q[keep], pos[keep], rot[keep] = hq[better], hpos[better].to(pos.dtype), hrot[better].to(rot.dtype)
+        iterations[idx] += it.to(torch.long)
+        return q, pos, rot, (pos <= tol_pos) & (rot <= tol_rot), iterations
 
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
@@ -458,6 +502,10 @@ class IKSolver:
             q = robot.clamp(q)
             pos, rot = pose_error(T, robot.fk(q))
         success = (pos <= tol_pos) & (rot <= tol_rot)
+        if getattr(self.net, "n_hypotheses", 1) > 1 and not bool(success.all()):
+            q, pos, rot, success, iterations = self._other_hypotheses(
+                T, q, pos, rot, success, iterations, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters
+            )
         # the LM refinement already restarts its failures (the multistart fallback); the closed form
         # without a network is the first pass itself
         first_pass_is_fallback = (self.net is None and self._analytic) or (
@@ -494,8 +542,9 @@ class IKSolver:
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
 
-        PUMA-like arms: the valid closed-form solutions (at most 8; exact). Other arms: LM from
-        ``n_starts`` uniform starts (plus the network's guess when a checkpoint is given); the
+        PUMA-like arms (``analytic=True``): the valid closed-form solutions (at most 8; exact). Otherwise
+        LM from every hypothesis of the network (each IK branch of a branch network, each head of a
+        multi-head one; the guess of a plain network) and then ``n_starts`` uniform starts; the
         successful ones (within ``tol_pos`` metres / ``tol_rot`` radians) are de-duplicated
         (two solutions are the same when no joint differs by more than ``dedupe_tol`` radians,
         modulo 2 pi). For a redundant arm (7 joints) the solutions form a continuum; K is then
@@ -514,8 +563,9 @@ class IKSolver:
 
         g = torch.Generator(device=T.device).manual_seed(int(seed))
         starts = robot.sample(n_starts, generator=g, dtype=T.dtype, device=T.device)
-        if self.net is not None:
-            starts = torch.cat([robot.clamp(self.net.predict(T)), starts])
+        if self.net is not None:  # every hypothesis of the network first (one for a plain IKNet)
+            hyp = self.net.hypotheses(T)[0] if hasattr(self.net, "hypotheses") else self.net.predict(T)
+            starts = torch.cat([robot.clamp(hyp), starts])
         Tk = T.expand(starts.shape[0], 4, 4)
         q, _ = lm_solve(robot, Tk, starts, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=100, restarts=0)
         q = robot.clamp(q)

@@ -47,7 +47,7 @@ def test_round_trip_other_robots_from_a_near_guess(name):
     robot = nik.load_robot(name)
     q, T = _targets(robot, 20, 2)
     noise = 0.05 * torch.randn(q.shape, generator=torch.Generator().manual_seed(3), dtype=q.dtype)
-    solver = nik.IKSolver(robot, refine="lm")
+    solver = nik.IKSolver(robot, checkpoint=None, refine="lm")
     assert solver.initial_source == "multistart"
     res = solver.solve(T, q_near=robot.clamp(q + noise))
     _check_round_trip(robot, res, T, 1e-4, 1e-3)

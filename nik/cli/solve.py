@@ -20,14 +20,19 @@ def register(sub) -> None:
     s = sub.add_parser(
         "solve",
         help="solve inverse kinematics for one pose or a CSV of poses",
-        description="Joint angles reaching the given tool poses: network guess (with --checkpoint), else the closed "
-        "form (PUMA-like arms), else a multi-start; then the --refine method to tolerance. Prints joint angles in "
-        "degrees (prismatic joints: their travel in mm), the position error in mm, the rotation error in degrees "
-        "and the success flag. Exit status: 0 when every pose was reached within tolerance, 1 when some was not, "
-        "2 on an error.",
+        description="Joint angles reaching the given tool poses: the closed form (PUMA-like arms), else the "
+        "network shipped with nik for the robot (or --checkpoint), else a multi-start; then the --refine method "
+        "to tolerance. Prints joint angles in degrees (prismatic joints: their travel in mm), the position error in "
+        "mm, the rotation error in degrees and the success flag. Exit status: 0 when every pose was reached within "
+        "tolerance, 1 when some was not, 2 on an error.",
     )
     s.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
-    s.add_argument("--checkpoint", default=None, help="trained network (.ckpt) for the initial guess")
+    s.add_argument(
+        "--checkpoint",
+        default="auto",
+        help="trained network (.ckpt) for the initial guess; 'auto' (default): the network shipped with nik for "
+        "this robot, if any (not used where the closed form applies); 'none': no network",
+    )
     s.add_argument(
         "--refine",
         choices=REFINE_CHOICES,
@@ -228,7 +233,8 @@ def _cmd_solve(args) -> int:
         _, _, factor = _units(robot.prismatic.tolist(), robot.dof)
         q_near = torch.tensor([v / f for v, f in zip(args.q_near, factor, strict=True)], dtype=torch.float64)
     T = as_poses(poses, "quat", name="--pose" if args.pose is not None else str(args.poses))
-    solver = IKSolver(robot, checkpoint=args.checkpoint, refine=args.refine, device=args.device)
+    checkpoint = None if str(args.checkpoint).lower() == "none" else args.checkpoint
+    solver = IKSolver(robot, checkpoint=checkpoint, refine=args.refine, device=args.device)
     with warnings.catch_warnings():  # the reach warning becomes the one line below
         warnings.simplefilter("ignore", UserWarning)
         res = solver.solve(

@@ -39,7 +39,17 @@ import torch
 
 from nik.kinematics import chain_joint_frames
 
-__all__ = ["BRANCH_NAMES", "BranchClassifier", "branch_classifier", "branch_labels", "branch_name", "joint_frames"]
+__all__ = [
+    "BRANCH_NAMES",
+    "BranchClassifier",
+    "URBranchClassifier",
+    "branch_classifier",
+    "branch_labels",
+    "branch_name",
+    "ik_branch_classifier",
+    "joint_frames",
+    "ur_branch_classifier",
+]
 
 #: Human names of the three bits, value 0 first.
 BRANCH_NAMES = (("front", "back"), ("up", "down"), ("noflip", "flip"))
@@ -227,3 +237,82 @@ def branch_labels(robot, q: torch.Tensor) -> torch.Tensor:
             "axes 2 and 3 and a spherical wrist, like puma560 and kuka_kr)"
         )
     return clf(q)
+
+
+class URBranchClassifier:
+    """Branch labels (0..7) of 6R arms of the UR type: joints 2, 3, 4 parallel, joint 1 not parallel to
+    them, axes 5 and 6 meeting in a point ``P`` (the UR5/UR10 family).
+
+    Such an arm reaches a generic pose in up to 8 ways, two choices each of the shoulder (q1), the wrist
+    (q5) and the elbow (q3). Given the shoulder and q5, q6 follows and the planar 3R chain of joints
+    2, 3, 4 has to bring axis 4 to a fixed point, up or down. The three signed quantities mirror the
+    PUMA ones (module docstring), from the joint frames in the base frame:
+
+    - shoulder ``t = (P - p_1) . (a_2 x a_1)``: ``P``'s reach along the arm's forward direction
+      (``P`` lies at a fixed offset along ``a_2``; the two shoulder solutions give ``t`` opposite
+      signs); oriented so that the centre of the limits is *front*;
+    - elbow ``u = ((p_3 - p_2) x (p_4 - p_2)) . a_2``, times ``sign t``: which side of the line from
+      axis 2 to axis 4 the elbow axis 3 lies on;
+    - wrist ``w = (a_4 x a_6) . a_5``: the sine of the angle from axis 4 to axis 6 about axis 5.
+
+    ``label = shoulder + 2 * elbow + 4 * wrist``, as for the PUMA type. Computed from full joint frames
+    (:func:`joint_frames`), in float64.
+    """
+
+    def __init__(self, robot):
+        self.robot = robot
+        self._front = 1.0
+        q0 = torch.zeros(1, robot.dof, dtype=torch.float64)
+        for qref in (robot.limits.mean(-1).reshape(1, -1).double(), q0):
+            t_ref = float(self._raw(qref)[0][0])
+            if abs(t_ref) > 1e-6:
+                self._front = 1.0 if t_ref > 0 else -1.0
+                break
+
+    def _raw(self, q: torch.Tensor):
+        axes, points = joint_frames(self.robot, q.double())
+        a1, a2, a4, a5, a6 = axes[:, 0], axes[:, 1], axes[:, 3], axes[:, 4], axes[:, 5]
+        P, _ = _meeting_point(axes[:, 4:6], points[:, 4:6])
+        t = ((P - points[:, 0]) * torch.linalg.cross(a2, a1)).sum(-1)
+        s, e, c = points[:, 1], points[:, 2], points[:, 3]
+        u = (torch.linalg.cross(e - s, c - s) * a2).sum(-1)
+        w = (torch.linalg.cross(a4, a6) * a5).sum(-1)
+        return t, u, w
+
+    def components(self, q: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The signed quantities behind the label, each ``(B,)`` (see the class docstring)."""
+        t, u, w = self._raw(q)
+        return {"t": self._front * t, "u": u * torch.sign(t), "w": w}
+
+    def __call__(self, q: torch.Tensor) -> torch.Tensor:
+        """``q: (B, dof)`` -> ``(B,)`` uint8 labels in 0..7."""
+        t, u, w = self._raw(q)
+        shoulder = (t * self._front < 0).to(torch.uint8)
+        elbow = (u * t < 0).to(torch.uint8)
+        return shoulder | (elbow << 1) | ((w < 0).to(torch.uint8) << 2)
+
+
+def ur_branch_classifier(robot) -> URBranchClassifier | None:
+    """The branch classifier of a UR-type arm (see :class:`URBranchClassifier`), or None if ``robot`` is not one."""
+    if robot.dof != 6 or bool(getattr(robot, "prismatic", torch.zeros(1, dtype=torch.bool)).any()):
+        return None
+    g = torch.Generator().manual_seed(12345)
+    q = robot.sample(8, generator=g, dtype=torch.float64)
+    axes, points = joint_frames(robot, q)
+    a1, a2, a3, a4, a5, a6 = axes.unbind(1)
+    if torch.linalg.cross(a2, a3).norm(dim=-1).max() > _TOL or torch.linalg.cross(a2, a4).norm(dim=-1).max() > _TOL:
+        return None
+    if torch.linalg.cross(a1, a2).norm(dim=-1).min() < 1e-3:
+        return None
+    if torch.linalg.cross(a4, a5).norm(dim=-1).min() < 1e-3 or torch.linalg.cross(a5, a6).norm(dim=-1).min() < 1e-3:
+        return None
+    _, resid = _meeting_point(axes[:, 4:6], points[:, 4:6])
+    if resid.max() > _TOL:
+        return None
+    return URBranchClassifier(robot)
+
+
+def ik_branch_classifier(robot):
+    """A branch classifier of ``robot``: the PUMA type (:func:`branch_classifier`) or the UR type
+    (:func:`ur_branch_classifier`); None for other arms (redundant arms, arms without such structure)."""
+    return branch_classifier(robot) or ur_branch_classifier(robot)

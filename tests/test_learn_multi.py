@@ -1,0 +1,86 @@
+"""nik.learn.multi: the shipped configs train multi-solution networks through train.py; export to the package."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+import nik
+from nik.learn.multi import MultiSolutionIK, plot_history
+from nik.models import load_checkpoint
+from nik.multinet import BranchIKNet, MultiHypIKNet
+from nik.pretrained import load, validation_error
+from nik.pretrained.export import main as export_main
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:LightningCLI's args parameter"),
+    pytest.mark.filterwarnings("ignore::DeprecationWarning"),
+    pytest.mark.filterwarnings("ignore:.*treespec"),
+    pytest.mark.filterwarnings("ignore:.*does not have many workers"),
+]
+
+
+def _cli():
+    spec = importlib.util.spec_from_file_location("nik_train_script", ROOT / "train.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.cli_main
+
+
+def _config(robot: str, tmp_path: Path, data: Path) -> Path:
+    """The shipped config of ``robot``, pointed at tiny data and a temp folder, with a tiny net."""
+    cfg = yaml.safe_load((ROOT / "configs" / "train" / f"{robot}.yaml").read_text())
+    cfg["trainer"].update(default_root_dir=str(tmp_path), max_time=None, max_epochs=4, logger=False)
+    cfg["trainer"]["enable_progress_bar"] = False
+    cfg["trainer"]["callbacks"][0]["init_args"]["dirpath"] = str(tmp_path)
+    cfg["model"]["init_args"].update(hidden=[32, 32], eval_samples=200)
+    cfg["data"].update(path=str(data), batch_size=128)
+    path = tmp_path / "cfg.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+@pytest.mark.parametrize("robot,cls", [("kuka_kr", BranchIKNet), ("panda", MultiHypIKNet)])
+def test_shipped_config_trains_in_two_phases_and_exports(robot, cls, tmp_path):
+    from nik.data import generate_dataset
+
+    data = generate_dataset(robot, 1500, tmp_path / "data", seed=0, progress=False)
+    cli = _cli()(["fit", "--config", str(_config(robot, tmp_path, data))])
+    model = cli.model
+    assert isinstance(model, MultiSolutionIK) and isinstance(model.net, cls)
+    assert model.in_pose_phase()  # half-way through it switched to the FK pose loss
+    hist = next(cb for cb in cli.trainer.callbacks if type(cb).__name__ == "History").rows
+    assert len(hist) == 4 and hist[-1]["val_pos_mm"] < hist[0]["val_pos_mm"]  # it learns
+    assert (tmp_path / "curve.png").stat().st_size > 0
+    assert (tmp_path / "final.ckpt").is_file()  # the network as the fit ended
+    ckpt = tmp_path / "last.ckpt"
+    net = load_checkpoint(ckpt, robot=robot)  # loadable as a solver checkpoint too
+    T = cli.datamodule.val_data[0][:20].double()
+    torch.testing.assert_close(net.hypotheses(T), model.net.eval().hypotheses(T))
+    assert nik.IKSolver(robot, checkpoint=ckpt, analytic=False).initial_source == "network"
+    out = tmp_path / "pretrained"
+    assert export_main([str(ckpt), "--robot", robot, "--out", str(out)]) == 0
+    shipped = load(robot, out)
+    assert torch.equal(shipped.hypotheses(T), net.hypotheses(T))
+    meta = (out / f"{robot}.json").read_text()
+    assert f"configs/train/{robot}.yaml" in meta
+    rec = validation_error(shipped, seed=12345, n=2000)
+    assert f'"best_pos_mm_median": {rec["best_pos_mm_median"]}' in meta
+
+
+def test_plot_history_writes_a_png(tmp_path):
+    rows = [{"wall_s": 10.0 * i, "val_pos_mm": 100.0 / (i + 1), "val_rot_deg": 10.0 / (i + 1)} for i in range(4)]
+    path = plot_history(rows, tmp_path / "c.png", title="t")
+    assert path.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_bad_module_arguments_are_refused():
+    with pytest.raises(ValueError, match="kind"):
+        MultiSolutionIK(kind="flow")
+    with pytest.raises(ValueError, match="pose_start"):
+        MultiSolutionIK(pose_start=1.5)

@@ -1,0 +1,104 @@
+"""nik.pretrained / nik.models.load_pretrained: the shipped networks, their files and their recorded errors."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+
+import nik
+from nik.errors import CheckpointError
+from nik.models import load_pretrained, pretrained_robots
+from nik.multinet import BranchIKNet, MultiHypIKNet
+from nik.pretrained import PRETRAINED_DIR, available, load, read_meta, save, validation_error
+
+SHIPPED = available()
+
+
+def test_the_issue_arms_have_a_shipped_network():
+    assert {"kuka_kr", "ur5", "panda"} <= set(SHIPPED)
+    assert pretrained_robots() == SHIPPED
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_file_matches_its_robot_and_reproduces_its_recorded_validation_error(name):
+    meta = read_meta(name)
+    robot = nik.load_robot(name)
+    assert meta["robot"] == name and meta["robot_hash"] == robot.definition_hash
+    assert (PRETRAINED_DIR / f"{name}.safetensors").stat().st_size < 8 * 2**20  # a few MB
+    net = load_pretrained(name)
+    assert not net.training and net.config() == meta["net"]
+    rec = meta["validation"]
+    now = validation_error(net, seed=rec["seed"], n=rec["n"])
+    for key, value in rec.items():
+        assert math.isclose(now[key], value, rel_tol=1e-4, abs_tol=1e-9), (key, now[key], value)
+    assert "train.py fit --config configs/train/" in meta["training"]["command"]
+
+
+def test_unknown_robot_names_the_robots_that_have_one():
+    definition = nik.load_robot("ur5").to_definition()
+    definition["name"] = "my_arm"
+    with pytest.raises(CheckpointError, match="my_arm.*pretrained networks exist for: .*panda"):
+        load_pretrained(nik.Robot.from_definition(definition))
+
+
+def _tiny(tmp_path, name="ur5"):
+    robot = nik.load_robot(name)
+    torch.manual_seed(0)
+    net = BranchIKNet(robot, hidden=[8]) if name != "panda" else MultiHypIKNet(robot, hidden=[8], heads=3)
+    save(net, tmp_path, training={"command": "test"}, validation={"seed": 3, "n": 50})
+    return robot, net
+
+
+def test_save_then_load_gives_the_same_network_without_pickle(tmp_path):
+    robot, net = _tiny(tmp_path, "panda")
+    assert available(tmp_path) == ["panda"]
+    back = load(robot, tmp_path)
+    _, T = robot.fk(robot.sample(7, generator=torch.Generator().manual_seed(1))), None
+    T = robot.fk(robot.sample(7, generator=torch.Generator().manual_seed(1), dtype=torch.float64))
+    assert torch.equal(back.hypotheses(T), net.eval().hypotheses(T))
+    meta = json.loads((tmp_path / "panda.json").read_text())
+    assert meta["validation"] == validation_error(back, seed=3, n=50)
+    assert meta["net"] == {
+        "kind": "multihead",
+        "hidden": [8],
+        "activation": "silu",
+        "representation": "rot6d",
+        "heads": 3,
+    }
+
+
+def test_a_network_for_another_definition_of_the_robot_is_refused(tmp_path):
+    _tiny(tmp_path, "ur5")
+    meta = json.loads((tmp_path / "ur5.json").read_text())
+    meta["robot_hash"] = "0123456789abcdef"
+    (tmp_path / "ur5.json").write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match="hash 0123456789abcdef"):
+        load("ur5", tmp_path)
+
+
+def test_solver_uses_the_shipped_network_by_default_and_not_with_checkpoint_none():
+    robot = nik.load_robot("panda")
+    T = robot.fk(robot.sample(4, generator=torch.Generator().manual_seed(2), dtype=torch.float64))
+    res = nik.IKSolver("panda", refine="none").solve(T)
+    assert res.source == "network"
+    torch.testing.assert_close(res.q, load_pretrained("panda").predict(T))
+    assert nik.IKSolver("panda", checkpoint=None).initial_source == "multistart"
+    # PUMA-like arms keep the closed form unless analytic=False
+    assert nik.IKSolver("kuka_kr").initial_source == "analytic"
+    assert nik.IKSolver("kuka_kr", analytic=False).initial_source == "network"
+
+
+def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys):
+    from nik.cli import main
+    from nik.poses import matrix_to_quaternion
+
+    robot = nik.load_robot("panda")
+    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(4), dtype=torch.float64))
+    pose = torch.cat([T[0, :3, 3], matrix_to_quaternion(T[0, :3, :3])]).tolist()
+    assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, pose)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["results"][0]["success"] is True
+    assert doc["initial_guess"] == "network"
