@@ -434,9 +434,10 @@ class DEIK(IKModule):
         set_flat_params(self.net, self.de_state.best_x)
         best = self.de_state.best_fitness
         self.history.append(best)
-        # the same on every rank (sync_dist only keeps Lightning from asking for it)
-        self.log("train_loss", best, on_step=False, on_epoch=True, batch_size=T.shape[0], sync_dist=True)
-        self.log("de_generation", float(self.de_state.generation), on_step=False, on_epoch=True, sync_dist=True)
+        # the same on every rank (the fitness was gathered), so not reduced: a reduction here is a collective
+        # that rank 0's progress bar runs at another point of the epoch's end than the other ranks (a deadlock)
+        self.log("train_loss", best, on_step=False, on_epoch=True, batch_size=T.shape[0], rank_zero_only=True)
+        self.log("de_generation", float(self.de_state.generation), on_step=False, on_epoch=True, rank_zero_only=True)
         if not h.bp and h.generations is not None and self.de_state.generation >= h.generations:
             self.trainer.should_stop = True
         self._count_step()
@@ -450,8 +451,9 @@ class DEIK(IKModule):
             self.first_bp_loss = float(loss.detach())
         self.manual_backward(loss)
         opt.step()
+        # every rank has the same whole batch (no distributed sampler) and the same weights: no reduction
         self.log(
-            "train_loss", loss.detach(), on_step=False, on_epoch=True, batch_size=batch[0].shape[0], sync_dist=True
+            "train_loss", loss.detach(), on_step=False, on_epoch=True, batch_size=batch[0].shape[0], rank_zero_only=True
         )
         return loss
 
