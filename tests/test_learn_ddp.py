@@ -126,7 +126,7 @@ def test_de_on_two_ranks_gives_the_same_population_as_on_one(dataset, tmp_path):
     for devices in (1, 2):
         root = tmp_path / f"de_{devices}"
         _train(tmp_path / "de_latest.yaml", dataset, root, *extra, devices=devices)
-        (ckpt,) = root.rglob("last.ckpt")
+        (ckpt,) = root.glob("lightning_logs/*/checkpoints/last.ckpt")  # the ModelCheckpoint's, saved every epoch
         full = torch.load(ckpt, weights_only=True)
         states.append({**full["nik_de"], "rank0_loss_evals": full["nik"]["counters"]["loss_evals"]})
     one, two = states

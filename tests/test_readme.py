@@ -45,6 +45,11 @@ SHRINK = [
         "--budget 0.5 --seeds 0 --nets paper --methods adam --runs-dir runs/compare_readme",
     ),
     ("paper_d.py --out runs/paper_d", "paper_d.py --runs 1 --out runs/paper_d"),
+    (
+        "--config configs/train/kuka_kr.yaml ",
+        "--config configs/train/kuka_kr.yaml --trainer.max_steps 2 --model.hidden [32] --model.eval_samples 200 ",
+    ),
+    ("--robot kuka_kr --wall-min 28", "--robot kuka_kr --wall-min 28 --out runs/kuka_kr/pretrained"),
     ("paper_a.py --n 100", "paper_a.py --n 2 --iters 20"),
     ("refine.py --n 1000 --swarm-n 100 --boundary", "refine.py --n 4 --swarm-n 1 --skip-uniform"),
     (
