@@ -37,7 +37,6 @@ def _config(robot: str, tmp_path: Path, data: Path) -> Path:
     cfg = yaml.safe_load((ROOT / "configs" / "train" / f"{robot}.yaml").read_text())
     cfg["trainer"].update(default_root_dir=str(tmp_path), max_time=None, max_epochs=4, logger=False)
     cfg["trainer"]["enable_progress_bar"] = False
-    cfg["trainer"]["callbacks"][0]["init_args"]["dirpath"] = str(tmp_path)
     cfg["model"]["init_args"].update(hidden=[32, 32], eval_samples=200)
     cfg["data"].update(path=str(data), batch_size=128)
     path = tmp_path / "cfg.yaml"
