@@ -87,12 +87,17 @@ class IKModule(L.LightningModule):
             "output": h.output,
         }
 
-    def setup(self, stage: str) -> None:
-        if self.net is not None:
-            return
+    def ik_datamodule(self):
+        """The trainer's :class:`IKDataModule` (it supplies the robot and the training data)."""
         dm = self.trainer.datamodule
         if dm is None or getattr(dm, "robot", None) is None:
             raise ValueError("nik training modules need an IKDataModule (it supplies the robot and training data)")
+        return dm
+
+    def setup(self, stage: str) -> None:
+        if self.net is not None:
+            return
+        dm = self.ik_datamodule()
         pose, q = dm.train_data
         net = IKNet(dm.robot, **self.net_config())
         net.fit_normalisation(pose, q)

@@ -106,9 +106,7 @@ class MultiSolutionIK(GradientIK):
     def setup(self, stage: str) -> None:
         if self.net is not None:
             return
-        dm = self.trainer.datamodule
-        if dm is None or getattr(dm, "robot", None) is None:
-            raise ValueError("nik training modules need an IKDataModule (it supplies the robot and training data)")
+        dm = self.ik_datamodule()
         pose, _ = dm.train_data
         self.net = self.build(dm.robot).fit_normalisation(pose).to(dtype=pose.dtype)
 

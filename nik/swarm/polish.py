@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from functools import partial
 
 import torch
 
@@ -364,24 +365,21 @@ def lm_solve(
     q0 = (q0 if q0.ndim == 3 else q0.unsqueeze(1)).to(dtype=dtype, device=device)
     if n_restarts > 0 and reachable is None:
         reachable = within_reach(robot, T_target) if T_target.shape[-2] == 4 else None
-    run = lm_run(
-        T_target[..., :3, :],
-        q0,
-        G,
-        off,
-        lo,
-        hi,
-        wrap,
+    run_from = partial(
+        lm_run,
+        G=G,
+        offsets=off,
+        lo=lo,
+        hi=hi,
+        wrap=wrap,
         cfg=cfg,
         tol_pos=tol_pos,
         tol_rot=tol_rot,
         iters=iters,
-        first_iters=first_iters,
-        restarts=n_restarts,
         sampler=lambda m: robot.sample(m, generator=generator, dtype=dtype, device=device),
-        reachable=reachable,
         prismatic=prismatic,
     )
+    run = run_from(T_target[..., :3, :], q0, first_iters=first_iters, restarts=n_restarts, reachable=reachable)
     q, it = run.q, run.iterations
     todo = ~run.converged
     if reachable is not None:
@@ -391,22 +389,7 @@ def lm_solve(
         # the few hard targets left: many starts side by side (few sequential iterations)
         S = cfg.tail_starts
         starts = robot.sample(todo.numel() * S, generator=generator, dtype=dtype, device=device)
-        tail = lm_run(
-            T_target[todo][..., :3, :],
-            starts.reshape(-1, S, robot.dof),
-            G,
-            off,
-            lo,
-            hi,
-            wrap,
-            cfg=cfg,
-            tol_pos=tol_pos,
-            tol_rot=tol_rot,
-            iters=iters,
-            restarts=cfg.tail_restarts,
-            sampler=lambda m: robot.sample(m, generator=generator, dtype=dtype, device=device),
-            prismatic=prismatic,
-        )
+        tail = run_from(T_target[todo][..., :3, :], starts.reshape(-1, S, robot.dof), restarts=cfg.tail_restarts)
         better = tail.converged | (tail.E < run.E[todo])
         q[todo[better]] = tail.q[better]
         it[todo] += tail.iterations
