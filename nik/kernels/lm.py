@@ -110,6 +110,13 @@ def lm_work(n: int) -> np.ndarray:
 # building blocks
 # ---------------------------------------------------------------------------
 @kernel
+def _copy(src, dst):
+    """``dst[:] = src`` for 1-D arrays, as a plain loop."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@kernel
 def _uniform(rng):
     """The next number of the splitmix64 stream in ``[0, 1)`` (53 bits); ``rng: (1,) uint64`` advances."""
     z = rng[0] + _GOLDEN
@@ -257,7 +264,7 @@ def _best_uniform(G, joints, Tt, rw, m, rng, q, cand, T, e):
         E, _, _ = _residual(Tt, T, rw, e)
         if E < best:
             best = E
-            q[:] = cand
+            _copy(cand, q)
 
 
 # ---------------------------------------------------------------------------
@@ -316,7 +323,7 @@ def lm_solve(G, joints, Tt, q0, opts, iopts, rng, q, work):
     if iopts[FIRST_STARTS] > 0:
         _best_uniform(G, joints, Tt, rw, iopts[FIRST_STARTS], rng, q, cand, T, e)
     else:
-        q[:] = q0
+        _copy(q0, q)
     _bounds(joints, q)
     limit = iopts[FIRST_ITERS]
     total = 0
@@ -341,9 +348,9 @@ def lm_solve(G, joints, Tt, q0, opts, iopts, rng, q, work):
                 Ec, posc, rotc = _evaluate(G, joints, qc, Tt, rw, Tc, Jc, ec)
             if good and Ec < E:
                 stall = 0 if E - Ec >= stall_rel * E else stall + 1
-                q[:] = qc
-                J[:, :] = Jc
-                e[:] = ec
+                _copy(qc, q)
+                _copy(Jc.ravel(), J.ravel())
+                _copy(ec, e)
                 E, pos, rot = Ec, posc, rotc
                 lam = max(lam * lam_down, lam_min)
             else:
@@ -355,8 +362,8 @@ def lm_solve(G, joints, Tt, q0, opts, iopts, rng, q, work):
             return total, True, pos, rot
         if E < best_E:
             best_E, best_pos, best_rot = E, pos, rot
-            best_q[:] = q
-    q[:] = best_q
+            _copy(q, best_q)
+    _copy(best_q, q)
     return total, False, best_pos, best_rot
 
 
