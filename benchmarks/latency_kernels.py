@@ -6,7 +6,7 @@ Per robot, in this process, one call at a time, the paths interleaved call by ca
 - FK + geometric Jacobian: the kernel / ``robot.fk_and_jacobian`` / the numpy one-pose LM's ``fk_jacobian``;
 - Levenberg-Marquardt for one pose, no network (300 reachable targets, each with its own seed): the kernel
   (best of ``--first-starts`` uniform configurations, then LM with up to 274 uniform restarts: the restart
-  budget of the numpy one-pose path) / the numpy path (``nik.swarm.lm_single``, what ``IKSolver.solve``
+  budget of the numpy one-pose path) / the numpy path (``nik.lm.single``, what ``IKSolver.solve``
   runs today for one pose without a network). Median, p95, max per call; success within 0.1 mm and
   0.1 deg by torch FK of the answer; joints outside the limits;
 - the MLP forward pass of the shipped network (one pose: 1 row for a multi-head network, 8 rows for a
@@ -71,7 +71,7 @@ def fk_rows(robot, calls: int) -> list[str]:
     q = robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64)[0]
     qn = q.numpy().copy()
     T, J = np.empty((4, 4)), np.empty((6, robot.dof))
-    from nik.swarm.lm_single import SingleLM
+    from nik.lm.single import SingleLM
 
     single = SingleLM.from_robot(robot)
     fk_k, fk_t = per_call([lambda: K.fk(G, joints, qn, T), lambda: robot.fk(q)], calls)
@@ -89,8 +89,8 @@ def fk_rows(robot, calls: int) -> list[str]:
 
 def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = True):
     """Per-call microseconds, successes and joints outside the limits of the kernel LM (and of the numpy path)."""
-    from nik.refiners import _lm_refine_one
-    from nik.swarm.polish import LMCfg
+    from nik.ik.refiners import _lm_refine_one
+    from nik.lm import LMCfg
 
     G, joints = K.chain_model(robot.G, robot.offsets, robot.limits, robot.prismatic)
     qt = robot.sample(n_targets, generator=torch.Generator().manual_seed(TARGET_SEED_BASE), dtype=torch.float64)

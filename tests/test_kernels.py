@@ -20,7 +20,7 @@ from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_s
 from nik.kernels.cache import choose_cache, user_cache_folder
 from nik.kernels.lm import uniform_configurations
 from nik.kernels.mlp import ACTIVATIONS, mlp_forward, mlp_pack, mlp_work
-from nik.swarm.bounds import wrap_mask
+from nik.robots.joints import wrap_mask
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ["panda", "ur5", "kuka_kr", "stanford"]  # stanford: joint 3 prismatic
