@@ -20,6 +20,7 @@ from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_s
 from nik.kernels.cache import choose_cache, user_cache_folder
 from nik.kernels.lm import uniform_configurations
 from nik.kernels.mlp import ACTIVATIONS, mlp_forward, mlp_pack, mlp_work
+from nik.kinematics import FKKernel
 from nik.robots.joints import wrap_mask
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -289,14 +290,45 @@ def test_cache_folder_is_numbas_setting_then_the_package_then_the_user_folder(tm
 
 _LIGHT = """
 import sys
+import torch
 import nik
 robot = nik.load_robot("panda")
-robot.fk(robot.sample(2))
-print("numba" in sys.modules, "nik.kernels" in sys.modules)
+q = robot.sample(3, dtype=torch.float64).requires_grad_(True)
+robot.fk(q).sum().backward()  # a gradient is wanted: the torch path
+print("numba" in sys.modules, "nik.kernels.chain" in sys.modules)
+robot.fk(q.detach()[0])  # one configuration, no gradient: the compiled path
+print("numba" in sys.modules)
 """
 
 
-def test_import_nik_and_torch_fk_do_not_import_numba():
+def test_import_nik_does_not_import_numba_until_a_compiled_path_runs():
     done = subprocess.run([sys.executable, "-c", _LIGHT], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert done.stdout.split() == ["False", "False"]
+    assert done.stdout.split() == ["False", "False", "True"]
+
+
+# ---------------------------------------------------------------------------
+# Robot.fk takes the compiled path for a few CPU configurations
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+def test_robot_fk_compiled_path_matches_the_torch_kernel_in_every_shape(dtype):
+    robot = nik.load_robot("stanford")
+    q = _configurations(robot, 6, seed=10).to(dtype)
+    torch_fk = FKKernel(robot.G.numpy(), robot.offsets.numpy(), prismatic=robot.prismatic.tolist())
+    atol = 1e-12 if dtype == torch.float64 else 1e-5
+    for shaped in (q[0], q[:1], q, q.reshape(2, 3, robot.dof)):
+        T = robot.fk(shaped)
+        assert T.dtype == dtype and T.shape == (*shaped.shape[:-1], 4, 4)
+        torch.testing.assert_close(T, torch_fk(shaped.reshape(-1, robot.dof)).reshape(T.shape), atol=atol, rtol=0)
+
+
+def test_robot_fk_refuses_nan_on_the_compiled_path_and_keeps_gradients_on_the_torch_path():
+    robot = nik.load_robot("panda")
+    q = _configurations(robot, 1, seed=11)[0]
+    bad = q.clone()
+    bad[2] = float("nan")
+    with pytest.raises(ValueError, match="NaN or inf"):
+        robot.fk(bad)
+    q.requires_grad_(True)
+    robot.fk(q)[0, 3].backward()
+    assert q.grad is not None and bool(torch.isfinite(q.grad).all())

@@ -19,19 +19,27 @@ first used.
 
 from __future__ import annotations
 
-from nik.kernels._jit import CACHE
-from nik.kernels.chain import chain_model, fk, fk_batch, fk_jacobian
-from nik.kernels.lm import lm_options, lm_solve, lm_work, seed_state, uniform_configurations
+import importlib
 
-__all__ = [
-    "CACHE",
-    "chain_model",
-    "fk",
-    "fk_batch",
-    "fk_jacobian",
-    "lm_options",
-    "lm_solve",
-    "lm_work",
-    "seed_state",
-    "uniform_configurations",
-]
+#: Public names and the submodule that defines each; imported on first access, so that
+#: ``import nik.kernels.cache`` (no numba) stays light.
+_NAMES = {
+    "CACHE": "nik.kernels._jit",
+    "chain_model": "nik.kernels.chain",
+    "fk": "nik.kernels.chain",
+    "fk_batch": "nik.kernels.chain",
+    "fk_jacobian": "nik.kernels.chain",
+    "lm_options": "nik.kernels.lm",
+    "lm_solve": "nik.kernels.lm",
+    "lm_work": "nik.kernels.lm",
+    "seed_state": "nik.kernels.lm",
+    "uniform_configurations": "nik.kernels.lm",
+}
+
+__all__ = sorted(_NAMES)
+
+
+def __getattr__(name: str):
+    if name in _NAMES:
+        return getattr(importlib.import_module(_NAMES[name]), name)
+    raise AttributeError(f"module 'nik.kernels' has no attribute {name!r}")

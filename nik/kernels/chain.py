@@ -151,18 +151,33 @@ def _bottom_row(T):
 # kernels
 # ---------------------------------------------------------------------------
 @kernel
+def _finite(q):
+    for i in range(q.shape[0]):
+        if not math.isfinite(q[i]):
+            return False
+    return True
+
+
+@kernel
 def fk(G, joints, q, T):
-    """FK of one configuration: ``q: (n,)`` -> ``T: (4, 4)`` (written in place; metres)."""
+    """FK of one configuration: ``q: (n,)`` -> ``T: (4, 4)`` (written in place; metres).
+
+    Returns True when every joint value is finite (the caller's input check costs nothing more)."""
     _chain(G, joints, q, T)
     _bottom_row(T)
+    return _finite(q)
 
 
 @kernel
 def fk_batch(G, joints, q, T):
-    """FK of a small batch: ``q: (B, n)`` -> ``T: (B, 4, 4)`` (written in place)."""
+    """FK of a small batch: ``q: (B, n)`` -> ``T: (B, 4, 4)`` (written in place). Returns True when every
+    joint value is finite."""
+    finite = True
     for b in range(q.shape[0]):
         _chain(G, joints, q[b], T[b])
         _bottom_row(T[b])
+        finite = finite and _finite(q[b])
+    return finite
 
 
 @kernel
