@@ -16,7 +16,7 @@ import pytest
 import torch
 
 import nik
-from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_solve, lm_work, seed_state
+from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_solve, lm_work, pose_errors, seed_state
 from nik.kernels.cache import choose_cache, user_cache_folder
 from nik.kernels.lm import uniform_configurations
 from nik.kernels.mlp import ACTIVATIONS, mlp_forward, mlp_pack, mlp_work
@@ -129,13 +129,15 @@ def test_chain_model_marks_the_same_wrapping_joints_as_wrap_mask():
 # ---------------------------------------------------------------------------
 # Levenberg-Marquardt
 # ---------------------------------------------------------------------------
-def _solve(robot, T, seed, *, q0=None, **kw):
+def _solve(robot, T, seed, *, q0=None, restarts=2, **kw):
+    """One target through the batch kernel: ``(q, iterations, converged, pos, rot)``."""
     G, joints = _model(robot)
     opts, iopts = lm_options(**kw)
-    q = np.empty(robot.dof)
-    q0 = np.zeros(robot.dof) if q0 is None else q0
-    it, conv, pos, rot = lm_solve(G, joints, T, q0, opts, iopts, seed_state(seed), q, lm_work(robot.dof))
-    return q, it, conv, pos, rot
+    q, info = np.empty((1, robot.dof)), np.empty((1, 4))
+    q0 = np.zeros((1, robot.dof)) if q0 is None else np.asarray(q0, dtype=np.float64).reshape(1, -1)
+    restarts = np.array([restarts], dtype=np.int64)
+    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), q, info, lm_work(robot.dof))
+    return q[0], int(info[0, 0]), bool(info[0, 1]), info[0, 2], info[0, 3]
 
 
 @pytest.mark.parametrize("name", ["panda", "ur5", "stanford"])
@@ -225,9 +227,31 @@ def test_uniform_configurations_cover_the_limits_reproducibly():
     assert np.abs(np.corrcoef(u.T) - np.eye(robot.dof)).max() < 0.1
 
 
+def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_budget():
+    robot = nik.load_robot("ur5")
+    G, joints = _model(robot)
+    T = robot.fk(_configurations(robot, 5, seed=13)).numpy()
+    T[3, :3, 3] = [3.0, 0.0, 0.5]  # out of reach: given no restarts
+    opts, iopts = lm_options(first_starts=8)
+    restarts = np.array([50, 50, 50, 0, 50], dtype=np.int64)
+    q, info = np.empty((5, robot.dof)), np.empty((5, 4))
+    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), q, info, lm_work(6))
+    assert info[[0, 1, 2, 4], 1].all() and info[3, 1] == 0.0
+    assert info[3, 0] <= 25  # one start of at most first_iters iterations
+    for b in (0, 2, 4):  # target b alone, as row b of its own call: the same stream, the same answer
+        rows = np.repeat(T[b : b + 1], b + 1, axis=0)
+        qb, ib = np.empty((b + 1, robot.dof)), np.empty((b + 1, 4))
+        budget = np.full(b + 1, 50, dtype=np.int64)
+        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), qb, ib, lm_work(6))
+        assert np.array_equal(qb[b], q[b])
+    errors = np.empty((5, 2))
+    pose_errors(G, joints, T, q, errors)
+    np.testing.assert_allclose(errors, info[:, 2:], atol=1e-15)
+
+
 def test_lm_options_refuse_negative_counts():
     with pytest.raises(ValueError, match="iteration counts"):
-        lm_options(restarts=-1)
+        lm_options(first_starts=-1)
 
 
 # ---------------------------------------------------------------------------

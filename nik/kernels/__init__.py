@@ -32,6 +32,7 @@ _NAMES = {
     "lm_options": "nik.kernels.lm",
     "lm_solve": "nik.kernels.lm",
     "lm_work": "nik.kernels.lm",
+    "pose_errors": "nik.kernels.lm",
     "seed_state": "nik.kernels.lm",
     "uniform_configurations": "nik.kernels.lm",
 }

@@ -25,7 +25,8 @@ Random numbers come from a splitmix64 stream whose state (``rng: (1,) uint64``) 
 same seed, same answer, and no global random state is touched.
 
 Options are two small arrays (:func:`lm_options` builds them from keywords):
-``opts: float64`` (indices ``ROT_WEIGHT ... TOL_ROT``) and ``iopts: int64`` (``FIRST_ITERS ... FIRST_STARTS``).
+``opts: float64`` (indices ``ROT_WEIGHT ... TOL_ROT``) and ``iopts: int64`` (``FIRST_ITERS ... FIRST_STARTS``);
+the restart budget is per target (a target proven out of reach gets none).
 """
 
 from __future__ import annotations
@@ -37,12 +38,12 @@ import numpy as np
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain, _chain_jacobian
 
-__all__ = ["lm_options", "lm_solve", "lm_work", "seed_state", "uniform_configurations"]
+__all__ = ["lm_options", "lm_solve", "lm_work", "pose_errors", "seed_state", "uniform_configurations"]
 
 # entries of opts (float64) and iopts (int64), see lm_options
 ROT_WEIGHT, LAMBDA0, LAMBDA_UP, LAMBDA_DOWN, LAMBDA_MIN, LAMBDA_MAX = 0, 1, 2, 3, 4, 5
 EPS, MAX_STEP, STALL_REL, TOL_POS, TOL_ROT = 6, 7, 8, 9, 10
-FIRST_ITERS, ITERS, STALL_ITERS, RESTARTS, FIRST_STARTS = range(5)
+FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS = range(4)
 
 _TWO_PI = 2.0 * math.pi
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -50,6 +51,7 @@ _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 _INV_2_53 = 1.0 / 9007199254740992.0
+_STREAM = np.uint64(0xD1B54A32D192ED03)  # separates the random streams of the targets of one call
 
 
 def lm_options(
@@ -68,14 +70,13 @@ def lm_options(
     first_iters: int = 25,
     iters: int = 25,
     stall_iters: int = 4,
-    restarts: int = 2,
     first_starts: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(opts, iopts)`` for :func:`lm_solve` (defaults: those of the batched LM's ``LMCfg``).
 
     Units: ``rot_weight`` m/rad, ``eps`` m^2, ``max_step`` rad (m for prismatic joints), ``tol_pos`` m,
     ``tol_rot`` rad. ``first_iters``: iteration limit of the first start, ``iters``: of each restart;
-    ``restarts``: fresh uniform starts at most; ``first_starts``: when > 0, the first start is the best
+    ``first_starts``: when > 0, the first start is the best
     (by pose error) of that many uniform configurations instead of ``q0``.
     """
     opts = np.empty(11)
@@ -83,14 +84,8 @@ def lm_options(
         rot_weight, lambda0, lambda_up, lambda_down, lambda_min, lambda_max
     )  # fmt: skip
     opts[[EPS, MAX_STEP, STALL_REL, TOL_POS, TOL_ROT]] = eps, max_step, stall_rel, tol_pos, tol_rot
-    iopts = np.empty(5, dtype=np.int64)
-    iopts[[FIRST_ITERS, ITERS, STALL_ITERS, RESTARTS, FIRST_STARTS]] = (
-        first_iters,
-        iters,
-        stall_iters,
-        restarts,
-        first_starts,
-    )
+    iopts = np.empty(4, dtype=np.int64)
+    iopts[[FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS]] = first_iters, iters, stall_iters, first_starts
     if (iopts < 0).any():
         raise ValueError(f"lm_options: iteration counts and starts must be >= 0, got {iopts.tolist()}")
     return opts, iopts
@@ -271,29 +266,14 @@ def _best_uniform(G, joints, Tt, rw, m, rng, q, cand, T, e):
 # the kernel
 # ---------------------------------------------------------------------------
 @kernel
-def lm_solve(G, joints, Tt, q0, opts, iopts, rng, q, work):
-    """Levenberg-Marquardt towards ``Tt: (4, 4)`` from ``q0: (n,)`` (or from the best of ``first_starts``
-    uniform configurations), restarting from uniform configurations while the target is not reached.
-
-    Args:
-        G, joints: the model (:func:`nik.kernels.chain.chain_model`).
-        Tt: (4, 4) target pose, metres.
-        q0: (n,) first start (brought inside the limits first); ignored when ``iopts[FIRST_STARTS] > 0``.
-        opts, iopts: options (:func:`lm_options`).
-        rng: (1,) uint64 random state (:func:`seed_state`), advanced.
-        q: (n,) out: the answer, inside the limits: the first start within tolerance, else the start
-            with the lowest error (best effort).
-        work: scratch, :func:`lm_work`.
-
-    Returns:
-        ``(iterations, converged, pos_err m, rot_err rad)`` of ``q``.
-    """
+def _lm_one(G, joints, Tt, q0, opts, iopts, restarts, rng, q, work):
+    """LM for one target ``Tt (4, 4)`` (see :func:`lm_solve`); returns ``(iterations, converged, pos, rot)``."""
     n = q0.shape[0]
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     lambda0, lam_up, lam_down = opts[LAMBDA0], opts[LAMBDA_UP], opts[LAMBDA_DOWN]
     lam_min, lam_max, eps, max_step = opts[LAMBDA_MIN], opts[LAMBDA_MAX], opts[EPS], opts[MAX_STEP]
     stall_rel = opts[STALL_REL]
-    iters, stall_iters, restarts = iopts[ITERS], iopts[STALL_ITERS], iopts[RESTARTS]
+    iters, stall_iters = iopts[ITERS], iopts[STALL_ITERS]
     # scratch views
     o = 0
     T = work[o : o + 12].reshape((3, 4))
@@ -365,6 +345,47 @@ def lm_solve(G, joints, Tt, q0, opts, iopts, rng, q, work):
             _copy(q, best_q)
     _copy(best_q, q)
     return total, False, best_pos, best_rot
+
+
+@kernel
+def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, q, info, work):
+    """Levenberg-Marquardt towards each target ``Tt[b]`` from ``q0[b]`` (or from the best of ``first_starts``
+    uniform configurations), restarting from uniform configurations while the target is not reached.
+
+    Args:
+        G, joints: the model (:func:`nik.kernels.chain.chain_model`).
+        Tt: (B, 4, 4) target poses, metres.
+        q0: (B, n) first starts (brought inside the limits first); ignored when ``iopts[FIRST_STARTS] > 0``.
+        opts, iopts: options (:func:`lm_options`).
+        restarts: (B,) int64, fresh uniform starts each target may draw at most (0 for one proven out of reach).
+        seed: (1,) uint64 (:func:`seed_state`); target ``b`` draws from its own stream of it, so its answer
+            depends on the seed and ``b`` only.
+        q: (B, n) out: the answers, inside the limits: the first start within tolerance, else the start with
+            the lowest error (best effort).
+        info: (B, 4) out: iterations, converged (1.0 or 0.0), position error (m), rotation error (rad) of ``q``.
+        work: scratch, :func:`lm_work`.
+    """
+    rng = np.empty(1, dtype=np.uint64)
+    for b in range(Tt.shape[0]):
+        rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
+        it, conv, pos, rot = _lm_one(G, joints, Tt[b], q0[b], opts, iopts, restarts[b], rng, q[b], work)
+        info[b, 0] = it
+        info[b, 1] = 1.0 if conv else 0.0
+        info[b, 2] = pos
+        info[b, 3] = rot
+
+
+@kernel
+def pose_errors(G, joints, Tt, q, out):
+    """Position (m) and geodesic rotation (rad) errors ``out: (B, 2)`` of configurations ``q: (B, n)`` against
+    ``Tt: (B, 4, 4)`` (the FK of the kernels; the angle as ``atan2(|sin|, cos)``)."""
+    T = np.empty((3, 4))
+    e = np.empty(6)
+    for b in range(q.shape[0]):
+        _chain(G, joints, q[b], T)
+        _, pos, rot = _residual(Tt[b], T, 1.0, e)
+        out[b, 0] = pos
+        out[b, 1] = rot
 
 
 @kernel
