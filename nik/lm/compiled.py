@@ -1,0 +1,126 @@
+"""Levenberg-Marquardt for a few poses through the compiled kernel of :mod:`nik.kernels.lm` (numpy in and out).
+
+The algorithm and its settings are those of the batched torch LM (:class:`~nik.lm.batched.LMCfg`): the same
+error, damping, active set at the limits, stall test and iteration limits. What differs is the work per
+target: torch's per-operation overhead (microseconds per op, dozens of ops per iteration) is gone, one
+iteration of a 7-joint arm costs about a microsecond, so a target is solved in tens of microseconds. Each
+target that is within reach may draw the batched LM's whole restart budget
+(``restarts + tail_starts * (1 + tail_restarts)`` fresh uniform starts, 274 by default) one after the other.
+
+Without a guess, the first start is the best of :data:`FIRST_STARTS` uniform configurations by pose error
+(measured, ``benchmarks/latency_kernels.py --sweep``: 4 to 16 candidates give the lowest median and p95 on
+panda, ur5 and kuka_kr; 64, the numpy path's count, costs 10 us more per pose in FK alone).
+
+Random starts come from the kernel's seeded streams (target ``b`` of a call: the stream ``b`` of ``seed``),
+not from a ``torch.Generator``: the same seed gives the same answer on this path, not the batched path's.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import astuple, dataclass
+
+import numpy as np
+
+from nik.lm.batched import LMCfg
+
+__all__ = ["FIRST_STARTS", "CompiledLM", "restart_budget"]
+
+#: Uniform configurations whose best (by pose error) is the first start of a target without a guess.
+FIRST_STARTS = 8
+
+
+def restart_budget(cfg: LMCfg) -> int:
+    """Fresh uniform starts a failing target within reach may draw: the batched LM's total
+    (``restarts`` in the first pass, then ``tail_starts`` starts with ``tail_restarts`` restarts each)."""
+    return int(cfg.restarts + cfg.tail_starts * (1 + cfg.tail_restarts))
+
+
+@dataclass
+class CompiledLM:
+    """The compiled LM of one robot with one :class:`LMCfg` (build with :meth:`of`).
+
+    Attributes:
+        G, joints: the model arrays (:meth:`nik.Robot.chain_arrays`).
+        opts, iopts: the kernel's options from the config (tolerances and iteration limit set per call).
+        budget: restarts a target within reach may draw (:func:`restart_budget`).
+        work: the kernel's scratch.
+    """
+
+    G: np.ndarray
+    joints: np.ndarray
+    opts: np.ndarray
+    iopts: np.ndarray
+    budget: int
+    work: np.ndarray
+
+    @classmethod
+    def of(cls, robot, cfg: LMCfg | None = None) -> CompiledLM:
+        """The compiled LM of ``robot`` and ``cfg`` (default :class:`LMCfg`), built once per pair and kept."""
+        cfg = cfg or LMCfg()
+        per_robot = _MODELS.setdefault(robot, {})
+        key = astuple(cfg)
+        model = per_robot.get(key)
+        if model is None:
+            from nik.kernels.lm import lm_options, lm_work
+
+            opts, iopts = lm_options(
+                rot_weight=cfg.rot_weight,
+                lambda0=cfg.lambda0,
+                lambda_up=cfg.lambda_up,
+                lambda_down=cfg.lambda_down,
+                lambda_min=cfg.lambda_min,
+                lambda_max=cfg.lambda_max,
+                eps=cfg.eps,
+                max_step=cfg.max_step,
+                stall_rel=cfg.stall_rel,
+                first_iters=cfg.iters,
+                iters=cfg.iters,
+                stall_iters=cfg.stall_iters,
+            )
+            G, joints = robot.chain_arrays()
+            model = cls(G, joints, opts, iopts, restart_budget(cfg), lm_work(robot.dof))
+            per_robot[key] = model
+        return model
+
+    def solve(
+        self,
+        T: np.ndarray,
+        q0: np.ndarray | None,
+        *,
+        tol_pos: float,
+        tol_rot: float,
+        seed: int,
+        max_iters: int | None = None,
+        restarts: bool = True,
+        reachable: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """LM for ``T: (B, 4, 4)`` float64 from ``q0: (B, dof)`` (None: the best of :data:`FIRST_STARTS` uniform
+        configurations), restarting the targets that fail (``restarts=False``: none; none either where
+        ``reachable: (B,)`` is False).
+
+        Returns:
+            ``q: (B, dof)`` inside the limits and ``info: (B, 4)``: iterations, converged (1.0 / 0.0),
+            position error (m), rotation error (rad) of ``q``.
+        """
+        from nik.kernels import lm as klm
+
+        B, n = T.shape[0], self.joints.shape[0]
+        opts, iopts = self.opts.copy(), self.iopts.copy()
+        opts[klm.TOL_POS], opts[klm.TOL_ROT] = tol_pos, tol_rot
+        if max_iters is not None:
+            iopts[klm.FIRST_ITERS] = int(max_iters)
+        if q0 is None:
+            iopts[klm.FIRST_STARTS] = FIRST_STARTS
+            q0 = np.zeros((B, n))
+        budget = np.full(B, self.budget if restarts else 0, dtype=np.int64)
+        if reachable is not None:
+            budget[~np.asarray(reachable, dtype=bool)] = 0
+        q, info = np.empty((B, n)), np.empty((B, 4))
+        T = np.ascontiguousarray(T, dtype=np.float64)
+        q0 = np.ascontiguousarray(q0, dtype=np.float64)
+        klm.lm_solve(self.G, self.joints, T, q0, opts, iopts, budget, klm.seed_state(seed), q, info, self.work)
+        return q, info
+
+
+_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
