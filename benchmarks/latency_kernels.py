@@ -98,14 +98,15 @@ def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = T
     Tn = Tt.numpy()
     opts, iopts = K.lm_options(tol_pos=TOL_POS, tol_rot=TOL_ROT, first_starts=first_starts)
     work, q0, budget = K.lm_work(robot.dof), np.zeros((1, robot.dof)), np.array([RESTARTS], dtype=np.int64)
-    answers, info = np.empty((n_targets, robot.dof)), np.empty((1, 4))
+    answers = np.empty((n_targets, robot.dof))
+    info = np.empty(1, dtype=np.int64), np.empty(1, dtype=bool), np.empty(1), np.empty(1)
     cfg = LMCfg()
     times_k, times_n, answers_n = [], [], []
     for k in range(n_targets):  # warm-up call, then interleaved kernel / numpy
         if k == 0:
-            K.lm_solve(G, joints, Tn[:1], q0, opts, iopts, budget, K.seed_state(0), answers[:1], info, work)
+            K.lm_solve(G, joints, Tn[:1], q0, opts, iopts, budget, K.seed_state(0), answers[:1], *info, work)
         t = time.perf_counter_ns()
-        K.lm_solve(G, joints, Tn[k : k + 1], q0, opts, iopts, budget, K.seed_state(k), answers[k : k + 1], info, work)
+        K.lm_solve(G, joints, Tn[k : k + 1], q0, opts, iopts, budget, K.seed_state(k), answers[k : k + 1], *info, work)
         times_k.append((time.perf_counter_ns() - t) / 1e3)
         if with_numpy:
             g = torch.Generator().manual_seed(k)
@@ -171,8 +172,9 @@ calls = {
     "fk_batch": lambda: K.fk_batch(G, joints, q[None], T[None]),
     "fk_jacobian": lambda: K.fk_jacobian(G, joints, q, T, J),
     "lm_solve": lambda: K.lm_solve(G, joints, np.eye(4)[None], q[None], opts, iopts, np.ones(1, dtype=np.int64),
-                                   K.seed_state(0), np.empty((1, 7)), np.empty((1, 4)), K.lm_work(7)),
-    "pose_errors": lambda: K.pose_errors(G, joints, np.eye(4)[None], q[None], np.empty((1, 2))),
+                                   K.seed_state(0), np.empty((1, 7)), np.empty(1, dtype=np.int64),
+                                   np.empty(1, dtype=bool), np.empty(1), np.empty(1), K.lm_work(7)),
+    "pose_errors": lambda: K.pose_errors(G, joints, np.eye(4)[None], q[None], np.empty(1), np.empty(1)),
     "uniform_configurations": lambda: K.uniform_configurations(joints, K.seed_state(0), np.empty((2, 7))),
     "mlp_forward": lambda: mlp.mlp_forward(flat, layout, 2, np.ones((1, 3)), np.empty((1, 2)), mlp.mlp_work(layout, 1)),
 }

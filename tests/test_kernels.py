@@ -133,11 +133,17 @@ def _solve(robot, T, seed, *, q0=None, restarts=2, **kw):
     """One target through the batch kernel: ``(q, iterations, converged, pos, rot)``."""
     G, joints = _model(robot)
     opts, iopts = lm_options(**kw)
-    q, info = np.empty((1, robot.dof)), np.empty((1, 4))
     q0 = np.zeros((1, robot.dof)) if q0 is None else np.asarray(q0, dtype=np.float64).reshape(1, -1)
     restarts = np.array([restarts], dtype=np.int64)
-    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), q, info, lm_work(robot.dof))
-    return q[0], int(info[0, 0]), bool(info[0, 1]), info[0, 2], info[0, 3]
+    out = _outputs(1, robot.dof)
+    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), *out, lm_work(robot.dof))
+    q, it, conv, pos, rot = out
+    return q[0], int(it[0]), bool(conv[0]), pos[0], rot[0]
+
+
+def _outputs(B, n):
+    """The kernel's output arrays: q, iterations, converged, pos, rot."""
+    return np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
 
 
 @pytest.mark.parametrize("name", ["panda", "ur5", "stanford"])
@@ -234,19 +240,21 @@ def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_
     T[3, :3, 3] = [3.0, 0.0, 0.5]  # out of reach: given no restarts
     opts, iopts = lm_options(first_starts=8)
     restarts = np.array([50, 50, 50, 0, 50], dtype=np.int64)
-    q, info = np.empty((5, robot.dof)), np.empty((5, 4))
-    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), q, info, lm_work(6))
-    assert info[[0, 1, 2, 4], 1].all() and info[3, 1] == 0.0
-    assert info[3, 0] <= 25  # one start of at most first_iters iterations
+    out = _outputs(5, robot.dof)
+    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), *out, lm_work(6))
+    q, it, conv, pos, rot = out
+    assert conv[[0, 1, 2, 4]].all() and not conv[3]
+    assert it[3] <= 25  # one start of at most first_iters iterations
     for b in (0, 2, 4):  # target b alone, as row b of its own call: the same stream, the same answer
         rows = np.repeat(T[b : b + 1], b + 1, axis=0)
-        qb, ib = np.empty((b + 1, robot.dof)), np.empty((b + 1, 4))
+        alone = _outputs(b + 1, robot.dof)
         budget = np.full(b + 1, 50, dtype=np.int64)
-        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), qb, ib, lm_work(6))
-        assert np.array_equal(qb[b], q[b])
-    errors = np.empty((5, 2))
-    pose_errors(G, joints, T, q, errors)
-    np.testing.assert_allclose(errors, info[:, 2:], atol=1e-15)
+        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), *alone, lm_work(6))
+        assert np.array_equal(alone[0][b], q[b])
+    errors = np.empty(5), np.empty(5)
+    pose_errors(G, joints, T, q, *errors)
+    np.testing.assert_allclose(errors[0], pos, atol=1e-15)
+    np.testing.assert_allclose(errors[1], rot, atol=1e-15)
 
 
 def test_lm_options_refuse_negative_counts():

@@ -73,7 +73,7 @@ def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, rea
 
     Tn = np.ascontiguousarray(T.detach().numpy().reshape(1, 4, 4), dtype=np.float64)
     start = None if q0 is None else np.ascontiguousarray(q0.detach().numpy().reshape(1, -1), dtype=np.float64)
-    q, info = CompiledLM.of(robot, cfg).solve(
+    run = CompiledLM.of(robot, cfg).solve(
         Tn,
         start,
         tol_pos=tol_pos,
@@ -83,9 +83,11 @@ def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, rea
         restarts=restarts,
         reachable=None if reachable is None else reachable.numpy(),
     )
-    err = torch.from_numpy(info[:, 2:]).to(T.dtype)
     return RefineResult(
-        torch.from_numpy(q).to(T.dtype), err[:, 0], err[:, 1], torch.from_numpy(info[:, 0]).to(torch.long)
+        torch.from_numpy(run.q).to(T.dtype),
+        torch.from_numpy(run.pos_err).to(T.dtype),
+        torch.from_numpy(run.rot_err).to(T.dtype),
+        torch.from_numpy(run.iterations),
     )
 
 

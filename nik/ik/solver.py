@@ -30,7 +30,7 @@ from pathlib import Path
 
 import torch
 
-from nik.ik import stages
+from nik.ik import lean, stages
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.robots import Robot, load_robot
@@ -184,6 +184,10 @@ class IKSolver:
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
         check_tolerances(tol_pos, tol_rot)
+        if lean.applies(self):  # a few CPU poses: the compiled path, when it takes the input
+            res = lean.solve(self, T_target, tol_pos, tol_rot, seed, q_near, max_iters, representation)
+            if res is not None:
+                return res
         T = as_poses(T_target, representation)
         reachable = within_reach(self.robot, T)
         msg = unreachable_message(self.robot, T, reachable)

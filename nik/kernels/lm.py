@@ -348,7 +348,7 @@ def _lm_one(G, joints, Tt, q0, opts, iopts, restarts, rng, q, work):
 
 
 @kernel
-def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, q, info, work):
+def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, q, iterations, converged, pos, rot, work):
     """Levenberg-Marquardt towards each target ``Tt[b]`` from ``q0[b]`` (or from the best of ``first_starts``
     uniform configurations), restarting from uniform configurations while the target is not reached.
 
@@ -362,30 +362,28 @@ def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, q, info, work):
             depends on the seed and ``b`` only.
         q: (B, n) out: the answers, inside the limits: the first start within tolerance, else the start with
             the lowest error (best effort).
-        info: (B, 4) out: iterations, converged (1.0 or 0.0), position error (m), rotation error (rad) of ``q``.
+        iterations: (B,) int64 out: LM iterations spent (all starts).
+        converged: (B,) bool out: ``q`` is within both tolerances.
+        pos, rot: (B,) float64 out: position (m) and rotation (rad) error of ``q``.
         work: scratch, :func:`lm_work`.
     """
     rng = np.empty(1, dtype=np.uint64)
     for b in range(Tt.shape[0]):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
-        it, conv, pos, rot = _lm_one(G, joints, Tt[b], q0[b], opts, iopts, restarts[b], rng, q[b], work)
-        info[b, 0] = it
-        info[b, 1] = 1.0 if conv else 0.0
-        info[b, 2] = pos
-        info[b, 3] = rot
+        iterations[b], converged[b], pos[b], rot[b] = _lm_one(
+            G, joints, Tt[b], q0[b], opts, iopts, restarts[b], rng, q[b], work
+        )
 
 
 @kernel
-def pose_errors(G, joints, Tt, q, out):
-    """Position (m) and geodesic rotation (rad) errors ``out: (B, 2)`` of configurations ``q: (B, n)`` against
+def pose_errors(G, joints, Tt, q, pos, rot):
+    """Position (m) and geodesic rotation (rad) errors ``pos, rot: (B,)`` of configurations ``q: (B, n)`` against
     ``Tt: (B, 4, 4)`` (the FK of the kernels; the angle as ``atan2(|sin|, cos)``)."""
     T = np.empty((3, 4))
     e = np.empty(6)
     for b in range(q.shape[0]):
         _chain(G, joints, q[b], T)
-        _, pos, rot = _residual(Tt[b], T, 1.0, e)
-        out[b, 0] = pos
-        out[b, 1] = rot
+        _, pos[b], rot[b] = _residual(Tt[b], T, 1.0, e)
 
 
 @kernel

@@ -18,13 +18,13 @@ not from a ``torch.Generator``: the same seed gives the same answer on this path
 from __future__ import annotations
 
 import weakref
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from nik.lm.batched import LMCfg
 
-__all__ = ["FIRST_STARTS", "CompiledLM", "restart_budget"]
+__all__ = ["FIRST_STARTS", "CompiledLM", "CompiledRun", "restart_budget"]
 
 #: Uniform configurations whose best (by pose error) is the first start of a target without a guess.
 FIRST_STARTS = 8
@@ -34,6 +34,30 @@ def restart_budget(cfg: LMCfg) -> int:
     """Fresh uniform starts a failing target within reach may draw: the batched LM's total
     (``restarts`` in the first pass, then ``tail_starts`` starts with ``tail_restarts`` restarts each)."""
     return int(cfg.restarts + cfg.tail_starts * (1 + cfg.tail_restarts))
+
+
+@dataclass
+class CompiledRun:
+    """What :meth:`CompiledLM.solve` returns for B targets (numpy).
+
+    Attributes:
+        q: (B, dof) float64 answers inside the limits (the first start within tolerance, else the start with the
+            lowest error).
+        iterations: (B,) int64, LM iterations spent over all starts.
+        converged: (B,) bool, ``q`` within both tolerances.
+        pos_err: (B,) metres; rot_err: (B,) radians (geodesic), of ``q``.
+    """
+
+    q: np.ndarray
+    iterations: np.ndarray
+    converged: np.ndarray
+    pos_err: np.ndarray
+    rot_err: np.ndarray
+
+
+def astuple_run(run: CompiledRun) -> tuple:
+    """The fields of ``run`` in order (the kernel's output arguments)."""
+    return run.q, run.iterations, run.converged, run.pos_err, run.rot_err
 
 
 @dataclass
@@ -53,15 +77,16 @@ class CompiledLM:
     iopts: np.ndarray
     budget: int
     work: np.ndarray
+    _per_call: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def of(cls, robot, cfg: LMCfg | None = None) -> CompiledLM:
         """The compiled LM of ``robot`` and ``cfg`` (default :class:`LMCfg`), built once per pair and kept."""
-        cfg = cfg or LMCfg()
         per_robot = _MODELS.setdefault(robot, {})
-        key = astuple(cfg)
+        key = None if cfg is None else tuple(vars(cfg).values())  # a changed config gets its own model
         model = per_robot.get(key)
         if model is None:
+            cfg = cfg or LMCfg()
             from nik.kernels.lm import lm_options, lm_work
 
             opts, iopts = lm_options(
@@ -94,33 +119,48 @@ class CompiledLM:
         max_iters: int | None = None,
         restarts: bool = True,
         reachable: np.ndarray | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> CompiledRun:
         """LM for ``T: (B, 4, 4)`` float64 from ``q0: (B, dof)`` (None: the best of :data:`FIRST_STARTS` uniform
         configurations), restarting the targets that fail (``restarts=False``: none; none either where
-        ``reachable: (B,)`` is False).
-
-        Returns:
-            ``q: (B, dof)`` inside the limits and ``info: (B, 4)``: iterations, converged (1.0 / 0.0),
-            position error (m), rotation error (rad) of ``q``.
-        """
+        ``reachable: (B,)`` is False)."""
         from nik.kernels import lm as klm
 
         B, n = T.shape[0], self.joints.shape[0]
-        opts, iopts = self.opts.copy(), self.iopts.copy()
-        opts[klm.TOL_POS], opts[klm.TOL_ROT] = tol_pos, tol_rot
-        if max_iters is not None:
-            iopts[klm.FIRST_ITERS] = int(max_iters)
+        opts, iopts = self._options(klm, tol_pos, tol_rot, max_iters, q0 is None)
         if q0 is None:
-            iopts[klm.FIRST_STARTS] = FIRST_STARTS
             q0 = np.zeros((B, n))
-        budget = np.full(B, self.budget if restarts else 0, dtype=np.int64)
-        if reachable is not None:
-            budget[~np.asarray(reachable, dtype=bool)] = 0
-        q, info = np.empty((B, n)), np.empty((B, 4))
-        T = np.ascontiguousarray(T, dtype=np.float64)
-        q0 = np.ascontiguousarray(q0, dtype=np.float64)
-        klm.lm_solve(self.G, self.joints, T, q0, opts, iopts, budget, klm.seed_state(seed), q, info, self.work)
-        return q, info
+        budget = self.budget if restarts else 0
+        if reachable is None:
+            budget = np.full(B, budget, dtype=np.int64)
+        else:
+            budget = np.where(reachable, budget, 0)
+        run = CompiledRun(
+            np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
+        )
+        if T.dtype != np.float64 or not T.flags.c_contiguous:
+            T = np.ascontiguousarray(T, dtype=np.float64)
+        if q0.dtype != np.float64 or not q0.flags.c_contiguous:
+            q0 = np.ascontiguousarray(q0, dtype=np.float64)
+        klm.lm_solve(
+            self.G, self.joints, T, q0, opts, iopts, budget, klm.seed_state(seed), *astuple_run(run), self.work
+        )
+        return run
+
+    def _options(self, klm, tol_pos, tol_rot, max_iters, multistart) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel's options with the call's tolerances, iteration limit and first starts (kept per value)."""
+        key = (float(tol_pos), float(tol_rot), max_iters, multistart)
+        found = self._per_call.get(key)
+        if found is None:
+            opts, iopts = self.opts.copy(), self.iopts.copy()
+            opts[klm.TOL_POS], opts[klm.TOL_ROT] = tol_pos, tol_rot
+            if max_iters is not None:
+                iopts[klm.FIRST_ITERS] = int(max_iters)
+            if multistart:
+                iopts[klm.FIRST_STARTS] = FIRST_STARTS
+            if len(self._per_call) > 64:
+                self._per_call.clear()
+            found = self._per_call[key] = (opts, iopts)
+        return found
 
 
 _MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
