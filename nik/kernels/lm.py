@@ -43,7 +43,7 @@ __all__ = ["lm_options", "lm_solve", "lm_work", "pose_errors", "seed_state", "un
 # entries of opts (float64) and iopts (int64), see lm_options
 ROT_WEIGHT, LAMBDA0, LAMBDA_UP, LAMBDA_DOWN, LAMBDA_MIN, LAMBDA_MAX = 0, 1, 2, 3, 4, 5
 EPS, MAX_STEP, STALL_REL, TOL_POS, TOL_ROT = 6, 7, 8, 9, 10
-FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS = range(4)
+FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS, TAIL_AFTER, TAIL_ITERS, TAIL_STALL_ITERS = range(7)
 
 _TWO_PI = 2.0 * math.pi
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -71,21 +71,31 @@ def lm_options(
     iters: int = 25,
     stall_iters: int = 4,
     first_starts: int = 0,
+    tail_after: int | None = None,
+    tail_iters: int | None = None,
+    tail_stall_iters: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(opts, iopts)`` for :func:`lm_solve` (defaults: those of the batched LM's ``LMCfg``).
 
     Units: ``rot_weight`` m/rad, ``eps`` m^2, ``max_step`` rad (m for prismatic joints), ``tol_pos`` m,
     ``tol_rot`` rad. ``first_iters``: iteration limit of the first start, ``iters``: of each restart;
     ``first_starts``: when > 0, the first start is the best
-    (by pose error) of that many uniform configurations instead of ``q0``.
+    (by pose error) of that many uniform configurations instead of ``q0``. The restarts after the first
+    ``tail_after`` (default: none) run ``tail_iters`` iterations at most and stop after ``tail_stall_iters``
+    without progress (defaults ``iters`` and ``stall_iters``): longer runs for the hard targets that are left.
     """
     opts = np.empty(11)
     opts[[ROT_WEIGHT, LAMBDA0, LAMBDA_UP, LAMBDA_DOWN, LAMBDA_MIN, LAMBDA_MAX]] = (
         rot_weight, lambda0, lambda_up, lambda_down, lambda_min, lambda_max
     )  # fmt: skip
     opts[[EPS, MAX_STEP, STALL_REL, TOL_POS, TOL_ROT]] = eps, max_step, stall_rel, tol_pos, tol_rot
-    iopts = np.empty(4, dtype=np.int64)
+    iopts = np.empty(7, dtype=np.int64)
     iopts[[FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS]] = first_iters, iters, stall_iters, first_starts
+    iopts[[TAIL_AFTER, TAIL_ITERS, TAIL_STALL_ITERS]] = (
+        2**62 if tail_after is None else tail_after,
+        iters if tail_iters is None else tail_iters,
+        stall_iters if tail_stall_iters is None else tail_stall_iters,
+    )
     if (iopts < 0).any():
         raise ValueError(f"lm_options: iteration counts and starts must be >= 0, got {iopts.tolist()}")
     return opts, iopts
@@ -273,7 +283,7 @@ def _lm_one(G, joints, Tt, q0, opts, iopts, restarts, rng, q, work):
     lambda0, lam_up, lam_down = opts[LAMBDA0], opts[LAMBDA_UP], opts[LAMBDA_DOWN]
     lam_min, lam_max, eps, max_step = opts[LAMBDA_MIN], opts[LAMBDA_MAX], opts[EPS], opts[MAX_STEP]
     stall_rel = opts[STALL_REL]
-    iters, stall_iters = iopts[ITERS], iopts[STALL_ITERS]
+    iters, stall_iters, tail_after = iopts[ITERS], iopts[STALL_ITERS], iopts[TAIL_AFTER]
     # scratch views
     o = 0
     T = work[o : o + 12].reshape((3, 4))
@@ -309,9 +319,12 @@ def _lm_one(G, joints, Tt, q0, opts, iopts, restarts, rng, q, work):
     total = 0
     best_E, best_pos, best_rot = math.inf, math.inf, math.inf
     for start in range(restarts + 1):
+        stall_limit = stall_iters
         if start > 0:
             _draw(joints, rng, q)
             limit = iters
+            if start > tail_after:
+                limit, stall_limit = iopts[TAIL_ITERS], iopts[TAIL_STALL_ITERS]
         E, pos, rot = _evaluate(G, joints, q, Tt, rw, T, J, e)
         lam = lambda0
         stall = 0
@@ -336,7 +349,7 @@ def _lm_one(G, joints, Tt, q0, opts, iopts, restarts, rng, q, work):
             else:
                 stall += 1
                 lam = min(lam * lam_up, lam_max)
-            if stall >= stall_iters:
+            if stall >= stall_limit:
                 break
         if pos <= tol_pos and rot <= tol_rot:
             return total, True, pos, rot
