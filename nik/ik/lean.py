@@ -58,7 +58,7 @@ def applies(solver) -> bool:
         not _unavailable
         and solver.refine == "lm"
         and not solver.closed_form
-        and (solver.net is None or solver.fallback == "multistart")
+        and (not solver.has_network or solver.fallback == "multistart")
     )
 
 
