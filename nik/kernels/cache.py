@@ -25,7 +25,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CacheChoice", "choose_cache", "user_cache_folder", "writable"]
+__all__ = ["CacheChoice", "cache_home", "choose_cache", "user_cache_folder", "writable"]
 
 #: The kernels' source folder (numba's in-tree cache goes to its ``__pycache__``).
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -60,11 +60,17 @@ def writable(folder: Path) -> bool:
     return True
 
 
-def user_cache_folder(environ=None) -> Path:
-    """``$XDG_CACHE_HOME/nik/numba``, or ``~/.cache/nik/numba`` when ``XDG_CACHE_HOME`` is unset or empty."""
+def cache_home(environ=None) -> Path:
+    """nik's user cache folder: ``$XDG_CACHE_HOME/nik``, or ``~/.cache/nik`` when ``XDG_CACHE_HOME`` is unset or
+    empty (compiled kernels in ``numba/``, parsed URDF arms in ``robots/``)."""
     environ = os.environ if environ is None else environ
     base = environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "nik" / "numba"
+    return Path(base) / "nik"
+
+
+def user_cache_folder(environ=None) -> Path:
+    """``$XDG_CACHE_HOME/nik/numba``, or ``~/.cache/nik/numba`` when ``XDG_CACHE_HOME`` is unset or empty."""
+    return cache_home(environ) / "numba"
 
 
 def choose_cache(*, environ=None, package_dir: Path = PACKAGE_DIR, is_writable=writable) -> CacheChoice:
