@@ -19,6 +19,10 @@ it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve
    flag and ``reachable`` (False where the reach bound proves the target out of reach;
    :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
 
+CPU batches of up to :data:`nik.ik.lean.LEAN_MAX_BATCH` poses on an arm without a closed form take a compiled
+path instead (:mod:`nik.ik.lean`: the same checks, LM through numba kernels from uniform starts, the same
+result contract), chosen in one place at the top of :meth:`IKSolver.solve`.
+
 Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`, refiners
 ``(robot, T, q0) -> RefineResult`` in :mod:`nik.ik.refiners`. Units are SI (metres, radians) throughout.
 """
@@ -141,7 +145,9 @@ class IKSolver:
 
     @property
     def initial_source(self) -> str:
-        """Where :meth:`solve` takes its initial guess: ``network``, ``analytic`` or ``multistart``."""
+        """Where :meth:`solve` takes its initial guess on the batched torch path: ``network``, ``analytic`` or
+        ``multistart``. CPU batches the compiled path takes (:mod:`nik.ik.lean`) start from uniform
+        configurations; each result's ``source`` says which."""
         if self.has_network:
             return "network"
         return "analytic" if self.closed_form else "multistart"
