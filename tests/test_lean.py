@@ -171,7 +171,9 @@ def test_configurations_it_does_not_reproduce_take_the_torch_path():
     assert lean.applies(nik.IKSolver(robot, checkpoint=None, fallback="none"))  # no guess: restarts on both paths
     assert not lean.applies(nik.IKSolver(robot, fallback="none"))  # the network's guess without restarts
     assert not lean.applies(nik.IKSolver(robot, refine="ipso"))
-    assert not lean.applies(nik.IKSolver(nik.load_robot("kuka_kr")))  # the closed form
+    kuka = nik.load_robot("kuka_kr")
+    assert lean.applies(nik.IKSolver(kuka))  # the closed form, compiled
+    assert not lean.applies(nik.IKSolver(kuka, analytic=False, fallback="none"))  # its network's guess alone
     _, T = _targets(robot, lean.LEAN_MAX_BATCH + 1, seed=28)
     assert lean._poses(T, None) is None and lean._poses(T[: lean.LEAN_MAX_BATCH], None) is not None
     assert lean._poses(T[:1].to(torch.float16), None) is None
@@ -185,3 +187,35 @@ def test_numpy_targets_and_lists_are_accepted_as_float64(no_stages):
         res = solver.solve(form)
         assert res.q.dtype == torch.float64 and bool(res.success.all())
     assert isinstance(np.asarray(res.q), np.ndarray)
+
+
+@pytest.mark.parametrize("name", ["kuka_kr", "puma560"])
+def test_closed_form_arms_get_the_closed_form_solution_on_both_paths(name, torch_path):
+    robot = nik.load_robot(name)
+    q, T = _targets(robot, 16, seed=30)
+    T = _out_of_reach(robot, T)
+    near = robot.clamp(q + 0.3)
+    solver = nik.IKSolver(robot)
+    results = []
+    for use_torch in (False, True):
+        torch_path(use_torch)
+        with pytest.warns(UserWarning, match="beyond the reach"):
+            results.append((solver.solve(T), solver.solve(T, q_near=near)))
+    for res in (*results[0], *results[1]):
+        assert res.source == "analytic" and bool(robot.within_limits(res.q).all())
+        assert res.success.tolist() == [True] * 15 + [False]
+        assert int(res.iterations[:15].sum()) == 0  # exact: no LM needed
+        pos, rot = nik.pose_error(T, robot.fk(res.q))
+        torch.testing.assert_close(res.pos_err, pos, atol=1e-12, rtol=0)
+        assert float(pos[:15].max()) < 1e-9 and float(rot[:15].max()) < 1e-9
+    # with q_near the choice is the same solution (nearest, by joint motion); without, the one farthest inside
+    # the limits (two wrist flips can tie on that score, so only success and limits are compared there)
+    torch.testing.assert_close(results[0][1].q[:15], results[1][1].q[:15], atol=1e-9, rtol=0)
+    torch.testing.assert_close(results[0][1].q[15], results[1][1].q[15], atol=1e-9, rtol=0)  # best effort too
+
+
+def test_closed_form_path_is_compiled_for_one_pose(no_stages):
+    robot = nik.load_robot("kuka_kr")
+    _, T = _targets(robot, 1, seed=31)
+    res = nik.IKSolver(robot).solve(T[0])
+    assert res.source == "analytic" and bool(res.success.all()) and float(res.pos_err[0]) < 1e-9

@@ -12,14 +12,16 @@ path does the same job with numpy and the compiled kernels, in tens of microseco
 3. Levenberg-Marquardt through the compiled kernel (:class:`nik.lm.compiled.CompiledLM`, the solver's
    :class:`~nik.lm.LMCfg`) from the best of ``FIRST_STARTS`` uniform configurations, with the batched LM's
    restart budget for the targets within reach; with ``q_near``, a second LM from ``q_near`` and, per target,
-   the rule of the ``near`` stage (a successful answer first, then the one nearer ``q_near``);
+   the rule of the ``near`` stage (a successful answer first, then the one nearer ``q_near``). A PUMA-like
+   arm instead gets its closed form (:mod:`nik.kernels.puma`: all 8 solutions, the one chosen as
+   ``nik.ik.guesses.analytic_guess`` chooses it), then LM from it where it misses the tolerance within reach;
 4. an :class:`~nik.ik.result.IKResult` of tensors in the targets' dtype (float64 inside), joints inside
-   the limits, errors measured by FK of the returned joints, ``source="multistart"``.
+   the limits, errors measured by FK of the returned joints, ``source`` ``"multistart"`` or ``"analytic"``.
 
 When (:func:`applies`, checked in :meth:`nik.IKSolver.solve` before anything else): CPU targets, at most
-:data:`LEAN_MAX_BATCH` of them, ``refine="lm"``, an arm without a closed form, and either no network or
-``fallback="multistart"`` (the default: a failing target draws uniform restarts on both paths). The
-network's guess is not used here: the forward pass of a shipped network (3 x 512, float64, compiled) alone
+:data:`LEAN_MAX_BATCH` of them, ``refine="lm"``, and: a closed-form arm without a network, or another arm
+with no network or with ``fallback="multistart"`` (the default: a failing target draws uniform restarts on
+both paths). The network's guess is not used here: the forward pass of a shipped network (3 x 512, float64, compiled) alone
 costs 80 us for one pose of a multi-head network and 450 us for the 8 branches of a branch network (torch
 float32: 100 / 220 us), more than this whole solve from uniform starts (20-50 us median on panda and ur5;
 ``benchmarks/latency_kernels.py``). Same seed, same answer on this path; the random starts are the kernel's
@@ -57,12 +59,11 @@ _unavailable = False
 
 def applies(solver) -> bool:
     """True when the solver's configuration is one this path reproduces (see the module docstring)."""
-    return (
-        not _unavailable
-        and solver.refine == "lm"
-        and not solver.closed_form
-        and (not solver.has_network or solver.fallback == "multistart")
-    )
+    if _unavailable or solver.refine != "lm":
+        return False
+    if solver.closed_form:  # the closed form is the guess unless a network was given
+        return not solver.has_network
+    return not solver.has_network or solver.fallback == "multistart"
 
 
 def solve(solver, T_target, tol_pos, tol_rot, seed, q_near, max_iters, representation) -> IKResult | None:
@@ -91,10 +92,15 @@ def solve(solver, T_target, tol_pos, tol_rot, seed, q_near, max_iters, represent
         msg = unreachable_message(robot, torch.from_numpy(T), torch.from_numpy(reachable))
         warnings.warn(msg, UserWarning, stacklevel=3)
     lm = CompiledLM.of(robot, solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None)
-    kw = {"tol_pos": tol_pos, "tol_rot": tol_rot, "seed": seed, "max_iters": max_iters, "reachable": reachable}
-    run = lm.solve(T, None, **kw)
-    if near is not None:
-        run = _nearer(run, lm.solve(T, near, **kw), near)
+    kw = {"tol_pos": tol_pos, "tol_rot": tol_rot, "seed": seed, "max_iters": max_iters}
+    if solver.closed_form:
+        source = "analytic"
+        run = _closed_form(robot, lm, T, near, reachable, restarts=solver.fallback == "multistart", **kw)
+    else:
+        source = "multistart"
+        run = lm.solve(T, None, reachable=reachable, **kw)
+        if near is not None:
+            run = _nearer(run, lm.solve(T, near, reachable=reachable, **kw), near)
     q, pos, rot, ok = run.q, run.pos_err, run.rot_err, run.converged
     if dtype != torch.float64:  # the answer in the targets' dtype, inside the limits, its errors measured
         q = np.clip(q.astype(np.float32), facts["lo32"], facts["hi32"])
@@ -108,7 +114,7 @@ def solve(solver, T_target, tol_pos, tol_rot, seed, q_near, max_iters, represent
         torch.from_numpy(rot),
         torch.from_numpy(ok),
         torch.from_numpy(run.iterations),
-        "multistart",
+        source,
         reachable=torch.from_numpy(reachable),
     )
 
@@ -119,7 +125,7 @@ def _kernels():
     if _KERNELS is None:
         from types import SimpleNamespace
 
-        from nik.kernels import lm, poses
+        from nik.kernels import lm, poses, puma
 
         _KERNELS = SimpleNamespace(
             poses_ok=poses.poses_ok,
@@ -127,11 +133,43 @@ def _kernels():
             rpy_poses=poses.rpy_poses,
             reach_flags=poses.reach_flags,
             pose_errors=lm.pose_errors,
+            puma_solutions=puma.puma_solutions,
+            puma_pick=puma.puma_pick,
         )
     return _KERNELS
 
 
 _KERNELS = None
+
+
+def _closed_form(robot, lm, T, near, reachable, *, restarts: bool, **kw) -> CompiledRun:
+    """The stages of a closed-form arm, compiled: the solution of the closed form chosen as ``analytic_guess``
+    chooses it (nearest ``near`` when given, else farthest inside the limits; out of reach, the clamped one
+    nearest the target), then LM from it for the targets it leaves outside tolerance that are within reach
+    (restarts as the solver's fallback says), kept where it is not worse."""
+    from nik.ik.guesses import LIMIT_ROUNDING
+
+    kernels, facts = _kernels(), _facts(robot)
+    base, tool, offsets, k = facts["puma"]
+    B = T.shape[0]
+    sols, valid = np.empty((B, 8, 6)), np.empty((B, 8), dtype=bool)
+    kernels.puma_solutions(base, tool, offsets, k, lm.G, lm.joints, 1e-6, 1e-6, T, sols, valid)
+    q = np.empty((B, 6))
+    use_near = near is not None
+    kernels.puma_pick(sols, valid, lm.G, lm.joints, T, near if use_near else q, use_near, LIMIT_ROUNDING, q)
+    pos, rot = np.empty(B), np.empty(B)
+    kernels.pose_errors(lm.G, lm.joints, T, q, pos, rot)
+    ok = (pos <= kw["tol_pos"]) & (rot <= kw["tol_rot"])
+    run = CompiledRun(q, np.zeros(B, dtype=np.int64), ok, pos, rot)
+    todo = np.flatnonzero(~ok & reachable)
+    if todo.size:
+        res = lm.solve(T[todo], q[todo], restarts=restarts, **kw)
+        better = (res.pos_err + 0.1 * res.rot_err) <= (pos[todo] + 0.1 * rot[todo])
+        keep = todo[better]
+        run.q[keep], run.pos_err[keep], run.rot_err[keep] = res.q[better], res.pos_err[better], res.rot_err[better]
+        run.converged[keep] = res.converged[better]
+        run.iterations[todo] += res.iterations
+    return run
 
 
 def _nearer(a: CompiledRun, b: CompiledRun, q_near: np.ndarray) -> CompiledRun:
@@ -152,16 +190,29 @@ def _nearer(a: CompiledRun, b: CompiledRun, q_near: np.ndarray) -> CompiledRun:
 
 
 def _facts(robot) -> dict:
-    """Per robot, once: the reach bound's centre and radius, float32 limits rounded inward."""
+    """Per robot, once: the reach bound's centre and radius, float32 limits rounded inward, and for a
+    PUMA-like arm the closed form's arrays (base, tool, offsets, constants)."""
     facts = _ROBOTS.get(robot)
     if facts is None:
+        from nik.analytic import is_puma_like, puma560_params
+
         lo32, hi32 = robot.limits_as(torch.empty(0, dtype=torch.float32))
         facts = {
             "center": reach_center(robot).numpy(),
             "radius": max(reach_radius(robot), 1e-300),
             "lo32": lo32.numpy(),
             "hi32": hi32.numpy(),
+            "puma": None,
         }
+        if is_puma_like(robot):
+            from nik.kernels.puma import puma_constants
+
+            g = puma560_params(robot)
+            arrays = (g.base, g.tool, g.offsets)
+            facts["puma"] = (
+                *(np.ascontiguousarray(a, dtype=np.float64) for a in arrays),
+                puma_constants(g.alpha, g.a, g.d),
+            )
         _ROBOTS[robot] = facts
     return facts
 
