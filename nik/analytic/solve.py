@@ -1,0 +1,176 @@
+"""All closed-form IK solutions of a 6R arm with a spherical wrist or three parallel axes.
+
+``solve(robot, T)`` classifies the arm once (:func:`nik.analytic.geometry.family`), builds the constants of
+its closed form (:mod:`nik.analytic.kernels`), and then solves any batch of poses with elementwise tensor
+work: 8 candidate solutions per pose, each angle moved by 2 pi into the joint limits where possible,
+and a validity mask (the candidate exists, lies inside the limits and, with ``check=True``, reaches the
+pose by FK within the tolerance).
+"""
+
+from __future__ import annotations
+
+import warnings
+import weakref
+
+import numpy as np
+import torch
+
+from nik.analytic.geometry import arm_geometry
+from nik.analytic.kernels import KernelConstants, build_constants, run_kernel
+from nik.analytic.puma560 import wrap_into_limits
+from nik.poses import pose_error
+
+__all__ = ["closed_form", "solve"]
+
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def closed_form(robot) -> KernelConstants:
+    """The kernel constants of ``robot`` (cached per robot and definition hash); ValueError if no closed form fits."""
+    key = robot.definition_hash
+    hit = _CACHE.get(robot)
+    if hit is not None and hit[0] == key:
+        return hit[1]
+    geom = arm_geometry(robot)
+    if geom.family is None:
+        raise ValueError(
+            f"nik.analytic.solve: robot {getattr(robot, 'name', 'robot')!r} has no closed form: {geom.reason}"
+        )
+    k = build_constants(geom, robot.G.double().numpy(), robot.offsets.double().numpy())
+    k = _order_by_branch(robot, k)
+    _CACHE[robot] = (key, k)
+    return k
+
+
+def _finish(Tf, k, off, lo, hi):
+    theta, reach = run_kernel(Tf, k)
+    q = wrap_into_limits(theta - off, lo, hi)
+    return q, reach & ((q >= lo) & (q <= hi)).all(dim=-1)
+
+
+_compiled: dict = {}
+
+
+def _kernel(compiled: bool):
+    if not compiled:
+        return _finish
+    if "fn" not in _compiled:
+        try:
+            _compiled["fn"] = torch.compile(_finish, dynamic=True)
+        except Exception as err:  # pragma: no cover - platform dependent
+            warnings.warn(f"torch.compile unavailable ({err}); nik.analytic.solve runs eager", stacklevel=3)
+            _compiled["fn"] = _finish
+    return _compiled["fn"]
+
+
+def solve(
+    robot,
+    T: torch.Tensor,
+    *,
+    check: bool = True,
+    tol_pos: float | None = None,
+    tol_rot: float | None = None,
+    compiled: bool = False,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """All (up to 8) closed-form IK solutions of a 6R arm of a known family (:func:`nik.analytic.family`).
+
+    Args:
+        robot: a :class:`nik.Robot` whose family is ``"spherical_wrist"`` or ``"three_parallel"``;
+            otherwise ``ValueError`` naming the condition that failed.
+        T: (..., 4, 4) target tool poses in the base frame, metres; any float dtype/device.
+        check: verify every solution by FK (batched) and mark it invalid unless it reaches the pose
+            within ``tol_pos`` / ``tol_rot``. With ``check=False`` the mask is existence (no square root
+            of a negative number) and joint limits only.
+        tol_pos: metres; default 1e-9 (float64) or 2e-5 (lower precision).
+        tol_rot: radians; default 1e-9 (float64) or 2e-5 (lower precision).
+        compiled: run a ``torch.compile``'d kernel (large batches; the first call compiles).
+
+    Returns:
+        ``q: (..., 8, 6)`` joint angles (radians, dtype/device of ``T``; each angle moved by a multiple
+        of 2 pi into its limits where possible) and ``valid: (..., 8)`` bool. Invalid entries hold
+        finite, meaningless values. Singular poses give finite solutions (where a joint is free, one
+        value of it). Slot ``k`` is ``shoulder + 2 elbow + 4 wrist``; for PUMA-type and UR-type arms it
+        is the branch label of :func:`nik.data.branches.ik_branch_classifier`.
+    """
+    if not isinstance(T, torch.Tensor) or T.ndim < 2 or T.shape[-2:] != (4, 4) or not T.is_floating_point():
+        shape = tuple(T.shape) if isinstance(T, torch.Tensor) else type(T).__name__
+        raise ValueError(f"nik.analytic.solve: T must be a floating-point tensor of shape (..., 4, 4), got {shape}")
+    k = closed_form(robot)
+    batch = T.shape[:-2]
+    Tf = T.reshape(-1, 4, 4)
+    off = robot.offsets.to(T.device, T.dtype)
+    lo, hi = robot.limits_as(Tf)
+    q, valid = _kernel(compiled)(Tf, k, off, lo, hi)
+    if check:
+        exact = T.dtype == torch.float64
+        tp = tol_pos if tol_pos is not None else (1e-9 if exact else 2e-5)
+        tr = tol_rot if tol_rot is not None else (1e-9 if exact else 2e-5)
+        reached = robot.fk(q.reshape(-1, 6), compiled=compiled, check=False).reshape(-1, 8, 4, 4)
+        pe, re = pose_error(Tf[:, None], reached)
+        valid = valid & (pe <= tp) & (re <= tr)
+    return q.reshape(*batch, 8, 6), valid.reshape(*batch, 8)
+
+
+# ---------------------------------------------------------------------------
+# Solution order = branch label
+# ---------------------------------------------------------------------------
+def _order_by_branch(robot, k: KernelConstants) -> KernelConstants:
+    """Choose the root signs so that slot ``shoulder + 2 elbow + 4 wrist`` holds that branch label.
+
+    The solutions are laid out ``(wrist, elbow, shoulder)``; the sign of each square root depends only on
+    the choices made before it, so the label bits of the 8 solutions of one generic pose fix every sign.
+    The assignment is checked on several poses; if an arm's labels do not follow it (no classifier, or
+    inconsistent), the natural order stays and ``k["branch_order"]`` is False.
+    """
+    from nik.data.branches import ik_branch_classifier
+
+    k = KernelConstants(k)
+    k["branch_order"] = False
+    clf = ik_branch_classifier(robot)
+    if clf is None:
+        return k
+    gen = torch.Generator().manual_seed(20240518)
+    qs = robot.sample(32, generator=gen, dtype=torch.float64)
+    T = robot.fk(qs)
+    theta, reach = run_kernel(T, k)
+    q = theta - robot.offsets
+    pe, re = pose_error(T[:, None], robot.fk(q))
+    ok = reach & (pe < 1e-8) & (re < 1e-8)
+    labels = clf(q.reshape(-1, 6)).reshape(-1, 8).long()
+    new = {name: {} for name in ("s1", "s3", "s5")}
+    used = 0
+    for b in range(qs.shape[0]):
+        if not bool(ok[b].all()) or len(set(labels[b].tolist())) != 8:
+            continue
+        used += 1
+        for idx in range(8):
+            kk, jj, ii = idx >> 2, (idx >> 1) & 1, idx & 1
+            lab = int(labels[b, idx])
+            nk, nj, ni = lab >> 2, (lab >> 1) & 1, lab & 1
+            old = {
+                "s1": (k["s1"][ii], (ni,)),
+                "s3": _at(k["s3"], kk, jj, ii, nk, nj, ni),
+                "s5": _at(k["s5"], kk, jj, ii, nk, nj, ni),
+            }
+            for name, (value, where) in old.items():
+                if new[name].setdefault(where, value) != value:
+                    return k  # labels do not follow the sign structure: keep the natural order
+    if used < 4:
+        return k
+    for name in ("s1", "s3", "s5"):
+        arr = np.array(k[name], dtype=float)
+        for where, value in new[name].items():
+            arr[where if len(where) > 1 else where[0]] = value
+        if len(new[name]) != arr.size:
+            return k
+        k[name] = arr.tolist()
+    k["branch_order"] = True
+    return k
+
+
+def _at(signs, kk, jj, ii, nk, nj, ni):
+    """The sign at the natural index of a (wrist?, elbow?, shoulder) sign array and its label index."""
+    arr = np.array(signs)
+    old = (kk if arr.shape[0] == 2 else 0, jj if arr.shape[1] == 2 else 0, ii)
+    new = (nk if arr.shape[0] == 2 else 0, nj if arr.shape[1] == 2 else 0, ni)
+    return float(arr[old]), new
