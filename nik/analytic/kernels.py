@@ -28,10 +28,13 @@ solutions), SP1 for ``th_2`` and ``th_4`` from ``psi``.
 
 **Singularities.** Every angle comes from ``atan2``, never from ``acos`` or a division, and every square
 root is of a clamped discriminant, so singular poses give finite angles that reach the pose: where a
-subproblem has a continuum of solutions (``atan2(0, 0)``) one member (angle 0 of the free joint) is
-taken and the later subproblems, solved from the full target, absorb it. Where a discriminant can be
-computed from a quantity that vanishes at the singularity (the wrist: ``1 - n_z^2 = n_x^2 + n_y^2``), it
-is, so that a wrist-singular pose gives ``th_5`` exactly.
+subproblem has a continuum of solutions (``atan2(0, 0)``) one member is taken and the later
+subproblems, solved from the full target, absorb it. At the wrist singularity (axis 6 along axis 4,
+or along axes 2..4 of a three-parallel arm; detected as ``|n_xy| < 100 eps``) the free angle is fixed:
+joint 4 at the middle of its range (spherical wrist); the sum angle ``psi`` that puts the planar pair
+mid-way in its reach (three parallel: there ``psi`` also moves the pair's target point). Where a
+discriminant can be computed from a quantity that vanishes at the singularity (the wrist:
+``1 - n_z^2 = n_x^2 + n_y^2``), it is, so that a wrist-singular pose gives ``th_5`` exactly.
 
 **Solution order.** Slot ``k`` of the 8 is ``shoulder + 2 elbow + 4 wrist``; for arms that
 :func:`nik.data.branches.ik_branch_classifier` labels (PUMA-type and UR-type arms) the signs of the
@@ -193,7 +196,7 @@ def _spherical(pF2, wz, wx, th1, reach1, k, dt, dev):
     # W = D^T Rz(-psi) (R1^T Rz(-th1) Q): its columns e_z (n) and e_x (ex), in F_4
     n = _matvec(k["DT"], _rz_t(cp, sp, wz))
     ex = _matvec(k["DT"], _rz_t(cp, sp, wx))
-    th4, th5, th6, disc5 = _wrist(n, ex, k, s5)
+    th4, th5, th6, disc5 = _wrist(n, ex, k, s5, torch.full_like(n[0], k["th4_free"]))
     shape = th4.shape
     theta = torch.stack([th1.expand(shape), th2.expand(shape), th3.expand(shape), th4, th5, th6], dim=-1).reshape(
         -1, 8, 6
@@ -202,11 +205,12 @@ def _spherical(pF2, wz, wx, th1, reach1, k, dt, dev):
     return theta, reach.expand(shape).reshape(-1, 8)
 
 
-def _wrist(n, ex, k, s5):
+def _wrist(n, ex, k, s5, free):
     """``W = Rz(th4) A Rz(th5) B Rz(th6)`` from its columns ``n = W e_z`` and ``ex = W e_x``.
 
     Spherical wrist: ``W`` in ``F_4``, ``A = R(G_4)``. Three parallel: ``W`` in ``F_2``, ``th4`` is the sum
-    angle ``psi`` of joints 2..4 and ``A = D R(G_4)``. Returns ``th4, th5, th6`` and the discriminant of ``th5``.
+    angle ``psi`` of joints 2..4 and ``A = D R(G_4)``. ``free``: the value of ``th4`` where it is free (axis 6
+    along axis 4). Returns ``th4, th5, th6`` and the discriminant of ``th5``.
     """
     A = k["A"]
     # th5: (A^T e_z) . Rz(th5) (B e_z) = n_z  (SP4 about axis 5)
@@ -220,6 +224,9 @@ def _wrist(n, ex, k, s5):
     rb = (c5 * b[0] - s5_ * b[1], s5_ * b[0] + c5 * b[1], b[2])  # Rz(th5) b
     m = _matvec(A, rb)
     th4 = _sp1(m, n)
+    # axis 6 along axis 4 (wrist singular): th4 is free and its atan2 is of rounding noise; take a fixed value
+    tiny = (100.0 * torch.finfo(s2.dtype).eps) ** 2
+    th4 = torch.where(s2 < tiny, free, th4)
     c4, s4 = torch.cos(th4), torch.sin(th4)
     r = _matvec(k["AT"], _rz_t(c4, s4, ex))  # A^T Rz(-th4) W e_x
     r = _rz_t(c5, s5_, r)
@@ -234,7 +241,15 @@ def _three_parallel(pF2, wz, wx, th1, reach1, k, dt, dev):
     s5 = torch.tensor(k["s5"], dtype=dt, device=dev)  # (2, 1, 2): wrist sign per (wrist, shoulder)
     s3 = torch.tensor(k["s3"], dtype=dt, device=dev)  # (2, 2, 2): elbow sign per (wrist, elbow, shoulder)
     # th5 from the height of axis 6 along axis 2, psi (sum of joints 2..4) from its direction, th6 from W e_x
-    psi, th5, th6, disc5 = _wrist(wz, wx, k, s5)
+    # wrist singular (axis 6 along axes 2..4): psi is free, but it moves P - Rz(psi) D p4, the tip of the planar
+    # pair; take the psi that puts that tip mid-way in the pair's annulus (|c|^2 = 2 K3), or as near as it gets
+    pxy2 = pF2[0] * pF2[0] + pF2[1] * pF2[1]
+    r4sq = k["r4sq"]
+    span = 2.0 * torch.sqrt(pxy2 * r4sq)  # |c|^2 = pxy2 + r4sq - span cos(angle of p4 from P)
+    near = torch.clamp(pxy2 + (r4sq - 2.0 * k["K3"]), min=-span, max=span)
+    ang = torch.atan2(torch.sqrt(torch.clamp(span * span - near * near, min=0.0)), near)
+    free = torch.atan2(pF2[1], pF2[0]) + ang - k["a4"]
+    psi, th5, th6, disc5 = _wrist(wz, wx, k, s5, free)
     cp, sp = torch.cos(psi), torch.sin(psi)
     p4 = k["Dp4"]
     cx = pF2[0] - _lin((p4[0], cp), (-p4[1], sp))
@@ -274,8 +289,12 @@ def _z_turn(C: np.ndarray) -> tuple[float, float]:
     return math.atan2(C[1, 0], C[0, 0]), sigma
 
 
-def build_constants(geom: ArmGeometry, G: np.ndarray, offsets: np.ndarray) -> KernelConstants:
-    """The constants of :func:`run_kernel` for an arm of family ``geom.family`` with normal form ``G: (7, 4, 4)``.
+def build_constants(geom: ArmGeometry, G: np.ndarray, offsets: np.ndarray, limits: np.ndarray) -> KernelConstants:
+    """The constants of :func:`run_kernel` for an arm of family ``geom.family``.
+
+    Args:
+        geom: :func:`nik.analytic.geometry.arm_geometry` of the arm.
+        G: (7, 4, 4) normal form; offsets: (6,) radians; limits: (6, 2) radians.
 
     The elbow and wrist signs are the natural ones (+ first); :func:`order_by_branch` reorders them.
     """
@@ -332,6 +351,7 @@ def build_constants(geom: ArmGeometry, G: np.ndarray, offsets: np.ndarray) -> Ke
             az=_snap(A[2, 2]),
             s3=[[[1.0, 1.0], [-1.0, -1.0]]],
             s5=[[[1.0, 1.0], [1.0, 1.0]], [[-1.0, -1.0], [-1.0, -1.0]]],
+            th4_free=float(0.5 * (limits[3, 0] + limits[3, 1]) + o[3]),  # wrist singular: joint 4 mid-range
         )
         a = A[2, :]
     else:
@@ -350,6 +370,8 @@ def build_constants(geom: ArmGeometry, G: np.ndarray, offsets: np.ndarray) -> Ke
             beta23=beta2 + sig2 * beta3,
             s5=[[[1.0, 1.0]], [[-1.0, -1.0]]],
             s3=[[[1.0, 1.0], [-1.0, -1.0]], [[1.0, 1.0], [-1.0, -1.0]]],
+            r4sq=float((Fl @ p4)[:2] @ (Fl @ p4)[:2]),
+            a4=math.atan2((Fl @ p4)[1], (Fl @ p4)[0]),
         )
         a = DA[2, :]
     b = B[:, 2]

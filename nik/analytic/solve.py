@@ -36,7 +36,7 @@ def closed_form(robot) -> KernelConstants:
         raise ValueError(
             f"nik.analytic.solve: robot {getattr(robot, 'name', 'robot')!r} has no closed form: {geom.reason}"
         )
-    k = build_constants(geom, robot.G.double().numpy(), robot.offsets.double().numpy())
+    k = build_constants(geom, robot.G.double().numpy(), robot.offsets.double().numpy(), robot.limits.double().numpy())
     k = _order_by_branch(robot, k)
     _CACHE[robot] = (key, k)
     return k
