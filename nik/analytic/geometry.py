@@ -16,12 +16,14 @@ moves rigidly with the joints before it), so the family is read from these six l
   other cobots built like them).
 - None otherwise (7-DOF arms, prismatic joints, general 6R arms).
 
-Tolerance: two axes count as parallel when the sine of their angle is at most ``ANGLE_TOL`` (1e-9);
-two lines meet when their distance is at most ``LENGTH_TOL`` (1e-9) times the arm's size (the sum
-of the lengths of ``G_1 .. G_5``, metres). Axes that must *not* be parallel need a sine above
-``DEGENERATE_SIN`` (1e-6). Within these tolerances the closed form is exact up to them: a family
-found with tolerance 1e-9 gives solutions within about 1e-9 m of the pose, and :func:`nik.analytic.solve`
-checks every one by FK.
+Tolerance: two axes count as parallel when the sine of their angle is at most ``ANGLE_TOL`` (1e-6);
+two lines meet when their distance is at most ``LENGTH_TOL`` (1e-6) times the arm's size (the sum of
+the lengths of ``G_1 .. G_5``, metres). Axes that must *not* be parallel need a sine above
+``DEGENERATE_SIN`` (1e-3). Tables written in DH, MDH or POE are exact to rounding (deviation ~1e-16);
+URDFs read through pytorch-kinematics carry its float32 rounding of ``rpy`` (up to ~1e-8 m: the Kinova
+Jaco 2 of example-robot-data). :attr:`ArmGeometry.deviation` records the largest departure; where it
+exceeds ``POLISH_ABOVE`` (1e-12) times the size, :func:`nik.analytic.solve` follows the closed form
+(exact for the ideal arm) by two damped Newton steps on the robot's own FK, and its FK check decides.
 
 :func:`arm_geometry` returns, besides the family, the joint frames at the zero configuration and the
 meeting point the closed forms start from (:mod:`nik.analytic.kernels`).
@@ -35,12 +37,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ANGLE_TOL", "DEGENERATE_SIN", "FAMILIES", "LENGTH_TOL", "ArmGeometry", "arm_geometry", "family"]
+__all__ = [
+    "ANGLE_TOL",
+    "DEGENERATE_SIN",
+    "FAMILIES",
+    "LENGTH_TOL",
+    "POLISH_ABOVE",
+    "ArmGeometry",
+    "arm_geometry",
+    "family",
+]
 
 FAMILIES = ("spherical_wrist", "three_parallel")
-ANGLE_TOL = 1e-9  # sine of the angle between axes that count as parallel
-LENGTH_TOL = 1e-9  # times the arm's size (metres): lines that count as meeting
-DEGENERATE_SIN = 1e-6  # axes that must not be parallel need a larger sine than this
+ANGLE_TOL = 1e-6  # sine of the angle between axes that count as parallel
+LENGTH_TOL = 1e-6  # times the arm's size (metres): lines that count as meeting
+DEGENERATE_SIN = 1e-3  # axes that must not be parallel need a larger sine than this
+POLISH_ABOVE = 1e-12  # times the arm's size: a larger deviation from the family gets Newton steps after the closed form
 
 
 @dataclass(frozen=True)
@@ -51,7 +63,7 @@ class ArmGeometry:
     ``frames``: (7, 4, 4) ``F_1 .. F_6`` and the tool pose at the zero configuration (base frame).
     ``point``: the wrist centre (spherical wrist) or the meeting point of axes 5 and 6 (three parallel),
     base frame at the zero configuration. ``deviation``: the largest departure from the family's
-    structure found (sine or metres), for information.
+    structure found, metres (a sine counts times ``size``).
     """
 
     family: str | None

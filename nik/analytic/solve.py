@@ -4,7 +4,9 @@
 its closed form (:mod:`nik.analytic.kernels`), and then solves any batch of poses with elementwise tensor
 work: 8 candidate solutions per pose, each angle moved by 2 pi into the joint limits where possible,
 and a validity mask (the candidate exists, lies inside the limits and, with ``check=True``, reaches the
-pose by FK within the tolerance).
+pose by FK within the tolerance). Arms that fit their family only within the tolerance of
+:mod:`nik.analytic.geometry` (a URDF's float32-rounded origins) get two damped Newton steps on their
+own FK after the closed form.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import weakref
 import numpy as np
 import torch
 
-from nik.analytic.geometry import arm_geometry
+from nik.analytic.geometry import POLISH_ABOVE, arm_geometry
 from nik.analytic.kernels import KernelConstants, build_constants, run_kernel
 from nik.analytic.puma560 import wrap_into_limits
 from nik.poses import pose_error
@@ -37,6 +39,7 @@ def closed_form(robot) -> KernelConstants:
             f"nik.analytic.solve: robot {getattr(robot, 'name', 'robot')!r} has no closed form: {geom.reason}"
         )
     k = build_constants(geom, robot.G.double().numpy(), robot.offsets.double().numpy(), robot.limits.double().numpy())
+    k["polish"] = geom.deviation > POLISH_ABOVE * geom.size
     k = _order_by_branch(robot, k)
     _CACHE[robot] = (key, k)
     return k
@@ -44,8 +47,30 @@ def closed_form(robot) -> KernelConstants:
 
 def _finish(Tf, k, off, lo, hi):
     theta, reach = run_kernel(Tf, k)
-    q = wrap_into_limits(theta - off, lo, hi)
-    return q, reach & ((q >= lo) & (q <= hi)).all(dim=-1)
+    return wrap_into_limits(theta - off, lo, hi), reach
+
+
+def _polish(robot, Tf: torch.Tensor, q: torch.Tensor, steps: int = 3) -> torch.Tensor:
+    """``steps`` damped Newton steps on the robot's FK for ``q: (N, 8, 6)`` towards ``Tf: (N, 4, 4)``.
+
+    For arms that fit their family only within the tolerance (:data:`nik.analytic.geometry.POLISH_ABOVE`):
+    the closed form is exact for the ideal arm, and a step from there converges quadratically.
+    """
+    shape = q.shape
+    qf = q.reshape(-1, 6)
+    Tt = Tf[:, None].expand(-1, shape[1], 4, 4).reshape(-1, 4, 4)
+    eye = torch.eye(6, dtype=q.dtype, device=q.device)
+    damping = 1e-12 if q.dtype == torch.float64 else 1e-6
+    for _ in range(steps):
+        T, J = robot.fk_and_jacobian(qf)
+        dp = Tt[:, :3, 3] - T[:, :3, 3]
+        M = Tt[:, :3, :3] @ T[:, :3, :3].transpose(-1, -2)
+        dr = 0.5 * torch.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0], M[:, 1, 0] - M[:, 0, 1]], dim=-1)
+        e = torch.cat([dp, dr], dim=-1)
+        Jt = J.transpose(-1, -2)
+        dq = torch.linalg.solve(Jt @ J + damping * eye, (Jt @ e[..., None]))[..., 0]
+        qf = qf + torch.nan_to_num(dq, nan=0.0, posinf=0.0, neginf=0.0)
+    return qf.reshape(shape)
 
 
 _compiled: dict = {}
@@ -100,7 +125,10 @@ def solve(
     Tf = T.reshape(-1, 4, 4)
     off = robot.offsets.to(T.device, T.dtype)
     lo, hi = robot.limits_as(Tf)
-    q, valid = _kernel(compiled)(Tf, k, off, lo, hi)
+    q, reach = _kernel(compiled)(Tf, k, off, lo, hi)
+    if k["polish"] and Tf.shape[0] > 0:
+        q = wrap_into_limits(_polish(robot, Tf, q), lo, hi)
+    valid = reach & ((q >= lo) & (q <= hi)).all(dim=-1)
     if check:
         exact = T.dtype == torch.float64
         tp = tol_pos if tol_pos is not None else (1e-9 if exact else 2e-5)
@@ -135,7 +163,7 @@ def _order_by_branch(robot, k: KernelConstants) -> KernelConstants:
     theta, reach = run_kernel(T, k)
     q = theta - robot.offsets
     pe, re = pose_error(T[:, None], robot.fk(q))
-    ok = reach & (pe < 1e-8) & (re < 1e-8)
+    ok = reach & (pe < 1e-6) & (re < 1e-6)  # before any polish: within the family tolerance
     labels = clf(q.reshape(-1, 6)).reshape(-1, 8).long()
     new = {name: {} for name in ("s1", "s3", "s5")}
     used = 0
