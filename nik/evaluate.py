@@ -5,6 +5,9 @@ way (FK of the returned joints against the target): the network alone, the netwo
 refinement, the uniform-init swarm (no network), the closed form (PUMA-like arms) and
 pytorch-kinematics' ``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
 table, a JSON copy and a cumulative error plot.
+
+The evaluation room: it may import every room below it (robots, data, nets, analytic, ik, learn); only the
+cli imports it.
 """
 
 from __future__ import annotations
@@ -256,7 +259,7 @@ def evaluate(
     """
     from nik.data import load_dataset
     from nik.device import resolve_device
-    from nik.solver import IKSolver
+    from nik.ik import IKSolver
 
     dev = resolve_device(device)
     robot = load_robot(robot) if not isinstance(robot, Robot) else robot

@@ -8,6 +8,9 @@
 - :func:`puma560_ik` is paper B's closed form of PUMA-560-type arms (quaternion or matrix wrist);
   :func:`puma560_params` recovers that geometry from any robot's FK normal form or says why the
   robot does not fit, :func:`is_puma_like` says whether it does.
+
+The room may import kinematics, poses, robots and data (the branch labels that order :func:`solve`'s
+solutions); never lm, swarm, ik, learn or cli.
 """
 
 from nik.analytic.geometry import FAMILIES, family
