@@ -57,6 +57,7 @@ from nik.analytic.geometry import ArmGeometry
 __all__ = ["KernelConstants", "build_constants", "run_kernel"]
 
 _SNAP = 1e-14
+_TWO_PI = 2.0 * math.pi
 
 
 class KernelConstants(dict):
@@ -94,39 +95,71 @@ def _matvec(M, v):
     return tuple(_lin(*((M[r][c], v[c]) for c in range(3))) for r in range(3))
 
 
-def _rz(c, s, v):
-    """``Rz(th) v`` with ``c, s`` the cosine and sine of ``th``."""
-    return (c * v[0] - s * v[1], s * v[0] + c * v[1], v[2])
-
-
 def _rz_t(c, s, v):
-    """``Rz(th)^T v``."""
+    """``Rz(th)^T v`` with ``c, s`` the cosine and sine of ``th``."""
     return (c * v[0] + s * v[1], c * v[1] - s * v[0], v[2])
 
 
-def _sp4_half(disc, dprime):
-    """Half-width ``atan2(sqrt(disc), d')`` of the two SP4 roots, with the discriminant clamped at 0."""
-    return torch.atan2(torch.sqrt(torch.clamp(disc, min=0.0)), dprime)
+def _angle(y, x):
+    """``(atan2(y, x), cos, sin)``, the cosine and sine from ``x, y`` (no cos/sin); ``(0, 1, 0)`` at ``x = y = 0``."""
+    th = torch.atan2(y, x)
+    r2 = x * x + y * y
+    ok = r2 > 0
+    inv = torch.rsqrt(torch.where(ok, r2, 1.0))
+    return th, torch.where(ok, x * inv, 1.0), y * inv
+
+
+def _sp4(phi0: float, disc, d, sign):
+    """The SP4 roots ``phi0 + sign * atan2(sqrt(disc), d)`` (``disc`` clamped at 0) with their cosines and sines."""
+    h, ch, sh = _angle(torch.sqrt(torch.clamp(disc, min=0.0)), d)
+    ssh = sign * sh
+    c0, s0 = _snap(math.cos(phi0)), _snap(math.sin(phi0))
+    return phi0 + sign * h, _lin((c0, ch), (-s0, ssh)), _lin((s0, ch), (c0, ssh))
 
 
 def _sp1(m, n):
-    """SP1 about z: the angle ``th`` with ``Rz(th) m`` along ``n`` in the xy plane (``atan2(0, 0) = 0``)."""
-    return torch.atan2(m[0] * n[1] - m[1] * n[0], m[0] * n[0] + m[1] * n[1])
+    """SP1 about z: the angle ``th`` with ``Rz(th) m`` along ``n`` in the xy plane, with its cosine and sine."""
+    return _angle(m[0] * n[1] - m[1] * n[0], m[0] * n[0] + m[1] * n[1])
+
+
+def _wrap(th, j: int, k, lim):
+    """Joint ``j``'s angle ``th - offset`` moved by a multiple of 2 pi into its limits where possible (as
+    :func:`nik.analytic.puma560.wrap_into_limits`), and whether it is inside them."""
+    lo, hi = lim[0][j], lim[1][j]
+    x = th - k["off"][j] if k["off"][j] != 0.0 else th
+    w = torch.remainder(x + math.pi, _TWO_PI) - math.pi
+    inside = (w >= lo) & (w <= hi)
+    if hi < math.pi and lo >= -math.pi:  # a turn up or down can never land inside
+        return w, inside
+    other = w
+    if lo < -math.pi:
+        down = w - _TWO_PI
+        other = torch.where((down >= lo) & (down <= hi), down, w)
+    if hi >= math.pi:
+        up = w + _TWO_PI
+        other = torch.where((up >= lo) & (up <= hi), up, other)
+    w = torch.where(inside, w, other)
+    return w, (w >= lo) & (w <= hi)
 
 
 # ---------------------------------------------------------------------------
 # The kernel
 # ---------------------------------------------------------------------------
-def run_kernel(Tf: torch.Tensor, k: KernelConstants) -> tuple[torch.Tensor, torch.Tensor]:
-    """Joint angles of the closed form.
+def run_kernel(Tf: torch.Tensor, k: KernelConstants, lim) -> tuple[torch.Tensor, torch.Tensor, list[torch.Tensor]]:
+    """All 8 closed-form solutions, wrapped into the limits.
 
     Args:
         Tf: (N, 4, 4) target poses (base frame, metres).
         k: :func:`build_constants` output.
+        lim: ``(lower, upper)``, two lists of 6 Python floats (the limits in ``Tf``'s dtype).
 
     Returns:
-        ``theta: (N, 8, 6)`` joint angles ``q + offset`` (radians, not wrapped) and ``reach: (N, 8)``
-        bool: no square root of a clearly negative number on the way (the pose may be reachable).
+        ``q: (N, 8, 6)`` joint angles (radians; each moved by a multiple of 2 pi into its limits where
+        possible), ``ok: (N, 8)`` bool: inside the limits, and no square root of a clearly negative
+        number on the way (the pose may be reachable), and ``qs``: the same joint angles per joint, each in
+        the shape it has before the 8 solutions are laid out, ``(wrist, elbow, shoulder, pose)`` (``(2, N)`` for
+        joint 1: one value per shoulder choice; ``(2, 2, 2, N)`` at most). The poses are the last axis, so that
+        the broadcasts between these shapes run over contiguous memory.
     """
     dt, dev = Tf.dtype, Tf.device
     R = [[Tf[:, r, c] for c in range(3)] for r in range(3)]
@@ -141,76 +174,82 @@ def run_kernel(Tf: torch.Tensor, k: KernelConstants) -> tuple[torch.Tensor, torc
     qz = _matvec(k["R0T"], rot_target(k["g6z"]))
     qx = _matvec(k["R0T"], rot_target(k["g6x"]))
 
-    # shoulder (SP4 about axis 1): g . Rz(-th1) x = K'
+    # shoulder (SP4 about axis 1): g . Rz(phi) x = K' with phi = -th1; phi = atan2(B, A) +- atan2(sqrt(disc), d)
     g = k["g"]
     A1 = _lin((g[0], x[0]), (g[1], x[1]))
     B1 = _lin((g[1], x[0]), (-g[0], x[1]))
     d1 = k["K1"] - g[2] * x[2] if g[2] != 0.0 else torch.full_like(x[0], k["K1"])
     disc1 = k["gxy2"] * (x[0] * x[0] + x[1] * x[1]) - d1 * d1
-    s1 = torch.tensor(k["s1"], dtype=dt, device=dev)  # (2,) signs on the last (shoulder) axis
-    phi1 = torch.atan2(B1, A1)[:, None, None, None] + s1 * _sp4_half(disc1, d1)[:, None, None, None]
-    th1 = -phi1  # (N, 1, 1, 2)
-    c1, s1_ = torch.cos(th1), torch.sin(th1)
-    reach1 = disc1 >= -k["tol_len2"]
+    ok = disc1 >= -k["tol_len2"]
+    sign1 = torch.tensor(k["s1"], dtype=dt, device=dev)[:, None]  # (2, 1): (shoulder, pose)
+    phi, cphi, sphi = _angle(B1, A1)
+    h, ch, sh = _angle(torch.sqrt(torch.clamp(disc1, min=0.0)), d1)
+    ssh = sign1 * sh
+    th1 = -(phi + sign1 * h)  # (2, N)
+    c1 = cphi * ch - sphi * ssh  # cos(phi + sign h) = cos(-th1)
+    s1 = -(sphi * ch + cphi * ssh)
 
-    def after1(v):  # R1^T Rz(-th1) v - R1^T t1 as needed: rotate by -th1 then by R1^T (no translation)
-        xr = tuple(t[:, None, None, None] for t in v)
-        return _matvec(k["R1T"], _rz_t(c1, s1_, xr))
+    def after1(v):  # R1^T Rz(-th1) v
+        return _matvec(k["R1T"], _rz_t(c1, s1, v))
 
-    wz = after1(qz)  # axis 6 (tool frame z of G_6^-1 ... ) in F_2: W e_z before the joints 2..
+    wz = after1(qz)  # W e_z and W e_x of W = R1^T Rz(-th1) R0^T R_T R6^T, in F_2
     wx = after1(qx)
     pF2 = after1(x)
-    pF2 = tuple(pF2[i] - k["R1Tt1"][i] for i in range(3))
+    pF2 = tuple(pF2[i] - k["R1Tt1"][i] for i in range(3))  # the point in F_2
 
     if k["family"] == "spherical_wrist":
-        theta, reach = _spherical(pF2, wz, wx, th1, reach1, k, dt, dev)
+        ths, ok = _spherical(pF2, wz, wx, ok, k, dt, dev)
     else:
-        theta, reach = _three_parallel(pF2, wz, wx, th1, reach1, k, dt, dev)
-    return theta, reach
+        ths, ok = _three_parallel(pF2, wz, wx, ok, k, dt, dev)
+    ths = (th1,) + ths
+    qs = []
+    for j, th in enumerate(ths):
+        w, inside = _wrap(th, j, k, lim)
+        qs.append(w)
+        ok = ok & inside
+    shape = torch.broadcast_shapes(*(w.shape for w in qs))  # (2, 2, 2, N): wrist, elbow, shoulder, pose
+    q = torch.stack([w.expand(shape) for w in qs], dim=-1).permute(3, 0, 1, 2, 4).reshape(-1, 8, 6)
+    return q, ok.expand(shape).permute(3, 0, 1, 2).reshape(-1, 8), qs
 
 
-def _planar(cx, cy, k, s3):
+def _planar(cx, cy, k, sign3):
     """Planar pair of parallel joints 2, 3: ``Rz(th2) (t2 + C2 Rz(th3) w) = c`` in the xy plane of ``F_2``.
 
-    Returns ``th2, th3, disc3``; the two elbow roots carry the signs ``s3``.
+    Returns ``(th2, c2, s2), (th3, disc3)``; the two elbow roots carry the signs ``sign3``.
     """
     rhs = 0.5 * (cx * cx + cy * cy) - k["K3"]
     disc3 = k["rho3sq"] - rhs * rhs
-    th3 = k["phi3"] + s3 * _sp4_half(disc3, rhs)
-    c3, s3_ = torch.cos(th3), torch.sin(th3)
+    th3, c3, s3 = _sp4(k["phi3"], disc3, rhs, sign3)
     w = k["w"]
-    rw = (c3 * w[0] - s3_ * w[1], s3_ * w[0] + c3 * w[1])
     C = k["C2xy"]
-    vx = _lin((C[0][0], rw[0]), (C[0][1], rw[1])) + k["t2"][0]
-    vy = _lin((C[1][0], rw[0]), (C[1][1], rw[1])) + k["t2"][1]
-    th2 = _sp1((vx, vy), (cx, cy))
-    return th2, th3, disc3
+    rw0 = _lin((w[0], c3), (-w[1], s3))  # Rz(th3) w, xy
+    rw1 = _lin((w[1], c3), (w[0], s3))
+    vx = _lin((C[0][0], rw0), (C[0][1], rw1)) + k["t2"][0]
+    vy = _lin((C[1][0], rw0), (C[1][1], rw1)) + k["t2"][1]
+    return _sp1((vx, vy), (cx, cy)), (th3, disc3)
 
 
-def _spherical(pF2, wz, wx, th1, reach1, k, dt, dev):
-    s3 = torch.tensor(k["s3"], dtype=dt, device=dev)  # (1, 2, 2): elbow sign per (elbow, shoulder)
-    s5 = torch.tensor(k["s5"], dtype=dt, device=dev)  # (2, 2, 2): wrist sign per (wrist, elbow, shoulder)
-    th2, th3, disc3 = _planar(pF2[0], pF2[1], k, s3)  # (N, 1, 2, 2)
+def _spherical(pF2, wz, wx, ok, k, dt, dev):
+    sign3 = torch.tensor(k["s3"], dtype=dt, device=dev)[..., None]  # (1, 2, 2, 1): per (elbow, shoulder)
+    sign5 = torch.tensor(k["s5"], dtype=dt, device=dev)[..., None]  # (2, 2, 2, 1): per (wrist, elbow, shoulder)
+    (th2, _, _), (th3, disc3) = _planar(pF2[0], pF2[1], k, sign3)  # (1, 2, 2, N)
     psi = th2 + k["sig2"] * th3 + k["beta2"]
     cp, sp = torch.cos(psi), torch.sin(psi)
     # W = D^T Rz(-psi) (R1^T Rz(-th1) Q): its columns e_z (n) and e_x (ex), in F_4
     n = _matvec(k["DT"], _rz_t(cp, sp, wz))
     ex = _matvec(k["DT"], _rz_t(cp, sp, wx))
-    th4, th5, th6, disc5 = _wrist(n, ex, k, s5, torch.full_like(n[0], k["th4_free"]))
-    shape = th4.shape
-    theta = torch.stack([th1.expand(shape), th2.expand(shape), th3.expand(shape), th4, th5, th6], dim=-1).reshape(
-        -1, 8, 6
-    )
-    reach = reach1[:, None, None, None] & (disc3 >= -k["tol_len4"]) & (disc5 >= -k["tol_unit"])
-    return theta, reach.expand(shape).reshape(-1, 8)
+    free = (k["th4_free"], math.cos(k["th4_free"]), math.sin(k["th4_free"]))
+    (th4, _, _), th5, th6, disc5 = _wrist(n, ex, k, sign5, free)
+    ok = ok & (disc3 >= -k["tol_len4"]) & (disc5 >= -k["tol_unit"])
+    return (th2, th3, th4, th5, th6), ok
 
 
-def _wrist(n, ex, k, s5, free):
+def _wrist(n, ex, k, sign5, free):
     """``W = Rz(th4) A Rz(th5) B Rz(th6)`` from its columns ``n = W e_z`` and ``ex = W e_x``.
 
     Spherical wrist: ``W`` in ``F_4``, ``A = R(G_4)``. Three parallel: ``W`` in ``F_2``, ``th4`` is the sum
-    angle ``psi`` of joints 2..4 and ``A = D R(G_4)``. ``free``: the value of ``th4`` where it is free (axis 6
-    along axis 4). Returns ``th4, th5, th6`` and the discriminant of ``th5``.
+    angle ``psi`` of joints 2..4 and ``A = D R(G_4)``. ``free``: ``(th4, cos, sin)`` where ``th4`` is free
+    (axis 6 along axis 4). Returns ``(th4, c4, s4), th5, th6`` and the discriminant of ``th5``.
     """
     A = k["A"]
     # th5: (A^T e_z) . Rz(th5) (B e_z) = n_z  (SP4 about axis 5)
@@ -218,29 +257,28 @@ def _wrist(n, ex, k, s5, free):
     d5 = n[2] - az * bz if az * bz != 0.0 else n[2]
     s2 = n[0] * n[0] + n[1] * n[1]  # = 1 - n_z^2, exact near the wrist singularity
     disc5 = s2 - (az * az + bz * bz) + (2.0 * az * bz) * n[2] if (az != 0.0 or bz != 0.0) else s2
-    th5 = k["phi5"] + s5 * _sp4_half(disc5, d5)
-    c5, s5_ = torch.cos(th5), torch.sin(th5)
+    th5, c5, s5 = _sp4(k["phi5"], disc5, d5, sign5)
     b = k["b"]
-    rb = (c5 * b[0] - s5_ * b[1], s5_ * b[0] + c5 * b[1], b[2])  # Rz(th5) b
+    rb = (_lin((b[0], c5), (-b[1], s5)), _lin((b[1], c5), (b[0], s5)), b[2])  # Rz(th5) b
     m = _matvec(A, rb)
-    th4 = _sp1(m, n)
+    th4, c4, s4 = _sp1(m, n)
     # axis 6 along axis 4 (wrist singular): th4 is free and its atan2 is of rounding noise; take a fixed value
-    tiny = (100.0 * torch.finfo(s2.dtype).eps) ** 2
-    th4 = torch.where(s2 < tiny, free, th4)
-    c4, s4 = torch.cos(th4), torch.sin(th4)
+    sing = s2 < (100.0 * torch.finfo(s2.dtype).eps) ** 2
+    th4 = torch.where(sing, free[0], th4)
+    c4 = torch.where(sing, free[1], c4)
+    s4 = torch.where(sing, free[2], s4)
     r = _matvec(k["AT"], _rz_t(c4, s4, ex))  # A^T Rz(-th4) W e_x
-    r = _rz_t(c5, s5_, r)
+    r = _rz_t(c5, s5, r)
     BT = k["BT"]
     rx = _lin((BT[0][0], r[0]), (BT[0][1], r[1]), (BT[0][2], r[2]))
     ry = _lin((BT[1][0], r[0]), (BT[1][1], r[1]), (BT[1][2], r[2]))
     th6 = torch.atan2(ry, rx)
-    return th4, th5, th6, disc5
+    return (th4, c4, s4), th5, th6, disc5
 
 
-def _three_parallel(pF2, wz, wx, th1, reach1, k, dt, dev):
-    s5 = torch.tensor(k["s5"], dtype=dt, device=dev)  # (2, 1, 2): wrist sign per (wrist, shoulder)
-    s3 = torch.tensor(k["s3"], dtype=dt, device=dev)  # (2, 2, 2): elbow sign per (wrist, elbow, shoulder)
-    # th5 from the height of axis 6 along axis 2, psi (sum of joints 2..4) from its direction, th6 from W e_x
+def _three_parallel(pF2, wz, wx, ok, k, dt, dev):
+    sign5 = torch.tensor(k["s5"], dtype=dt, device=dev)[..., None]  # (2, 1, 2, 1): per (wrist, shoulder)
+    sign3 = torch.tensor(k["s3"], dtype=dt, device=dev)[..., None]  # (2, 2, 2, 1): per (wrist, elbow, shoulder)
     # wrist singular (axis 6 along axes 2..4): psi is free, but it moves P - Rz(psi) D p4, the tip of the planar
     # pair; take the psi that puts that tip mid-way in the pair's annulus (|c|^2 = 2 K3), or as near as it gets
     pxy2 = pF2[0] * pF2[0] + pF2[1] * pF2[1]
@@ -249,19 +287,15 @@ def _three_parallel(pF2, wz, wx, th1, reach1, k, dt, dev):
     near = torch.clamp(pxy2 + (r4sq - 2.0 * k["K3"]), min=-span, max=span)
     ang = torch.atan2(torch.sqrt(torch.clamp(span * span - near * near, min=0.0)), near)
     free = torch.atan2(pF2[1], pF2[0]) + ang - k["a4"]
-    psi, th5, th6, disc5 = _wrist(wz, wx, k, s5, free)
-    cp, sp = torch.cos(psi), torch.sin(psi)
+    # th5 from the height of axis 6 along axis 2, psi (sum of joints 2..4) from its direction, th6 from W e_x
+    (psi, cp, sp), th5, th6, disc5 = _wrist(wz, wx, k, sign5, (free, torch.cos(free), torch.sin(free)))
     p4 = k["Dp4"]
     cx = pF2[0] - _lin((p4[0], cp), (-p4[1], sp))
     cy = pF2[1] - _lin((p4[0], sp), (p4[1], cp))
-    th2, th3, disc3 = _planar(cx, cy, k, s3)  # (N, 2, 2, 2)
+    (th2, _, _), (th3, disc3) = _planar(cx, cy, k, sign3)  # (2, 2, 2, N)
     th4 = k["sig23"] * (psi - th2 - k["sig2"] * th3 - k["beta23"])
-    shape = th2.shape
-    theta = torch.stack([th1.expand(shape), th2, th3, th4, th5.expand(shape), th6.expand(shape)], dim=-1).reshape(
-        -1, 8, 6
-    )
-    reach = reach1[:, None, None, None] & (disc3 >= -k["tol_len4"]) & (disc5 >= -k["tol_unit"])
-    return theta, reach.expand(shape).reshape(-1, 8)
+    ok = ok & (disc3 >= -k["tol_len4"]) & (disc5 >= -k["tol_unit"])
+    return (th2, th3, th4, th5, th6), ok
 
 
 # ---------------------------------------------------------------------------
@@ -335,6 +369,7 @@ def build_constants(geom: ArmGeometry, G: np.ndarray, offsets: np.ndarray, limit
         beta2=beta2,
         sig2=sig2,
         s1=[1.0, -1.0],
+        off=[float(v) for v in o],
         tol_len2=1e-12 * size * size,
         tol_len4=1e-12 * size**4,
         tol_unit=1e-12,

@@ -11,6 +11,7 @@ own FK after the closed form.
 
 from __future__ import annotations
 
+import math
 import warnings
 import weakref
 
@@ -20,19 +21,25 @@ import torch
 from nik.analytic.geometry import POLISH_ABOVE, arm_geometry
 from nik.analytic.kernels import KernelConstants, build_constants, run_kernel
 from nik.analytic.puma560 import wrap_into_limits
+from nik.kinematics import generate_fk_source
 from nik.poses import pose_error
 
-__all__ = ["closed_form", "solve"]
+__all__ = ["closed_form", "reaches", "solve"]
 
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def closed_form(robot) -> KernelConstants:
     """The kernel constants of ``robot`` (cached per robot and definition hash); ValueError if no closed form fits."""
+    return _prepared(robot)[0]
+
+
+def _prepared(robot):
+    """``(constants, fk_rows)``: the closed form's constants and the robot's FK as 12 entry rows (cached)."""
     key = robot.definition_hash
     hit = _CACHE.get(robot)
     if hit is not None and hit[0] == key:
-        return hit[1]
+        return hit[1:]
     geom = arm_geometry(robot)
     if geom.family is None:
         raise ValueError(
@@ -41,13 +48,11 @@ def closed_form(robot) -> KernelConstants:
     k = build_constants(geom, robot.G.double().numpy(), robot.offsets.double().numpy(), robot.limits.double().numpy())
     k["polish"] = geom.deviation > POLISH_ABOVE * geom.size
     k = _order_by_branch(robot, k)
-    _CACHE[robot] = (key, k)
-    return k
-
-
-def _finish(Tf, k, off, lo, hi):
-    theta, reach = run_kernel(Tf, k)
-    return wrap_into_limits(theta - off, lo, hi), reach
+    namespace: dict = {"torch": torch}
+    source = generate_fk_source(robot.G.numpy(), robot.offsets.numpy(), per_joint=True)
+    exec(compile(source, "<nik per-joint fk>", "exec"), namespace)
+    _CACHE[robot] = (key, k, namespace["fk_kernel"])
+    return k, namespace["fk_kernel"]
 
 
 def _polish(robot, Tf: torch.Tensor, q: torch.Tensor, steps: int = 3) -> torch.Tensor:
@@ -78,14 +83,26 @@ _compiled: dict = {}
 
 def _kernel(compiled: bool):
     if not compiled:
-        return _finish
+        return run_kernel
     if "fn" not in _compiled:
         try:
-            _compiled["fn"] = torch.compile(_finish, dynamic=True)
+            _compiled["fn"] = torch.compile(run_kernel, dynamic=True)
         except Exception as err:  # pragma: no cover - platform dependent
             warnings.warn(f"torch.compile unavailable ({err}); nik.analytic.solve runs eager", stacklevel=3)
-            _compiled["fn"] = _finish
+            _compiled["fn"] = run_kernel
     return _compiled["fn"]
+
+
+def reaches(T_target: torch.Tensor, T: torch.Tensor, tol_pos: float, tol_rot: float) -> torch.Tensor:
+    """``(...,)`` bool: ``T`` within ``tol_pos`` (m) and ``tol_rot`` (rad, geodesic) of ``T_target`` (broadcast).
+
+    Without a square root or an arc function: ``|p - p_t|^2 <= tol_pos^2`` and
+    ``|R - R_t|_F^2 = 8 sin^2(angle / 2) <= 8 sin^2(tol_rot / 2)``, the same test as :func:`nik.poses.pose_error`.
+    """
+    d = T[..., :3, :] - T_target[..., :3, :]
+    pos2 = d[..., 3].square().sum(-1)
+    rot2 = d[..., :3].square().sum((-2, -1))
+    return (pos2 <= tol_pos * tol_pos) & (rot2 <= 8.0 * math.sin(0.5 * tol_rot) ** 2)
 
 
 def solve(
@@ -120,22 +137,28 @@ def solve(
     if not isinstance(T, torch.Tensor) or T.ndim < 2 or T.shape[-2:] != (4, 4) or not T.is_floating_point():
         shape = tuple(T.shape) if isinstance(T, torch.Tensor) else type(T).__name__
         raise ValueError(f"nik.analytic.solve: T must be a floating-point tensor of shape (..., 4, 4), got {shape}")
-    k = closed_form(robot)
+    k, fk_rows = _prepared(robot)
     batch = T.shape[:-2]
     Tf = T.reshape(-1, 4, 4)
-    off = robot.offsets.to(T.device, T.dtype)
     lo, hi = robot.limits_as(Tf)
-    q, reach = _kernel(compiled)(Tf, k, off, lo, hi)
+    q, valid, qs = _kernel(compiled)(Tf, k, (lo.tolist(), hi.tolist()))
     if k["polish"] and Tf.shape[0] > 0:
         q = wrap_into_limits(_polish(robot, Tf, q), lo, hi)
-    valid = reach & ((q >= lo) & (q <= hi)).all(dim=-1)
+        valid = valid & ((q >= lo) & (q <= hi)).all(dim=-1)
+        qs = [q[..., j].reshape(-1, 2, 2, 2).permute(1, 2, 3, 0) for j in range(6)]
     if check:
         exact = T.dtype == torch.float64
         tp = tol_pos if tol_pos is not None else (1e-9 if exact else 2e-5)
         tr = tol_rot if tol_rot is not None else (1e-9 if exact else 2e-5)
-        reached = robot.fk(q.reshape(-1, 6), compiled=compiled, check=False).reshape(-1, 8, 4, 4)
-        pe, re = pose_error(Tf[:, None], reached)
-        valid = valid & (pe <= tp) & (re <= tr)
+        if compiled:
+            reached = robot.fk(q.reshape(-1, 6), compiled=True, check=False).reshape(-1, 8, 4, 4)
+            valid = valid & reaches(Tf[:, None], reached, tp, tr)
+        else:  # the same test entry by entry, on the FK of the per-joint angles (shared first joints once)
+            e = fk_rows(qs)  # 12 entries, (2, 2, 2, N) or smaller
+            pos2 = sum((e[4 * r + 3] - Tf[:, r, 3]).square() for r in range(3))
+            rot2 = sum((e[4 * r + c] - Tf[:, r, c]).square() for r in range(3) for c in range(3))
+            near = (pos2 <= tp * tp) & (rot2 <= 8.0 * math.sin(0.5 * tr) ** 2)
+            valid = valid & near.expand(2, 2, 2, -1).permute(3, 0, 1, 2).reshape(-1, 8)
     return q.reshape(*batch, 8, 6), valid.reshape(*batch, 8)
 
 
@@ -160,8 +183,7 @@ def _order_by_branch(robot, k: KernelConstants) -> KernelConstants:
     gen = torch.Generator().manual_seed(20240518)
     qs = robot.sample(32, generator=gen, dtype=torch.float64)
     T = robot.fk(qs)
-    theta, reach = run_kernel(T, k)
-    q = theta - robot.offsets
+    q, reach, _ = run_kernel(T, k, ([-math.inf] * 6, [math.inf] * 6))
     pe, re = pose_error(T[:, None], robot.fk(q))
     ok = reach & (pe < 1e-6) & (re < 1e-6)  # before any polish: within the family tolerance
     labels = clf(q.reshape(-1, 6)).reshape(-1, 8).long()
