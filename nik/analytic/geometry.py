@@ -23,7 +23,7 @@ the lengths of ``G_1 .. G_5``, metres). Axes that must *not* be parallel need a 
 URDFs read through pytorch-kinematics carry its float32 rounding of ``rpy`` (up to ~1e-8 m: the Kinova
 Jaco 2 of example-robot-data). :attr:`ArmGeometry.deviation` records the largest departure; where it
 exceeds ``POLISH_ABOVE`` (1e-12) times the size, :func:`nik.analytic.solve` follows the closed form
-(exact for the ideal arm) by two damped Newton steps on the robot's own FK, and its FK check decides.
+(exact for the ideal arm) by three damped Newton steps on the robot's own FK, and its FK check decides.
 
 :func:`arm_geometry` returns, besides the family, the joint frames at the zero configuration and the
 meeting point the closed forms start from (:mod:`nik.analytic.kernels`).

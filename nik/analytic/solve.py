@@ -5,7 +5,7 @@ its closed form (:mod:`nik.analytic.kernels`), and then solves any batch of pose
 work: 8 candidate solutions per pose, each angle moved by 2 pi into the joint limits where possible,
 and a validity mask (the candidate exists, lies inside the limits and, with ``check=True``, reaches the
 pose by FK within the tolerance). Arms that fit their family only within the tolerance of
-:mod:`nik.analytic.geometry` (a URDF's float32-rounded origins) get two damped Newton steps on their
+:mod:`nik.analytic.geometry` (a URDF's float32-rounded origins) get three damped Newton steps on their
 own FK after the closed form.
 """
 
