@@ -104,7 +104,8 @@ def _puma_mdh(tmp_path):
 
 def _assert_round_trip(robot, n: int = 300, seed: int = 3):
     """Random configurations -> poses -> solve: every valid solution reaches its pose within 1e-9 m / 1e-9 rad,
-    lies inside the limits, and the configuration the pose came from is among the valid solutions."""
+    lies inside the limits, and the configuration the pose came from is among the valid solutions, in the slot
+    of its branch label where the arm has a branch classifier."""
     q = robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
     T = robot.fk(q)
     sols, valid = solve(robot, T)
@@ -113,8 +114,12 @@ def _assert_round_trip(robot, n: int = 300, seed: int = 3):
     pos, rot = nik.pose_error(T[:, None], robot.fk(sols))
     assert float(pos[valid].max()) <= 1e-9 and float(rot[valid].max()) <= 1e-9
     assert bool(robot.within_limits(sols[valid]).all())
-    found = ((_wrapped(sols - q[:, None]).abs().amax(-1) < 1e-7) & valid).any(-1)
+    match = (_wrapped(sols - q[:, None]).abs().amax(-1) < 1e-7) & valid
+    found = match.any(-1)
     assert bool(found.all()), f"{int((~found).sum())} of {n} sampled configurations not among the solutions"
+    clf = ik_branch_classifier(robot)
+    if clf is not None:  # the training label of q is the slot the closed form puts it in
+        assert torch.equal(clf(q).long(), match.float().argmax(-1))
 
 
 # ---------------------------------------------------------------------------
