@@ -20,7 +20,8 @@ from example-robot-data (skipped with a note where it is not installed), kuka_kr
   those it does not flag least-squares, counted once modulo 2 pi (1e-6 rad). Residuals are nik's float64 FK
   of the returned joints against the pose (metres, radians).
 - Throughput on a batch of ``--batch`` (10,000) poses, one thread, interleaved rounds (nik with the FK check,
-  nik without it, EAIK's ``IK_batched``), medians; IK-Geo one pose per call on ``--poses`` poses.
+  nik without it, EAIK's ``IK_batched``), medians; IK-Geo one pose per call (its binding has no batch call),
+  median of 3 passes over 200 poses, for information.
 
     python benchmarks/analytic.py --peers [--poses 1000] [--batch 10000] [--threads 1] [--repeats 7] [--compile]
 
@@ -261,9 +262,10 @@ def peers_benchmark(args) -> None:
         t_ig = math.nan
         if ig is not None:
             worst = [0.0, 0.0]
-            t0 = time.perf_counter()
             raw = [ig.get_ik(Tp[i, :3, :3].T.copy(), Tp[i, :3, 3]) for i in range(len(T))]  # its binding takes R^T
-            t_ig = (time.perf_counter() - t0) / len(T)
+            m = min(200, len(T))
+            one_by_one = [(Tp[i, :3, :3].T.copy(), Tp[i, :3, 3].copy()) for i in range(m)]
+            t_ig = _median_time(lambda g=ig, x=one_by_one: [g.get_ik(R, t) for R, t in x], 3) / m
             for i, out in enumerate(raw):
                 Q = _distinct(np.array([q for q, ls in out if not ls]).reshape(-1, 6))
                 n_ig[i] = len(Q)
