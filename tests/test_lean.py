@@ -51,7 +51,7 @@ def test_both_paths_solve_the_same_targets_inside_the_limits_and_flag_the_same_o
     robot = nik.load_robot(name)
     _, T = _targets(robot, 12, seed=21)
     T = _out_of_reach(robot, T)
-    solver = nik.IKSolver(robot)
+    solver = nik.IKSolver(robot, analytic=False)  # ur5 has a closed form: here its network and LM
     with pytest.warns(UserWarning, match="beyond the reach"):
         fast = solver.solve(T, seed=3)
     torch_path(True)
@@ -83,7 +83,7 @@ def test_one_pose_takes_the_compiled_path_with_the_same_answer_for_the_same_seed
 def test_quaternion_and_rpy_targets_give_the_matrix_answer(no_stages):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 3, seed=23)
-    solver = nik.IKSolver(robot)
+    solver = nik.IKSolver(robot, analytic=False)
     ref = solver.solve(T, seed=1)
     quat = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
     rpy = torch.cat([T[:, :3, 3], matrix_to_rpy(T[:, :3, :3])], dim=-1)
@@ -140,7 +140,7 @@ BAD = [
 def test_bad_targets_raise_the_same_message_on_both_paths(kind, spoil, torch_path):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 1, seed=26)
-    solver = nik.IKSolver(robot, checkpoint=None)
+    solver = nik.IKSolver(robot, checkpoint=None, analytic=False)
     with pytest.raises(ValueError) as fast:
         solver.solve(spoil(T.clone()))
     torch_path(True)
@@ -153,7 +153,7 @@ def test_bad_targets_raise_the_same_message_on_both_paths(kind, spoil, torch_pat
 def test_bad_q_near_and_tolerances_raise_the_same_message_on_both_paths(q_near, torch_path):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 1, seed=27)
-    solver = nik.IKSolver(robot, checkpoint=None)
+    solver = nik.IKSolver(robot, checkpoint=None, analytic=False)
     messages = []
     for use_torch in (False, True):
         torch_path(use_torch)
@@ -167,9 +167,10 @@ def test_bad_q_near_and_tolerances_raise_the_same_message_on_both_paths(q_near, 
 
 def test_configurations_it_does_not_reproduce_take_the_torch_path():
     robot = nik.load_robot("ur5")
-    assert lean.applies(nik.IKSolver(robot))
-    assert lean.applies(nik.IKSolver(robot, checkpoint=None, fallback="none"))  # no guess: restarts on both paths
-    assert not lean.applies(nik.IKSolver(robot, fallback="none"))  # the network's guess without restarts
+    assert lean.applies(nik.IKSolver(robot, analytic=False))
+    # no guess: restarts on both paths
+    assert lean.applies(nik.IKSolver(robot, checkpoint=None, analytic=False, fallback="none"))
+    assert not lean.applies(nik.IKSolver(robot, analytic=False, fallback="none"))  # the network's guess alone
     assert not lean.applies(nik.IKSolver(robot, refine="ipso"))
     kuka = nik.load_robot("kuka_kr")
     assert lean.applies(nik.IKSolver(kuka))  # the closed form, compiled
@@ -182,7 +183,7 @@ def test_configurations_it_does_not_reproduce_take_the_torch_path():
 def test_numpy_targets_and_lists_are_accepted_as_float64(no_stages):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 2, seed=29)
-    solver = nik.IKSolver(robot)
+    solver = nik.IKSolver(robot, analytic=False)
     for form in (T.numpy(), T.numpy().tolist(), T[0].numpy()):
         res = solver.solve(form)
         assert res.q.dtype == torch.float64 and bool(res.success.all())

@@ -21,9 +21,9 @@ path does the same job with numpy and the compiled kernels, in tens of microseco
 When (:func:`applies`, checked in :meth:`nik.IKSolver.solve` before anything else): CPU targets, at most
 :data:`LEAN_MAX_BATCH` of them, ``refine="lm"``, and: a closed-form arm without a network, or another arm
 with no network or with ``fallback="multistart"`` (the default: a failing target draws uniform restarts on
-both paths). The network's guess is not used here: the forward pass of a shipped network (3 x 512, float64, compiled) alone
-costs 80 us for one pose of a multi-head network and 450 us for the 8 branches of a branch network (torch
-float32: 100 / 220 us), more than this whole solve from uniform starts (20-50 us median on panda and ur5;
+both paths). The network's guess is not used here: the forward pass of a shipped network (3 x 512, float64,
+compiled) alone costs 80 us for one pose of a multi-head network and 450 us for the 8 branches of a branch
+network (torch float32: 100 / 220 us), more than this whole solve from uniform starts (20-50 us median on panda and ur5;
 ``benchmarks/latency_kernels.py``). Same seed, same answer on this path; the random starts are the kernel's
 own (the batched path's differ).
 """
@@ -61,8 +61,8 @@ def applies(solver) -> bool:
     """True when the solver's configuration is one this path reproduces (see the module docstring)."""
     if _unavailable or solver.refine != "lm":
         return False
-    if solver.closed_form:  # the closed form is the guess unless a network was given
-        return not solver.has_network
+    if solver.closed_form:  # the closed form is the guess unless a network was given (PUMA-like arms compiled)
+        return not solver.has_network and _facts(solver.robot)["puma"] is not None
     return not solver.has_network or solver.fallback == "multistart"
 
 

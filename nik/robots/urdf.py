@@ -29,8 +29,18 @@ __all__ = ["URDF_CACHE_FORMAT", "load_urdf", "default_end_link", "build_pk_chain
 URDF_CACHE_FORMAT = 1
 
 
+_XML_DECLARATION = re.compile(r"^\s*<\?xml[^>]*\?>")
+
+
+def _no_declaration(text: str) -> str:
+    """``text`` without a leading ``<?xml ... encoding=...?>``: lxml refuses str input that declares an encoding."""
+    return _XML_DECLARATION.sub("", text, count=1)
+
+
 def _parse_chain(text: str, source: str):
     import pytorch_kinematics as pk
+
+    text = _no_declaration(text)
 
     try:
         with contextlib.redirect_stderr(io.StringIO()):  # the parser prints notes on unknown tags
@@ -64,7 +74,7 @@ def build_pk_chain(text: str, end_link: str, root_link: str = ""):
     import pytorch_kinematics as pk
 
     with contextlib.redirect_stderr(io.StringIO()):
-        return pk.build_serial_chain_from_urdf(text, end_link, root_link)
+        return pk.build_serial_chain_from_urdf(_no_declaration(text), end_link, root_link)
 
 
 def load_urdf(
@@ -236,7 +246,7 @@ def _parse_urdf(text: str):
     from pytorch_kinematics.urdf_parser_py.urdf import URDF
 
     with contextlib.redirect_stderr(io.StringIO()):
-        return URDF.from_xml_string(text)
+        return URDF.from_xml_string(_no_declaration(text))
 
 
 def _axis(joint) -> np.ndarray:
