@@ -367,26 +367,25 @@ def test_robot_fk_refuses_nan_on_the_compiled_path_and_keeps_gradients_on_the_to
 
 
 # ---------------------------------------------------------------------------
-# the closed form of PUMA-like arms
+# the closed forms (spherical wrist, three parallel axes)
 # ---------------------------------------------------------------------------
-@pytest.mark.parametrize("name", ["kuka_kr", "puma560", "rebot_v_6r"])
-def test_puma_solutions_match_the_torch_closed_form(name):
-    from nik.analytic import puma560_ik, puma560_params
-    from nik.kernels.puma import puma_constants, puma_solutions
+@pytest.mark.parametrize("name", ["kuka_kr", "puma560", "rebot_v_6r", "ur5"])
+def test_closed_form_solutions_match_nik_analytic_solve(name):
+    from nik.analytic import solve
+    from nik.analytic.solve import closed_form
+    from nik.kernels.closed import closed_form_array, solutions
 
     robot = nik.load_robot(name)
     G, joints = _model(robot)
-    g = puma560_params(robot)
-    k = puma_constants(g.alpha, g.a, g.d)
-    T = robot.fk(_configurations(robot, 10, seed=40))
-    ref_q, ref_valid = puma560_ik(robot, T)
-    q, valid = np.empty((10, 8, 6)), np.empty((10, 8), dtype=bool)
-    base, tool, offsets = (np.ascontiguousarray(a) for a in (g.base, g.tool, g.offsets))
-    puma_solutions(base, tool, offsets, k, G, joints, 1e-6, 1e-6, T.numpy(), q, valid)
-    assert np.array_equal(valid, ref_valid.numpy()) and valid.any(axis=1).all()
+    T = robot.fk(_configurations(robot, 12, seed=40))
+    T[0, :3, 3] += 3.0  # out of reach: no valid solution
+    ref_q, ref_valid = solve(robot, T)
+    q, valid = np.empty((12, 8, 6)), np.empty((12, 8), dtype=bool)
+    solutions(closed_form_array(closed_form(robot)), G, joints, 1e-9, 1e-9, T.numpy(), q, valid)
+    assert np.array_equal(valid, ref_valid.numpy()) and not valid[0].any() and valid[1:].any(axis=1).all()
     diff = np.remainder(q - ref_q.numpy() + math.pi, 2 * math.pi) - math.pi  # the same angle, up to whole turns
     assert np.abs(diff[valid]).max() < 1e-9
-    for b, s in zip(*np.nonzero(valid), strict=True):  # every valid solution reaches its target
-        Tq = np.empty((4, 4))
+    Tq = np.empty((4, 4))
+    for b, s in zip(*np.nonzero(valid), strict=True):  # every valid solution reaches its target (own FK)
         fk(G, joints, q[b, s], Tq)
         np.testing.assert_allclose(Tq, T[b].numpy(), atol=1e-9)

@@ -167,6 +167,7 @@ def test_bad_q_near_and_tolerances_raise_the_same_message_on_both_paths(q_near, 
 
 def test_configurations_it_does_not_reproduce_take_the_torch_path():
     robot = nik.load_robot("ur5")
+    assert lean.applies(nik.IKSolver(robot))  # its closed form, compiled
     assert lean.applies(nik.IKSolver(robot, analytic=False))
     # no guess: restarts on both paths
     assert lean.applies(nik.IKSolver(robot, checkpoint=None, analytic=False, fallback="none"))
@@ -190,7 +191,7 @@ def test_numpy_targets_and_lists_are_accepted_as_float64(no_stages):
     assert isinstance(np.asarray(res.q), np.ndarray)
 
 
-@pytest.mark.parametrize("name", ["kuka_kr", "puma560"])
+@pytest.mark.parametrize("name", ["kuka_kr", "puma560", "ur5"])
 def test_closed_form_arms_get_the_closed_form_solution_on_both_paths(name, torch_path):
     robot = nik.load_robot(name)
     q, T = _targets(robot, 16, seed=30)

@@ -12,9 +12,10 @@ path does the same job with numpy and the compiled kernels, in tens of microseco
 3. Levenberg-Marquardt through the compiled kernel (:class:`nik.lm.compiled.CompiledLM`, the solver's
    :class:`~nik.lm.LMCfg`) from the best of ``FIRST_STARTS`` uniform configurations, with the batched LM's
    restart budget for the targets within reach; with ``q_near``, a second LM from ``q_near`` and, per target,
-   the rule of the ``near`` stage (a successful answer first, then the one nearer ``q_near``). A PUMA-like
-   arm instead gets its closed form (:mod:`nik.kernels.puma`: all 8 solutions, the one chosen as
-   ``nik.ik.guesses.analytic_guess`` chooses it), then LM from it where it misses the tolerance within reach;
+   the rule of the ``near`` stage (a successful answer first, then the one nearer ``q_near``). An arm with a
+   closed form (spherical wrist, UR type) instead gets it compiled (:mod:`nik.kernels.closed`: the 8 solutions
+   of ``nik.analytic.solve``, the one chosen as ``nik.ik.guesses.analytic_guess`` chooses it), then LM from it
+   where it misses the tolerance within reach;
 4. an :class:`~nik.ik.result.IKResult` of tensors in the targets' dtype (float64 inside), joints inside
    the limits, errors measured by FK of the returned joints, ``source`` ``"multistart"`` or ``"analytic"``.
 
@@ -36,6 +37,7 @@ import weakref
 import numpy as np
 import torch
 
+from nik.ik.guesses import LIMIT_ROUNDING
 from nik.ik.result import IKResult
 from nik.ik.targets import QUAT_NORM_TOL
 from nik.lm.batched import LMCfg
@@ -53,6 +55,8 @@ __all__ = ["LEAN_MAX_BATCH", "applies", "solve"]
 LEAN_MAX_BATCH = 10_000
 
 _DTYPES = (torch.float64, torch.float32)
+#: The FK check of a closed-form solution (metres, radians): ``nik.analytic.solve``'s default in float64.
+CLOSED_FORM_TOL = 1e-9
 _ROBOTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _unavailable = False
 
@@ -61,8 +65,8 @@ def applies(solver) -> bool:
     """True when the solver's configuration is one this path reproduces (see the module docstring)."""
     if _unavailable or solver.refine != "lm":
         return False
-    if solver.closed_form:  # the closed form is the guess unless a network was given (PUMA-like arms compiled)
-        return not solver.has_network and _facts(solver.robot)["puma"] is not None
+    if solver.closed_form:  # the closed form is the guess unless a network was given
+        return not solver.has_network and _facts(solver.robot)["closed"] is not None
     return not solver.has_network or solver.fallback == "multistart"
 
 
@@ -125,7 +129,7 @@ def _kernels():
     if _KERNELS is None:
         from types import SimpleNamespace
 
-        from nik.kernels import lm, poses, puma
+        from nik.kernels import closed, lm, poses
 
         _KERNELS = SimpleNamespace(
             poses_ok=poses.poses_ok,
@@ -133,8 +137,7 @@ def _kernels():
             rpy_poses=poses.rpy_poses,
             reach_flags=poses.reach_flags,
             pose_errors=lm.pose_errors,
-            puma_solutions=puma.puma_solutions,
-            puma_pick=puma.puma_pick,
+            closed_guess=closed.guess,
         )
     return _KERNELS
 
@@ -147,22 +150,16 @@ def _closed_form(robot, lm, T, near, reachable, *, restarts: bool, **kw) -> Comp
     chooses it (nearest ``near`` when given, else farthest inside the limits; out of reach, the clamped one
     nearest the target), then LM from it for the targets it leaves outside tolerance that are within reach
     (restarts as the solver's fallback says), kept where it is not worse."""
-    from nik.ik.guesses import LIMIT_ROUNDING
-
-    kernels, facts = _kernels(), _facts(robot)
-    base, tool, offsets, k = facts["puma"]
     B = T.shape[0]
-    sols, valid = np.empty((B, 8, 6)), np.empty((B, 8), dtype=bool)
-    kernels.puma_solutions(base, tool, offsets, k, lm.G, lm.joints, 1e-6, 1e-6, T, sols, valid)
-    q = np.empty((B, 6))
+    q, pos, rot, ok = np.empty((B, 6)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
     use_near = near is not None
-    kernels.puma_pick(sols, valid, lm.G, lm.joints, T, near if use_near else q, use_near, LIMIT_ROUNDING, q)
-    pos, rot = np.empty(B), np.empty(B)
-    kernels.pose_errors(lm.G, lm.joints, T, q, pos, rot)
-    ok = (pos <= kw["tol_pos"]) & (rot <= kw["tol_rot"])
+    todo = _kernels().closed_guess(
+        _facts(robot)["closed"], lm.G, lm.joints, CLOSED_FORM_TOL, T, near if use_near else q, use_near,
+        LIMIT_ROUNDING, kw["tol_pos"], kw["tol_rot"], reachable, q, pos, rot, ok,
+    )  # fmt: skip
     run = CompiledRun(q, np.zeros(B, dtype=np.int64), ok, pos, rot)
-    todo = np.flatnonzero(~ok & reachable)
-    if todo.size:
+    if todo:
+        todo = np.flatnonzero(~ok & reachable)
         res = lm.solve(T[todo], q[todo], restarts=restarts, **kw)
         better = (res.pos_err + 0.1 * res.rot_err) <= (pos[todo] + 0.1 * rot[todo])
         keep = todo[better]
@@ -190,11 +187,11 @@ def _nearer(a: CompiledRun, b: CompiledRun, q_near: np.ndarray) -> CompiledRun:
 
 
 def _facts(robot) -> dict:
-    """Per robot, once: the reach bound's centre and radius, float32 limits rounded inward, and for a
-    PUMA-like arm the closed form's arrays (base, tool, offsets, constants)."""
+    """Per robot, once: the reach bound's centre and radius, float32 limits rounded inward, and for an arm with
+    a closed form the compiled one's constants (None where the kernel does not cover it)."""
     facts = _ROBOTS.get(robot)
     if facts is None:
-        from nik.analytic import is_puma_like, puma560_params
+        from nik.analytic import family
 
         lo32, hi32 = robot.limits_as(torch.empty(0, dtype=torch.float32))
         facts = {
@@ -202,17 +199,13 @@ def _facts(robot) -> dict:
             "radius": max(reach_radius(robot), 1e-300),
             "lo32": lo32.numpy(),
             "hi32": hi32.numpy(),
-            "puma": None,
+            "closed": None,
         }
-        if is_puma_like(robot):
-            from nik.kernels.puma import puma_constants
+        if family(robot) is not None:
+            from nik.analytic.solve import closed_form
+            from nik.kernels.closed import closed_form_array
 
-            g = puma560_params(robot)
-            arrays = (g.base, g.tool, g.offsets)
-            facts["puma"] = (
-                *(np.ascontiguousarray(a, dtype=np.float64) for a in arrays),
-                puma_constants(g.alpha, g.a, g.d),
-            )
+            facts["closed"] = closed_form_array(closed_form(robot))
         _ROBOTS[robot] = facts
     return facts
 
