@@ -3,9 +3,10 @@
 For each robot and batch size B, the default ``IKSolver(robot)`` solves the same B reachable targets (FK of
 seeded random configurations) by both paths, interleaved (compiled, torch, compiled, torch, ...), with the
 seed of the round; the table gives the median time per call and per target, the ratio torch / compiled
-(> 1: the compiled path is faster) and the success counts. ``nik.ik.lean.LEAN_MAX_BATCH`` is set from it.
+(> 1: the compiled path is faster) and the success counts. ``nik.ik.lean.LEAN_MAX_BATCH`` (LM arms: panda) and
+``LEAN_MAX_BATCH_CLOSED_FORM`` (closed-form arms: kuka_kr, ur5) are set from it.
 
-    python benchmarks/crossover.py                     # panda, ur5; B = 1 ... 1024; 1 and 2 threads
+    python benchmarks/crossover.py                     # panda, ur5, kuka_kr; B = 1 ... 1024; 1 and 2 threads
     python benchmarks/crossover.py --quick             # B up to 64, fewer rounds
 """
 
@@ -31,6 +32,7 @@ TOL_POS, TOL_ROT = 1e-4, 1e-3
 
 def timed(solver, T, seed: int, compiled: bool):
     lean.LEAN_MAX_BATCH = 10**9 if compiled else 0
+    lean.LEAN_MAX_BATCH_CLOSED_FORM = 10**9
     t = time.perf_counter()
     res = solver.solve(T, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=seed)
     return time.perf_counter() - t, int(res.success.sum()), res.source
@@ -38,7 +40,7 @@ def timed(solver, T, seed: int, compiled: bool):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--robots", nargs="+", default=["panda", "ur5"])
+    parser.add_argument("--robots", nargs="+", default=["panda", "ur5", "kuka_kr"])
     parser.add_argument("--batches", nargs="+", type=int, default=[1, 4, 16, 64, 256, 1024])
     parser.add_argument("--threads", nargs="+", type=int, default=[1, 2])
     parser.add_argument("--quick", action="store_true")

@@ -25,12 +25,15 @@ def _out_of_reach(robot, T):
     return T
 
 
+_LEAN_MAX_BATCH = lean.LEAN_MAX_BATCH
+
+
 @pytest.fixture
 def torch_path(monkeypatch):
     """Within the test, IKSolver.solve never takes the compiled path."""
 
     def use(enabled: bool):
-        monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0 if enabled else 64)
+        monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0 if enabled else _LEAN_MAX_BATCH)
 
     return use
 
@@ -179,6 +182,7 @@ def test_configurations_it_does_not_reproduce_take_the_torch_path():
     _, T = _targets(robot, lean.LEAN_MAX_BATCH + 1, seed=28)
     assert lean._poses(T, None) is None and lean._poses(T[: lean.LEAN_MAX_BATCH], None) is not None
     assert lean._poses(T[:1].to(torch.float16), None) is None
+    assert lean._poses(T[: lean.LEAN_MAX_BATCH_CLOSED_FORM + 1], None, lean.LEAN_MAX_BATCH_CLOSED_FORM) is None
 
 
 def test_numpy_targets_and_lists_are_accepted_as_float64(no_stages):

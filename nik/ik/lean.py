@@ -20,13 +20,13 @@ path does the same job with numpy and the compiled kernels, in tens of microseco
    the limits, errors measured by FK of the returned joints, ``source`` ``"multistart"`` or ``"analytic"``.
 
 When (:func:`applies`, checked in :meth:`nik.IKSolver.solve` before anything else): CPU targets, at most
-:data:`LEAN_MAX_BATCH` of them, ``refine="lm"``, and: a closed-form arm without a network, or another arm
-with no network or with ``fallback="multistart"`` (the default: a failing target draws uniform restarts on
-both paths). The network's guess is not used here: the forward pass of a shipped network (3 x 512, float64,
-compiled) alone costs 80 us for one pose of a multi-head network and 450 us for the 8 branches of a branch
-network (torch float32: 100 / 220 us), more than this whole solve from uniform starts (20-50 us median on panda and ur5;
-``benchmarks/latency_kernels.py``). Same seed, same answer on this path; the random starts are the kernel's
-own (the batched path's differ).
+:data:`LEAN_MAX_BATCH` of them (:data:`LEAN_MAX_BATCH_CLOSED_FORM` on a closed-form arm), ``refine="lm"``,
+and: a closed-form arm without a network, or another arm with no network or with ``fallback="multistart"``
+(the default: a failing target draws uniform restarts on both paths). The network's guess is not used here:
+the forward pass of a shipped network (3 x 512, float64, compiled) alone costs 80 us for one pose of a
+multi-head network and 450 us for the 8 branches of a branch network (torch float32: 100 / 220 us), more than
+this whole solve from uniform starts (20-50 us median on panda; ``benchmarks/latency_kernels.py``). Same seed,
+same answer on this path; the random starts are the kernel's own (the batched path's differ).
 """
 
 from __future__ import annotations
@@ -45,14 +45,19 @@ from nik.lm.compiled import CompiledLM, CompiledRun
 from nik.poses import ORTHONORMAL_TOL
 from nik.robots.reach import REACH_SLACK, reach_center, reach_radius, unreachable_message
 
-__all__ = ["LEAN_MAX_BATCH", "applies", "solve"]
+__all__ = ["LEAN_MAX_BATCH", "LEAN_MAX_BATCH_CLOSED_FORM", "applies", "solve"]
 
-#: Largest number of CPU targets :meth:`nik.IKSolver.solve` hands to this path. ``benchmarks/crossover.py``
-#: (default IKSolver, panda and ur5, 1 and 2 threads, B = 1 ... 10,000 on a shared 2-core machine) found no
-#: crossover: the compiled path was faster at every size, 15-25x for one pose, 4.6-13x at 1,024 and still
-#: 2.0x (panda) / 13x (ur5) at 10,000 targets on one thread, with as many successes or more. 10,000 is the
-#: largest size measured; beyond it (and on machines with many cores, not measured) the batched torch path.
+#: Largest number of CPU targets :meth:`nik.IKSolver.solve` hands to this path on an arm solved by LM.
+#: ``benchmarks/crossover.py`` (default IKSolver, panda and ur5 by LM, 1 and 2 threads, B = 1 ... 10,000 on a
+#: shared 2-core machine) found no crossover: the compiled path was faster at every size, 15-25x for one pose,
+#: 5-13x at 1,024 and still 1.8-2.0x (panda) / 13x (ur5) at 10,000 targets on one thread, with as many
+#: successes or more. 10,000 is the largest size measured; beyond it (and on machines with many cores, not
+#: measured) the batched torch path.
 LEAN_MAX_BATCH = 10_000
+#: The same for an arm with a closed form, where the batched torch closed form catches up: one thread, the
+#: compiled path was 34-59x faster for one pose, 2.1-2.2x at 1,024 targets, 0.83x (ur5) / 3.3x (kuka_kr) at
+#: 4,096 and 1.06x / 1.38x at 10,000: the crossover lies between 1,024 and 4,096 targets.
+LEAN_MAX_BATCH_CLOSED_FORM = 2_048
 
 _DTYPES = (torch.float64, torch.float32)
 #: The FK check of a closed-form solution (metres, radians): ``nik.analytic.solve``'s default in float64.
@@ -75,8 +80,9 @@ def solve(solver, T_target, tol_pos, tol_rot, seed, q_near, max_iters, represent
     (not on the CPU, more than :data:`LEAN_MAX_BATCH` targets, another dtype, or something its checks refuse:
     the torch path then answers or raises)."""
     global _unavailable
+    limit = LEAN_MAX_BATCH_CLOSED_FORM if solver.closed_form else LEAN_MAX_BATCH
     try:
-        poses = _poses(T_target, representation)
+        poses = _poses(T_target, representation, limit)
     except ImportError as err:  # pragma: no cover - numba is a dependency
         _unavailable = True
         warnings.warn(f"compiled kernels unavailable ({err}); using the torch path", RuntimeWarning, stacklevel=3)
@@ -213,9 +219,9 @@ def _facts(robot) -> dict:
 # ---------------------------------------------------------------------------
 # input checks in numpy (None: not accepted here; the torch path decides)
 # ---------------------------------------------------------------------------
-def _poses(T_target, representation) -> tuple[np.ndarray, torch.dtype] | None:
+def _poses(T_target, representation, limit: int = LEAN_MAX_BATCH) -> tuple[np.ndarray, torch.dtype] | None:
     """``(T: (B, 4, 4) float64, dtype of the result)`` when the targets pass every check of
-    :func:`nik.ik.targets.as_poses` and ``1 <= B <= LEAN_MAX_BATCH``, else None."""
+    :func:`nik.ik.targets.as_poses` and ``1 <= B <= limit``, else None."""
     if isinstance(T_target, torch.Tensor):
         if T_target.device.type != "cpu" or T_target.dtype not in _DTYPES:
             return None
@@ -244,7 +250,7 @@ def _poses(T_target, representation) -> tuple[np.ndarray, torch.dtype] | None:
             return None
     else:
         return None
-    if not 1 <= a.shape[0] <= LEAN_MAX_BATCH:
+    if not 1 <= a.shape[0] <= min(limit, LEAN_MAX_BATCH):
         return None
     if a.dtype != np.float64 or not a.flags.c_contiguous:
         a = np.ascontiguousarray(a, dtype=np.float64)

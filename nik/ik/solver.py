@@ -20,9 +20,10 @@ it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve
    flag and ``reachable`` (False where the reach bound proves the target out of reach;
    :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
 
-CPU batches of up to :data:`nik.ik.lean.LEAN_MAX_BATCH` poses on an arm without a closed form take a compiled
-path instead (:mod:`nik.ik.lean`: the same checks, LM through numba kernels from uniform starts, the same
-result contract), chosen in one place at the top of :meth:`IKSolver.solve`.
+CPU batches of up to :data:`nik.ik.lean.LEAN_MAX_BATCH` poses (:data:`~nik.ik.lean.LEAN_MAX_BATCH_CLOSED_FORM` on
+an arm with a closed form) take a compiled path instead (:mod:`nik.ik.lean`: the same checks, the closed form or
+LM from uniform starts through numba kernels, the same result contract), chosen in one place at the top of
+:meth:`IKSolver.solve`.
 
 Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`, refiners
 ``(robot, T, q0) -> RefineResult`` in :mod:`nik.ik.refiners`. Units are SI (metres, radians) throughout.
