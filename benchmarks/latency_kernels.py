@@ -2,16 +2,17 @@
 
 Per robot, in this process, one call at a time, the paths interleaved call by call (A B A B ...):
 
-- FK of one configuration: the kernel (numpy in/out) / ``robot.fk`` (torch, eager);
+- FK of one configuration: the kernel (numpy in/out) / ``robot.fk`` (torch in and out: its compiled path) / the
+  torch kernel it used before (``FKKernel``, eager);
 - FK + geometric Jacobian: the kernel / ``robot.fk_and_jacobian`` / the numpy one-pose LM's ``fk_jacobian``;
 - Levenberg-Marquardt for one pose, no network (300 reachable targets, each with its own seed): the kernel
   (best of ``--first-starts`` uniform configurations, then LM with up to 274 uniform restarts: the restart
-  budget of the numpy one-pose path) / the numpy path (``nik.lm.single``, what ``IKSolver.solve``
-  runs today for one pose without a network). Median, p95, max per call; success within 0.1 mm and
+  budget of the numpy one-pose path) / the numpy path (``nik.lm.single``, what ``IKSolver.solve`` ran for
+  one pose before the kernels). Median, p95, max per call; success within 0.1 mm and
   0.1 deg by torch FK of the answer; joints outside the limits;
 - the MLP forward pass of the shipped network (one pose: 1 row for a multi-head network, 8 rows for a
   branch network), kernel (float64) / torch (float32, its own dtype);
-- the cold compile time of every kernel (a subprocess with an empty cache folder) and the first use with
+- the cold compile time of the kernels (a subprocess with an empty cache folder) and the first use with
   a warm cache (another subprocess).
 
 Numbers are microseconds per call. The kernels are single-threaded; torch runs with ``--threads``.
@@ -67,30 +68,33 @@ def med(ts) -> str:
 
 
 def fk_rows(robot, calls: int) -> list[str]:
-    G, joints = K.chain_model(robot.G, robot.offsets, robot.limits, robot.prismatic)
-    q = robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64)[0]
-    qn = q.numpy().copy()
-    T, J = np.empty((4, 4)), np.empty((6, robot.dof))
+    from nik.kinematics import FKKernel
     from nik.lm.single import SingleLM
 
+    G, joints = K.chain_model(robot.G, robot.offsets, robot.limits, robot.prismatic)
+    q = robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64)[0]
+    qn, q1 = q.numpy().copy(), q[None]
+    T, J = np.empty((4, 4)), np.empty((6, robot.dof))
+    torch_fk = FKKernel(robot.G.numpy(), robot.offsets.numpy(), prismatic=robot.prismatic.tolist())
     single = SingleLM.from_robot(robot)
-    fk_k, fk_t = per_call([lambda: K.fk(G, joints, qn, T), lambda: robot.fk(q)], calls)
+    fk_k, fk_r, fk_t = per_call([lambda: K.fk(G, joints, qn, T), lambda: robot.fk(q), lambda: torch_fk(q1)], calls)
     fj_k, fj_t, fj_n = per_call(
         [lambda: K.fk_jacobian(G, joints, qn, T, J), lambda: robot.fk_and_jacobian(q), lambda: single.fk_jacobian(qn)],
         calls,
     )
     return [
-        f"| {robot.name} | FK, one configuration | {med(fk_k)} | torch {med(fk_t)} | "
-        f"{statistics.median(fk_t) / statistics.median(fk_k):.0f}x |",
+        f"| {robot.name} | FK, one configuration | {med(fk_k)} | robot.fk (torch in/out) {med(fk_r)}, torch kernel "
+        f"{med(fk_t)} | {statistics.median(fk_t) / statistics.median(fk_r):.0f}x (robot.fk vs torch) |",
         f"| {robot.name} | FK + Jacobian | {med(fj_k)} | torch {med(fj_t)}, numpy {med(fj_n)} | "
         f"{statistics.median(fj_n) / statistics.median(fj_k):.0f}x vs numpy |",
     ]
 
 
 def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = True):
-    """Per-call microseconds, successes and joints outside the limits of the kernel LM (and of the numpy path)."""
-    from nik.ik.refiners import _lm_refine_one
+    """Per-call microseconds, successes and joints outside the limits of the kernel LM (and of the numpy one-pose
+    LM of ``nik.lm.single``, the path ``IKSolver.solve`` took for one pose before the kernels)."""
     from nik.lm import LMCfg
+    from nik.lm.single import SingleLM, best_of, lm_solve_one
 
     G, joints = K.chain_model(robot.G, robot.offsets, robot.limits, robot.prismatic)
     qt = robot.sample(n_targets, generator=torch.Generator().manual_seed(TARGET_SEED_BASE), dtype=torch.float64)
@@ -100,7 +104,7 @@ def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = T
     work, q0, budget = K.lm_work(robot.dof), np.zeros((1, robot.dof)), np.array([RESTARTS], dtype=np.int64)
     answers = np.empty((n_targets, robot.dof))
     info = np.empty(1, dtype=np.int64), np.empty(1, dtype=bool), np.empty(1), np.empty(1)
-    cfg = LMCfg()
+    cfg, single = LMCfg(), SingleLM.from_robot(robot)
     times_k, times_n, answers_n = [], [], []
     for k in range(n_targets):  # warm-up call, then interleaved kernel / numpy
         if k == 0:
@@ -110,10 +114,18 @@ def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = T
         times_k.append((time.perf_counter_ns() - t) / 1e3)
         if with_numpy:
             g = torch.Generator().manual_seed(k)
+
+            def sample(g=g):
+                return robot.sample(1, generator=g, dtype=torch.float64)[0].numpy()
+
             t = time.perf_counter_ns()
-            res = _lm_refine_one(robot, Tt[k : k + 1], None, TOL_POS, TOL_ROT, None, cfg, True, None, g)
+            start = best_of(single, Tn[k], robot.sample(64, generator=g, dtype=torch.float64).numpy(), cfg.rot_weight)
+            q, _ = lm_solve_one(
+                single, Tn[k], start, cfg=cfg, tol_pos=TOL_POS, tol_rot=TOL_ROT, first_iters=cfg.iters,
+                restarts=RESTARTS, sample=sample,
+            )  # fmt: skip
             times_n.append((time.perf_counter_ns() - t) / 1e3)
-            answers_n.append(res.q[0])
+            answers_n.append(torch.as_tensor(q))
     out = {"kernel": (times_k, *score(robot, Tt, torch.from_numpy(answers)))}
     if with_numpy:
         out["numpy"] = (times_n, *score(robot, Tt, torch.stack(answers_n)))
@@ -161,21 +173,36 @@ _COMPILE = """
 import time, numpy as np
 t0 = time.perf_counter()
 import nik.kernels as K
-from nik.kernels import mlp
+from nik.kernels import closed, mlp, poses
 t1 = time.perf_counter()
+import nik
+from nik.analytic.solve import closed_form
+ur5 = nik.load_robot("ur5")
+k = closed.closed_form_array(closed_form(ur5))
+G6, j6 = K.chain_model(ur5.G, ur5.offsets, ur5.limits)
 G, joints = K.chain_model(np.tile(np.eye(4), (8, 1, 1)), np.zeros(7), [[-3.0, 3.0]] * 7)
-q, T, J = np.zeros(7), np.empty((4, 4)), np.empty((6, 7))
+q, T, J, E = np.zeros(7), np.empty((4, 4)), np.empty((6, 7)), np.eye(4)[None]
 opts, iopts = K.lm_options()
 flat, layout = mlp.mlp_pack([(np.ones((4, 3)), np.ones(4)), (np.ones((2, 4)), np.ones(2))])
+one = np.empty(1)
 calls = {
     "fk": lambda: K.fk(G, joints, q, T),
     "fk_batch": lambda: K.fk_batch(G, joints, q[None], T[None]),
     "fk_jacobian": lambda: K.fk_jacobian(G, joints, q, T, J),
-    "lm_solve": lambda: K.lm_solve(G, joints, np.eye(4)[None], q[None], opts, iopts, np.ones(1, dtype=np.int64),
+    "lm_solve": lambda: K.lm_solve(G, joints, E, q[None], opts, iopts, np.ones(1, dtype=np.int64),
                                    K.seed_state(0), np.empty((1, 7)), np.empty(1, dtype=np.int64),
-                                   np.empty(1, dtype=bool), np.empty(1), np.empty(1), K.lm_work(7)),
-    "pose_errors": lambda: K.pose_errors(G, joints, np.eye(4)[None], q[None], np.empty(1), np.empty(1)),
+                                   np.empty(1, dtype=bool), one, one.copy(), K.lm_work(7)),
+    "pose_errors": lambda: K.pose_errors(G, joints, E, q[None], one, one.copy()),
     "uniform_configurations": lambda: K.uniform_configurations(joints, K.seed_state(0), np.empty((2, 7))),
+    "poses_ok": lambda: poses.poses_ok(E, 1e-4),
+    "quat_poses": lambda: poses.quat_poses(np.array([[0, 0, 0, 1.0, 0, 0, 0]]), 1e-2, np.empty((1, 4, 4))),
+    "rpy_poses": lambda: poses.rpy_poses(np.zeros((1, 6)), np.empty((1, 4, 4))),
+    "reach_flags": lambda: poses.reach_flags(E, np.zeros(3), 1.0, 1e-9, np.empty(1, dtype=bool)),
+    "closed.guess": lambda: closed.guess(k, G6, j6, 1e-9, E, np.zeros((1, 6)), False, 1e-9, 1e-4, 1e-3,
+                                         np.ones(1, dtype=bool), np.empty((1, 6)), one, one.copy(),
+                                         np.empty(1, dtype=bool)),
+    "closed.solutions (tests only)": lambda: closed.solutions(k, G6, j6, 1e-9, 1e-9, E, np.empty((1, 8, 6)),
+                                                              np.empty((1, 8), dtype=bool)),
     "mlp_forward": lambda: mlp.mlp_forward(flat, layout, 2, np.ones((1, 3)), np.empty((1, 2)), mlp.mlp_work(layout, 1)),
 }
 out = {}
