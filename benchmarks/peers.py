@@ -271,9 +271,10 @@ def latency_robot(name: str):
 
 
 def kinematics_only(path: Path) -> Path:
-    """A copy of the URDF without visual, collision and inertial elements: not needed for kinematics; Robotics
-    Toolbox's xacro step would look for the mesh packages, and KDL (under TRAC-IK) mishandles a root link with
-    an inertia (it says so, and TRAC-IK then solved none of 50 panda poses)."""
+    """A copy of the URDF without visual, collision and inertial elements and without the joints' safety
+    controllers: none is needed for kinematics; Robotics Toolbox's xacro step would look for the mesh packages,
+    KDL (under TRAC-IK) mishandles a root link with an inertia, and pytracik reads a joint with a safety
+    controller as limits [0, 0] (it then solved none of the panda poses)."""
     import tempfile
     import xml.etree.ElementTree as ET
 
@@ -282,6 +283,9 @@ def kinematics_only(path: Path) -> Path:
         for tag in ("visual", "collision", "inertial"):
             for element in link.findall(tag):
                 link.remove(element)
+    for joint in tree.getroot().findall("joint"):
+        for element in joint.findall("safety_controller"):
+            joint.remove(element)
     out = Path(tempfile.mkdtemp()) / path.name
     tree.write(out)
     return out
