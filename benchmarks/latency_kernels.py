@@ -1,6 +1,7 @@
 """One-pose latency of the compiled kernels (:mod:`nik.kernels`) against the torch and numpy paths they replace.
 
-Per robot, in this process, one call at a time, the paths interleaved call by call (A B A B ...):
+Per robot, in this process, one call at a time, the paths interleaved by blocks of calls (50 A, 50 B, 50 A, ...;
+call by call, each path would run in the caches the other just filled):
 
 - FK of one configuration: the kernel (numpy in/out) / ``robot.fk`` (torch in and out: its compiled path) / the
   torch kernel it used before (``FKKernel``, eager);
@@ -49,17 +50,19 @@ TARGET_SEED_BASE = 1_000_003  # targets from their own stream (as benchmarks/pee
 RESTARTS = 2 + 16 * (1 + 16)  # the numpy one-pose path's budget: LMCfg restarts + tail_starts * (1 + tail_restarts)
 
 
-def per_call(fns, calls: int) -> list[list[float]]:
-    """Microseconds of each call of each of ``fns`` (interleaved: fn0, fn1, ..., fn0, fn1, ...)."""
+def per_call(fns, calls: int, block: int = 50) -> list[list[float]]:
+    """Microseconds of each call of each of ``fns``, interleaved by blocks (``block`` calls of fn0, then of fn1,
+    ...): call by call, each function would run in the caches the others just filled."""
     for fn in fns:
         fn()
         fn()
     out = [[] for _ in fns]
-    for _ in range(calls):
+    for _ in range(0, calls, block):
         for k, fn in enumerate(fns):
-            t = time.perf_counter_ns()
-            fn()
-            out[k].append((time.perf_counter_ns() - t) / 1e3)
+            for _ in range(block):
+                t = time.perf_counter_ns()
+                fn()
+                out[k].append((time.perf_counter_ns() - t) / 1e3)
     return out
 
 
@@ -106,22 +109,27 @@ def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = T
     info = np.empty(1, dtype=np.int64), np.empty(1, dtype=bool), np.empty(1), np.empty(1)
     cfg, single = LMCfg(), SingleLM.from_robot(robot)
     times_k, times_n, answers_n = [], [], []
-    for k in range(n_targets):  # warm-up call, then interleaved kernel / numpy
-        if k == 0:
-            K.lm_solve(G, joints, Tn[:1], q0, opts, iopts, budget, K.seed_state(0), answers[:1], *info, work)
-        t = time.perf_counter_ns()
-        K.lm_solve(G, joints, Tn[k : k + 1], q0, opts, iopts, budget, K.seed_state(k), answers[k : k + 1], *info, work)
-        times_k.append((time.perf_counter_ns() - t) / 1e3)
-        if with_numpy:
+    K.lm_solve(G, joints, Tn[:1], q0, opts, iopts, budget, K.seed_state(0), answers[:1], *info, work)  # warm-up
+    for start in range(0, n_targets, 30):  # kernel and numpy interleaved by blocks of 30 targets
+        block = range(start, min(start + 30, n_targets))
+        for k in block:
+            t = time.perf_counter_ns()
+            K.lm_solve(
+                G, joints, Tn[k : k + 1], q0, opts, iopts, budget, K.seed_state(k), answers[k : k + 1], *info, work
+            )
+            times_k.append((time.perf_counter_ns() - t) / 1e3)
+        if not with_numpy:
+            continue
+        for k in block:
             g = torch.Generator().manual_seed(k)
 
             def sample(g=g):
                 return robot.sample(1, generator=g, dtype=torch.float64)[0].numpy()
 
             t = time.perf_counter_ns()
-            start = best_of(single, Tn[k], robot.sample(64, generator=g, dtype=torch.float64).numpy(), cfg.rot_weight)
+            start_q = best_of(single, Tn[k], robot.sample(64, generator=g, dtype=torch.float64).numpy(), cfg.rot_weight)
             q, _ = lm_solve_one(
-                single, Tn[k], start, cfg=cfg, tol_pos=TOL_POS, tol_rot=TOL_ROT, first_iters=cfg.iters,
+                single, Tn[k], start_q, cfg=cfg, tol_pos=TOL_POS, tol_rot=TOL_ROT, first_iters=cfg.iters,
                 restarts=RESTARTS, sample=sample,
             )  # fmt: skip
             times_n.append((time.perf_counter_ns() - t) / 1e3)
@@ -242,7 +250,7 @@ def main() -> None:
     if not args.no_compile:
         print("\n".join(compile_times()) + "\n")
 
-    print(f"## FK, FK + Jacobian, MLP: microseconds per call (median of {calls}, interleaved)\n")
+    print(f"## FK, FK + Jacobian, MLP: microseconds per call (median of {calls}, interleaved by blocks of 50)\n")
     print("| robot | what | kernel | reference | speed-up |\n|---|---|---:|---:|---:|")
     robots = {name: nik.load_robot(name) for name in args.robots}
     for robot in robots.values():
@@ -252,7 +260,9 @@ def main() -> None:
             print(row)
 
     n = args.targets
-    print(f"\n## One pose, no network: microseconds per call ({n} reachable targets, kernel and numpy interleaved)\n")
+    print(
+        f"\n## One pose, no network: microseconds per call ({n} reachable targets, kernel and numpy by blocks of 30)\n"
+    )
     print(f"Kernel: best of {args.first_starts} uniform configurations, then LM, up to {RESTARTS} uniform restarts.\n")
     print("| robot | path | median | p95 | max | > 2 ms | success | outside limits |")
     print("|---|---|---:|---:|---:|---:|---:|---:|")
