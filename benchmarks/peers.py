@@ -231,7 +231,7 @@ def unreachable_scenario(robot_name: str, rounds: int, seed: int) -> dict:
 
 
 # ---------------------------------------------------------------------------
-# One pose per call (issue 16): nik, Robotics Toolbox ik_LM, TRAC-IK
+# One pose per call: nik, Robotics Toolbox ik_LM, TRAC-IK
 # ---------------------------------------------------------------------------
 #: A 7-DOF arm without a shipped network, from example-robot-data (``pip install example-robot-data``).
 EXAMPLE_ROBOTS = {"xarm7": "xarm_description/urdf/xarm7.urdf"}
@@ -431,6 +431,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.quick:
         args.sizes, args.threads, args.rounds, args.latency_n = "200", "1", 1, 20
+        args.latency_robots = "panda,ur5"
     robots = [r.strip() for r in args.robots.split(",") if r.strip()]
     sizes = [int(s) for s in args.sizes.split(",")]
     thread_list = [int(s) for s in args.threads.split(",")]

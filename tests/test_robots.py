@@ -288,7 +288,7 @@ def test_definition_round_trip_keeps_joint_types_and_they_enter_the_hash():
 
 
 # ---------------------------------------------------------------------------
-# the cache of parsed URDF arms (issue 16: load_robot("panda") without importing pytorch-kinematics)
+# the cache of parsed URDF arms: load_robot("panda") without importing pytorch-kinematics
 # ---------------------------------------------------------------------------
 def test_a_urdf_arm_is_parsed_once_and_read_back_identical(tmp_path, monkeypatch):
     import json
