@@ -225,3 +225,16 @@ def test_closed_form_path_is_compiled_for_one_pose(no_stages):
     _, T = _targets(robot, 1, seed=31)
     res = nik.IKSolver(robot).solve(T[0])
     assert res.source == "analytic" and bool(res.success.all()) and float(res.pos_err[0]) < 1e-9
+
+
+def test_float32_poses_on_a_closed_form_arm_get_the_torch_paths_choice(torch_path):
+    robot = nik.load_robot("kuka_kr")
+    _, T = _targets(robot, 8, seed=32)
+    T = T.float()  # a float32 rotation is orthonormal to about 1e-7: the closed form's check is 2e-5 then
+    solver = nik.IKSolver(robot)
+    fast = solver.solve(T, tol_pos=1e-3, tol_rot=1e-2)
+    torch_path(True)
+    slow = solver.solve(T, tol_pos=1e-3, tol_rot=1e-2)
+    assert fast.q.dtype == torch.float32 and bool(fast.success.all()) and bool(slow.success.all())
+    assert bool(robot.within_limits(fast.q).all())
+    torch.testing.assert_close(fast.q, slow.q, atol=1e-3, rtol=0)  # the same solution of the 8

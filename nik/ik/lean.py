@@ -60,8 +60,9 @@ LEAN_MAX_BATCH = 10_000
 LEAN_MAX_BATCH_CLOSED_FORM = 2_048
 
 _DTYPES = (torch.float64, torch.float32)
-#: The FK check of a closed-form solution (metres, radians): ``nik.analytic.solve``'s default in float64.
-CLOSED_FORM_TOL = 1e-9
+#: The FK check of a closed-form solution (metres, radians) by the targets' dtype: ``nik.analytic.solve``'s
+#: defaults (a float32 pose is a rotation only to about 1e-7).
+CLOSED_FORM_TOL = {torch.float64: 1e-9, torch.float32: 2e-5}
 _ROBOTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _unavailable = False
 
@@ -105,7 +106,8 @@ def solve(solver, T_target, tol_pos, tol_rot, seed, q_near, max_iters, represent
     kw = {"tol_pos": tol_pos, "tol_rot": tol_rot, "seed": seed, "max_iters": max_iters}
     if solver.closed_form:
         source = "analytic"
-        run = _closed_form(robot, lm, T, near, reachable, restarts=solver.fallback == "multistart", **kw)
+        check = CLOSED_FORM_TOL[dtype]
+        run = _closed_form(robot, lm, T, near, reachable, check, restarts=solver.fallback == "multistart", **kw)
     else:
         source = "multistart"
         run = lm.solve(T, None, reachable=reachable, **kw)
@@ -151,7 +153,7 @@ def _kernels():
 _KERNELS = None
 
 
-def _closed_form(robot, lm, T, near, reachable, *, restarts: bool, **kw) -> CompiledRun:
+def _closed_form(robot, lm, T, near, reachable, check_tol, *, restarts: bool, **kw) -> CompiledRun:
     """The stages of a closed-form arm, compiled: the solution of the closed form chosen as ``analytic_guess``
     chooses it (nearest ``near`` when given, else farthest inside the limits; out of reach, the clamped one
     nearest the target), then LM from it for the targets it leaves outside tolerance that are within reach
@@ -160,7 +162,7 @@ def _closed_form(robot, lm, T, near, reachable, *, restarts: bool, **kw) -> Comp
     q, pos, rot, ok = np.empty((B, 6)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
     use_near = near is not None
     todo = _kernels().closed_guess(
-        _facts(robot)["closed"], lm.G, lm.joints, CLOSED_FORM_TOL, T, near if use_near else q, use_near,
+        _facts(robot)["closed"], lm.G, lm.joints, check_tol, T, near if use_near else q, use_near,
         LIMIT_ROUNDING, kw["tol_pos"], kw["tol_rot"], reachable, q, pos, rot, ok,
     )  # fmt: skip
     run = CompiledRun(q, np.zeros(B, dtype=np.int64), ok, pos, rot)
