@@ -1,4 +1,4 @@
-"""Compiled one-pose kernels (numba): FK, FK + Jacobian, damped LM, network forward pass.
+"""Compiled one-pose kernels (numba): FK, FK + Jacobian, damped LM, closed forms, network forward pass.
 
 For one pose, the cost of the torch path is per-operation overhead, not arithmetic; these kernels
 do the same work as plain compiled loops over small float64 numpy arrays, in microseconds. They
@@ -7,8 +7,12 @@ the reference they are tested against.
 
 - :mod:`nik.kernels.chain`: the model arrays of a robot (:func:`chain_model`), FK of one
   configuration or a small batch, FK + geometric Jacobian;
-- :mod:`nik.kernels.lm`: Levenberg-Marquardt with joint limits and seeded uniform restarts;
-- :mod:`nik.kernels.mlp`: forward pass of an MLP whose weights are one flat float64 array.
+- :mod:`nik.kernels.lm`: Levenberg-Marquardt with joint limits and seeded uniform restarts, pose errors;
+- :mod:`nik.kernels.closed`: the closed forms of 6R arms (spherical wrist, three parallel axes) and the
+  choice among their solutions;
+- :mod:`nik.kernels.poses`: the checks and conversions of target poses, the reach bound;
+- :mod:`nik.kernels.mlp`: forward pass of an MLP whose weights are one flat float64 array;
+- :mod:`nik.kernels.cache`: where the compiled code is kept (imports no numba).
 
 Every kernel is ``numba.njit(cache=True)``: compiled on first use (seconds, once per machine), then
 loaded from the cache folder chosen by :mod:`nik.kernels.cache` (``nik/kernels/__pycache__`` when
