@@ -103,7 +103,10 @@ def solve(solver, T_target, tol_pos, tol_rot, seed, q_near, max_iters, represent
         msg = unreachable_message(robot, torch.from_numpy(T), torch.from_numpy(reachable))
         warnings.warn(msg, UserWarning, stacklevel=3)
     lm = CompiledLM.of(robot, solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None)
-    kw = {"tol_pos": tol_pos, "tol_rot": tol_rot, "seed": seed, "max_iters": max_iters}
+    # float32 answers: solved to half the tolerance in float64, so that rounding the joints to float32 (about
+    # 1e-7 rad) cannot carry an answer just inside the tolerance out of it
+    margin = 1.0 if dtype == torch.float64 else 0.5
+    kw = {"tol_pos": tol_pos * margin, "tol_rot": tol_rot * margin, "seed": seed, "max_iters": max_iters}
     if solver.closed_form:
         source = "analytic"
         check = CLOSED_FORM_TOL[dtype]
