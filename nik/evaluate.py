@@ -55,6 +55,7 @@ class EvalReport:
     notes: list[str] = field(default_factory=list)
     device: str = "cpu"
     threads: int = 1
+    end_link: str | None = None  # the tool link of a URDF arm
 
 
 def _row(method: str, robot: Robot, T: torch.Tensor, q: torch.Tensor, seconds: float, note: str = "") -> tuple:
@@ -266,7 +267,14 @@ def evaluate(
         raise ValueError(f"{data}: the {split!r} split is empty")
     n = min(int(n), len(part))
     T = part.pose[:n].to(device=dev, dtype=torch.float64).clone()
-    report = EvalReport(robot=robot.name, data=str(data), n=n, threads=torch.get_num_threads(), device=str(dev))
+    report = EvalReport(
+        robot=robot.name,
+        data=str(data),
+        n=n,
+        threads=torch.get_num_threads(),
+        device=str(dev),
+        end_link=robot.end_link,
+    )
     say = progress or (lambda msg: None)
 
     def add(method: str, q: torch.Tensor, seconds: float, note: str = "") -> None:
@@ -339,8 +347,9 @@ def _threads(n: int) -> str:
 
 def markdown_table(report: EvalReport) -> str:
     """The report as a Markdown table (errors in mm and degrees, success in percent)."""
+    tool = f" (tool link `{report.end_link}`)" if report.end_link else ""
     lines = [
-        f"Robot `{report.robot}`, {report.n} poses of the test split of `{report.data}`, "
+        f"Robot `{report.robot}`{tool}, {report.n} poses of the test split of `{report.data}`, "
         f"CPU ({_threads(report.threads)}), float64.",
         "",
         "| method | success 1 mm / 1 deg | success 0.1 mm / 0.1 deg | position error mm (p50 / p95 / p99 / max) "

@@ -10,6 +10,8 @@ import sys
 import warnings
 from pathlib import Path
 
+from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+
 __all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solutions_csv"]
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
@@ -26,7 +28,7 @@ def register(sub) -> None:
         "mm, the rotation error in degrees and the success flag. Exit status: 0 when every pose was reached within "
         "tolerance, 1 when some was not, 2 on an error.",
     )
-    s.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
+    add_robot_arguments(s)
     s.add_argument(
         "--checkpoint",
         default="auto",
@@ -85,7 +87,7 @@ def register(sub) -> None:
         "(success at 1 mm / 1 deg and 0.1 mm / 0.1 deg, error percentiles, joints outside limits, time per "
         "target), a JSON copy and a cumulative error plot (PNG).",
     )
-    e.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
+    add_robot_arguments(e)
     e.add_argument(
         "--checkpoint", default=None, help="trained network (.ckpt); without it the network rows are left out"
     )
@@ -214,10 +216,9 @@ def _cmd_solve(args) -> int:
     import torch
 
     from nik.reach import unreachable_message
-    from nik.robots import load_robot
     from nik.solver import IKSolver, as_poses
 
-    robot = load_robot(args.robot)
+    robot = robot_from_args(args)
     if args.pose is not None:
         poses = torch.tensor([args.pose], dtype=torch.float64)
     else:
@@ -278,6 +279,7 @@ def _cmd_solve(args) -> int:
             json.dumps(
                 {
                     "robot": robot.name,
+                    "end_link": robot.end_link,
                     "joint_names": robot.joint_names,
                     "joint_units_si": si,
                     "joint_units_display": shown,
@@ -295,7 +297,7 @@ def _cmd_solve(args) -> int:
         ok = int(res.success.sum())
         print(
             f"solved {ok} of {len(res)} poses within {args.tol_mm:g} mm / {args.tol_deg:g} deg "
-            f"({robot.name}, guess: {res.source}, refine: {args.refine}); wrote {args.out}"
+            f"({robot.name}{tool_link_text(robot)}, guess: {res.source}, refine: {args.refine}); wrote {args.out}"
         )
     else:
         _print_table(robot, res)
@@ -327,14 +329,16 @@ def _print_table(robot, res, *, limit: int = 50) -> None:
         print("  ".join(c.rjust(w) for c, w in zip(cells, widths, strict=True)))
     if len(res) > limit:
         print(f"... {len(res) - limit} more rows (use --out FILE.csv)")
-    print(f"robot {robot.name}, initial guess: {res.source}; {int(res.success.sum())} of {len(res)} reached")
+    print(
+        f"robot {robot.name}{tool_link_text(robot)}, initial guess: {res.source}; "
+        f"{int(res.success.sum())} of {len(res)} reached"
+    )
 
 
 def _cmd_evaluate(args) -> int:
     from nik.evaluate import REFINEMENTS, evaluate, markdown_table, write_report
-    from nik.robots import load_robot
 
-    robot = load_robot(args.robot)
+    robot = robot_from_args(args)
     refinements = tuple(m.strip() for m in args.refinements.split(",") if m.strip())
     bad = [m for m in refinements if m not in REFINEMENTS]
     if bad:
