@@ -349,6 +349,7 @@ def _cmd_evaluate(args) -> int:
         from nik.models import load_checkpoint
 
         load_checkpoint(args.checkpoint, robot=robot)
+    out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name
     report = evaluate(
         robot,
         data=args.data,
@@ -361,8 +362,8 @@ def _cmd_evaluate(args) -> int:
         seed=args.seed,
         device=args.device,
         progress=lambda msg: print(f"evaluating: {msg}", file=sys.stderr, flush=True),
+        on_row=lambda rep: write_report(rep, out, plot=False),  # each row is kept as soon as it is made
     )
-    out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name
     paths = write_report(report, out)
     print(markdown_table(report))
     print(f"wrote {paths['markdown']}, {paths['json']}, {paths['plot']}")
