@@ -1,9 +1,10 @@
 """End-to-end evaluation on a dataset's held-out test split: the table users compare.
 
 :func:`evaluate` solves the same test poses with every pipeline and measures each the same
-way (FK of the returned joints against the target): the network alone, the network plus each
-refinement, the uniform-init swarm (no network), the closed form (PUMA-like arms) and
-pytorch-kinematics' ``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
+way (FK of the returned joints against the target): the default pipeline (``IKSolver(robot)``, what
+users run), LM multistart without a network, the network alone, the network plus each refinement,
+the uniform-init swarm (no network), the closed form (PUMA-like arms) and pytorch-kinematics'
+``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
 table, a JSON copy and a cumulative error plot.
 """
 
@@ -56,6 +57,7 @@ class EvalReport:
     device: str = "cpu"
     threads: int = 1
     end_link: str | None = None  # the tool link of a URDF arm
+    network: str = ""  # the network of the network rows: "shipped network for NAME", a path, or "" (none)
 
 
 def _row(method: str, robot: Robot, T: torch.Tensor, q: torch.Tensor, seconds: float, note: str = "") -> tuple:
@@ -230,6 +232,31 @@ def _pk_solve(
 # ---------------------------------------------------------------------------
 # The evaluation
 # ---------------------------------------------------------------------------
+def _network_rows_solver(robot: Robot, checkpoint, report: EvalReport) -> dict | None:
+    """The :class:`IKSolver` keywords of the network rows, or None (said in a note) when there is no network.
+
+    ``checkpoint``: ``"auto"``, the network shipped with nik for this robot as ``IKSolver(robot)`` picks it (by
+    name and definition hash; used here on PUMA-like arms too, where the solver's default keeps the closed form);
+    ``None`` or ``"none"``, no network; else a path.
+    """
+    from nik.solver import IKSolver
+
+    word = checkpoint.lower() if isinstance(checkpoint, str) else None
+    if checkpoint is None or word == "none":
+        report.notes.append("no network (checkpoint none): the network rows are missing")
+        return None
+    if word == "auto":
+        if IKSolver(robot, checkpoint="auto", analytic=False).net is None:
+            report.notes.append(
+                f"no network shipped with nik for {robot.name} (this definition): the network rows are missing"
+            )
+            return None
+        report.network = f"shipped network for {robot.name}"
+        return {"checkpoint": "auto", "analytic": False}
+    report.network = str(checkpoint)
+    return {"checkpoint": checkpoint}
+
+
 def evaluate(
     robot: Robot | str | Path,
     *,
@@ -252,7 +279,10 @@ def evaluate(
     Args:
         robot: the arm (object, built-in name or file); the dataset and checkpoint must match it.
         data: dataset directory (``nik generate``).
-        checkpoint: trained network; without it the network rows are left out (and said so).
+        checkpoint: the network of the network rows: ``"auto"``, the one shipped with nik for this robot (as
+            ``IKSolver(robot)`` picks it); a path to a trained network; ``None`` / ``"none"``: no network rows
+            (a note says why). The rows "default pipeline" (``IKSolver(robot)``) and "LM multistart, no
+            network" are there whatever it is.
         n: number of test poses.
         refinements: methods run after the network (``lm``, ``pso``, ``sapso``, ``ipso``, ``ga``).
         swarm: the uniform-init swarm row's method (no network).
@@ -295,19 +325,38 @@ def evaluate(
         if on_row is not None:
             on_row(report)
 
-    if checkpoint is not None:
+    say("default pipeline")
+    solver = IKSolver(robot, device=dev)
+    res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
+    add(
+        "default pipeline",
+        res.q,
+        sec,
+        f"IKSolver(robot): guess {solver.initial_source}, refine lm, fallback {solver.fallback}",
+    )
+    say("LM multistart, no network")
+    solver = IKSolver(robot, checkpoint=None, analytic=False, device=dev)
+    res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
+    add(
+        "LM multistart, no network",
+        res.q,
+        sec,
+        "IKSolver(robot, checkpoint=None, analytic=False): LM from uniform starts, restarts where it fails",
+    )
+    net_kw = _network_rows_solver(robot, checkpoint, report)
+    if net_kw is not None:
         say("network")
-        raw = IKSolver(robot, checkpoint=checkpoint, device=dev, refine="none")
+        raw = IKSolver(robot, **net_kw, device=dev, refine="none")
         res, sec = _timed(lambda: raw.solve(T, seed=seed), dev)
         add("network", res.q, sec)
         for method in refinements:
             say(f"network + {method}")
-            solver = IKSolver(robot, checkpoint=checkpoint, device=dev, refine=method, fallback=False)
+            solver = IKSolver(robot, **net_kw, device=dev, refine=method, fallback=False)
             res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
             polish = " + LM polish" if method != "lm" else ""
             add(f"network + {method}", res.q, sec, f"mean {res.iterations.float().mean():.1f} iterations{polish}")
         say("network + lm + LM restarts")
-        solver = IKSolver(robot, checkpoint=checkpoint, device=dev, refine="lm", fallback="multistart")
+        solver = IKSolver(robot, **net_kw, device=dev, refine="lm", fallback="multistart")
         res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
         add(
             "network + lm + LM restarts",
@@ -315,13 +364,14 @@ def evaluate(
             sec,
             "targets LM misses from the guess restart from uniform starts; no closed form",
         )
+    if swarm == "lm":
+        report.notes.append("uniform-init lm is the row 'LM multistart, no network'")
     else:
-        report.notes.append("no checkpoint given: the network rows are missing")
-    say(f"uniform-init {swarm}")
-    solver = IKSolver(robot, refine=swarm, analytic=False, fallback="none")
-    res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
-    its = float(res.iterations.float().mean())
-    add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
+        say(f"uniform-init {swarm}")
+        solver = IKSolver(robot, refine=swarm, analytic=False, fallback="none")
+        res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
+        its = float(res.iterations.float().mean())
+        add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
     from nik.analytic import is_puma_like
 
     if is_puma_like(robot):
@@ -362,9 +412,10 @@ def _threads(n: int) -> str:
 def markdown_table(report: EvalReport) -> str:
     """The report as a Markdown table (errors in mm and degrees, success in percent)."""
     tool = f" (tool link `{report.end_link}`)" if report.end_link else ""
+    net = f" Network rows: {report.network}." if report.network else ""
     lines = [
         f"Robot `{report.robot}`{tool}, {report.n} poses of the test split of `{report.data}`, "
-        f"CPU ({_threads(report.threads)}), float64.",
+        f"CPU ({_threads(report.threads)}), float64.{net}",
         "",
         "| method | success 1 mm / 1 deg | success 0.1 mm / 0.1 deg | position error mm (p50 / p95 / p99 / max) "
         "| rotation error deg (p50 / p95 / p99 / max) | joints outside limits | ms / target | note |",

@@ -148,3 +148,52 @@ def test_rows_computed_before_a_failure_are_written(monkeypatch, tmp_path):
         main([*argv, "--swarm", "lm", "--no-pk"])
     table = (out / "evaluation.md").read_text()
     assert calls["n"] == 2 and table.count("\n| ") == 2  # the header and the one row made before the failure
+
+
+# ---- rows for what users run: the default pipeline, LM multistart, the shipped network (--checkpoint auto) -----------
+@pytest.fixture(scope="module")
+def puma_data(tmp_path_factory):
+    from nik.data import generate_dataset
+
+    return generate_dataset("puma560", 80, tmp_path_factory.mktemp("puma") / "d", seed=2, progress=False)
+
+
+def _methods(out):
+    import json
+
+    doc = json.loads((out / "evaluation.json").read_text())
+    return [r["method"] for r in doc["rows"]], doc
+
+
+def test_cli_checkpoint_auto_evaluates_the_shipped_network_and_the_default_pipeline(puma_data, tmp_path, capsys):
+    from nik.cli import main
+
+    out = tmp_path / "auto"
+    argv = ["evaluate", "--robot", "puma560", "--data", str(puma_data), "--n", "4", "--no-pk", "--swarm", "lm"]
+    assert main([*argv, "--checkpoint", "auto", "--refinements", "lm", "--out", str(out)]) == 0, capsys.readouterr()
+    methods, doc = _methods(out)
+    for row in ("default pipeline", "LM multistart, no network", "network", "network + lm", "analytic (closed form)"):
+        assert row in methods
+    assert "shipped" in (out / "evaluation.md").read_text()
+    rows = {r["method"]: r for r in doc["rows"]}
+    assert rows["default pipeline"]["success_01mm_01deg"] == 1.0  # closed form + LM on a PUMA arm
+    # without a network: the same table less the network rows, and it says why
+    out = tmp_path / "none"
+    assert main([*argv, "--checkpoint", "none", "--out", str(out)]) == 0
+    methods, doc = _methods(out)
+    assert "default pipeline" in methods and "LM multistart, no network" in methods
+    assert not any(m.startswith("network") for m in methods)
+    assert any("checkpoint none" in n for n in doc["notes"])
+    capsys.readouterr()
+
+
+def test_default_pipeline_row_is_what_iksolver_robot_returns(odd_arm, odd_data):
+    from nik.data import load_dataset
+    from nik.evaluate import evaluate
+
+    report = evaluate(odd_arm, data=odd_data, n=5, checkpoint="auto", include_pk=False, swarm="lm", seed=3)
+    T = load_dataset(odd_data).split("test").pose[:5].to(torch.float64)
+    res = nik.IKSolver(odd_arm).solve(T, tol_pos=1e-4, tol_rot=1e-3, seed=3)
+    pos_mm, _ = report.errors["default pipeline"]
+    assert_close(torch.as_tensor(pos_mm), res.pos_err * 1e3, atol=1e-9, rtol=0)
+    assert any("no network shipped" in n for n in report.notes)  # auto on an arm nik ships nothing for

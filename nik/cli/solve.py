@@ -82,14 +82,19 @@ def register(sub) -> None:
 
     e = sub.add_parser(
         "evaluate",
-        help="evaluate network, refinements, swarm, closed form and pytorch-kinematics on a test split",
+        help="evaluate the default pipeline, LM multistart, network, refinements, swarm, closed form and "
+        "pytorch-kinematics on a test split",
         description="Solve the test poses of a dataset with every pipeline and write a Markdown table "
         "(success at 1 mm / 1 deg and 0.1 mm / 0.1 deg, error percentiles, joints outside limits, time per "
         "target), a JSON copy and a cumulative error plot (PNG).",
     )
     add_robot_arguments(e)
     e.add_argument(
-        "--checkpoint", default=None, help="trained network (.ckpt); without it the network rows are left out"
+        "--checkpoint",
+        default="auto",
+        help="network of the network rows: 'auto' (default): the one shipped with nik for this robot, as "
+        "IKSolver(robot) picks it; 'none': no network rows; else a trained network (.ckpt / .safetensors). "
+        "The rows 'default pipeline' (IKSolver(robot)) and 'LM multistart, no network' are always there",
     )
     e.add_argument("--data", required=True, help="dataset directory (nik generate)")
     e.add_argument("--n", type=int, default=1000, help="number of test poses (default 1000)")
@@ -345,7 +350,7 @@ def _cmd_evaluate(args) -> int:
         raise ValueError(f"--refinements: unknown method(s) {bad}; expected some of {','.join(REFINEMENTS)}")
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
-    if args.checkpoint is not None:  # refuse a bad checkpoint in one line, before any progress output
+    if str(args.checkpoint).lower() not in ("auto", "none"):  # refuse a bad one in one line, before any output
         from nik.models import load_checkpoint
 
         load_checkpoint(args.checkpoint, robot=robot)
