@@ -28,7 +28,7 @@ from nik.learn import (
     pose_loss,
     set_flat_params,
 )
-from nik.models import IKNet
+from nik.nets import IKNet
 
 
 def main(argv=None) -> int:

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def bare(data: str, generations: int) -> float:
     from nik.data import load_dataset
     from nik.learn import DECfg, de_init, de_step, flat_params, init_population, population_fitness
-    from nik.models import IKNet
+    from nik.nets import IKNet
 
     ds = load_dataset(data, mmap=False)
     T, q = ds.train.pose.float(), ds.train.q.float()

@@ -31,7 +31,7 @@ def main(argv=None) -> int:
 
     from nik.data import load_dataset
     from nik.learn import DECfg, de_init, de_step, flat_params, init_population, population_fitness
-    from nik.models import IKNet
+    from nik.nets import IKNet
 
     torch.manual_seed(args.seed)
     ds = load_dataset(args.data, mmap=False)

@@ -11,7 +11,7 @@ best of K by FK ("best of K"), medians and p95, mm and degrees.
 Candidates:
 
 - ``mlp``: one head (a plain regression; it averages solutions), joint loss then pose loss;
-- ``multihead``: :class:`nik.multinet.MultiHypIKNet`, K = 8 heads, relaxed winner-takes-all joint loss, then
+- ``multihead``: :class:`nik.nets.multi.MultiHypIKNet`, K = 8 heads, relaxed winner-takes-all joint loss, then
   pose loss (the training of ``configs/train/panda.yaml``, shortened);
 - ``flow``: a conditional neural spline flow (``zuko.flows.NSF``, context = the standardised pose) over the
   joints scaled to [-1, 1], trained by maximum likelihood (as IKFlow); hypotheses = K samples of its base
@@ -31,7 +31,7 @@ import torch
 
 from nik.data import load_dataset
 from nik.learn.multi import pose_loss_per_sample
-from nik.multinet import MultiHypIKNet, hypothesis_pose_error
+from nik.nets.multi import MultiHypIKNet, hypothesis_pose_error
 
 
 def _evaluate(robot, hyp_fn, n: int, seed: int = 12345) -> dict:

@@ -35,8 +35,8 @@ from pathlib import Path
 import torch
 
 import nik
-from nik.models import load_pretrained, pretrained_robots
-from nik.multinet import BranchIKNet, hypothesis_pose_error
+from nik.nets import load_pretrained, pretrained_robots
+from nik.nets.multi import BranchIKNet, hypothesis_pose_error
 
 TOL_POS = 1e-4  # m
 TOL_ROT = math.radians(0.1)  # rad

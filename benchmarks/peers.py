@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import nik  # noqa: E402
-from nik.reach import reach_center, reach_radius  # noqa: E402
+from nik.robots.reach import reach_center, reach_radius  # noqa: E402
 
 TOL_POS = 1e-4  # m
 TOL_ROT = math.radians(0.1)  # rad
@@ -89,7 +89,7 @@ def available(module: str) -> bool:
 
 def run_nik_from_guess(robot, T, q_guess):
     """nik's LM (with its restarts) from given guesses: what the pipeline does after a network."""
-    from nik.solver import lm_refine
+    from nik.ik import lm_refine
 
     t = time.perf_counter()
     res = lm_refine(robot, T, q_guess, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=0)

@@ -8,7 +8,7 @@ Rows:
   (b) every swarm seeded near a guess (the true joints + N(0, noise^2) per joint, clamped), without
       and with LM polish, plus a short seeded improved PSO (10 iterations) + polish;
   (c) LM alone: from the guess, and multi-start (best of LMCfg.first_starts uniform configurations, then
-      fresh uniform starts only for the targets that fail; see nik.swarm.lm_solve);
+      fresh uniform starts only for the targets that fail; see nik.lm.lm_solve);
   (d) pytorch-kinematics PseudoInverseIK on the same targets: 10 per-target uniform random
       initial configs ((N, R, dof) initial_config), early_stopping_any_converged=True, joint limits
       given, same tolerances; and seeded from the same guess (R = 1). Its answers are re-measured
@@ -29,8 +29,9 @@ import numpy as np
 import torch
 
 import nik
+from nik.lm import LMCfg
 from nik.poses import matrix_to_rpy
-from nik.swarm import LMCfg, default_cfg, refine
+from nik.swarm import default_cfg, refine
 
 TOL_POS, TOL_ROT = 1e-4, math.radians(0.1)
 

@@ -20,17 +20,18 @@ _SUBMODULES = {
     "cli",
     "data",
     "evaluate",
+    "ik",
     "kinematics",
     "learn",
+    "lm",
     "models",
+    "nets",
     "poses",
     "robots",
-    "solver",
     "swarm",
-    "reach",
     "threads",
 }
-_LAZY = {"IKSolver": "nik.solver", "IKResult": "nik.solver", "set_threads": "nik.threads"}
+_LAZY = {"IKSolver": "nik.ik", "IKResult": "nik.ik", "set_threads": "nik.threads"}
 
 __all__ = [
     "CheckpointError",

@@ -6,6 +6,9 @@ users run), LM multistart without a network, the network alone, the network plus
 the uniform-init swarm (no network), the closed form (PUMA-like arms) and pytorch-kinematics'
 ``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
 table, a JSON copy and a cumulative error plot.
+
+The evaluation room: it may import every room below it (robots, data, nets, analytic, ik, learn); only the
+cli imports it.
 """
 
 from __future__ import annotations
@@ -239,7 +242,7 @@ def _network_rows_solver(robot: Robot, checkpoint, report: EvalReport) -> dict |
     name and definition hash; used here on PUMA-like arms too, where the solver's default keeps the closed form);
     ``None`` or ``"none"``, no network; else a path.
     """
-    from nik.solver import IKSolver
+    from nik.ik import IKSolver
 
     word = checkpoint.lower() if isinstance(checkpoint, str) else None
     if checkpoint is None or word == "none":
@@ -298,7 +301,7 @@ def evaluate(
     """
     from nik.data import load_dataset
     from nik.device import resolve_device
-    from nik.solver import IKSolver
+    from nik.ik import IKSolver
 
     dev = resolve_device(device)
     robot = load_robot(robot) if not isinstance(robot, Robot) else robot

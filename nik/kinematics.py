@@ -22,6 +22,8 @@ Two implementations of that product:
   entries of ``T`` with the constants of ``G`` written in, so that products by the zeros and
   ones of DH tables disappear. It runs eagerly, and ``torch.compile`` fuses it into one loop
   over the batch (:class:`FKKernel` with ``compiled=True``), with a plain eager fallback.
+
+The ground floor: this module imports nothing from nik.
 """
 
 from __future__ import annotations

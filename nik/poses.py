@@ -10,6 +10,8 @@ of its input. Conventions:
   (``n, o, a`` the columns of ``R``);
 - the 6D rotation representation (Zhou et al. 2019) is the first two columns of ``R``,
   stacked as ``(r11, r21, r31, r12, r22, r32)``.
+
+The ground floor beside :mod:`nik.kinematics`: this module imports nothing from nik.
 """
 
 from __future__ import annotations

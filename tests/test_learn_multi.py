@@ -12,9 +12,9 @@ import yaml
 import nik
 from nik.learn.multi import MultiSolutionIK, plot_history
 from nik.models import load_checkpoint
-from nik.multinet import BranchIKNet, MultiHypIKNet
-from nik.pretrained import load, validation_error
-from nik.pretrained.export import main as export_main
+from nik.nets.export import main as export_main
+from nik.nets.multi import BranchIKNet, MultiHypIKNet
+from nik.nets.pretrained import load, validation_error
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = [

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 import nik
-from nik.swarm.lm_single import SingleLM
+from nik.lm.single import SingleLM
 
 
 @pytest.mark.parametrize("name", ["panda", "ur5", "kuka_kr"])

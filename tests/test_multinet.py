@@ -9,7 +9,7 @@ import torch
 
 import nik
 from nik.data.branches import URBranchClassifier, branch_classifier, ik_branch_classifier, ur_branch_classifier
-from nik.multinet import BranchIKNet, MultiHypIKNet, build_net, hypothesis_pose_error
+from nik.nets.multi import BranchIKNet, MultiHypIKNet, build_net, hypothesis_pose_error
 
 
 def _poses(robot, n, seed):

@@ -11,8 +11,8 @@ import torch
 import nik
 from nik.errors import CheckpointError
 from nik.models import load_pretrained, pretrained_robots
-from nik.multinet import BranchIKNet, MultiHypIKNet
-from nik.pretrained import PRETRAINED_DIR, available, load, read_meta, save, validation_error
+from nik.nets.multi import BranchIKNet, MultiHypIKNet
+from nik.nets.pretrained import PRETRAINED_DIR, available, load, read_meta, save, validation_error
 
 SHIPPED = available()
 

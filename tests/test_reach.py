@@ -6,7 +6,7 @@ import pytest
 import torch
 
 import nik
-from nik.reach import reach_center, reach_radius, reach_ratio, unreachable_message, within_reach
+from nik.robots.reach import reach_center, reach_radius, reach_ratio, unreachable_message, within_reach
 
 
 @pytest.mark.parametrize("name", ["puma560", "kuka_kr", "ur5", "panda", "rebot_v_6r"])

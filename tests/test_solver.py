@@ -294,7 +294,7 @@ def test_default_solver_round_trips_1000_stanford_arm_configurations():
 
 
 def test_solve_all_keeps_distinct_slide_lengths_apart():
-    from nik.solver import dedupe
+    from nik.ik import dedupe
 
     q = torch.tensor(
         [[0.1, 0.2, 0.3], [0.1, 0.2, 0.3 + 2 * math.pi], [0.1 + 2 * math.pi, 0.2, 0.3]], dtype=torch.float64

@@ -8,7 +8,9 @@ import pytest
 import torch
 
 import nik
+from nik.lm import so3_log
 from nik.robots import robot_from_config
+from nik.robots.joints import wrap_mask
 from nik.swarm import (
     PSOCfg,
     apply_bounds,
@@ -22,8 +24,6 @@ from nik.swarm import (
     pso_init,
     pso_step,
     refine,
-    so3_log,
-    wrap_mask,
 )
 from nik.swarm.ipso import constriction, expected_normal_norm
 
@@ -247,7 +247,7 @@ def test_solvers_reach_targets_of_an_arm_with_a_long_slide(slider, method):
 # LM: restarts only for the targets that fail
 # ---------------------------------------------------------------------------
 def test_lm_restarts_touch_only_the_targets_that_fail_within_reach():
-    from nik.swarm import lm_solve
+    from nik.lm import lm_solve
 
     robot = nik.load_robot("ur5")
     q, T = _targets(robot, 12, 21)
@@ -274,7 +274,7 @@ def test_lm_restarts_touch_only_the_targets_that_fail_within_reach():
 
 
 def test_lm_same_generator_seed_same_answer():
-    from nik.swarm import lm_solve
+    from nik.lm import lm_solve
 
     robot = nik.load_robot("panda")
     _, T = _targets(robot, 30, 22)
@@ -286,7 +286,7 @@ def test_lm_same_generator_seed_same_answer():
 def test_lm_compiled_kernel_gives_the_eager_answers():
     import dataclasses
 
-    from nik.swarm import LMCfg, lm_solve
+    from nik.lm import LMCfg, lm_solve
 
     robot = nik.load_robot("ur5")
     q, T = _targets(robot, 6, 23)

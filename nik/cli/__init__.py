@@ -3,6 +3,8 @@
 Each submodule of ``nik.cli`` registers its subcommands with ``register(subparsers)`` and
 sets ``func`` on its parser; :func:`main` dispatches and turns a ``ValueError`` (nik's
 errors included) or a missing file into one line on stderr and exit code 2, without a traceback.
+
+The top room: it may import every other room, and none imports it.
 """
 
 from __future__ import annotations

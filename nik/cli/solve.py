@@ -1,4 +1,4 @@
-"""``nik solve`` and ``nik evaluate``: argument parsing and printing; the work is in :mod:`nik.solver`
+"""``nik solve`` and ``nik evaluate``: argument parsing and printing; the work is in :mod:`nik.ik`
 and :mod:`nik.evaluate`."""
 
 from __future__ import annotations
@@ -220,8 +220,8 @@ def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None
 def _cmd_solve(args) -> int:
     import torch
 
-    from nik.reach import unreachable_message
-    from nik.solver import IKSolver, as_poses
+    from nik.ik import IKSolver, as_poses
+    from nik.robots.reach import unreachable_message
 
     robot = robot_from_args(args)
     if args.pose is not None:
@@ -351,7 +351,7 @@ def _cmd_evaluate(args) -> int:
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
     if str(args.checkpoint).lower() not in ("auto", "none"):  # refuse a bad one in one line, before any output
-        from nik.models import load_checkpoint
+        from nik.nets import load_checkpoint
 
         load_checkpoint(args.checkpoint, robot=robot)
     out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name

@@ -3,6 +3,8 @@
 generate_dataset(robot, n, out, seed=...)  -> writes data/NAME/ (q.npy, pose.npy, branch.npy, meta.json)
 load_dataset(path, robot=None)             -> IKDataset (.q (N, dof), .pose (N, 4, 4), .meta, splits)
 generate_dataset(..., shard=(i, k))         -> shard i of k of that dataset; merge_shards(out, dirs) joins them
+
+The room may import kinematics, poses and robots; never nets, analytic, lm, swarm, ik, learn or cli.
 """
 
 from nik.data.branches import BRANCH_NAMES, BranchClassifier, branch_classifier, branch_labels, branch_name

@@ -3,6 +3,9 @@ and the Lightning modules / data module behind ``train.py``.
 
 The Lightning parts (``modules``, ``datamodule``, ``callbacks``) are imported on first use so that
 ``import nik.learn`` for DE or the losses does not pull in Lightning.
+
+The room may import every room below it (kinematics, poses, robots, data, nets, analytic, lm, swarm, ik);
+only evaluation and cli import it.
 """
 
 from __future__ import annotations

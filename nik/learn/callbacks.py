@@ -96,7 +96,7 @@ class History(L.Callback):
 
 class StableLastCheckpoint(Checkpoint):
     """Keeps ``<trainer.default_root_dir>/<filename>`` (default ``last.ckpt``) up to date: a full Lightning
-    checkpoint (resumable with ``--ckpt_path``, loadable by :func:`nik.models.load_checkpoint`) written at
+    checkpoint (resumable with ``--ckpt_path``, loadable by :func:`nik.nets.load_checkpoint`) written at
     the end of every training epoch that ran a validation, and when training ends, so every run of
     ``train.py`` has one path that does not depend on the logger's ``version_N`` folders.
 

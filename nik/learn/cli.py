@@ -55,7 +55,7 @@ def _quiet_lightning() -> None:
 def check_resume_checkpoint(path: str | Path) -> None:
     """Refuse a ``--ckpt_path`` that is missing or not a loadable nik checkpoint (one line, no traceback
     from deep inside Lightning). Raises :class:`FileNotFoundError` or :class:`nik.CheckpointError`."""
-    from nik.models import load_checkpoint
+    from nik.nets import load_checkpoint
 
     load_checkpoint(path)  # weights_only=True: no code from the file runs
 

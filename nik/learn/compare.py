@@ -4,7 +4,7 @@
     (or python benchmarks/learners.py with the same arguments)
 
 For each network (``paper``: paper C's 6-8-6 tanh net on xyz + RPY; ``default``: the realistic default
-of :data:`nik.models.DEFAULT`) and each method (``configs/train/<method>.yaml``), runs
+of :data:`nik.nets.DEFAULT`) and each method (``configs/train/<method>.yaml``), runs
 ``train.py fit`` in this process with ``--trainer.max_time`` = budget (DE also stops at its 500
 generations), then evaluates the final network on the test split. Writes ``<out>.md`` (the table),
 ``<out>.csv`` (one row per run), ``<out>_history.csv`` and ``<out>.png`` (validation joint MSE, paper C
@@ -28,7 +28,7 @@ import torch
 
 from nik.learn.cli import METHODS, cli_main, method_config
 from nik.learn.losses import evaluate
-from nik.models import DEFAULT, PAPER_C
+from nik.nets import DEFAULT, PAPER_C
 
 __all__ = ["NETS", "run_one", "table", "plot", "compare", "build_parser", "main"]
 

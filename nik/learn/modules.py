@@ -1,6 +1,6 @@
 """Lightning modules: gradient-trained networks (``bp``, ``adam``, ``lbfgs``) and DE / DE-BP.
 
-Every module owns one :class:`nik.models.IKNet` (``self.net``), built in :meth:`IKModule.setup`
+Every module owns one :class:`nik.nets.IKNet` (``self.net``), built in :meth:`IKModule.setup`
 from the data module's robot and training split (its normalisation buffers are fitted there), and
 reports the same metrics at validation/test: ``val_loss`` (the training objective), ``val_joint_mse``
 (paper C eq. 4), ``val_pose_loss``, ``val_joint_rmse_deg``, ``val_pose_pos_mm`` / ``val_pose_rot_deg``
@@ -14,7 +14,7 @@ across ranks (``sync_dist``), the counters are summed over ranks and ``wall_s`` 
 DE splits each generation's population across the ranks (see :class:`DEIK`).
 
 Checkpoints carry ``checkpoint["nik"]`` (robot definition, hash, architecture; plain data) so that
-:func:`nik.models.load_checkpoint` reads them with ``torch.load(weights_only=True)``.
+:func:`nik.nets.load_checkpoint` reads them with ``torch.load(weights_only=True)``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import torch
 from nik.learn.de import DECfg, DEState, de_init, de_step
 from nik.learn.losses import LOSSES, evaluate, joint_mse, pose_loss
 from nik.learn.population import flat_params, init_population, population_fitness, sample_chunk, set_flat_params
-from nik.models import IKNet, checkpoint_extra
+from nik.nets import IKNet, checkpoint_extra
 
 __all__ = ["IKModule", "GradientIK", "DEIK"]
 
@@ -48,7 +48,7 @@ class IKModule(L.LightningModule):
 
     Args:
         hidden: hidden layer sizes (paper C: ``[8]``).
-        activation: ``tanh`` (paper C), ``silu``, ``relu``, ... (:data:`nik.models.ACTIVATIONS`).
+        activation: ``tanh`` (paper C), ``silu``, ``relu``, ... (:data:`nik.nets.ACTIVATIONS`).
         representation: network input: ``rpy`` (paper C), ``quat`` or ``rot6d``.
         output: ``angles`` or ``sincos``.
         loss: training objective: ``joint`` (paper C eq. 4), ``pose`` (through FK) or ``both``

@@ -1,7 +1,7 @@
-"""Lightning module for the multi-solution networks (:mod:`nik.multinet`) and a training-curve plot.
+"""Lightning module for the multi-solution networks (:mod:`nik.nets.multi`) and a training-curve plot.
 
-:class:`MultiSolutionIK` trains a :class:`nik.multinet.BranchIKNet` (``kind: branch``) or a
-:class:`nik.multinet.MultiHypIKNet` (``kind: multihead``) with Adam and a cosine learning rate
+:class:`MultiSolutionIK` trains a :class:`nik.nets.multi.BranchIKNet` (``kind: branch``) or a
+:class:`nik.nets.multi.MultiHypIKNet` (``kind: multihead``) with Adam and a cosine learning rate
 (time- or step-based, as :class:`nik.learn.modules.GradientIK`), in two phases of one run:
 
 1. **joint space** until ``pose_start`` of the run: the branch net regresses the ``(sin, cos)``
@@ -27,7 +27,7 @@ import lightning as L
 import torch
 
 from nik.learn.modules import GradientIK
-from nik.multinet import BranchIKNet, MultiHypIKNet, hypothesis_pose_error
+from nik.nets.multi import BranchIKNet, MultiHypIKNet, hypothesis_pose_error
 
 __all__ = ["MultiSolutionIK", "CurvePlot", "FinalCheckpoint", "pose_loss_per_sample", "plot_history"]
 
@@ -47,7 +47,7 @@ class MultiSolutionIK(GradientIK):
     Args:
         kind: ``branch`` (arms with branch labels) or ``multihead``.
         hidden: hidden layer sizes.
-        activation: one of :data:`nik.models.ACTIVATIONS`.
+        activation: one of :data:`nik.nets.ACTIVATIONS`.
         heads: K of the multi-head net (ignored for ``branch``: always 8).
         pose_start: fraction of the run (steps or ``trainer.max_time``) after which the pose loss is used.
         joint_weight: weight of the joint loss in the pose phase.

@@ -96,7 +96,7 @@ def population_fitness(
     """Loss of every network of the population on the same samples.
 
     Args:
-        net: an :class:`nik.models.IKNet` (its architecture and buffers; its own weights are unused).
+        net: an :class:`nik.nets.IKNet` (its architecture and buffers; its own weights are unused).
         W: (NP, P) flattened weights.
         x: (N, D) standardised inputs (``net.features(T_target)``).
         y_target: (N, out) encoded joint targets (``net.encode(q)``), for ``loss`` joint/both.

@@ -1,11 +1,13 @@
-"""Swarm refinement: batched PSO, SA-PSO, improved PSO and GA, objectives, and LM polish.
+"""swarm: batched PSO, SA-PSO, improved PSO and GA, their objectives and driver.
 
-``refine(robot, T_target, method=...)`` is the entry point; the algorithms are also usable
-directly as a state plus a pure step function (``pso_init`` / ``pso_step`` and friends) on a
-:class:`SwarmProblem`.
+``refine(robot, T_target, method=...)`` is the entry point (finished by the Levenberg-Marquardt polish
+of :mod:`nik.lm` when ``polish=True``); the algorithms are also usable directly as a state plus a pure
+step function (``pso_init`` / ``pso_step`` and friends) on a :class:`SwarmProblem`.
+
+The room may import kinematics, poses, robots and lm; never ik, learn or cli.
 """
 
-from nik.swarm.bounds import BOUNDARY_STRATEGIES, apply_bounds, wrap_mask
+from nik.swarm.bounds import BOUNDARY_STRATEGIES, apply_bounds
 from nik.swarm.driver import ALGORITHMS, METHODS, SwarmResult, SwarmRun, default_cfg, refine, run_swarm
 from nik.swarm.ga import GACfg, GAState, ga_init, ga_step
 from nik.swarm.init import InitCfg, init_particles
@@ -18,7 +20,6 @@ from nik.swarm.objectives import (
     paper_d_position,
     pose_objective,
 )
-from nik.swarm.polish import LMCfg, lm_solve, so3_log
 from nik.swarm.problem import SwarmProblem, make_problem
 from nik.swarm.pso import PSOCfg, PSOState, SwarmCfg, pso_init, pso_step
 from nik.swarm.sapso import SAPSOCfg, sapso_init, sapso_step
@@ -33,7 +34,6 @@ __all__ = [
     "IPSOCfg",
     "IPSOState",
     "InitCfg",
-    "LMCfg",
     "PSOCfg",
     "PSOState",
     "SAPSOCfg",
@@ -48,7 +48,6 @@ __all__ = [
     "init_particles",
     "ipso_init",
     "ipso_step",
-    "lm_solve",
     "make_objective",
     "make_problem",
     "paper_a_objective",
@@ -61,6 +60,4 @@ __all__ = [
     "run_swarm",
     "sapso_init",
     "sapso_step",
-    "so3_log",
-    "wrap_mask",
 ]

@@ -1,4 +1,4 @@
-"""Keeping particles inside the joint limits, and angle wrapping.
+"""Keeping particles inside the joint limits (angle wrapping itself is :mod:`nik.robots.joints`).
 
 Every function is batched over any leading shape; ``lo, hi, wrap`` are ``(n,)`` for the
 ``n`` joints being searched.
@@ -22,41 +22,13 @@ that comparison has not been run to completion yet, so the default is provisiona
 
 from __future__ import annotations
 
-import math
-
 import torch
 
-__all__ = ["BOUNDARY_STRATEGIES", "apply_bounds", "wrap_mask", "wrap_into", "angle_diff"]
+from nik.robots.joints import wrap_into
+
+__all__ = ["BOUNDARY_STRATEGIES", "apply_bounds"]
 
 BOUNDARY_STRATEGIES = ("reflect", "clamp", "resample")
-TWO_PI = 2.0 * math.pi
-
-
-def wrap_mask(limits: torch.Tensor, *, tol: float = 1e-6, prismatic: torch.Tensor | None = None) -> torch.Tensor:
-    """``(n,)`` bool: revolute joints whose range ``hi - lo`` (``limits: (n, 2)``, float64) is at least ``2 pi``.
-
-    ``prismatic: (n,)`` bool marks joints that never wrap (a slide of 7 m is not a turn); None: all revolute.
-    """
-    wrap = (limits[:, 1] - limits[:, 0]) >= TWO_PI - tol
-    if prismatic is not None:
-        wrap = wrap & ~torch.as_tensor(prismatic, dtype=torch.bool, device=wrap.device)
-    return wrap
-
-
-def wrap_into(x: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """Shift ``x`` by whole turns into ``[lo, hi]`` (valid when ``hi - lo >= 2 pi``); clamped against rounding."""
-    up = torch.ceil((lo - x) / TWO_PI).clamp_min(0)
-    down = torch.ceil((x - hi) / TWO_PI).clamp_min(0)
-    x = x + TWO_PI * (up - down)
-    return torch.minimum(torch.maximum(x, lo), hi)
-
-
-def angle_diff(a: torch.Tensor, b: torch.Tensor, wrap: torch.Tensor) -> torch.Tensor:
-    """``a - b``, taken as the shortest signed angle (in ``[-pi, pi)``) on wrapping joints."""
-    d = a - b
-    if bool(wrap.any()):
-        d = torch.where(wrap, torch.remainder(d + math.pi, TWO_PI) - math.pi, d)
-    return d
 
 
 def apply_bounds(

@@ -7,13 +7,13 @@ from typing import Any, NamedTuple
 
 import torch
 
+from nik.lm import LMCfg, lm_solve
 from nik.poses import pose_error, validate_joints, validate_pose
 from nik.robots.model import Robot
 from nik.swarm.bounds import BOUNDARY_STRATEGIES
 from nik.swarm.ga import GACfg, ga_init, ga_step
 from nik.swarm.ipso import IPSOCfg, ipso_init, ipso_step
 from nik.swarm.objectives import make_objective
-from nik.swarm.polish import LMCfg, lm_solve
 from nik.swarm.problem import SwarmProblem, make_problem
 from nik.swarm.pso import PSOCfg, pso_init, pso_step
 from nik.swarm.sapso import SAPSOCfg, sapso_init, sapso_step
@@ -168,7 +168,7 @@ def refine(
         method: ``ipso`` (paper D's improved PSO), ``pso`` (classic), ``sapso`` (paper A),
             ``ga`` (paper D's baseline) or ``lm`` (no swarm: damped least squares from the guesses,
             or from the best of ``LMCfg.first_starts`` uniform configurations when ``q_init`` is None;
-            restarts for the targets that fail, see :func:`nik.swarm.lm_solve`).
+            restarts for the targets that fail, see :func:`nik.lm.lm_solve`).
         q_init: None (uniform particles inside the limits, the papers' behaviour) or guesses
             ``(B, dof)`` / ``(B, K, dof)``, radians: particles start around them (``cfg.init``).
         cfg: the method's config (:class:`PSOCfg`, :class:`SAPSOCfg`, :class:`IPSOCfg`,

@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import torch
 
-from nik.swarm.bounds import angle_diff
+from nik.robots.joints import angle_diff
 from nik.swarm.init import init_particles
 from nik.swarm.problem import SwarmProblem
 from nik.swarm.pso import PSOState, SwarmCfg, best_update, move

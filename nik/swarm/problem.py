@@ -12,8 +12,8 @@ from dataclasses import dataclass, replace
 import torch
 
 from nik.poses import rotation_angle
+from nik.robots.joints import wrap_mask
 from nik.robots.model import Robot
-from nik.swarm.bounds import wrap_mask
 from nik.swarm.objectives import Objective
 
 __all__ = ["SwarmProblem", "make_problem"]

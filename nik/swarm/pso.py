@@ -19,7 +19,8 @@ from typing import NamedTuple
 
 import torch
 
-from nik.swarm.bounds import angle_diff, apply_bounds
+from nik.robots.joints import angle_diff
+from nik.swarm.bounds import apply_bounds
 from nik.swarm.init import InitCfg, init_particles
 from nik.swarm.problem import SwarmProblem
 

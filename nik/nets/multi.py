@@ -1,7 +1,7 @@
 """Networks that represent several IK solutions of one pose instead of averaging them.
 
 A pose of a 6R arm has up to 8 joint solutions, a pose of a 7-DOF arm a continuum; a plain
-regression (:class:`nik.models.IKNet`) averages them into a joint vector that is none of them.
+regression (:class:`nik.nets.IKNet`) averages them into a joint vector that is none of them.
 Two networks here give *hypotheses* ``(B, K, dof)`` instead:
 
 - :class:`BranchIKNet` (arms with IK branch labels, :func:`nik.data.branches.ik_branch_classifier`:
@@ -29,7 +29,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from nik.models import ACTIVATIONS
+from nik.nets.mlp import ACTIVATIONS
 from nik.poses import POSE_DIMS, pose_error, pose_to_vector
 from nik.robots import Robot
 
@@ -205,7 +205,7 @@ class BranchIKNet(_HypothesisNet):
     Args:
         robot: an arm with a branch classifier (PUMA or UR type).
         hidden: hidden layer sizes, e.g. ``[512, 512, 512]``.
-        activation: one of :data:`nik.models.ACTIVATIONS`.
+        activation: one of :data:`nik.nets.mlp.ACTIVATIONS`.
         representation: input pose representation (default ``rot6d``).
     """
 
@@ -269,7 +269,7 @@ class MultiHypIKNet(_HypothesisNet):
     Args:
         robot: any arm.
         hidden: hidden layer sizes of the trunk.
-        activation: one of :data:`nik.models.ACTIVATIONS`.
+        activation: one of :data:`nik.nets.mlp.ACTIVATIONS`.
         heads: number of hypotheses K.
         representation: input pose representation (default ``rot6d``).
     """

@@ -1,13 +1,14 @@
 """Guess providers: ``(robot, T, ...) -> q (B, dof)`` initial joint guesses inside the limits.
 
-:class:`nik.IKSolver` composes one of these with a refiner (:mod:`nik.refiners`):
+:class:`nik.IKSolver` composes one of these with a refiner (:mod:`nik.ik.refiners`):
 
 - :func:`analytic_guess`: the closed form of PUMA-like arms (the valid solution nearest ``q_near``,
   or the one farthest inside the joint ranges; out of reach, the clamped one that comes closest);
 - :func:`multistart_guess`: the best of ``n_starts`` uniform configurations by pose error;
 - :func:`network_guess`: a trained network's prediction, clamped to the limits.
 
-Also here: choosing among several solutions (:func:`nearest_solution`), used by ``q_near``.
+Also here: choosing among several solutions (:func:`nearest_solution`, used by ``q_near``) and
+dropping duplicates (:func:`dedupe`, used by ``solve_all``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import torch
 
 from nik.poses import pose_error
 
-__all__ = ["LIMIT_ROUNDING", "analytic_guess", "multistart_guess", "nearest_solution", "network_guess"]
+__all__ = ["LIMIT_ROUNDING", "analytic_guess", "dedupe", "multistart_guess", "nearest_solution", "network_guess"]
 
 #: Relative tolerance (radians per radian of limit) within which an angle counts as on a joint limit.
 LIMIT_ROUNDING = 1e-9
@@ -110,3 +111,16 @@ def _central_solution(sols: torch.Tensor, valid: torch.Tensor, lo: torch.Tensor,
     score = torch.where(valid, score, torch.full_like(score, -float("inf")))
     idx = score.argmax(-1)
     return torch.gather(sols, 1, idx[:, None, None].expand(-1, 1, sols.shape[-1])).squeeze(1)
+
+
+def dedupe(q: torch.Tensor, *, tol: float = 1e-3, prismatic: torch.Tensor | None = None) -> torch.Tensor:
+    """Drop from ``q: (K, dof)`` every row within ``tol`` (max abs joint difference, radians or metres;
+    wrapped modulo 2 pi except on ``prismatic: (dof,)`` joints) of an earlier row; the order of the rest is kept."""
+    if q.shape[0] <= 1:
+        return q
+    diff = q[:, None] - q[None]
+    wrapped = torch.remainder(diff + math.pi, 2 * math.pi) - math.pi
+    diff = wrapped if prismatic is None else torch.where(prismatic.to(q.device), diff, wrapped)
+    close = diff.abs().amax(-1) < tol
+    dup = torch.triu(close, diagonal=1).any(dim=0)
+    return q[~dup]

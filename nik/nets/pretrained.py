@@ -2,11 +2,11 @@
 
 The ``.safetensors`` file holds the weights and buffers (read without pickle); the ``.json`` file holds
 plain data: the robot's name, definition hash and definition, the architecture (:meth:`config` of
-:mod:`nik.multinet`), how it was trained (command and config), and its recorded validation error with
+:mod:`nik.nets.multi`), how it was trained (command and config), and its recorded validation error with
 the seed and size of the validation set that reproduces it (:func:`validation_error`).
 
-:func:`nik.models.load_pretrained` is the public entry point; :func:`export` (``python -m
-nik.pretrained.export``) writes a pair from a training checkpoint.
+:func:`load_pretrained` (also ``nik.models.load_pretrained``) is the public entry point; ``python -m
+nik.nets.export`` writes a pair from a training checkpoint. The shipped files live in ``nik/nets/weights/``.
 """
 
 from __future__ import annotations
@@ -18,11 +18,23 @@ from pathlib import Path
 import torch
 
 from nik.errors import CheckpointError
+from nik.nets.multi import build_net, hypothesis_pose_error
+from nik.robots import Robot, load_robot
 
-__all__ = ["PRETRAINED_DIR", "available", "read_meta", "load", "save", "validation_error", "VALIDATION"]
+__all__ = [
+    "PRETRAINED_DIR",
+    "VALIDATION",
+    "available",
+    "load",
+    "load_pretrained",
+    "pretrained_robots",
+    "read_meta",
+    "save",
+    "validation_error",
+]
 
 #: Folder of the shipped files (inside the package).
-PRETRAINED_DIR = Path(__file__).resolve().parent
+PRETRAINED_DIR = Path(__file__).resolve().parent / "weights"
 #: Default validation set of a shipped network: ``n`` uniform joint vectors inside the limits from ``seed``.
 VALIDATION = {"seed": 12345, "n": 2000}
 
@@ -49,8 +61,6 @@ def validation_error(net, *, seed: int, n: int) -> dict:
     with ``seed``, float64 FK): medians and p95 of the position (mm) and rotation (deg) error of the best
     hypothesis by FK (``best_*``) and of the first hypothesis (``single_*``: branch 0 of a branch net, head 0
     of a multi-head net), as plain floats."""
-    from nik.multinet import hypothesis_pose_error
-
     robot = net.robot
     g = torch.Generator().manual_seed(int(seed))
     q = robot.sample(int(n), generator=g, dtype=torch.float64)
@@ -120,9 +130,6 @@ def load(robot, directory: str | Path | None = None):
     """
     from safetensors.torch import load_file
 
-    from nik.multinet import build_net
-    from nik.robots import Robot, load_robot
-
     d = Path(directory) if directory is not None else PRETRAINED_DIR
     if not isinstance(robot, Robot):
         robot = load_robot(robot)
@@ -146,3 +153,21 @@ def load(robot, directory: str | Path | None = None):
     except (KeyError, ValueError, RuntimeError, OSError) as err:
         raise CheckpointError(f"cannot load the pretrained network for {robot.name!r}: {err}") from err
     return net.eval()
+
+
+def pretrained_robots() -> list[str]:
+    """Names of the robots with a network shipped in ``nik/nets/weights`` (sorted)."""
+    return available()
+
+
+def load_pretrained(robot: Robot | str | Path):
+    """The network shipped with nik for ``robot`` (a :class:`nik.Robot`, built-in name or robot file), eval mode.
+
+    It is a multi-solution network (:mod:`nik.nets.multi`): ``net.hypotheses(T)`` gives ``(B, K, dof)``
+    joint hypotheses, ``net.predict(T)`` the best of them by FK. Read from safetensors (no pickle).
+
+    Raises:
+        CheckpointError: no network is shipped for this robot (the message names the robots that have
+            one), or the shipped one was trained for a different definition of it (hash mismatch).
+    """
+    return load(robot)

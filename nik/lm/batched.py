@@ -23,7 +23,7 @@ Per-target work (:func:`lm_solve`, :func:`lm_run`):
 2. a target leaves the batch as soon as one of its starts is within tolerance;
 3. a start is *spent* when it stalls (``stall_iters`` iterations in a row that lower ``|e|^2`` by
    less than the fraction ``stall_rel``) or after ``iters`` iterations; a spent start of a target
-   that is not provably out of reach (:func:`nik.reach.within_reach`) and has restarts left is
+   that is not provably out of reach (:func:`nik.robots.reach.within_reach`) and has restarts left is
    replaced, in the same batch, by a fresh uniform start (at most ``restarts`` per target). So
    only failing targets draw restarts, the batch stays large, and a provably unreachable target
    costs one start (stopped early by the stall test).
@@ -43,9 +43,9 @@ import torch
 
 from nik.kinematics import chain_jacobian
 from nik.poses import matrix_to_quaternion
-from nik.reach import within_reach
+from nik.robots.joints import wrap_into, wrap_mask
 from nik.robots.model import Robot
-from nik.swarm.bounds import wrap_into, wrap_mask
+from nik.robots.reach import within_reach
 
 __all__ = ["LMCfg", "LMRun", "lm_run", "lm_solve", "so3_log"]
 
@@ -343,7 +343,7 @@ def lm_solve(
         max_iters: iteration limit of the given starts (default ``cfg.iters``; restarts run ``cfg.iters``).
         restarts: fresh uniform starts a failing target may draw (default ``cfg.restarts``; 0: none).
         generator: source of the random starts (default: a generator seeded with 0).
-        reachable: (B,) bool, targets allowed to restart (default :func:`nik.reach.within_reach`):
+        reachable: (B,) bool, targets allowed to restart (default :func:`nik.robots.reach.within_reach`):
             a provably unreachable target gets its first start only (best effort, success False).
 
     Returns:

@@ -1,4 +1,4 @@
-"""The lean path for one pose: the Levenberg-Marquardt of :mod:`nik.swarm.polish` in float64 numpy.
+"""The lean path for one pose: the Levenberg-Marquardt of :mod:`nik.lm.batched` in float64 numpy.
 
 For a single target the batched torch version is bound by per-op overhead (microseconds per
 tensor op, dozens of ops per iteration); here one iteration is a few small numpy calls. It is the
@@ -46,7 +46,7 @@ class SingleLM:
 
     @classmethod
     def from_robot(cls, robot) -> SingleLM:
-        from nik.swarm.bounds import wrap_mask
+        from nik.robots.joints import wrap_mask
 
         G = robot.G.numpy()
         n = robot.dof

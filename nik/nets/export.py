@@ -1,8 +1,8 @@
-"""Export a trained multi-solution network to the package: ``python -m nik.pretrained.export CKPT --robot NAME``.
+"""Export a trained multi-solution network to the package: ``python -m nik.nets.export CKPT --robot NAME``.
 
 Reads the Lightning checkpoint of :class:`nik.learn.multi.MultiSolutionIK` safely
 (``torch.load(weights_only=True)``), rebuilds the network from its ``checkpoint["nik"]`` block and writes
-``<robot>.safetensors`` + ``<robot>.json`` (:func:`nik.pretrained.save`) with the training command,
+``<robot>.safetensors`` + ``<robot>.json`` (:func:`nik.nets.pretrained.save`) with the training command,
 the config file's text and the recorded validation error.
 """
 
@@ -15,15 +15,15 @@ from pathlib import Path
 import torch
 
 from nik.errors import CheckpointError
+from nik.nets.multi import build_net
+from nik.nets.pretrained import PRETRAINED_DIR, save
+from nik.robots import Robot, load_robot
 
 __all__ = ["load_training_checkpoint", "main"]
 
 
 def load_training_checkpoint(path: str | Path, robot=None):
     """The network in a ``MultiSolutionIK`` checkpoint, eval mode; ``robot`` (optional) must match its hash."""
-    from nik.multinet import build_net
-    from nik.robots import Robot, load_robot
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
@@ -42,9 +42,7 @@ def load_training_checkpoint(path: str | Path, robot=None):
 
 
 def main(argv: list[str] | None = None) -> int:
-    from nik.pretrained import PRETRAINED_DIR, save
-
-    ap = argparse.ArgumentParser(prog="python -m nik.pretrained.export", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m nik.nets.export", description=__doc__.splitlines()[0])
     ap.add_argument("checkpoint", help="runs/<robot>/last.ckpt of train.py with configs/train/<robot>.yaml")
     ap.add_argument("--robot", default=None, help="robot the checkpoint must belong to (default: its own)")
     ap.add_argument("--config", default=None, help="training config to record (default configs/train/<robot>.yaml)")

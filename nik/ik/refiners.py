@@ -1,9 +1,9 @@
 """Refiners: ``(robot, T, q0) -> RefineResult`` joint answers brought to tolerance from guesses.
 
-- :func:`lm_refine`: Levenberg-Marquardt (:func:`nik.swarm.lm_solve`) with restarts only for the
+- :func:`lm_refine`: Levenberg-Marquardt (:func:`nik.lm.lm_solve`) with restarts only for the
   targets that fail and are within reach; one pose on the CPU takes the numpy lean path
-  (:mod:`nik.swarm.lm_single`), where torch's per-op overhead would dominate;
-- the swarm methods are reached through :func:`nik.swarm.refine` (same fields on its result).
+  (:mod:`nik.lm.single`), where torch's per-op overhead would dominate;
+- :func:`swarm_refine`: the swarm methods through :func:`nik.swarm.refine`, answers measured by FK.
 """
 
 from __future__ import annotations
@@ -12,10 +12,12 @@ from dataclasses import dataclass
 
 import torch
 
+from nik.lm import LMCfg, SingleLM, best_of, lm_solve, lm_solve_one
+from nik.lm.single import _residual as _residual_one
 from nik.poses import pose_error
 from nik.robots import Robot
 
-__all__ = ["RefineResult", "lm_refine"]
+__all__ = ["RefineResult", "lm_refine", "swarm_refine"]
 
 
 @dataclass
@@ -44,8 +46,6 @@ def lm_refine(
 ) -> RefineResult:
     """Levenberg-Marquardt from ``q0: (B, dof)`` (None: a multistart guess), restarting only the
     targets that fail and are within reach (``restarts=False``: none). ``T: (B, 4, 4)``."""
-    from nik.swarm.polish import LMCfg, lm_solve
-
     cfg = cfg if isinstance(cfg, LMCfg) else LMCfg()
     g = torch.Generator(device=T.device).manual_seed(int(seed))
     if T.shape[0] == 1 and T.device.type == "cpu":
@@ -68,10 +68,7 @@ def lm_refine(
 
 
 def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, g) -> RefineResult:
-    """:func:`lm_refine` for one pose on the CPU: the numpy lean path (:mod:`nik.swarm.lm_single`)."""
-    from nik.swarm.lm_single import SingleLM, best_of, lm_solve_one
-    from nik.swarm.lm_single import _residual as _residual_one
-
+    """:func:`lm_refine` for one pose on the CPU: the numpy lean path (:mod:`nik.lm.single`)."""
     model = _SINGLE_CACHE.get(id(robot))
     if model is None or model[0] is not robot:
         model = (robot, SingleLM.from_robot(robot))
@@ -112,3 +109,38 @@ _SINGLE_CACHE: dict = {}
 
 #: Uniform candidates whose best (by pose error) starts the one-pose LM when there is no guess.
 SINGLE_FIRST_STARTS = 64
+
+
+def swarm_refine(
+    robot: Robot,
+    T: torch.Tensor,
+    q0: torch.Tensor | None,
+    *,
+    method: str,
+    tol_pos: float,
+    tol_rot: float,
+    seed: int = 0,
+    max_iters: int | None = None,
+    cfg=None,
+    polish: bool = True,
+) -> RefineResult:
+    """A swarm (``method``: ``pso`` | ``sapso`` | ``ipso`` | ``ga``) through :func:`nik.swarm.refine`, seeded
+    around ``q0: (B, dof)`` (None: uniform particles), finished by the LM polish unless ``polish=False``.
+    ``T: (B, 4, 4)``; the answers are brought inside the limits and measured by FK."""
+    from nik.swarm import refine
+
+    res = refine(
+        robot,
+        T,
+        method=method,
+        q_init=q0,
+        cfg=cfg,
+        tol_pos=tol_pos,
+        tol_rot=tol_rot,
+        max_iters=max_iters,
+        seed=seed,
+        polish=polish,
+    )
+    q = robot.clamp(res.q)
+    pos, rot = pose_error(T, robot.fk(q))
+    return RefineResult(q, pos, rot, res.iterations)

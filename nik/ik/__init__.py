@@ -1,0 +1,32 @@
+"""ik: the inverse-kinematics pipeline, guess -> refine -> more hypotheses -> fallback -> final check.
+
+- :mod:`nik.ik.solver`: :class:`IKSolver`, which holds one robot's configuration and composes the stages;
+- :mod:`nik.ik.stages`: the stages, one small function each, ``stage(solver, job, answers) -> answers``;
+- :mod:`nik.ik.guesses`: guess providers ``(robot, T, ...) -> q`` (network, closed form, multistart) and
+  the choice among several solutions (``q_near``, de-duplication);
+- :mod:`nik.ik.refiners`: refiners ``(robot, T, q0) -> RefineResult`` (LM, the swarms);
+- :mod:`nik.ik.targets`: target poses in any accepted form -> ``(B, 4, 4)``; :mod:`nik.ik.result`: :class:`IKResult`.
+
+The room composes the rooms below it (robots, nets, analytic, lm, swarm); only learn, evaluation and cli
+import it.
+"""
+
+from nik.ik.guesses import dedupe, nearest_solution
+from nik.ik.refiners import RefineResult, lm_refine, swarm_refine
+from nik.ik.result import IKResult
+from nik.ik.solver import REFINE_METHODS, IKSolver
+from nik.ik.targets import QUAT_NORM_TOL, as_poses, check_tolerances
+
+__all__ = [
+    "QUAT_NORM_TOL",
+    "REFINE_METHODS",
+    "IKResult",
+    "IKSolver",
+    "RefineResult",
+    "as_poses",
+    "check_tolerances",
+    "dedupe",
+    "lm_refine",
+    "nearest_solution",
+    "swarm_refine",
+]

@@ -1,0 +1,228 @@
+"""``IKSolver``: initial guess (network, closed form or multi-start) -> refinement -> result.
+
+The solver holds the configuration of one robot's pipeline and composes the stages of :mod:`nik.ik.stages`;
+it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve` runs:
+
+1. **guess**: the trained network's prediction when it has one; else, for an arm with a closed form
+   (:func:`nik.analytic.is_puma_like`), the closed-form solution (the valid one nearest ``q_near``, or the
+   one farthest inside the joint ranges); else none: the refiner starts from uniform configurations
+   (the swarm from particles spread inside the limits, LM from the best of ``LMCfg.first_starts``);
+2. **refine** the targets the guess leaves outside tolerance: by default (``refine="lm"``)
+   Levenberg-Marquardt (:func:`nik.lm.lm_solve`) from the guess, restarting only the targets that still
+   fail and are not provably out of reach (:mod:`nik.robots.reach`); the swarm methods (``ipso`` | ``pso``
+   | ``sapso`` | ``ga``) through :func:`nik.swarm.refine` (finished by an LM polish unless ``polish=False``);
+   ``refine="none"`` returns the raw guess;
+3. **near**: with ``q_near`` on an arm without a closed form, a second refinement from ``q_near`` itself;
+4. **more hypotheses**: LM from the other hypotheses of a multi-solution network for the targets still failing;
+5. **fallback**: a second chance for the targets still failing and within reach;
+6. **final check**: joint angles inside the limits, their true errors measured by FK, an honest success
+   flag and ``reachable`` (False where the reach bound proves the target out of reach;
+   :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
+
+Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`, refiners
+``(robot, T, q0) -> RefineResult`` in :mod:`nik.ik.refiners`. Units are SI (metres, radians) throughout.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import torch
+
+from nik.ik import stages
+from nik.ik.result import IKResult
+from nik.ik.targets import as_poses, as_q_near, check_tolerances
+from nik.robots import Robot, load_robot
+from nik.robots.reach import unreachable_message, within_reach
+from nik.threads import threads_for
+
+__all__ = ["REFINE_METHODS", "IKSolver"]
+
+#: Values of ``IKSolver(refine=...)``.
+REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
+
+
+def _shipped_network(robot: Robot):
+    """The network shipped for ``robot`` when one exists for its name and definition hash, else None."""
+    from nik.nets.pretrained import available, load_pretrained, read_meta
+
+    if robot.name not in available() or read_meta(robot.name).get("robot_hash") != robot.definition_hash:
+        return None
+    return load_pretrained(robot)
+
+
+class IKSolver:
+    """Inverse kinematics for one robot: guess, refine, report honestly.
+
+    Args:
+        robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
+        checkpoint: ``"auto"`` (default): the network shipped with nik for this robot
+            (:func:`nik.models.load_pretrained`) when one exists for its name and definition hash, else none;
+            on a PUMA-like arm with ``analytic=True`` the closed form stays the guess and no network is
+            loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
+            :func:`nik.models.save_checkpoint`), loaded safely by :func:`nik.nets.load_checkpoint`; one
+            made for another robot is refused. ``None``: no network. A multi-solution network
+            (:mod:`nik.nets.multi`) guesses its best hypothesis by FK; targets the refinement leaves outside
+            tolerance then get LM from each of its other hypotheses (before any ``fallback``);
+            :meth:`solve_all` starts LM from all of them.
+        refine: ``lm`` (the default: Levenberg-Marquardt from the guess, restarts only for the targets
+            that fail; the fastest) | ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` (swarms, then LM polish).
+        polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
+        swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
+        analytic: use the closed form for PUMA-like arms when no checkpoint is given (default True).
+        device: where the network lives (``"cpu"``, ``"cuda"``); :meth:`solve` computes on the device of
+            its input poses (``T.to("cuda")``) and the network's guess is moved there.
+        fallback: a second chance for targets still outside tolerance after the refinement:
+            ``"analytic"``, the closed-form solution nearest the first answer (PUMA-like arms only);
+            ``"multistart"``, Levenberg-Marquardt from fresh uniform starts (with ``refine="lm"`` these
+            are the LM's own restarts, drawn only for the targets that fail and are within reach);
+            ``"auto"`` (or True, the default), analytic where available, else multistart;
+            ``"none"`` (or False: with ``refine="lm"`` and a guess, no restarts). It is not used where it
+            would repeat the first pass (no network on a PUMA-like arm), nor with ``refine="none"``,
+            nor for targets proven out of reach. The evaluation turns it off to measure what the
+            network's guess alone delivers.
+    """
+
+    def __init__(
+        self,
+        robot: Robot | str | Path,
+        checkpoint: str | Path | None = "auto",
+        refine: str = "lm",
+        *,
+        polish: bool = True,
+        swarm_cfg=None,
+        analytic: bool = True,
+        fallback: bool | str = "auto",
+        device: str | torch.device | None = None,
+    ):
+        from nik.device import resolve_device
+
+        self.device = resolve_device(device)
+        if refine not in REFINE_METHODS:
+            raise ValueError(f"IKSolver: refine must be one of {list(REFINE_METHODS)}, got {refine!r}")
+        self.robot = load_robot(robot) if not isinstance(robot, Robot) else robot
+        self.refine = refine
+        self.polish = bool(polish)
+        self.swarm_cfg = swarm_cfg
+        fallback = {True: "auto", False: "none"}.get(fallback, fallback)
+        if fallback not in ("auto", "analytic", "multistart", "none"):
+            raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
+        self.net = None
+        self.closed_form = False
+        if analytic:
+            from nik.analytic import is_puma_like
+
+            self.closed_form = is_puma_like(self.robot)
+        if isinstance(checkpoint, str) and checkpoint == "auto":
+            if not self.closed_form:
+                self.net = _shipped_network(self.robot)
+        elif checkpoint is not None:
+            from nik.nets import load_checkpoint
+
+            self.net = load_checkpoint(checkpoint, robot=self.robot)
+        if self.net is not None:
+            self.net = self.net.to(self.device)
+        if fallback == "analytic" and not self.closed_form:
+            raise ValueError(f"IKSolver: fallback='analytic' needs a PUMA-like arm; {self.robot.name} is not")
+        if fallback == "auto":
+            fallback = "analytic" if self.closed_form else "multistart"
+        self.fallback = fallback
+
+    def __repr__(self) -> str:
+        return (
+            f"IKSolver(robot={self.robot.name!r}, network={self.net is not None}, "
+            f"analytic={self.closed_form}, refine={self.refine!r})"
+        )
+
+    @property
+    def initial_source(self) -> str:
+        """Where :meth:`solve` takes its initial guess: ``network``, ``analytic`` or ``multistart``."""
+        if self.net is not None:
+            return "network"
+        return "analytic" if self.closed_form else "multistart"
+
+    # -- public -----------------------------------------------------------
+    def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
+        """The raw initial guess ``(B, dof)`` (network, analytic or best-of-64 uniform), inside the limits."""
+        T = as_poses(T_target, representation)
+        return stages.first_guess(self, T, q_near=as_q_near(q_near, T, self.robot.dof), seed=seed)
+
+    def solve(
+        self,
+        T_target,
+        tol_pos: float = 1e-4,
+        tol_rot: float = 1e-3,
+        seed: int = 0,
+        q_near=None,
+        max_iters: int | None = None,
+        representation: str | None = None,
+    ) -> IKResult:
+        """Joint angles that reach the target poses.
+
+        Args:
+            T_target: ``(B, 4, 4)``, ``(B, 7)`` xyz + quaternion (w, x, y, z) or ``(B, 6)`` xyz +
+                roll-pitch-yaw, metres/radians (see :func:`nik.ik.targets.as_poses`; a single pose counts
+                as B = 1). The computation runs in its dtype and device (non-tensor input: float64).
+            tol_pos: success tolerance on the position, metres.
+            tol_rot: success tolerance on the geodesic rotation error, radians.
+            seed: seeds every random choice (same seed, same answer).
+            q_near: ``(dof,)`` or ``(B, dof)`` current configuration, radians: among the solutions
+                found, return the one nearest to it (joint motion, see :func:`nik.ik.guesses.nearest_solution`).
+                Closed-form arms pick among the 8 closed-form solutions; otherwise the refinement is
+                also run from ``q_near`` itself and the successful answer nearest ``q_near`` is kept.
+            max_iters: iteration limit of the refinement (default: the method's config).
+            representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
+
+        Returns:
+            :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``.
+
+        Raises:
+            ValueError: bad poses, a negative or NaN tolerance, a malformed ``q_near``.
+
+        Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
+        and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
+        """
+        check_tolerances(tol_pos, tol_rot)
+        T = as_poses(T_target, representation)
+        reachable = within_reach(self.robot, T)
+        msg = unreachable_message(self.robot, T, reachable)
+        if msg is not None:
+            warnings.warn(msg, UserWarning, stacklevel=2)
+        job = stages.Job(T, reachable, as_q_near(q_near, T, self.robot.dof), tol_pos, tol_rot, seed, max_iters)
+        with threads_for(T.shape[0]):
+            answers = stages.guess(self, job)
+            if self.refine != "none":
+                answers = stages.refine(self, job, answers)
+                answers = stages.near(self, job, answers)
+                answers = stages.more_hypotheses(self, job, answers)
+                answers = stages.fallback(self, job, answers)
+        return stages.final_check(self, job, answers)
+
+    def solve_all(
+        self,
+        T_target,
+        *,
+        tol_pos: float = 1e-4,
+        tol_rot: float = 1e-3,
+        seed: int = 0,
+        n_starts: int = 256,
+        dedupe_tol: float = 1e-3,
+        representation: str | None = None,
+    ) -> torch.Tensor:
+        """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
+
+        PUMA-like arms (``analytic=True``): the valid closed-form solutions (at most 8; exact). Otherwise
+        LM from every hypothesis of the network (each IK branch of a branch network, each head of a
+        multi-head one; the guess of a plain network) and then ``n_starts`` uniform starts; the
+        successful ones (within ``tol_pos`` metres / ``tol_rot`` radians) are de-duplicated
+        (two solutions are the same when no joint differs by more than ``dedupe_tol`` radians,
+        modulo 2 pi). For a redundant arm (7 joints) the solutions form a continuum; K is then
+        simply how many distinct samples of it the starts found.
+        """
+        T = as_poses(T_target, representation)
+        if T.shape[0] != 1:
+            raise ValueError(f"solve_all: expected one pose, got {T.shape[0]}")
+        check_tolerances(tol_pos, tol_rot)
+        job = stages.Job(T, within_reach(self.robot, T), None, tol_pos, tol_rot, seed)
+        return stages.all_solutions(self, job, n_starts=n_starts, dedupe_tol=dedupe_tol)
