@@ -39,9 +39,9 @@ sys.path.insert(0, str(ROOT))
 
 import nik  # noqa: E402
 from nik.robots.reach import reach_center, reach_radius  # noqa: E402
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT, describe  # noqa: E402
 
-TOL_POS = 1e-4  # m
-TOL_ROT = math.radians(0.1)  # rad
+TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
 URDF = {"panda": ROOT / "configs/robots/urdf/panda.urdf", "ur5": ROOT / "configs/robots/urdf/ur5.urdf"}
 
 
@@ -292,7 +292,7 @@ def main(argv=None) -> int:
         log.write(line + "\n")
 
     say(f"nik {nik.__version__}, torch {torch.__version__}, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}")
-    say(f"success: within {TOL_POS * 1e3:g} mm and {math.degrees(TOL_ROT):g} deg by float64 FK, inside the limits")
+    say(f"success: within {describe(TOL_POS, TOL_ROT)} by float64 FK, inside the limits")
     if not available("roboticstoolbox"):
         say("(roboticstoolbox-python is not installed: pip install -e .[bench]; its rows and ratios are n/a)")
     rows = []

@@ -25,6 +25,7 @@ import torch
 
 from nik.poses import matrix_to_rpy, pose_error, rpy_to_matrix
 from nik.robots import Robot, load_robot
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "plot_errors", "robot_to_urdf", "write_report"]
 
@@ -270,8 +271,8 @@ def evaluate(
     refinements: tuple[str, ...] = REFINEMENTS,
     swarm: str = "ipso",
     include_pk: bool = True,
-    tol_pos: float = 1e-4,
-    tol_rot: float = 1e-3,
+    tol_pos: float = DEFAULT_TOL_POS,
+    tol_rot: float = DEFAULT_TOL_ROT,
     seed: int = 0,
     progress=None,
     device: str | torch.device = "cpu",

@@ -371,3 +371,38 @@ def test_same_seed_gives_identical_results_and_answers_stay_inside_the_limits():
     assert torch.equal(a.q, b.q) and torch.equal(a.iterations, b.iterations)
     assert bool(robot.within_limits(a.q).all())
     assert float(a.success.float().mean()) >= 0.95
+
+
+# ---- one rotation tolerance everywhere (0.1 mm / 0.1 deg, as every table measures) ---------------------------------
+def test_every_entry_point_defaults_to_the_one_tolerance():
+    import inspect
+
+    from nik.evaluate import evaluate
+    from nik.ik import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+    from nik.lm import lm_solve
+    from nik.swarm import refine
+
+    assert DEFAULT_TOL_POS == 1e-4 and DEFAULT_TOL_ROT == pytest.approx(math.radians(0.1), rel=1e-15)
+    for fn in (nik.IKSolver.solve, nik.IKSolver.solve_all, lm_solve, refine, evaluate):
+        params = inspect.signature(fn).parameters
+        assert params["tol_pos"].default == DEFAULT_TOL_POS, fn.__qualname__
+        assert params["tol_rot"].default == DEFAULT_TOL_ROT, fn.__qualname__
+
+
+def test_cli_tolerances_default_to_the_same_and_print_rounded(tmp_path, capsys):
+    import csv
+
+    from nik.cli import build_parser, main
+
+    args = build_parser().parse_args(["solve", "--robot", "puma560", "--pose", *["0"] * 7])
+    assert (args.tol_mm, args.tol_deg) == (0.1, 0.1)
+    robot = nik.load_robot("puma560")
+    T = robot.fk(robot.sample(2, generator=torch.Generator().manual_seed(8), dtype=torch.float64))
+    poses = tmp_path / "p.csv"
+    with poses.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["x", "y", "z", "qw", "qx", "qy", "qz"])
+        for row in torch.cat([T[:, :3, 3], nik.poses.matrix_to_quaternion(T[:, :3, :3])], -1).tolist():
+            w.writerow([repr(v) for v in row])
+    assert main(["solve", "--robot", "puma560", "--poses", str(poses), "--out", str(tmp_path / "s.csv")]) == 0
+    assert "within 0.1 mm / 0.1 deg" in capsys.readouterr().out

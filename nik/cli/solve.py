@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
 
 __all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solutions_csv"]
 
@@ -60,12 +61,17 @@ def register(sub) -> None:
         help="print JSON (joints in SI and in deg/mm as q_si and q_display; q_rad and q_deg for revolute joints, "
         "null for prismatic ones; errors in SI and mm/deg)",
     )
-    s.add_argument("--tol-mm", type=float, default=0.1, help="position tolerance in mm (default 0.1)")
+    s.add_argument(
+        "--tol-mm",
+        type=float,
+        default=DEFAULT_TOL_POS_MM,
+        help=f"position tolerance in mm (default {DEFAULT_TOL_POS_MM:g})",
+    )
     s.add_argument(
         "--tol-deg",
         type=float,
-        default=math.degrees(1e-3),
-        help="rotation tolerance in degrees (default 0.0573 = 1e-3 rad)",
+        default=DEFAULT_TOL_ROT_DEG,
+        help=f"rotation tolerance in degrees (default {DEFAULT_TOL_ROT_DEG:g}, the tolerance every table measures)",
     )
     s.add_argument(
         "--q-near",
@@ -301,15 +307,15 @@ def _cmd_solve(args) -> int:
     elif args.out:
         ok = int(res.success.sum())
         print(
-            f"solved {ok} of {len(res)} poses within {args.tol_mm:g} mm / {args.tol_deg:g} deg "
+            f"solved {ok} of {len(res)} poses within {describe(args.tol_mm * 1e-3, math.radians(args.tol_deg))} "
             f"({robot.name}{tool_link_text(robot)}, guess: {res.source}, refine: {args.refine}); wrote {args.out}"
         )
     else:
-        _print_table(robot, res)
+        _print_table(robot, res, tolerance=describe(args.tol_mm * 1e-3, math.radians(args.tol_deg)))
     return 0 if bool(res.success.all()) else 1
 
 
-def _print_table(robot, res, *, limit: int = 50) -> None:
+def _print_table(robot, res, *, tolerance: str, limit: int = 50) -> None:
     """Joints in degrees, prismatic joints in mm (each column header says which), errors in mm and degrees."""
     names = robot.joint_names
     _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
@@ -336,7 +342,7 @@ def _print_table(robot, res, *, limit: int = 50) -> None:
         print(f"... {len(res) - limit} more rows (use --out FILE.csv)")
     print(
         f"robot {robot.name}{tool_link_text(robot)}, initial guess: {res.source}; "
-        f"{int(res.success.sum())} of {len(res)} reached"
+        f"{int(res.success.sum())} of {len(res)} reached within {tolerance}"
     )
 
 

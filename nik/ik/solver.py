@@ -36,6 +36,7 @@ from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.robots import Robot, load_robot
 from nik.robots.reach import unreachable_message, within_reach
 from nik.threads import threads_for
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["REFINE_METHODS", "IKSolver"]
 
@@ -151,8 +152,8 @@ class IKSolver:
     def solve(
         self,
         T_target,
-        tol_pos: float = 1e-4,
-        tol_rot: float = 1e-3,
+        tol_pos: float = DEFAULT_TOL_POS,
+        tol_rot: float = DEFAULT_TOL_ROT,
         seed: int = 0,
         q_near=None,
         max_iters: int | None = None,
@@ -164,8 +165,9 @@ class IKSolver:
             T_target: ``(B, 4, 4)``, ``(B, 7)`` xyz + quaternion (w, x, y, z) or ``(B, 6)`` xyz +
                 roll-pitch-yaw, metres/radians (see :func:`nik.ik.targets.as_poses`; a single pose counts
                 as B = 1). The computation runs in its dtype and device (non-tensor input: float64).
-            tol_pos: success tolerance on the position, metres.
-            tol_rot: success tolerance on the geodesic rotation error, radians.
+            tol_pos: success tolerance on the position, metres (default 1e-4: 0.1 mm).
+            tol_rot: success tolerance on the geodesic rotation error, radians (default 1.745e-3: 0.1 deg;
+                both from :mod:`nik.tolerances`, the tolerance every table measures).
             seed: seeds every random choice (same seed, same answer).
             q_near: ``(dof,)`` or ``(B, dof)`` current configuration, radians: among the solutions
                 found, return the one nearest to it (joint motion, see :func:`nik.ik.guesses.nearest_solution`).
@@ -203,8 +205,8 @@ class IKSolver:
         self,
         T_target,
         *,
-        tol_pos: float = 1e-4,
-        tol_rot: float = 1e-3,
+        tol_pos: float = DEFAULT_TOL_POS,
+        tol_rot: float = DEFAULT_TOL_ROT,
         seed: int = 0,
         n_starts: int = 256,
         dedupe_tol: float = 1e-3,
