@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -406,3 +407,36 @@ def test_cli_tolerances_default_to_the_same_and_print_rounded(tmp_path, capsys):
             w.writerow([repr(v) for v in row])
     assert main(["solve", "--robot", "puma560", "--poses", str(poses), "--out", str(tmp_path / "s.csv")]) == 0
     assert "within 0.1 mm / 0.1 deg" in capsys.readouterr().out
+
+
+# ---- angles given in degrees where radians are expected ------------------------------------------------------------
+def test_rpy_angles_beyond_two_pi_are_warned_about():
+    solver = nik.IKSolver("puma560", refine="none")
+    with pytest.warns(UserWarning, match=r"row 0: roll, pitch, yaw .*beyond 2 pi.*degrees"):
+        solver.solve([0.4, 0.1, 0.3, 180, 0, 90])  # the example: degrees read as radians
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # radians, even near the ends of their ranges: no warning
+        solver.solve([[0.4, 0.1, 0.3, 3.1, -1.5, 6.2], [0.4, 0.1, 0.3, -6.28, 0.0, 0.0]])
+
+
+def test_joint_angles_beyond_two_pi_are_warned_about():
+    robot = nik.load_robot("puma560")
+    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64))
+    solver = nik.IKSolver(robot)
+    with pytest.warns(UserWarning, match=r"q_near: row 0, joint 2 = -90 .*beyond 2 pi.*degrees"):
+        solver.solve(T, q_near=[0.0, -90.0, 90.0, 0.0, 0.0, 0.0])
+    with pytest.warns(UserWarning, match=r"q: row 1, joint 3 = 45 .*beyond 2 pi"):
+        robot.fk(torch.tensor([[0.0] * 6, [0.0, 0.0, 45.0, 0.0, 0.0, 0.0]], dtype=torch.float64))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        robot.fk(robot.sample(100, generator=torch.Generator().manual_seed(1)))
+        solver.solve(T, q_near=[0.0, -1.5, 1.5, 0.0, 0.0, 0.0])
+
+
+def test_a_prismatic_joint_in_metres_is_not_taken_for_degrees():
+    robot = nik.load_robot("stanford")  # joint 3 slides (metres); long travel is no angle
+    q = robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    q[0, 2] = 7.0  # far outside its limits, but a length: the angle check leaves it alone
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        robot.fk(q)

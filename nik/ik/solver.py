@@ -147,7 +147,9 @@ class IKSolver:
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
         """The raw initial guess ``(B, dof)`` (network, analytic or best-of-64 uniform), inside the limits."""
         T = as_poses(T_target, representation)
-        return stages.first_guess(self, T, q_near=as_q_near(q_near, T, self.robot.dof), seed=seed)
+        return stages.first_guess(
+            self, T, q_near=as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic), seed=seed
+        )
 
     def solve(
         self,
@@ -191,7 +193,15 @@ class IKSolver:
         msg = unreachable_message(self.robot, T, reachable)
         if msg is not None:
             warnings.warn(msg, UserWarning, stacklevel=2)
-        job = stages.Job(T, reachable, as_q_near(q_near, T, self.robot.dof), tol_pos, tol_rot, seed, max_iters)
+        job = stages.Job(
+            T,
+            reachable,
+            as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic),
+            tol_pos,
+            tol_rot,
+            seed,
+            max_iters,
+        )
         with threads_for(T.shape[0]):
             answers = stages.guess(self, job)
             if self.refine != "none":
