@@ -440,3 +440,28 @@ def test_a_prismatic_joint_in_metres_is_not_taken_for_degrees():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         robot.fk(q)
+
+
+# ---- solve_all: one solution per IK branch -------------------------------------------------------------------------
+def _wrapped_max_diff(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``(K, M)``: the largest joint difference (radians, modulo 2 pi) between rows of a and rows of b."""
+    d = a[:, None] - b[None]
+    return (torch.remainder(d + math.pi, 2 * math.pi) - math.pi).abs().amax(-1)
+
+
+@pytest.mark.parametrize("name,seed", [("rebot_v_6r", 1000), ("rebot_v_6r", 1001), ("rebot_v_6r", 1003), ("ur5", 1001)])
+def test_solve_all_returns_one_solution_per_branch_without_the_closed_form(name, seed):
+    robot = nik.load_robot(name)
+    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(seed), dtype=torch.float64))
+    sols = nik.IKSolver(robot, analytic=False).solve_all(T)  # LM from the network's hypotheses + 256 starts
+    assert 1 <= sols.shape[0] <= 8  # a 6R arm has at most 8
+    d = _wrapped_max_diff(sols, sols) + torch.eye(sols.shape[0], dtype=sols.dtype) * 10
+    assert float(d.min()) > math.radians(1.0), "two solutions within 1 deg in every joint"
+    pos, rot = nik.poses.pose_error(T.expand(sols.shape[0], 4, 4), robot.fk(sols))
+    assert float(pos.max()) < 1e-9 and float(rot.max()) < 1e-9  # polished far below the tolerance
+    if name == "rebot_v_6r":  # PUMA-like: the closed form is the independent reference
+        closed, valid = puma560_ik(robot, T[0])
+        closed = closed[valid]
+        match = _wrapped_max_diff(sols, closed)
+        assert float(match.min(1).values.max()) < 1e-8  # each solution is one of the closed form's
+        assert sols.shape[0] == closed.shape[0]  # ... and every closed-form solution was found
