@@ -226,18 +226,23 @@ def warn_degrees(
     name: str,
     rpy: bool = False,
     prismatic: torch.Tensor | None = None,
+    limits: torch.Tensor | None = None,
     stacklevel: int = 3,
 ) -> None:
     """``UserWarning`` when an angle of ``angles: (..., k)`` (radians) lies beyond 2 pi: most likely degrees.
 
-    ``rpy``: the values are roll, pitch, yaw (the message shows the row's three); else joint values, and
-    ``prismatic: (k,)`` bool marks lengths (metres) the check leaves alone. The first such value is named
+    ``rpy``: the values are roll, pitch, yaw (the message shows the row's three); else joint values:
+    ``prismatic: (k,)`` bool marks lengths (metres) the check leaves alone, and with ``limits: (k, 2)`` a value
+    inside its joint's range is no suspect (a joint may turn further than 2 pi). The first suspect is named
     (row and joint, counted from 1); the values are used as given.
     """
     a = angles.detach().reshape(-1, angles.shape[-1])
     big = a.abs() > DEGREES_SUSPECT
     if prismatic is not None and bool(prismatic.any()):
         big &= ~prismatic.to(device=a.device, dtype=torch.bool)
+    if limits is not None:
+        lim = limits.to(device=a.device, dtype=a.dtype)
+        big &= (a < lim[:, 0]) | (a > lim[:, 1])
     if not bool(big.any()):
         return
     row, col = (int(v) for v in big.nonzero()[0])

@@ -425,21 +425,26 @@ def test_joint_angles_beyond_two_pi_are_warned_about():
     solver = nik.IKSolver(robot)
     with pytest.warns(UserWarning, match=r"q_near: row 0, joint 2 = -90 .*beyond 2 pi.*degrees"):
         solver.solve(T, q_near=[0.0, -90.0, 90.0, 0.0, 0.0, 0.0])
-    with pytest.warns(UserWarning, match=r"q: row 1, joint 3 = 45 .*beyond 2 pi"):
-        robot.fk(torch.tensor([[0.0] * 6, [0.0, 0.0, 45.0, 0.0, 0.0, 0.0]], dtype=torch.float64))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        robot.fk(robot.sample(100, generator=torch.Generator().manual_seed(1)))
         solver.solve(T, q_near=[0.0, -1.5, 1.5, 0.0, 0.0, 0.0])
 
 
-def test_a_prismatic_joint_in_metres_is_not_taken_for_degrees():
-    robot = nik.load_robot("stanford")  # joint 3 slides (metres); long travel is no angle
-    q = robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
-    q[0, 2] = 7.0  # far outside its limits, but a length: the angle check leaves it alone
+def test_a_joint_that_turns_further_than_two_pi_or_slides_is_not_taken_for_degrees(tmp_path):
+    path = tmp_path / "long.yaml"  # joint 1 turns +-540 deg, joint 3 slides up to 9 m
+    path.write_text(
+        "convention: dh\nangles: deg\njoints:\n"
+        "  - {alpha: 90, a: 0, d: 0.3, limits: [-540, 540]}\n"
+        "  - {alpha: 0, a: 0.4, d: 0}\n"
+        "  - {alpha: 0, a: 0, d: 0, type: prismatic, limits: [0, 9]}\n"
+    )
+    robot = nik.load_robot(path)
+    T = robot.fk(torch.tensor([[7.0, 0.3, 8.0]], dtype=torch.float64))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        robot.fk(q)
+        nik.IKSolver(robot).solve(T, q_near=[7.0, 0.3, 8.0])  # inside the ranges: radians and metres
+    with pytest.warns(UserWarning, match=r"joint 1 = 500 .*beyond 2 pi"):
+        nik.IKSolver(robot).solve(T, q_near=[500.0, 0.3, 8.0])  # 500 (deg?) outside the +-9.42 rad range
 
 
 # ---- solve_all: one solution per IK branch -------------------------------------------------------------------------

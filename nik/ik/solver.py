@@ -148,7 +148,10 @@ class IKSolver:
         """The raw initial guess ``(B, dof)`` (network, analytic or best-of-64 uniform), inside the limits."""
         T = as_poses(T_target, representation)
         return stages.first_guess(
-            self, T, q_near=as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic), seed=seed
+            self,
+            T,
+            q_near=as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic, limits=self.robot.limits),
+            seed=seed,
         )
 
     def solve(
@@ -196,7 +199,7 @@ class IKSolver:
         job = stages.Job(
             T,
             reachable,
-            as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic),
+            as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic, limits=self.robot.limits),
             tol_pos,
             tol_rot,
             seed,

@@ -112,16 +112,19 @@ def check_tolerances(tol_pos: float, tol_rot: float) -> None:
             raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}")
 
 
-def as_q_near(q_near, T: torch.Tensor, dof: int, *, prismatic: torch.Tensor | None = None) -> torch.Tensor | None:
+def as_q_near(
+    q_near, T: torch.Tensor, dof: int, *, prismatic: torch.Tensor | None = None, limits: torch.Tensor | None = None
+) -> torch.Tensor | None:
     """``q_near`` (None, ``(dof,)`` or ``(B, dof)``, radians; a tensor, array or list) as ``(B, dof)`` in the
     dtype and device of ``T: (B, 4, 4)``; None stays None. Raises ``ValueError`` naming a bad shape or value;
-    warns when a revolute joint (``prismatic: (dof,)`` marks the others) lies beyond 2 pi (degrees?)."""
+    warns when a revolute joint (``prismatic: (dof,)`` marks the others) lies beyond 2 pi and outside its
+    ``limits: (dof, 2)`` (degrees?)."""
     if q_near is None:
         return None
     B = T.shape[0]
     q = q_near if isinstance(q_near, torch.Tensor) else torch.as_tensor(np.asarray(q_near, dtype=np.float64))
     validate_joints(q, dof, name="q_near")
-    warn_degrees(q, name="q_near", prismatic=prismatic, stacklevel=4)
+    warn_degrees(q, name="q_near", prismatic=prismatic, limits=limits, stacklevel=4)
     q = q.to(dtype=T.dtype, device=T.device)
     if q.ndim == 1:
         q = q.expand(B, -1)

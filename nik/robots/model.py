@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from nik.kinematics import FKKernel, chain_jacobian, to_homogeneous
-from nik.poses import validate_joints, warn_degrees
+from nik.poses import validate_joints
 
 __all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
 
@@ -282,8 +282,7 @@ class Robot:
             q: (..., dof) joint values (radians; metres for prismatic joints); any leading batch shape,
                 any float dtype/device.
             compiled: run the ``torch.compile``'d kernel (fast for large batches; the first call compiles).
-            check: validate ``q`` (shape, NaN/inf; a ``UserWarning`` when a revolute joint lies beyond 2 pi,
-                degrees given as radians?); hot loops that built ``q`` themselves pass False.
+            check: validate ``q`` (shape, NaN/inf); hot loops that built ``q`` themselves pass False.
 
         Returns:
             (..., 4, 4) tool poses in the base frame, metres, in q's dtype and device;
@@ -291,7 +290,6 @@ class Robot:
         """
         if check:
             validate_joints(q, self.dof)
-            warn_degrees(q, name="q", prismatic=self.prismatic)
         if self._kernel is None:
             self._kernel = FKKernel(self.G.numpy(), self.offsets.numpy(), prismatic=self.prismatic.tolist())
         return self._kernel(q.reshape(-1, self.dof), compiled=compiled).reshape(*q.shape[:-1], 4, 4)
