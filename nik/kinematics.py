@@ -139,8 +139,13 @@ def _term(coef: float, var: str) -> str:
     return f"+ {var} * {coef!r}" if coef > 0 else f"- {var} * {-coef!r}"
 
 
-def generate_fk_source(G, offsets, *, name: str = "fk_kernel", prismatic=None) -> str:
+def generate_fk_source(G, offsets, *, name: str = "fk_kernel", prismatic=None, per_joint: bool = False) -> str:
     """Python source of a function ``name(q: (B, n)) -> (B, 4, 4)`` computing the normal-form FK.
+
+    ``per_joint=True``: the function takes instead a sequence of ``n`` tensors, joint ``i``'s values, of any
+    shapes that broadcast together, and returns the 12 entries ``T[r, c]`` (r < 3, row-major) in the broadcast
+    shape (a Python float where an entry is constant). Products of the first joints are then computed on
+    their own (smaller) shapes, and no 4x4 matrix is assembled.
 
     Each entry of ``T`` is tracked as a linear combination ``{variable: coefficient}`` of
     tensors, plus a constant; multiplying by a constant ``G_i`` only changes coefficients,
@@ -153,14 +158,19 @@ def generate_fk_source(G, offsets, *, name: str = "fk_kernel", prismatic=None) -
     G = np.asarray(G, dtype=float)
     n = G.shape[0] - 1
     flags = prismatic_list(prismatic, n)
+    offsets = [float(o) for o in offsets]
     lines = [
         f"def {name}(q):",
         # joints as rows (n, B): every per-joint slice and every output row is contiguous, which lets
         # the eager ops and the compiled loop use SIMD (about 2x faster than (B, n) slices here)
-        f"    theta = q.t() + q.new_tensor({[float(o) for o in offsets]!r})[:, None]",
+        f"    theta = q.t() + q.new_tensor({offsets!r})[:, None]",
         "    c = torch.cos(theta)",
         "    s = torch.sin(theta)",
     ]
+    if per_joint:
+        lines = [f"def {name}(q):"] + [
+            f"    theta{i} = q[{i}]" + (f" + {offsets[i]!r}" if offsets[i] != 0.0 else "") for i in range(n)
+        ]
     counter = 0
 
     def emit(expr: dict) -> dict:
@@ -188,12 +198,15 @@ def generate_fk_source(G, offsets, *, name: str = "fk_kernel", prismatic=None) -
     for i in range(n):
         rotated = []
         if flags[i]:
-            lines.append(f"    d{i} = theta[{i}]")
+            lines.append(f"    d{i} = theta{i}" if per_joint else f"    d{i} = theta[{i}]")
             for r in range(3):
                 col3 = emit(added(T[r][3], scaled(T[r][2], f"d{i}", 1.0)))
                 rotated.append([T[r][0], T[r][1], T[r][2], col3])
         else:
-            lines += [f"    c{i} = c[{i}]", f"    s{i} = s[{i}]"]
+            if per_joint:
+                lines += [f"    c{i} = torch.cos(theta{i})", f"    s{i} = torch.sin(theta{i})"]
+            else:
+                lines += [f"    c{i} = c[{i}]", f"    s{i} = s[{i}]"]
             for r in range(3):
                 x, y = T[r][0], T[r][1]
                 col0 = emit(added(scaled(x, f"c{i}", 1.0), scaled(y, f"s{i}", 1.0)))
@@ -217,13 +230,15 @@ def generate_fk_source(G, offsets, *, name: str = "fk_kernel", prismatic=None) -
             expr = emit(T[r][k])
             ((v, cf),) = expr.items() if len(expr) == 1 else ((None, None),)
             if v == "":
-                outputs.append(f"q.new_full(q.shape[:1], {cf!r})")
+                outputs.append(repr(cf) if per_joint else f"q.new_full(q.shape[:1], {cf!r})")
             elif cf == 1.0:
                 outputs.append(v)
             elif cf == -1.0:
                 outputs.append(f"(-{v})")
             else:
                 outputs.append(f"({v} * {cf!r})")
+    if per_joint:
+        return "\n".join(lines + [f"    return [{', '.join(outputs)}]"])
     lines += [
         "    z = q.new_zeros(q.shape[:1])",
         "    o = q.new_ones(q.shape[:1])",

@@ -461,3 +461,23 @@ def write_yaml(tmp_path, text, name="arm.yaml"):
     path = tmp_path / name
     path.write_text(text)
     return path
+
+
+@pytest.mark.parametrize("name", ["ur5", "puma560", "stanford"])
+def test_per_joint_generated_fk_broadcasts_and_matches_robot_fk(name):
+    # per_joint=True: one tensor per joint, shapes that broadcast (joint 1 shared by 4 of 8 rows, and so on)
+    robot = nik.load_robot(name)
+    namespace: dict = {"torch": torch}
+    source = generate_fk_source(robot.G.numpy(), robot.offsets.numpy(), prismatic=robot.prismatic, per_joint=True)
+    exec(compile(source, "<test>", "exec"), namespace)
+    gen = torch.Generator().manual_seed(17)
+    shapes = [(1, 1, 2, 5), (1, 2, 2, 5), (1, 2, 2, 5), (2, 2, 2, 5), (2, 1, 2, 5), (2, 2, 2, 5)]
+    lo, hi = robot.limits[:, 0], robot.limits[:, 1]
+    qs = [lo[j] + torch.rand(shapes[j], generator=gen, dtype=torch.float64) * (hi[j] - lo[j]) for j in range(6)]
+    entries = namespace["fk_kernel"](qs)
+    assert len(entries) == 12
+    full = torch.stack([q.expand(2, 2, 2, 5) for q in qs], dim=-1)  # (2, 2, 2, 5, 6)
+    T = robot.fk(full)
+    for i, e in enumerate(entries):
+        r, c = divmod(i, 4)
+        assert_close(torch.as_tensor(e, dtype=torch.float64).expand(2, 2, 2, 5), T[..., r, c], atol=1e-12, rtol=0)

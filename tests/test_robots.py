@@ -1,6 +1,7 @@
 """Robot loading: built-ins, YAML files in every unit, URDF options, sampling, and clear errors."""
 
 import math
+from pathlib import Path
 
 import pytest
 import torch
@@ -165,6 +166,19 @@ def test_corrupt_urdf_is_a_clear_error(tmp_path):
     path = write(tmp_path, "<robot name='x'><link name='a'/><joint name=", "bad.urdf")
     with pytest.raises(RobotDefinitionError, match="not a readable URDF"):
         nik.load_robot(path)
+
+
+@pytest.mark.parametrize("origins", ["pk", "float64"])
+def test_urdf_with_an_encoding_declaration_loads(tmp_path, origins):
+    # example-robot-data's URDFs start with <?xml version="1.0" encoding="utf-8"?>, which lxml refuses in a str
+    from nik.robots.urdf import load_urdf
+
+    text = Path("configs/robots/urdf/ur5.urdf").read_text()
+    assert "encoding=" not in text.splitlines()[0]
+    body = text.split("?>", 1)[1] if text.lstrip().startswith("<?xml") else text
+    path = write(tmp_path, '<?xml version="1.0" encoding="utf-8"?>\n' + body, "declared.urdf")
+    declared, plain = load_urdf(path, origins=origins), load_urdf("configs/robots/urdf/ur5.urdf", origins=origins)
+    assert declared.definition_hash == plain.definition_hash
 
 
 def test_robot_errors_are_value_errors():

@@ -2,8 +2,9 @@
 
 :class:`nik.IKSolver` composes one of these with a refiner (:mod:`nik.ik.refiners`):
 
-- :func:`analytic_guess`: the closed form of PUMA-like arms (the valid solution nearest ``q_near``,
-  or the one farthest inside the joint ranges; out of reach, the clamped one that comes closest);
+- :func:`analytic_guess`: the closed form of arms that have one (:func:`nik.analytic.solve`; the valid
+  solution nearest ``q_near``, or the one farthest inside the joint ranges; out of reach, the clamped one
+  that comes closest);
 - :func:`multistart_guess`: the best of ``n_starts`` uniform configurations by pose error;
 - :func:`network_guess`: a trained network's prediction, clamped to the limits.
 
@@ -42,10 +43,10 @@ def multistart_guess(robot, T: torch.Tensor, *, seed: int = 0, n_starts: int = 6
 
 
 def analytic_guess(robot, T: torch.Tensor, *, q_near: torch.Tensor | None = None) -> torch.Tensor:
-    """``(B, dof)``: the closed-form solution (PUMA-like arms) for ``T: (B, 4, 4)``; see the module text."""
-    from nik.analytic import puma560_ik
+    """``(B, dof)``: the closed-form solution (arms with a closed form) for ``T: (B, 4, 4)``; see the module text."""
+    from nik.analytic import solve
 
-    sols, valid = puma560_ik(robot, T)
+    sols, valid = solve(robot, T)
     lo, hi = robot.limits_as(T)
     if q_near is not None:
         q, _ = nearest_solution(sols, valid, q_near, lo, hi)

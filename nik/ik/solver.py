@@ -4,9 +4,10 @@ The solver holds the configuration of one robot's pipeline and composes the stag
 it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve` runs:
 
 1. **guess**: the trained network's prediction when it has one; else, for an arm with a closed form
-   (:func:`nik.analytic.is_puma_like`), the closed-form solution (the valid one nearest ``q_near``, or the
-   one farthest inside the joint ranges); else none: the refiner starts from uniform configurations
-   (the swarm from particles spread inside the limits, LM from the best of ``LMCfg.first_starts``);
+   (:func:`nik.analytic.family`: a spherical wrist or three parallel axes), the closed-form solution (the
+   valid one nearest ``q_near``, or the one farthest inside the joint ranges); else none: the refiner
+   starts from uniform configurations (the swarm from particles spread inside the limits, LM from the best
+   of ``LMCfg.first_starts``);
 2. **refine** the targets the guess leaves outside tolerance: by default (``refine="lm"``)
    Levenberg-Marquardt (:func:`nik.lm.lm_solve`) from the guess, restarting only the targets that still
    fail and are not provably out of reach (:mod:`nik.robots.reach`); the swarm methods (``ipso`` | ``pso``
@@ -60,8 +61,8 @@ class IKSolver:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
         checkpoint: ``"auto"`` (default): the network shipped with nik for this robot
             (:func:`nik.models.load_pretrained`) when one exists for its name and definition hash, else none;
-            on a PUMA-like arm with ``analytic=True`` the closed form stays the guess and no network is
-            loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
+            on an arm with a closed form (:func:`nik.analytic.family`) and ``analytic=True`` the closed form
+            stays the guess and no network is loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
             :func:`nik.models.save_checkpoint`), loaded safely by :func:`nik.nets.load_checkpoint`; one
             made for another robot is refused. ``None``: no network. A multi-solution network
             (:mod:`nik.nets.multi`) guesses its best hypothesis by FK; targets the refinement leaves outside
@@ -71,16 +72,16 @@ class IKSolver:
             that fail; the fastest) | ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga`` (swarms, then LM polish).
         polish: finish swarm refinements with Levenberg-Marquardt (``nik.swarm.refine(polish=True)``).
         swarm_cfg: optional config of the refinement method (e.g. :class:`nik.swarm.IPSOCfg`).
-        analytic: use the closed form for PUMA-like arms when no checkpoint is given (default True).
+        analytic: use the closed form (spherical-wrist and UR-type 6R arms) when no checkpoint is given (default True).
         device: where the network lives (``"cpu"``, ``"cuda"``); :meth:`solve` computes on the device of
             its input poses (``T.to("cuda")``) and the network's guess is moved there.
         fallback: a second chance for targets still outside tolerance after the refinement:
-            ``"analytic"``, the closed-form solution nearest the first answer (PUMA-like arms only);
+            ``"analytic"``, the closed-form solution nearest the first answer (closed-form arms only);
             ``"multistart"``, Levenberg-Marquardt from fresh uniform starts (with ``refine="lm"`` these
             are the LM's own restarts, drawn only for the targets that fail and are within reach);
             ``"auto"`` (or True, the default), analytic where available, else multistart;
             ``"none"`` (or False: with ``refine="lm"`` and a guess, no restarts). It is not used where it
-            would repeat the first pass (no network on a PUMA-like arm), nor with ``refine="none"``,
+            would repeat the first pass (no network on a closed-form arm), nor with ``refine="none"``,
             nor for targets proven out of reach. The evaluation turns it off to measure what the
             network's guess alone delivers.
     """
@@ -112,9 +113,9 @@ class IKSolver:
         self.net = None
         self.closed_form = False
         if analytic:
-            from nik.analytic import is_puma_like
+            from nik.analytic import family
 
-            self.closed_form = is_puma_like(self.robot)
+            self.closed_form = family(self.robot) is not None
         if isinstance(checkpoint, str) and checkpoint == "auto":
             if not self.closed_form:
                 self.net = _shipped_network(self.robot)
@@ -125,7 +126,7 @@ class IKSolver:
         if self.net is not None:
             self.net = self.net.to(self.device)
         if fallback == "analytic" and not self.closed_form:
-            raise ValueError(f"IKSolver: fallback='analytic' needs a PUMA-like arm; {self.robot.name} is not")
+            raise ValueError(f"IKSolver: fallback='analytic' needs an arm with a closed form; {self.robot.name} is not")
         if fallback == "auto":
             fallback = "analytic" if self.closed_form else "multistart"
         self.fallback = fallback
@@ -227,7 +228,7 @@ class IKSolver:
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
 
-        PUMA-like arms (``analytic=True``): the valid closed-form solutions (at most 8; exact). Otherwise
+        Arms with a closed form (``analytic=True``): the valid closed-form solutions (at most 8; exact). Otherwise
         LM from every hypothesis of the network (each IK branch of a branch network, each head of a
         multi-head one; the guess of a plain network) and then ``n_starts`` uniform starts; the
         successful ones (within ``tol_pos`` metres / ``tol_rot`` radians) are de-duplicated

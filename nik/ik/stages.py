@@ -235,9 +235,9 @@ def all_solutions(solver, job: Job, *, n_starts: int = 256, dedupe_tol: float = 
 
     robot, T = solver.robot, job.T
     if solver.closed_form:
-        from nik.analytic import puma560_ik
+        from nik.analytic import solve
 
-        sols, valid = puma560_ik(robot, T[0])
+        sols, valid = solve(robot, T[0])
         return dedupe(sols[valid], tol=dedupe_tol)
     g = torch.Generator(device=T.device).manual_seed(int(job.seed))
     starts = robot.sample(n_starts, generator=g, dtype=T.dtype, device=T.device)
