@@ -376,15 +376,17 @@ def evaluate(
         res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
         its = float(res.iterations.float().mean())
         add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
-    from nik.analytic import is_puma_like
+    from nik.analytic import family
 
-    if is_puma_like(robot):
+    if family(robot) is not None:
         say("analytic")
         solver = IKSolver(robot, refine="none")
         res, sec = _timed(lambda: solver.solve(T), dev)
         add("analytic (closed form)", res.q, sec, "all 8 solutions, FK-verified; the most central valid one")
     else:
-        report.notes.append(f"{robot.name} is not PUMA-like: no closed-form row")
+        report.notes.append(
+            f"{robot.name} has no closed form (no spherical wrist, no three parallel axes): no closed-form row"
+        )
     if include_pk:
         say("pytorch-kinematics")
         try:
