@@ -37,9 +37,9 @@ import torch
 import nik
 from nik.nets import load_pretrained, pretrained_robots
 from nik.nets.multi import BranchIKNet, hypothesis_pose_error
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
-TOL_POS = 1e-4  # m
-TOL_ROT = math.radians(0.1)  # rad
+TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
 
 
 def _stats(pos: torch.Tensor, rot: torch.Tensor) -> tuple[float, float, float, float]:

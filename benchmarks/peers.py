@@ -39,9 +39,9 @@ sys.path.insert(0, str(ROOT))
 
 import nik  # noqa: E402
 from nik.robots.reach import reach_center, reach_radius  # noqa: E402
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT, describe  # noqa: E402
 
-TOL_POS = 1e-4  # m
-TOL_ROT = math.radians(0.1)  # rad
+TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
 URDF = {"panda": ROOT / "configs/robots/urdf/panda.urdf", "ur5": ROOT / "configs/robots/urdf/ur5.urdf"}
 
 
@@ -203,11 +203,18 @@ def compare(
                 "vs_rtb": ref / med,
             }
         )
-    if ets is None:
-        print("  (roboticstoolbox-python is not installed: pip install -e .[bench]; its rows are left out)")
-    else:
+    if ets is not None:
         print(f"  ({robot_name}: rtb FK agrees with nik within {gap:.1e} m)", flush=True)
     return rows
+
+
+def times_rtb(x: float) -> str:
+    """A speed ratio against Robotics Toolbox as printed: ``2.50x``, or ``n/a`` without an rtb row."""
+    return "n/a" if math.isnan(x) else f"{x:.2f}x"
+
+
+def ms_or_na(x: float) -> str:
+    return "n/a" if math.isnan(x) else f"{x:.3f}"
 
 
 def unreachable_scenario(robot_name: str, rounds: int, seed: int) -> dict:
@@ -442,7 +449,9 @@ def main(argv=None) -> int:
         log.write(line + "\n")
 
     say(f"nik {nik.__version__}, torch {torch.__version__}, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}")
-    say(f"success: within {TOL_POS * 1e3:g} mm and {math.degrees(TOL_ROT):g} deg by float64 FK, inside the limits")
+    say(f"success: within {describe(TOL_POS, TOL_ROT)} by float64 FK, inside the limits")
+    if not available("roboticstoolbox"):
+        say("(roboticstoolbox-python is not installed: pip install -e .[bench]; its rows and ratios are n/a)")
     rows = []
     if args.latency_only:
         thread_list = []
@@ -460,7 +469,7 @@ def main(argv=None) -> int:
     for r in rows:
         md.append(
             f"| {r['robot']} | {r['n']:,} | {r['threads']} | {r['solver']} | {r['ms']:.4f} | {r['success']:.2f} | "
-            f"{r['outside']} | {r['vs_rtb']:.2f}x |"
+            f"{r['outside']} | {times_rtb(r['vs_rtb'])} |"
         )
     unreach = (
         []

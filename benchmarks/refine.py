@@ -32,8 +32,9 @@ import nik
 from nik.lm import LMCfg
 from nik.poses import matrix_to_rpy
 from nik.swarm import default_cfg, refine
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
-TOL_POS, TOL_ROT = 1e-4, math.radians(0.1)
+TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
 
 
 def dh_urdf(robot_name: str = "kuka_kr") -> str:

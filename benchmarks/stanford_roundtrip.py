@@ -18,6 +18,7 @@ import time
 import torch
 
 import nik
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 
 def main() -> None:
@@ -39,7 +40,7 @@ def main() -> None:
         res = solver.solve(T, seed=seed)
         seconds = time.perf_counter() - start
         pos, rot = nik.pose_error(T, robot.fk(res.q))
-        ok = (pos <= 1e-4) & (rot <= math.radians(0.1))
+        ok = (pos <= DEFAULT_TOL_POS) & (rot <= DEFAULT_TOL_ROT)
         total_ok, total = total_ok + int(ok.sum()), total + args.n
         print(
             f"{seed:>4}  {int(ok.sum()):>6} / {args.n} = {100 * ok.double().mean():6.2f} %"

@@ -1,9 +1,10 @@
 """End-to-end evaluation on a dataset's held-out test split: the table users compare.
 
 :func:`evaluate` solves the same test poses with every pipeline and measures each the same
-way (FK of the returned joints against the target): the network alone, the network plus each
-refinement, the uniform-init swarm (no network), the closed form (PUMA-like arms) and
-pytorch-kinematics' ``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
+way (FK of the returned joints against the target): the default pipeline (``IKSolver(robot)``, what
+users run), LM multistart without a network, the network alone, the network plus each refinement,
+the uniform-init swarm (no network), the closed form (PUMA-like arms) and pytorch-kinematics'
+``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
 table, a JSON copy and a cumulative error plot.
 
 The evaluation room: it may import every room below it (robots, data, nets, analytic, ik, learn); only the
@@ -24,6 +25,7 @@ import torch
 
 from nik.poses import matrix_to_rpy, pose_error, rpy_to_matrix
 from nik.robots import Robot, load_robot
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "plot_errors", "robot_to_urdf", "write_report"]
 
@@ -58,6 +60,8 @@ class EvalReport:
     notes: list[str] = field(default_factory=list)
     device: str = "cpu"
     threads: int = 1
+    end_link: str | None = None  # the tool link of a URDF arm
+    network: str = ""  # the network of the network rows: "shipped network for NAME", a path, or "" (none)
 
 
 def _row(method: str, robot: Robot, T: torch.Tensor, q: torch.Tensor, seconds: float, note: str = "") -> tuple:
@@ -106,6 +110,11 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
 
     Joint ``i`` sits at origin ``G_{i-1} Rz(offset_i)`` (prismatic: ``G_{i-1} Tz(offset_i)``) of its
     parent link and turns about (slides along) z; a fixed joint with origin ``G_n`` carries the tool link.
+    A URDF arm's rotations, parsed through float32, are orthonormal to about 1e-7 only: each is written as
+    the nearest rotation, so the FK agrees to about 1e-7 there (exactly for arms defined by parameters).
+
+    Raises:
+        RuntimeError: a transform has no roll-pitch-yaw form that reproduces it (not seen on any arm).
     """
     G, off = robot.G.numpy(), robot.offsets.numpy()
     lim = robot.limits.numpy()
@@ -136,6 +145,9 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
         """``M`` as a product of one or two transforms whose roll-pitch-yaw round-trips exactly
         (pitch = +-90 deg loses roll and yaw)."""
         generic = rz(0.3) @ rx(0.7)
+        M = M.copy()
+        U, _, Vt = np.linalg.svd(M[:3, :3])
+        M[:3, :3] = U @ Vt  # the nearest rotation (float32-parsed URDF origins are off by ~1e-7)
         for pre in (None, rx(math.pi / 2), rx(-math.pi / 2), generic):
             parts_ = [M] if pre is None else [M @ np.linalg.inv(pre), pre]
             ok = True
@@ -145,7 +157,7 @@ def robot_to_urdf(robot: Robot) -> tuple[str, str]:
                 ok &= bool(np.abs(back - P[:3, :3]).max() < 1e-12)
             if ok:
                 return parts_
-        raise RuntimeError("robot_to_urdf: no roll-pitch-yaw form found")  # pragma: no cover
+        raise RuntimeError("robot_to_urdf: no roll-pitch-yaw form found")
 
     parts = [f'<robot name="{robot.name}">', '<link name="link0"/>']
     for i in range(robot.dof):
@@ -224,6 +236,31 @@ def _pk_solve(
 # ---------------------------------------------------------------------------
 # The evaluation
 # ---------------------------------------------------------------------------
+def _network_rows_solver(robot: Robot, checkpoint, report: EvalReport) -> dict | None:
+    """The :class:`IKSolver` keywords of the network rows, or None (said in a note) when there is no network.
+
+    ``checkpoint``: ``"auto"``, the network shipped with nik for this robot as ``IKSolver(robot)`` picks it (by
+    name and definition hash; used here on PUMA-like arms too, where the solver's default keeps the closed form);
+    ``None`` or ``"none"``, no network; else a path.
+    """
+    from nik.ik import IKSolver
+
+    word = checkpoint.lower() if isinstance(checkpoint, str) else None
+    if checkpoint is None or word == "none":
+        report.notes.append("no network (checkpoint none): the network rows are missing")
+        return None
+    if word == "auto":
+        if IKSolver(robot, checkpoint="auto", analytic=False).net is None:
+            report.notes.append(
+                f"no network shipped with nik for {robot.name} (this definition): the network rows are missing"
+            )
+            return None
+        report.network = f"shipped network for {robot.name}"
+        return {"checkpoint": "auto", "analytic": False}
+    report.network = str(checkpoint)
+    return {"checkpoint": checkpoint}
+
+
 def evaluate(
     robot: Robot | str | Path,
     *,
@@ -234,24 +271,30 @@ def evaluate(
     refinements: tuple[str, ...] = REFINEMENTS,
     swarm: str = "ipso",
     include_pk: bool = True,
-    tol_pos: float = 1e-4,
-    tol_rot: float = 1e-3,
+    tol_pos: float = DEFAULT_TOL_POS,
+    tol_rot: float = DEFAULT_TOL_ROT,
     seed: int = 0,
     progress=None,
     device: str | torch.device = "cpu",
+    on_row=None,
 ) -> EvalReport:
     """Evaluate every pipeline on the first ``n`` poses of a dataset's ``split``.
 
     Args:
         robot: the arm (object, built-in name or file); the dataset and checkpoint must match it.
         data: dataset directory (``nik generate``).
-        checkpoint: trained network; without it the network rows are left out (and said so).
+        checkpoint: the network of the network rows: ``"auto"``, the one shipped with nik for this robot (as
+            ``IKSolver(robot)`` picks it); a path to a trained network; ``None`` / ``"none"``: no network rows
+            (a note says why). The rows "default pipeline" (``IKSolver(robot)``) and "LM multistart, no
+            network" are there whatever it is.
         n: number of test poses.
         refinements: methods run after the network (``lm``, ``pso``, ``sapso``, ``ipso``, ``ga``).
         swarm: the uniform-init swarm row's method (no network).
         include_pk: add pytorch-kinematics' ``PseudoInverseIK`` as a peer.
         tol_pos, tol_rot: tolerances the refinements stop at (metres, radians).
         progress: optional callable ``progress(message)`` told before each row.
+        on_row: optional callable ``on_row(report)`` told after each row is added (the CLI writes the table
+            there, so rows already computed survive a failure in a later one).
         device: where every pipeline computes (``"cpu"``, ``"cuda"``); timings synchronise the GPU.
 
     Returns:
@@ -269,27 +312,55 @@ def evaluate(
         raise ValueError(f"{data}: the {split!r} split is empty")
     n = min(int(n), len(part))
     T = part.pose[:n].to(device=dev, dtype=torch.float64).clone()
-    report = EvalReport(robot=robot.name, data=str(data), n=n, threads=torch.get_num_threads(), device=str(dev))
+    report = EvalReport(
+        robot=robot.name,
+        data=str(data),
+        n=n,
+        threads=torch.get_num_threads(),
+        device=str(dev),
+        end_link=robot.end_link,
+    )
     say = progress or (lambda msg: None)
 
     def add(method: str, q: torch.Tensor, seconds: float, note: str = "") -> None:
         row, errs = _row(method, robot, T, q, seconds, note)
         report.rows.append(row)
         report.errors[method] = errs
+        if on_row is not None:
+            on_row(report)
 
-    if checkpoint is not None:
+    say("default pipeline")
+    solver = IKSolver(robot, device=dev)
+    res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
+    add(
+        "default pipeline",
+        res.q,
+        sec,
+        f"IKSolver(robot): guess {solver.initial_source}, refine lm, fallback {solver.fallback}",
+    )
+    say("LM multistart, no network")
+    solver = IKSolver(robot, checkpoint=None, analytic=False, device=dev)
+    res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
+    add(
+        "LM multistart, no network",
+        res.q,
+        sec,
+        "IKSolver(robot, checkpoint=None, analytic=False): LM from uniform starts, restarts where it fails",
+    )
+    net_kw = _network_rows_solver(robot, checkpoint, report)
+    if net_kw is not None:
         say("network")
-        raw = IKSolver(robot, checkpoint=checkpoint, device=dev, refine="none")
+        raw = IKSolver(robot, **net_kw, device=dev, refine="none")
         res, sec = _timed(lambda: raw.solve(T, seed=seed), dev)
         add("network", res.q, sec)
         for method in refinements:
             say(f"network + {method}")
-            solver = IKSolver(robot, checkpoint=checkpoint, device=dev, refine=method, fallback=False)
+            solver = IKSolver(robot, **net_kw, device=dev, refine=method, fallback=False)
             res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
             polish = " + LM polish" if method != "lm" else ""
             add(f"network + {method}", res.q, sec, f"mean {res.iterations.float().mean():.1f} iterations{polish}")
         say("network + lm + LM restarts")
-        solver = IKSolver(robot, checkpoint=checkpoint, device=dev, refine="lm", fallback="multistart")
+        solver = IKSolver(robot, **net_kw, device=dev, refine="lm", fallback="multistart")
         res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
         add(
             "network + lm + LM restarts",
@@ -297,29 +368,33 @@ def evaluate(
             sec,
             "targets LM misses from the guess restart from uniform starts; no closed form",
         )
+    if swarm == "lm":
+        report.notes.append("uniform-init lm is the row 'LM multistart, no network'")
     else:
-        report.notes.append("no checkpoint given: the network rows are missing")
-    say(f"uniform-init {swarm}")
-    solver = IKSolver(robot, refine=swarm, analytic=False, fallback="none")
-    res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
-    its = float(res.iterations.float().mean())
-    add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
-    from nik.analytic import is_puma_like
+        say(f"uniform-init {swarm}")
+        solver = IKSolver(robot, refine=swarm, analytic=False, fallback="none")
+        res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
+        its = float(res.iterations.float().mean())
+        add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
+    from nik.analytic import family
 
-    if is_puma_like(robot):
+    if family(robot) is not None:
         say("analytic")
         solver = IKSolver(robot, refine="none")
         res, sec = _timed(lambda: solver.solve(T), dev)
         add("analytic (closed form)", res.q, sec, "all 8 solutions, FK-verified; the most central valid one")
     else:
-        report.notes.append(f"{robot.name} is not PUMA-like: no closed-form row")
+        report.notes.append(
+            f"{robot.name} has no closed form (no spherical wrist, no three parallel axes): no closed-form row"
+        )
     if include_pk:
         say("pytorch-kinematics")
         try:
             q, sec, note = _pk_solve(robot, T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
             add("pytorch-kinematics", q, sec, note)
-        except ImportError as err:
-            report.notes.append(f"pytorch-kinematics row skipped: {err}")
+        except Exception as err:  # a peer that cannot be built or run costs its row, never the others
+            why = " ".join(f"{type(err).__name__}: {err}".split())
+            report.notes.append(f"pytorch-kinematics row skipped: {why}")
     return report
 
 
@@ -342,9 +417,11 @@ def _threads(n: int) -> str:
 
 def markdown_table(report: EvalReport) -> str:
     """The report as a Markdown table (errors in mm and degrees, success in percent)."""
+    tool = f" (tool link `{report.end_link}`)" if report.end_link else ""
+    net = f" Network rows: {report.network}." if report.network else ""
     lines = [
-        f"Robot `{report.robot}`, {report.n} poses of the test split of `{report.data}`, "
-        f"CPU ({_threads(report.threads)}), float64.",
+        f"Robot `{report.robot}`{tool}, {report.n} poses of the test split of `{report.data}`, "
+        f"CPU ({_threads(report.threads)}), float64.{net}",
         "",
         "| method | success 1 mm / 1 deg | success 0.1 mm / 0.1 deg | position error mm (p50 / p95 / p99 / max) "
         "| rotation error deg (p50 / p95 / p99 / max) | joints outside limits | ms / target | note |",
@@ -434,8 +511,8 @@ def plot_errors(report: EvalReport, path: str | Path) -> Path:
     return path
 
 
-def write_report(report: EvalReport, out: str | Path) -> dict[str, Path]:
-    """Write ``evaluation.md``, ``evaluation.json`` and ``errors.png`` (:func:`plot_errors`) into ``out``.
+def write_report(report: EvalReport, out: str | Path, *, plot: bool = True) -> dict[str, Path]:
+    """Write ``evaluation.md``, ``evaluation.json`` and (``plot``) ``errors.png`` (:func:`plot_errors`) into ``out``.
 
     Returns the paths under ``markdown``, ``json`` and ``plot`` (also under ``histogram``, its former name).
     """
@@ -446,5 +523,6 @@ def write_report(report: EvalReport, out: str | Path) -> dict[str, Path]:
     _write_atomic(paths["markdown"], markdown_table(report))
     data = {k: v for k, v in asdict(report).items() if k != "errors"}
     _write_atomic(paths["json"], json.dumps(data, indent=2))
-    plot_errors(report, paths["plot"])
+    if plot:
+        plot_errors(report, paths["plot"])
     return paths

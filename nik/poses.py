@@ -16,6 +16,9 @@ The ground floor beside :mod:`nik.kinematics`: this module imports nothing from 
 
 from __future__ import annotations
 
+import math
+import warnings
+
 import torch
 
 __all__ = [
@@ -34,6 +37,7 @@ __all__ = [
     "validate_pose",
     "validate_joints",
     "validate_quaternion",
+    "warn_degrees",
     "POSE_DIMS",
 ]
 
@@ -210,6 +214,48 @@ def pose_error(T_target: torch.Tensor, T: torch.Tensor) -> tuple[torch.Tensor, t
 
 def _fail(name: str, what: str) -> ValueError:
     return ValueError(f"{name}: {what}")
+
+
+#: Radians beyond this magnitude are most likely degrees (2 pi, with room for rounding at a +-2 pi joint limit).
+DEGREES_SUSPECT = 2 * math.pi * (1 + 1e-6)
+
+
+def warn_degrees(
+    angles: torch.Tensor,
+    *,
+    name: str,
+    rpy: bool = False,
+    prismatic: torch.Tensor | None = None,
+    limits: torch.Tensor | None = None,
+    stacklevel: int = 3,
+) -> None:
+    """``UserWarning`` when an angle of ``angles: (..., k)`` (radians) lies beyond 2 pi: most likely degrees.
+
+    ``rpy``: the values are roll, pitch, yaw (the message shows the row's three); else joint values:
+    ``prismatic: (k,)`` bool marks lengths (metres) the check leaves alone, and with ``limits: (k, 2)`` a value
+    inside its joint's range is no suspect (a joint may turn further than 2 pi). The first suspect is named
+    (row and joint, counted from 1); the values are used as given.
+    """
+    a = angles.detach().reshape(-1, angles.shape[-1])
+    big = a.abs() > DEGREES_SUSPECT
+    if prismatic is not None and bool(prismatic.any()):
+        big &= ~prismatic.to(device=a.device, dtype=torch.bool)
+    if limits is not None:
+        lim = limits.to(device=a.device, dtype=a.dtype)
+        big &= (a < lim[:, 0]) | (a > lim[:, 1])
+    if not bool(big.any()):
+        return
+    row, col = (int(v) for v in big.nonzero()[0])
+    if rpy:
+        vals = ", ".join(f"{float(v):.6g}" for v in a[row])
+        what = f"row {row}: roll, pitch, yaw = ({vals}) lie"
+    else:
+        what = f"row {row}, joint {col + 1} = {float(a[row, col]):.6g} lies"
+    warnings.warn(
+        f"{name}: {what} beyond 2 pi; nik reads angles in radians: were degrees given? (convert with math.radians)",
+        UserWarning,
+        stacklevel=stacklevel,
+    )
 
 
 def _one_pose_ok(T: torch.Tensor, tol: float) -> bool:

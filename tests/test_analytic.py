@@ -199,3 +199,49 @@ def test_an_arm_with_a_prismatic_joint_is_not_puma_like():
     assert is_puma_like(puma) and not is_puma_like(slid)
     with pytest.raises(ValueError, match=r"prismatic joint\(s\) \[6\]"):
         puma560_params(slid)
+
+
+# ---- URDF arms: origins parsed through float32 leave rotations orthonormal to about 1e-7 only ------------------------
+def _via_urdf(name, tmp_path):
+    from nik.evaluate import robot_to_urdf
+
+    text, end = robot_to_urdf(nik.load_robot(name))
+    path = tmp_path / f"{name}.urdf"
+    path.write_text(text)
+    return nik.load_robot(path, end_link=end)
+
+
+def test_puma_like_urdf_arm_with_float32_origins_is_recognised_and_solved(tmp_path):
+    robot = _via_urdf("rebot_v_6r", tmp_path)
+    R = robot.G[:, :3, :3]
+    assert float((R.transpose(-1, -2) @ R - torch.eye(3, dtype=R.dtype)).abs().max()) > 1e-8  # the hard case
+    assert is_puma_like(robot)
+    q = robot.sample(30, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
+    T = robot.fk(q)
+    sols, valid = puma560_ik(robot, T)
+    assert valid.any(-1).all()
+    reached = robot.fk(sols[valid])
+    target = T[:, None].expand(-1, 8, -1, -1)[valid]
+    pos, rot = nik.poses.pose_error(target, reached)
+    assert float(pos.max()) < 1e-6 and float(rot.max()) < 1e-6  # FK of the robot itself, not of a rounded copy
+
+
+def test_general_6r_urdf_arm_with_float32_origins_is_not_puma_like(tmp_path):
+    text = (
+        '<robot name="g6"><link name="l0"/>'
+        + "".join(
+            f'<link name="l{i + 1}"/><joint name="j{i + 1}" type="revolute">'
+            f'<parent link="l{i}"/><child link="l{i + 1}"/>'
+            f'<origin xyz="0.1 {0.02 * i} 0.2" rpy="{0.3 + i} {0.2 * i - 0.5} {1.1 - 0.4 * i}"/><axis xyz="0 0 1"/>'
+            '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
+            for i in range(6)
+        )
+        + "</robot>"
+    )
+    path = tmp_path / "g6.urdf"
+    path.write_text(text)
+    robot = nik.load_robot(path)
+    assert robot.dof == 6
+    assert not is_puma_like(robot)  # used to raise RuntimeError("canonical_dh: factor 1 has no DH form")
+    with pytest.raises(ValueError, match="not PUMA-like"):
+        puma560_params(robot)

@@ -179,3 +179,32 @@ def test_info_shows_a_prismatic_joint_in_mm(tmp_path, capsys):
     assert float(boom[3]) == 304.8 and float(boom[4]) == 1270.0
     (waist,) = [ln.split() for ln in stdout.splitlines() if ln.startswith("waist")]
     assert waist[-1] == "deg" and float(waist[3]) == -170.0
+
+
+def test_generate_end_link_picks_the_tool_link_and_says_so(tmp_path, capsys):
+    out = tmp_path / "ur5_tool0"
+    code, stdout, err = run(
+        capsys, "generate", "--robot", "ur5", "--end-link", "tool0", "--n", "200", "--out", str(out), "--no-progress"
+    )
+    assert code == 0, err
+    assert "of ur5 (tool link tool0)" in stdout
+    ds = load_dataset(out)
+    assert ds.meta["robot"]["definition"]["end_link"] == "tool0"
+    import nik
+
+    robot = nik.load_robot("ur5", end_link="tool0")
+    torch.testing.assert_close(ds.pose[:5], robot.fk(ds.q[:5].to(torch.float64)), atol=1e-12, rtol=0)
+    assert load_dataset(out, robot=robot) is not None  # the dataset belongs to the tool0 arm ...
+    with pytest.raises(ValueError, match="made with tool link 'tool0', this robot's is 'wrist_3_link'"):
+        load_dataset(out, robot="ur5")  # ... not to the default (wrist_3_link) one
+    code, stdout, err = run(capsys, "data", "info", str(out))
+    assert code == 0, err
+    assert "tool link tool0" in stdout
+
+
+def test_end_link_on_an_arm_without_links_is_a_one_line_error(tmp_path, capsys):
+    code, _, err = run(
+        capsys, "generate", "--robot", "puma560", "--end-link", "tool0", "--n", "10", "--out", str(tmp_path / "x")
+    )
+    assert code == 2
+    assert err.strip().count("\n") == 0 and "--end-link" in err and "URDF" in err

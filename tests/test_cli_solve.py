@@ -269,3 +269,38 @@ def test_threads_option_is_accepted_by_the_computing_commands():
     for argv in (["solve", "--robot", "ur5", "--pose", *["0"] * 7], ["evaluate", "--robot", "ur5", "--data", "d"]):
         assert parser.parse_args([*argv, "--threads", "2"]).threads == 2
     assert parser.parse_args(["generate", "--robot", "ur5", "--n", "1", "--out", "x", "--threads", "2"]).threads == 2
+
+
+def test_end_link_chooses_the_tool_link_and_the_output_names_it(capsys):
+    robot = nik.load_robot("ur5", end_link="tool0")
+    T, rows = _pose_rows(robot, 1, 5)
+    pose = [repr(v) for v in rows[0].tolist()]
+    argv = ["solve", "--robot", "ur5", "--end-link", "tool0", "--threads", "1", "--pose", *pose]
+    assert main(argv) == 0
+    assert "tool link tool0" in capsys.readouterr().out
+    assert main([*argv, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["end_link"] == "tool0"
+    q = torch.tensor([doc["results"][0]["q_si"]], dtype=torch.float64)
+    err_pos = (robot.fk(q)[0, :3, 3] - T[0, :3, 3]).norm()
+    assert float(err_pos) < 1e-4  # the tool0 pose is reached by tool0, not by the flange
+    # without --end-link the default tool link is used, and named
+    assert main(["solve", "--robot", "ur5", "--threads", "1", "--pose", *pose]) in (0, 1)
+    assert "tool link wrist_3_link" in capsys.readouterr().out
+
+
+def test_bad_end_link_is_a_one_line_error(capsys):
+    assert main(["solve", "--robot", "ur5", "--end-link", "gripper", "--pose", *["0"] * 3, "1", "0", "0", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "end_link 'gripper' is not a link" in err
+
+
+def test_evaluate_end_link_names_the_tool_link(tmp_path, capsys):
+    data = tmp_path / "ur5_tool0"
+    assert main(["generate", "--robot", "ur5", "--end-link", "tool0", "--n", "100", "--out", str(data)]) == 0
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--robot", "ur5", "--end-link", "tool0", "--data", str(data), "--n", "3", "--no-pk"]
+    assert main([*argv, "--out", str(out), "--swarm", "lm"]) == 0
+    assert "tool link `tool0`" in (out / "evaluation.md").read_text()
+    assert json.loads((out / "evaluation.json").read_text())["end_link"] == "tool0"
+    capsys.readouterr()

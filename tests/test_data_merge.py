@@ -135,3 +135,19 @@ def test_cli_generate_shard_and_data_merge(tmp_path, capsys):
     assert "shard(s) 1/2 missing" in capsys.readouterr().err
     assert main(["generate", *common, "--out", str(tmp_path / "x"), "--shard", "2/2"]) == 2
     assert "0 <= I < N" in capsys.readouterr().err
+
+
+def test_merge_refuses_an_output_that_is_one_of_its_inputs(tmp_path, capsys):
+    shards = [_gen("kuka_kr", tmp_path / f"s{i}", shard=(i, 2)) for i in range(2)]
+    before = {f.name: f.read_bytes() for f in shards[1].iterdir()}
+    with pytest.raises(DatasetError, match=f"the output {shards[1]} is one of the inputs"):
+        merge_shards(shards[1], shards, overwrite=True)
+    assert {f.name: f.read_bytes() for f in shards[1].iterdir()} == before  # the shard is untouched
+    # a shard inside the output folder would go with it too
+    inner = _gen("kuka_kr", tmp_path / "out" / "s0", shard=(0, 2))
+    with pytest.raises(DatasetError, match="holds input"):
+        merge_shards(tmp_path / "out", [inner, shards[1]], overwrite=True)
+    assert main(["data", "merge", str(shards[0]), *map(str, shards), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"output {shards[0]} is one of the inputs" in err
+    assert len(merge_shards(tmp_path / "merged", shards, fsync=False).name) > 0  # elsewhere it merges

@@ -50,3 +50,150 @@ def test_write_report_writes_table_json_and_a_png_plot(tmp_path):
     assert paths["markdown"].read_text().startswith("Robot `puma560`")
     assert sorted(p.name for p in (tmp_path / "eval").iterdir()) == ["errors.png", "evaluation.json", "evaluation.md"]
     assert plot_errors(report, tmp_path / "again.png").stat().st_size > 10_000
+
+
+# ---- URDF arms: the peer row is built, or skipped with a note; rows are never lost ---------------------------------
+# A 6R arm with rpy origins that float32 parsing leaves slightly non-orthonormal (as every URDF loaded through
+# pytorch-kinematics is): robot_to_urdf used to find "no roll-pitch-yaw form" for such arms.
+ODD_ARM = """<?xml version="1.0" encoding="utf-8"?>
+<robot name="odd6">
+  <link name="base"/>{links}{joints}
+</robot>
+"""
+
+
+def _odd_arm_urdf() -> str:
+    rpys = ["0 0 0", "1.3 0.2 -0.4", "-0.7 0.1 0.9", "0.3 -1.1 0.5", "1.9 0.4 -2.2", "-0.6 0.8 0.35"]
+    xyzs = ["0 0 0.3", "0.05 0 0.1", "0.4 0 0", "0.1 0.05 0.3", "0 0.02 0.1", "0 0 0.08"]
+    links = "".join(f'\n  <link name="l{i + 1}"/>' for i in range(6))
+    joints = "".join(
+        f'\n  <joint name="j{i + 1}" type="revolute"><parent link="{"base" if i == 0 else f"l{i}"}"/>'
+        f'<child link="l{i + 1}"/><origin xyz="{xyzs[i]}" rpy="{rpys[i]}"/><axis xyz="0 0 1"/>'
+        f'<limit lower="-2.8" upper="2.8" effort="1" velocity="1"/></joint>'
+        for i in range(6)
+    )
+    return ODD_ARM.format(links=links, joints=joints)
+
+
+@pytest.fixture(scope="module")
+def odd_arm(tmp_path_factory):
+    path = tmp_path_factory.mktemp("odd") / "odd6.urdf"
+    path.write_text(_odd_arm_urdf())
+    return nik.load_robot(path)
+
+
+@pytest.fixture(scope="module")
+def odd_data(odd_arm, tmp_path_factory):
+    from nik.data import generate_dataset
+
+    return generate_dataset(odd_arm, 60, tmp_path_factory.mktemp("odd_data") / "d", seed=0, progress=False)
+
+
+def test_robot_to_urdf_handles_a_urdf_arm_with_float32_origins(odd_arm):
+    R = odd_arm.G[:, :3, :3]
+    assert float((R.transpose(-1, -2) @ R - torch.eye(3, dtype=R.dtype)).abs().max()) > 1e-12  # the hard case
+    text, end = robot_to_urdf(odd_arm)
+    chain = build_pk_chain(text, end).to(dtype=torch.float64)
+    q = odd_arm.sample(50, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    assert_close(chain.forward_kinematics(q).get_matrix(), odd_arm.fk(q), atol=1e-6, rtol=0)
+
+
+def _short_eval(robot, data, **kw):
+    from nik.evaluate import evaluate
+
+    return evaluate(robot, data=data, n=4, checkpoint=None, swarm="lm", seed=0, **kw)
+
+
+def test_evaluate_on_a_urdf_arm_has_the_peer_row(odd_arm, odd_data):
+    report = _short_eval(odd_arm, odd_data)
+    assert "pytorch-kinematics" in [r.method for r in report.rows]
+
+
+def test_a_peer_row_that_cannot_be_built_is_skipped_with_a_one_line_note(odd_arm, odd_data, monkeypatch):
+    import nik.evaluate as ev
+
+    # a roll-pitch-yaw conversion that loses the roll: no transform round-trips, robot_to_urdf gives up
+    lossy = ev.matrix_to_rpy
+    monkeypatch.setattr(ev, "matrix_to_rpy", lambda R: lossy(R) * torch.tensor([0.0, 1.0, 1.0], dtype=R.dtype))
+    with pytest.raises(RuntimeError, match="no roll-pitch-yaw form"):
+        robot_to_urdf(odd_arm)
+    seen = []
+    report = _short_eval(odd_arm, odd_data, on_row=lambda rep: seen.append([r.method for r in rep.rows]))
+    methods = [r.method for r in report.rows]
+    assert "pytorch-kinematics" not in methods and len(methods) >= 1
+    assert seen[-1] == methods  # told after every row
+    skipped = [n for n in report.notes if n.startswith("pytorch-kinematics row skipped")]
+    assert len(skipped) == 1 and "\n" not in skipped[0] and "roll-pitch-yaw" in skipped[0]
+
+
+def test_rows_computed_before_a_failure_are_written(monkeypatch, tmp_path):
+    import nik.evaluate as ev
+    from nik.cli import main
+
+    data = tmp_path / "puma"
+    assert main(["generate", "--robot", "puma560", "--n", "60", "--out", str(data), "--no-progress"]) == 0
+    calls = {"n": 0}
+    real_row = ev._row
+
+    def failing_second_row(*args, **kw):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise RuntimeError("boom in the second row")
+        return real_row(*args, **kw)
+
+    monkeypatch.setattr(ev, "_row", failing_second_row)
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--robot", "puma560", "--data", str(data), "--n", "4", "--out", str(out)]
+    with pytest.raises(RuntimeError, match="boom"):
+        main([*argv, "--swarm", "lm", "--no-pk"])
+    table = (out / "evaluation.md").read_text()
+    assert calls["n"] == 2 and table.count("\n| ") == 2  # the header and the one row made before the failure
+
+
+# ---- rows for what users run: the default pipeline, LM multistart, the shipped network (--checkpoint auto) -----------
+@pytest.fixture(scope="module")
+def puma_data(tmp_path_factory):
+    from nik.data import generate_dataset
+
+    return generate_dataset("puma560", 80, tmp_path_factory.mktemp("puma") / "d", seed=2, progress=False)
+
+
+def _methods(out):
+    import json
+
+    doc = json.loads((out / "evaluation.json").read_text())
+    return [r["method"] for r in doc["rows"]], doc
+
+
+def test_cli_checkpoint_auto_evaluates_the_shipped_network_and_the_default_pipeline(puma_data, tmp_path, capsys):
+    from nik.cli import main
+
+    out = tmp_path / "auto"
+    argv = ["evaluate", "--robot", "puma560", "--data", str(puma_data), "--n", "4", "--no-pk", "--swarm", "lm"]
+    assert main([*argv, "--checkpoint", "auto", "--refinements", "lm", "--out", str(out)]) == 0, capsys.readouterr()
+    methods, doc = _methods(out)
+    for row in ("default pipeline", "LM multistart, no network", "network", "network + lm", "analytic (closed form)"):
+        assert row in methods
+    assert "shipped" in (out / "evaluation.md").read_text()
+    rows = {r["method"]: r for r in doc["rows"]}
+    assert rows["default pipeline"]["success_01mm_01deg"] == 1.0  # closed form + LM on a PUMA arm
+    # without a network: the same table less the network rows, and it says why
+    out = tmp_path / "none"
+    assert main([*argv, "--checkpoint", "none", "--out", str(out)]) == 0
+    methods, doc = _methods(out)
+    assert "default pipeline" in methods and "LM multistart, no network" in methods
+    assert not any(m.startswith("network") for m in methods)
+    assert any("checkpoint none" in n for n in doc["notes"])
+    capsys.readouterr()
+
+
+def test_default_pipeline_row_is_what_iksolver_robot_returns(odd_arm, odd_data):
+    from nik.data import load_dataset
+    from nik.evaluate import evaluate
+
+    report = evaluate(odd_arm, data=odd_data, n=5, checkpoint="auto", include_pk=False, swarm="lm", seed=3)
+    T = load_dataset(odd_data).split("test").pose[:5].to(torch.float64)
+    res = nik.IKSolver(odd_arm).solve(T, seed=3)  # its own default tolerances, as evaluate uses
+    pos_mm, _ = report.errors["default pipeline"]
+    assert_close(torch.as_tensor(pos_mm), res.pos_err * 1e3, atol=1e-9, rtol=0)
+    assert any("no network shipped" in n for n in report.notes)  # auto on an arm nik ships nothing for

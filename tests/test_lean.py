@@ -11,6 +11,7 @@ import torch
 import nik
 from nik.ik import lean, stages
 from nik.poses import matrix_to_quaternion, matrix_to_rpy
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 
 def _targets(robot, n, seed):
@@ -67,7 +68,7 @@ def test_both_paths_solve_the_same_targets_inside_the_limits_and_flag_the_same_o
         pos, rot = nik.pose_error(T, robot.fk(res.q))  # honest errors: those of the returned joints
         torch.testing.assert_close(res.pos_err, pos, atol=1e-12, rtol=0)
         torch.testing.assert_close(res.rot_err, rot, atol=1e-9, rtol=0)
-        assert torch.equal(res.success, (pos <= 1e-4) & (rot <= 1e-3))
+        assert torch.equal(res.success, (pos <= DEFAULT_TOL_POS) & (rot <= DEFAULT_TOL_ROT))
     assert torch.equal(fast.success, slow.success)
     assert bool(fast.success[:-1].all()) and not bool(fast.success[-1])
     assert torch.equal(fast.reachable, slow.reachable) and fast.reachable.tolist() == [True] * 11 + [False]

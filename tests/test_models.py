@@ -112,6 +112,22 @@ def test_not_a_checkpoint_is_refused(tmp_path):
         load_checkpoint(tmp_path / "missing.ckpt")
 
 
+def test_a_folder_given_as_checkpoint_is_named_a_folder(tmp_path, capsys):
+    from nik.cli import main
+    from nik.errors import CheckpointError
+
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    with pytest.raises(CheckpointError, match=r"runs is a folder, not a checkpoint file"):
+        load_checkpoint(folder)
+    assert (
+        main(["solve", "--robot", "kuka_kr", "--checkpoint", str(folder), "--pose", "1", "0", "1", "1", "0", "0", "0"])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a folder" in err and "not found" not in err
+
+
 def test_predict_angles_follow_fk_for_a_perfect_lookup(kuka):
     # decode(encode(q)) is the identity, so a net whose raw output were exact would reproduce q
     q = kuka.sample(8, generator=torch.Generator().manual_seed(3), dtype=torch.float64)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -371,3 +372,101 @@ def test_same_seed_gives_identical_results_and_answers_stay_inside_the_limits():
     assert torch.equal(a.q, b.q) and torch.equal(a.iterations, b.iterations)
     assert bool(robot.within_limits(a.q).all())
     assert float(a.success.float().mean()) >= 0.95
+
+
+# ---- one rotation tolerance everywhere (0.1 mm / 0.1 deg, as every table measures) ---------------------------------
+def test_every_entry_point_defaults_to_the_one_tolerance():
+    import inspect
+
+    from nik.evaluate import evaluate
+    from nik.ik import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+    from nik.lm import lm_solve
+    from nik.swarm import refine
+
+    assert DEFAULT_TOL_POS == 1e-4 and DEFAULT_TOL_ROT == pytest.approx(math.radians(0.1), rel=1e-15)
+    for fn in (nik.IKSolver.solve, nik.IKSolver.solve_all, lm_solve, refine, evaluate):
+        params = inspect.signature(fn).parameters
+        assert params["tol_pos"].default == DEFAULT_TOL_POS, fn.__qualname__
+        assert params["tol_rot"].default == DEFAULT_TOL_ROT, fn.__qualname__
+
+
+def test_cli_tolerances_default_to_the_same_and_print_rounded(tmp_path, capsys):
+    import csv
+
+    from nik.cli import build_parser, main
+
+    args = build_parser().parse_args(["solve", "--robot", "puma560", "--pose", *["0"] * 7])
+    assert (args.tol_mm, args.tol_deg) == (0.1, 0.1)
+    robot = nik.load_robot("puma560")
+    T = robot.fk(robot.sample(2, generator=torch.Generator().manual_seed(8), dtype=torch.float64))
+    poses = tmp_path / "p.csv"
+    with poses.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["x", "y", "z", "qw", "qx", "qy", "qz"])
+        for row in torch.cat([T[:, :3, 3], nik.poses.matrix_to_quaternion(T[:, :3, :3])], -1).tolist():
+            w.writerow([repr(v) for v in row])
+    assert main(["solve", "--robot", "puma560", "--poses", str(poses), "--out", str(tmp_path / "s.csv")]) == 0
+    assert "within 0.1 mm / 0.1 deg" in capsys.readouterr().out
+
+
+# ---- angles given in degrees where radians are expected ------------------------------------------------------------
+def test_rpy_angles_beyond_two_pi_are_warned_about():
+    solver = nik.IKSolver("puma560", refine="none")
+    with pytest.warns(UserWarning, match=r"row 0: roll, pitch, yaw .*beyond 2 pi.*degrees"):
+        solver.solve([0.4, 0.1, 0.3, 180, 0, 90])  # the issue's example: degrees read as radians
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # radians, even near the ends of their ranges: no warning
+        solver.solve([[0.4, 0.1, 0.3, 3.1, -1.5, 6.2], [0.4, 0.1, 0.3, -6.28, 0.0, 0.0]])
+
+
+def test_joint_angles_beyond_two_pi_are_warned_about():
+    robot = nik.load_robot("puma560")
+    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64))
+    solver = nik.IKSolver(robot)
+    with pytest.warns(UserWarning, match=r"q_near: row 0, joint 2 = -90 .*beyond 2 pi.*degrees"):
+        solver.solve(T, q_near=[0.0, -90.0, 90.0, 0.0, 0.0, 0.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        solver.solve(T, q_near=[0.0, -1.5, 1.5, 0.0, 0.0, 0.0])
+
+
+def test_a_joint_that_turns_further_than_two_pi_or_slides_is_not_taken_for_degrees(tmp_path):
+    path = tmp_path / "long.yaml"  # joint 1 turns +-540 deg, joint 3 slides up to 9 m
+    path.write_text(
+        "convention: dh\nangles: deg\njoints:\n"
+        "  - {alpha: 90, a: 0, d: 0.3, limits: [-540, 540]}\n"
+        "  - {alpha: 0, a: 0.4, d: 0}\n"
+        "  - {alpha: 0, a: 0, d: 0, type: prismatic, limits: [0, 9]}\n"
+    )
+    robot = nik.load_robot(path)
+    T = robot.fk(torch.tensor([[7.0, 0.3, 8.0]], dtype=torch.float64))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        nik.IKSolver(robot).solve(T, q_near=[7.0, 0.3, 8.0])  # inside the ranges: radians and metres
+    with pytest.warns(UserWarning, match=r"joint 1 = 500 .*beyond 2 pi"):
+        nik.IKSolver(robot).solve(T, q_near=[500.0, 0.3, 8.0])  # 500 (deg?) outside the +-9.42 rad range
+
+
+# ---- solve_all: one solution per IK branch -------------------------------------------------------------------------
+def _wrapped_max_diff(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``(K, M)``: the largest joint difference (radians, modulo 2 pi) between rows of a and rows of b."""
+    d = a[:, None] - b[None]
+    return (torch.remainder(d + math.pi, 2 * math.pi) - math.pi).abs().amax(-1)
+
+
+@pytest.mark.parametrize("name,seed", [("rebot_v_6r", 1000), ("rebot_v_6r", 1001), ("rebot_v_6r", 1003), ("ur5", 1001)])
+def test_solve_all_returns_one_solution_per_branch_without_the_closed_form(name, seed):
+    robot = nik.load_robot(name)
+    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(seed), dtype=torch.float64))
+    sols = nik.IKSolver(robot, analytic=False).solve_all(T)  # LM from the network's hypotheses + 256 starts
+    assert 1 <= sols.shape[0] <= 8  # a 6R arm has at most 8
+    d = _wrapped_max_diff(sols, sols) + torch.eye(sols.shape[0], dtype=sols.dtype) * 10
+    assert float(d.min()) > math.radians(1.0), "two solutions within 1 deg in every joint"
+    pos, rot = nik.poses.pose_error(T.expand(sols.shape[0], 4, 4), robot.fk(sols))
+    assert float(pos.max()) < 1e-9 and float(rot.max()) < 1e-9  # polished far below the tolerance
+    if name == "rebot_v_6r":  # PUMA-like: the closed form is the independent reference
+        closed, valid = puma560_ik(robot, T[0])
+        closed = closed[valid]
+        match = _wrapped_max_diff(sols, closed)
+        assert float(match.min(1).values.max()) < 1e-8  # each solution is one of the closed form's
+        assert sols.shape[0] == closed.shape[0]  # ... and every closed-form solution was found

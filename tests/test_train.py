@@ -116,3 +116,28 @@ def test_bad_ckpt_path_ends_in_one_clear_line(kind, dataset, tmp_path):
     expected = "not found" if kind == "missing" else "not a loadable nik checkpoint"
     assert expected in lines[0]
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.fixture(scope="module")
+def logged_run(dataset, tmp_path_factory):
+    """A 3-epoch run with stdout and stderr going to pipes (as in ``train.py ... > log``), keeping the network as
+    the fit ends (FinalCheckpoint, as the shipped-network configs do)."""
+    root = tmp_path_factory.mktemp("logged")
+    done = _train(dataset, root, "--trainer.max_epochs", "3", "--trainer.callbacks+=nik.learn.multi.FinalCheckpoint")
+    assert done.returncode == 0, done.stderr[-3000:]
+    return root, done
+
+
+def test_progress_is_one_line_per_epoch_when_stdout_is_not_a_terminal(logged_run):
+    _, done = logged_run
+    text = done.stdout + done.stderr  # (subprocess' text mode turns the bars' carriage returns into newlines)
+    assert "it/s" not in text and "s/it" not in text and "Validation DataLoader" not in text  # no tqdm bars
+    lines = [ln for ln in done.stdout.splitlines() if ln.startswith("epoch ")]
+    assert [ln.split()[1] for ln in lines] == ["1/3", "2/3", "3/3"]
+    assert all("train_loss" in ln and "val_loss" in ln for ln in lines)
+
+
+def test_final_checkpoint_is_saved_without_the_weights_only_notice(logged_run):
+    root, done = logged_run
+    assert "weights_only" not in done.stdout + done.stderr
+    assert load_checkpoint(root / "final.ckpt", robot="kuka_kr").robot.name == "kuka_kr"

@@ -171,6 +171,26 @@ def is_puma_like(robot) -> bool:
     return True
 
 
+def _rigid(G: np.ndarray, name: str) -> np.ndarray:
+    """``G: (n + 1, 4, 4)`` with each rotation replaced by the nearest rotation matrix (polar factor).
+
+    URDF origins pass through float32 in pytorch-kinematics, so a URDF arm's rotations are orthonormal to
+    about 1e-7 only; the DH rewrite needs them exact. The closed form then solves this rounded copy and
+    :func:`puma560_ik` checks every solution by FK of the robot itself. More than 1e-5 away from a rotation
+    is not a rounding: ``ValueError``.
+    """
+    G = np.array(G, dtype=float, copy=True)
+    U, _, Vt = np.linalg.svd(G[:, :3, :3])
+    R = U @ Vt
+    worst = float(np.abs(R - G[:, :3, :3]).max()) if len(G) else 0.0
+    if worst > 1e-5 or (np.linalg.det(R) < 0).any():
+        raise ValueError(
+            f"puma560_ik: robot {name!r} has a fixed transform that is not a rotation (off by {worst:.3g})"
+        )
+    G[:, :3, :3] = R
+    return G
+
+
 def _geometry(robot) -> PumaGeometry:
     name = getattr(robot, "name", "robot")
     prismatic = getattr(robot, "prismatic", None)
@@ -179,7 +199,7 @@ def _geometry(robot) -> PumaGeometry:
         raise ValueError(f"puma560_ik: robot {name!r} has prismatic joint(s) {joints}; a PUMA-like arm is all revolute")
     if robot.dof != 6:
         raise ValueError(f"puma560_ik: robot {name!r} has {robot.dof} joints; a PUMA-like arm has 6")
-    G0 = robot.G.numpy()
+    G0 = _rigid(robot.G.numpy(), name)
     o0 = robot.offsets.numpy()
     G, o, dh = canonical_dh(G0, o0)
     # self-check: the canonical chain must reproduce the robot's FK

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+
 __all__ = ["register", "format_info"]
 
 
@@ -29,7 +31,7 @@ def register(sub) -> None:
         description="Sample joint vectors, compute their poses by FK and write data/NAME/ (q.npy, pose.npy, "
         "branch.npy, meta.json). Reproducible: the same arguments give identical arrays.",
     )
-    g.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
+    add_robot_arguments(g)
     g.add_argument("--n", required=True, type=_positive_int, help="number of samples (e.g. 1000000 or 1e6)")
     g.add_argument("--out", required=True, help="dataset directory to create, e.g. data/kuka_kr_1m")
     g.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -101,11 +103,10 @@ def _cmd_generate(args) -> int:
     import time
 
     from nik.data import DEFAULT_CHUNK, generate_dataset
-    from nik.robots import load_robot
 
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
-    robot = load_robot(args.robot)
+    robot = robot_from_args(args)
     shard = None
     if args.shard is not None:
         from nik.data import parse_shard
@@ -137,10 +138,11 @@ def _cmd_generate(args) -> int:
 
         a, b = read_meta(out)["shard"]["rows"]
         rows = f"rows {a}..{b - 1} of {args.n}" if b > a else f"empty: {args.n} samples fill fewer blocks than shards"
-        what = f"shard {shard[0]}/{shard[1]} ({rows}) of {robot.name} samples"
+        what = f"shard {shard[0]}/{shard[1]} ({rows}) of {robot.name}{tool_link_text(robot)} samples"
         print(f"wrote {what} to {out} in {dt:.1f} s ({(b - a) / dt:,.0f} samples/s)")
         return 0
-    print(f"wrote {args.n} samples of {robot.name} to {out} in {dt:.1f} s ({args.n / dt:,.0f} samples/s)")
+    what = f"{args.n} samples of {robot.name}{tool_link_text(robot)}"
+    print(f"wrote {what} to {out} in {dt:.1f} s ({args.n / dt:,.0f} samples/s)")
     return 0
 
 
@@ -154,7 +156,8 @@ def format_info(ds) -> str:
     rob = m["robot"]
     lines = [
         f"dataset    {ds.path}",
-        f"robot      {rob['name']} (definition {rob['definition_hash']}, {m['dof']} joints)",
+        f"robot      {rob['name']} (definition {rob['definition_hash']}, {m['dof']} joints"
+        + (f", tool link {rob['definition']['end_link']})" if rob["definition"].get("end_link") else ")"),
         f"samples    {m['n']:,}  (train {m['split_sizes']['train']:,}, val {m['split_sizes']['val']:,}, "
         f"test {m['split_sizes']['test']:,}; contiguous ranges {m['splits']})",
         f"sampler    {m['sampler']}, seed {m['seed']}, ranges: {m['ranges']['source']}",

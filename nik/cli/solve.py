@@ -10,6 +10,9 @@ import sys
 import warnings
 from pathlib import Path
 
+from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
+
 __all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solutions_csv"]
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
@@ -26,7 +29,7 @@ def register(sub) -> None:
         "mm, the rotation error in degrees and the success flag. Exit status: 0 when every pose was reached within "
         "tolerance, 1 when some was not, 2 on an error.",
     )
-    s.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
+    add_robot_arguments(s)
     s.add_argument(
         "--checkpoint",
         default="auto",
@@ -58,12 +61,17 @@ def register(sub) -> None:
         help="print JSON (joints in SI and in deg/mm as q_si and q_display; q_rad and q_deg for revolute joints, "
         "null for prismatic ones; errors in SI and mm/deg)",
     )
-    s.add_argument("--tol-mm", type=float, default=0.1, help="position tolerance in mm (default 0.1)")
+    s.add_argument(
+        "--tol-mm",
+        type=float,
+        default=DEFAULT_TOL_POS_MM,
+        help=f"position tolerance in mm (default {DEFAULT_TOL_POS_MM:g})",
+    )
     s.add_argument(
         "--tol-deg",
         type=float,
-        default=math.degrees(1e-3),
-        help="rotation tolerance in degrees (default 0.0573 = 1e-3 rad)",
+        default=DEFAULT_TOL_ROT_DEG,
+        help=f"rotation tolerance in degrees (default {DEFAULT_TOL_ROT_DEG:g}, the tolerance every table measures)",
     )
     s.add_argument(
         "--q-near",
@@ -80,14 +88,19 @@ def register(sub) -> None:
 
     e = sub.add_parser(
         "evaluate",
-        help="evaluate network, refinements, swarm, closed form and pytorch-kinematics on a test split",
+        help="evaluate the default pipeline, LM multistart, network, refinements, swarm, closed form and "
+        "pytorch-kinematics on a test split",
         description="Solve the test poses of a dataset with every pipeline and write a Markdown table "
         "(success at 1 mm / 1 deg and 0.1 mm / 0.1 deg, error percentiles, joints outside limits, time per "
         "target), a JSON copy and a cumulative error plot (PNG).",
     )
-    e.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
+    add_robot_arguments(e)
     e.add_argument(
-        "--checkpoint", default=None, help="trained network (.ckpt); without it the network rows are left out"
+        "--checkpoint",
+        default="auto",
+        help="network of the network rows: 'auto' (default): the one shipped with nik for this robot, as "
+        "IKSolver(robot) picks it; 'none': no network rows; else a trained network (.ckpt / .safetensors). "
+        "The rows 'default pipeline' (IKSolver(robot)) and 'LM multistart, no network' are always there",
     )
     e.add_argument("--data", required=True, help="dataset directory (nik generate)")
     e.add_argument("--n", type=int, default=1000, help="number of test poses (default 1000)")
@@ -214,10 +227,9 @@ def _cmd_solve(args) -> int:
     import torch
 
     from nik.ik import IKSolver, as_poses
-    from nik.robots import load_robot
     from nik.robots.reach import unreachable_message
 
-    robot = load_robot(args.robot)
+    robot = robot_from_args(args)
     if args.pose is not None:
         poses = torch.tensor([args.pose], dtype=torch.float64)
     else:
@@ -278,6 +290,7 @@ def _cmd_solve(args) -> int:
             json.dumps(
                 {
                     "robot": robot.name,
+                    "end_link": robot.end_link,
                     "joint_names": robot.joint_names,
                     "joint_units_si": si,
                     "joint_units_display": shown,
@@ -294,15 +307,15 @@ def _cmd_solve(args) -> int:
     elif args.out:
         ok = int(res.success.sum())
         print(
-            f"solved {ok} of {len(res)} poses within {args.tol_mm:g} mm / {args.tol_deg:g} deg "
-            f"({robot.name}, guess: {res.source}, refine: {args.refine}); wrote {args.out}"
+            f"solved {ok} of {len(res)} poses within {describe(args.tol_mm * 1e-3, math.radians(args.tol_deg))} "
+            f"({robot.name}{tool_link_text(robot)}, guess: {res.source}, refine: {args.refine}); wrote {args.out}"
         )
     else:
-        _print_table(robot, res)
+        _print_table(robot, res, tolerance=describe(args.tol_mm * 1e-3, math.radians(args.tol_deg)))
     return 0 if bool(res.success.all()) else 1
 
 
-def _print_table(robot, res, *, limit: int = 50) -> None:
+def _print_table(robot, res, *, tolerance: str, limit: int = 50) -> None:
     """Joints in degrees, prismatic joints in mm (each column header says which), errors in mm and degrees."""
     names = robot.joint_names
     _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
@@ -327,24 +340,27 @@ def _print_table(robot, res, *, limit: int = 50) -> None:
         print("  ".join(c.rjust(w) for c, w in zip(cells, widths, strict=True)))
     if len(res) > limit:
         print(f"... {len(res) - limit} more rows (use --out FILE.csv)")
-    print(f"robot {robot.name}, initial guess: {res.source}; {int(res.success.sum())} of {len(res)} reached")
+    print(
+        f"robot {robot.name}{tool_link_text(robot)}, initial guess: {res.source}; "
+        f"{int(res.success.sum())} of {len(res)} reached within {tolerance}"
+    )
 
 
 def _cmd_evaluate(args) -> int:
     from nik.evaluate import REFINEMENTS, evaluate, markdown_table, write_report
-    from nik.robots import load_robot
 
-    robot = load_robot(args.robot)
+    robot = robot_from_args(args)
     refinements = tuple(m.strip() for m in args.refinements.split(",") if m.strip())
     bad = [m for m in refinements if m not in REFINEMENTS]
     if bad:
         raise ValueError(f"--refinements: unknown method(s) {bad}; expected some of {','.join(REFINEMENTS)}")
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
-    if args.checkpoint is not None:  # refuse a bad checkpoint in one line, before any progress output
+    if str(args.checkpoint).lower() not in ("auto", "none"):  # refuse a bad one in one line, before any output
         from nik.nets import load_checkpoint
 
         load_checkpoint(args.checkpoint, robot=robot)
+    out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name
     report = evaluate(
         robot,
         data=args.data,
@@ -357,8 +373,8 @@ def _cmd_evaluate(args) -> int:
         seed=args.seed,
         device=args.device,
         progress=lambda msg: print(f"evaluating: {msg}", file=sys.stderr, flush=True),
+        on_row=lambda rep: write_report(rep, out, plot=False),  # each row is kept as soon as it is made
     )
-    out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name
     paths = write_report(report, out)
     print(markdown_table(report))
     print(f"wrote {paths['markdown']}, {paths['json']}, {paths['plot']}")

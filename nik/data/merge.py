@@ -68,13 +68,22 @@ def merge_shards(
         ``out`` as a :class:`pathlib.Path`.
 
     Raises:
-        DatasetError: a directory is not a shard, shards of different datasets, a missing or duplicate
-            shard index, rows that do not tile ``[0, n)``, a corrupt shard file.
+        DatasetError: ``out`` is (or holds) one of the shards, a directory is not a shard, shards of different
+            datasets, a missing or duplicate shard index, rows that do not tile ``[0, n)``, a corrupt shard file.
         FileExistsError: ``out`` exists and ``overwrite`` is False.
     """
     paths = [Path(p) for p in shards]
     if not paths:
         raise ValueError("merge: no shard directories given")
+    target = Path(out).resolve()
+    for p in paths:
+        where = p.resolve()
+        if where == target:
+            raise DatasetError(
+                f"merge: the output {out} is one of the inputs ({p}); write the merged dataset elsewhere"
+            )
+        if target in where.parents:
+            raise DatasetError(f"merge: the output {out} holds input {p}; write the merged dataset elsewhere")
     metas = [_shard_meta(p) for p in paths]
     first, first_path = metas[0], paths[0]
     count = int(first["shard"]["count"])

@@ -474,9 +474,15 @@ def load_dataset(path: str | Path, *, robot=None, verify: bool = True, mmap: boo
         robot = load_robot(robot)
         want = meta["robot"].get("definition_hash")
         if robot.definition_hash != want:
+            made = (meta["robot"].get("definition") or {}).get("end_link")
+            tool = (
+                f"; it was made with tool link {made!r}, this robot's is {robot.end_link!r} (--end-link)"
+                if made != robot.end_link
+                else ""
+            )
             raise DatasetError(
                 f"{path} was generated for robot {meta['robot'].get('name')!r} (definition {want}), "
-                f"not for robot {robot.name!r} (definition {robot.definition_hash})"
+                f"not for robot {robot.name!r} (definition {robot.definition_hash}){tool}"
             )
     n, dof = int(meta["n"]), int(meta["dof"])
     q = _open_array(path, "q.npy", meta, (n, dof), verify=verify)

@@ -16,8 +16,11 @@ from nik.ik.refiners import RefineResult, lm_refine, swarm_refine
 from nik.ik.result import IKResult
 from nik.ik.solver import REFINE_METHODS, IKSolver
 from nik.ik.targets import QUAT_NORM_TOL, as_poses, check_tolerances
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = [
+    "DEFAULT_TOL_POS",
+    "DEFAULT_TOL_ROT",
     "QUAT_NORM_TOL",
     "REFINE_METHODS",
     "IKResult",

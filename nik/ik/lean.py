@@ -42,7 +42,7 @@ from nik.ik.result import IKResult
 from nik.ik.targets import QUAT_NORM_TOL
 from nik.lm.batched import LMCfg
 from nik.lm.compiled import CompiledLM, CompiledRun
-from nik.poses import ORTHONORMAL_TOL
+from nik.poses import DEGREES_SUSPECT, ORTHONORMAL_TOL
 from nik.robots.reach import REACH_SLACK, reach_center, reach_radius, unreachable_message
 
 __all__ = ["LEAN_MAX_BATCH", "LEAN_MAX_BATCH_CLOSED_FORM", "applies", "solve"]
@@ -94,7 +94,8 @@ def solve(solver, T_target, tol_pos, tol_rot, seed, q_near, max_iters, represent
     robot = solver.robot
     near = None
     if q_near is not None:
-        near = _joints(q_near, T.shape[0], robot.dof)
+        joints = robot.chain_arrays()[1]
+        near = _joints(q_near, T.shape[0], robot.dof, joints[:, 3] != 0.0, joints[:, 1], joints[:, 2])
         if near is None:
             return None
     facts = _facts(robot)
@@ -253,6 +254,8 @@ def _poses(T_target, representation, limit: int = LEAN_MAX_BATCH) -> tuple[np.nd
         a = a[None] if a.ndim == 1 else a
         if a.ndim != 2 or a.shape[1] != (7 if rep == "quat" else 6):
             return None
+        if rep == "rpy" and np.abs(a[:, 3:]).max() > DEGREES_SUSPECT:
+            return None  # degrees? the torch path warns
     else:
         return None
     if not 1 <= a.shape[0] <= min(limit, LEAN_MAX_BATCH):
@@ -269,8 +272,9 @@ def _poses(T_target, representation, limit: int = LEAN_MAX_BATCH) -> tuple[np.nd
     return (a, dtype) if kernels.poses_ok(a, ORTHONORMAL_TOL) else None
 
 
-def _joints(q_near, B: int, dof: int) -> np.ndarray | None:
-    """``q_near`` as ``(B, dof)`` float64 when :func:`nik.ik.targets.as_q_near` would accept it, else None."""
+def _joints(q_near, B: int, dof: int, prismatic: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
+    """``q_near`` as ``(B, dof)`` float64 when :func:`nik.ik.targets.as_q_near` would accept it without a warning
+    (an angle beyond 2 pi outside its joint's range: degrees?), else None."""
     if isinstance(q_near, torch.Tensor):
         if q_near.device.type != "cpu" or not q_near.is_floating_point():
             return None
@@ -284,4 +288,8 @@ def _joints(q_near, B: int, dof: int) -> np.ndarray | None:
         a = np.broadcast_to(a, (B, dof))
     if a.shape != (B, dof) or not np.isfinite(a).all():
         return None
+    if np.abs(a).max() > DEGREES_SUSPECT:
+        suspect = (np.abs(a) > DEGREES_SUSPECT) & ~prismatic & ((a < lo) | (a > hi))
+        if suspect.any():
+            return None  # degrees? the torch path warns
     return np.ascontiguousarray(a, dtype=np.float64)

@@ -42,6 +42,7 @@ from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.robots import Robot, load_robot
 from nik.robots.reach import unreachable_message, within_reach
 from nik.threads import threads_for
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["REFINE_METHODS", "IKSolver"]
 
@@ -158,13 +159,18 @@ class IKSolver:
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
         """The raw initial guess ``(B, dof)`` (network, analytic or best-of-64 uniform), inside the limits."""
         T = as_poses(T_target, representation)
-        return stages.first_guess(self, T, q_near=as_q_near(q_near, T, self.robot.dof), seed=seed)
+        return stages.first_guess(
+            self,
+            T,
+            q_near=as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic, limits=self.robot.limits),
+            seed=seed,
+        )
 
     def solve(
         self,
         T_target,
-        tol_pos: float = 1e-4,
-        tol_rot: float = 1e-3,
+        tol_pos: float = DEFAULT_TOL_POS,
+        tol_rot: float = DEFAULT_TOL_ROT,
         seed: int = 0,
         q_near=None,
         max_iters: int | None = None,
@@ -176,8 +182,9 @@ class IKSolver:
             T_target: ``(B, 4, 4)``, ``(B, 7)`` xyz + quaternion (w, x, y, z) or ``(B, 6)`` xyz +
                 roll-pitch-yaw, metres/radians (see :func:`nik.ik.targets.as_poses`; a single pose counts
                 as B = 1). The computation runs in its dtype and device (non-tensor input: float64).
-            tol_pos: success tolerance on the position, metres.
-            tol_rot: success tolerance on the geodesic rotation error, radians.
+            tol_pos: success tolerance on the position, metres (default 1e-4: 0.1 mm).
+            tol_rot: success tolerance on the geodesic rotation error, radians (default 1.745e-3: 0.1 deg;
+                both from :mod:`nik.tolerances`, the tolerance every table measures).
             seed: seeds every random choice (same seed, same answer).
             q_near: ``(dof,)`` or ``(B, dof)`` current configuration, radians: among the solutions
                 found, return the one nearest to it (joint motion, see :func:`nik.ik.guesses.nearest_solution`).
@@ -205,7 +212,15 @@ class IKSolver:
         msg = unreachable_message(self.robot, T, reachable)
         if msg is not None:
             warnings.warn(msg, UserWarning, stacklevel=2)
-        job = stages.Job(T, reachable, as_q_near(q_near, T, self.robot.dof), tol_pos, tol_rot, seed, max_iters)
+        job = stages.Job(
+            T,
+            reachable,
+            as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic, limits=self.robot.limits),
+            tol_pos,
+            tol_rot,
+            seed,
+            max_iters,
+        )
         with threads_for(T.shape[0]):
             answers = stages.guess(self, job)
             if self.refine != "none":
@@ -219,8 +234,8 @@ class IKSolver:
         self,
         T_target,
         *,
-        tol_pos: float = 1e-4,
-        tol_rot: float = 1e-3,
+        tol_pos: float = DEFAULT_TOL_POS,
+        tol_rot: float = DEFAULT_TOL_ROT,
         seed: int = 0,
         n_starts: int = 256,
         dedupe_tol: float = 1e-3,

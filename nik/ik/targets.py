@@ -8,7 +8,15 @@ import math
 import numpy as np
 import torch
 
-from nik.poses import POSE_DIMS, make_pose, quaternion_to_matrix, rpy_to_matrix, validate_joints, validate_pose
+from nik.poses import (
+    POSE_DIMS,
+    make_pose,
+    quaternion_to_matrix,
+    rpy_to_matrix,
+    validate_joints,
+    validate_pose,
+    warn_degrees,
+)
 
 __all__ = ["QUAT_NORM_TOL", "as_poses", "as_q_near", "check_tolerances"]
 
@@ -28,6 +36,9 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
 
     Returns:
         ``(B, 4, 4)`` floating-point poses (dtype and device of a floating tensor input).
+
+    Warns:
+        UserWarning: a roll, pitch or yaw beyond 2 pi (degrees given as radians?).
 
     Raises:
         ValueError: wrong shape, NaN/inf, a quaternion whose norm is 0 or further than
@@ -85,6 +96,7 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
             )
         R = quaternion_to_matrix(rot / norm[:, None])
     else:
+        warn_degrees(rot, name=name, rpy=True, stacklevel=4)
         R = rpy_to_matrix(rot)
     return validate_pose(make_pose(R, p), name=name)
 
@@ -100,14 +112,19 @@ def check_tolerances(tol_pos: float, tol_rot: float) -> None:
             raise ValueError(f"{name}: expected a number >= 0 ({unit}), got {value!r}")
 
 
-def as_q_near(q_near, T: torch.Tensor, dof: int) -> torch.Tensor | None:
+def as_q_near(
+    q_near, T: torch.Tensor, dof: int, *, prismatic: torch.Tensor | None = None, limits: torch.Tensor | None = None
+) -> torch.Tensor | None:
     """``q_near`` (None, ``(dof,)`` or ``(B, dof)``, radians; a tensor, array or list) as ``(B, dof)`` in the
-    dtype and device of ``T: (B, 4, 4)``; None stays None. Raises ``ValueError`` naming a bad shape or value."""
+    dtype and device of ``T: (B, 4, 4)``; None stays None. Raises ``ValueError`` naming a bad shape or value;
+    warns when a revolute joint (``prismatic: (dof,)`` marks the others) lies beyond 2 pi and outside its
+    ``limits: (dof, 2)`` (degrees?)."""
     if q_near is None:
         return None
     B = T.shape[0]
     q = q_near if isinstance(q_near, torch.Tensor) else torch.as_tensor(np.asarray(q_near, dtype=np.float64))
     validate_joints(q, dof, name="q_near")
+    warn_degrees(q, name="q_near", prismatic=prismatic, limits=limits, stacklevel=4)
     q = q.to(dtype=T.dtype, device=T.device)
     if q.ndim == 1:
         q = q.expand(B, -1)

@@ -66,7 +66,7 @@ def lm_options(
     max_step: float = 0.5,
     stall_rel: float = 1e-3,
     tol_pos: float = 1e-4,
-    tol_rot: float = 1e-3,
+    tol_rot: float = math.radians(0.1),
     first_iters: int = 25,
     iters: int = 25,
     stall_iters: int = 4,
@@ -75,7 +75,8 @@ def lm_options(
     tail_iters: int | None = None,
     tail_stall_iters: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(opts, iopts)`` for :func:`lm_solve` (defaults: those of the batched LM's ``LMCfg``).
+    """``(opts, iopts)`` for :func:`lm_solve` (defaults: those of the batched LM's ``LMCfg`` and nik's one
+    tolerance, 0.1 mm / 0.1 deg).
 
     Units: ``rot_weight`` m/rad, ``eps`` m^2, ``max_step`` rad (m for prismatic joints), ``tol_pos`` m,
     ``tol_rot`` rad. ``first_iters``: iteration limit of the first start, ``iters``: of each restart;

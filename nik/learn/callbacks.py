@@ -1,18 +1,20 @@
 """Callbacks: a wall-clock history of the validation metrics (for loss-versus-time plots), the
-number of torch threads per process, and a checkpoint at a stable path (``<default_root_dir>/last.ckpt``)
-that the docs and scripts can name."""
+number of torch threads per process, a checkpoint at a stable path (``<default_root_dir>/last.ckpt``)
+that the docs and scripts can name, and one progress line per epoch for logs (:class:`EpochLines`)."""
 
 from __future__ import annotations
 
 import csv
+import math
 import os
+import time
 from pathlib import Path
 
 import lightning as L
 import torch
-from lightning.pytorch.callbacks import Checkpoint
+from lightning.pytorch.callbacks import Checkpoint, ProgressBar
 
-__all__ = ["History", "StableLastCheckpoint", "Threads"]
+__all__ = ["EpochLines", "History", "StableLastCheckpoint", "Threads"]
 
 
 class Threads(L.Callback):
@@ -142,3 +144,63 @@ class StableLastCheckpoint(Checkpoint):
 
     def on_train_end(self, trainer, pl_module) -> None:
         self._save(trainer)
+
+
+class EpochLines(ProgressBar):
+    """Progress as one line per training epoch (and one per ``validate`` / ``test`` run) on stdout, in place of
+    Lightning's redrawn tqdm bars, which fill a redirected log (``train.py ... > log``) with megabytes.
+
+    ``train.py`` uses it when stdout is not a terminal and the run has a progress bar and no progress bar
+    callback of its own. A line: ``epoch 3/100  step 42  12.3 s  train_loss 0.0123  val_loss 0.0456 ...``
+    (every scalar in ``trainer.callback_metrics``; the losses first).
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._enabled = True
+        self._t0 = time.perf_counter()
+
+    def disable(self) -> None:
+        self._enabled = False
+
+    def enable(self) -> None:
+        self._enabled = True
+
+    @staticmethod
+    def _metrics(trainer) -> str:
+        items = {k: float(v) for k, v in trainer.callback_metrics.items() if getattr(v, "numel", lambda: 1)() == 1}
+        keys = sorted(items, key=lambda k: (not k.endswith("loss"), k))
+        return "  ".join(f"{k} {items[k]:.4g}" for k in keys)
+
+    def _say(self, trainer, head: str) -> None:
+        if not self._enabled or not trainer.is_global_zero:
+            return
+        metrics = self._metrics(trainer)
+        print(f"{head}  {time.perf_counter() - self._t0:.1f} s" + (f"  {metrics}" if metrics else ""), flush=True)
+
+    def on_train_start(self, trainer, pl_module) -> None:
+        self._t0 = time.perf_counter()
+
+    def on_train_epoch_end(self, trainer, pl_module) -> None:
+        total = trainer.max_epochs
+        of = f"/{total}" if total is not None and 0 < total < math.inf else ""
+        self._say(trainer, f"epoch {trainer.current_epoch + 1}{of}  step {trainer.global_step}")
+
+    @staticmethod
+    def _validate_run(trainer) -> bool:
+        """``train.py validate`` (not the validations inside a fit)."""
+        return getattr(trainer.state.fn, "value", trainer.state.fn) == "validate"
+
+    def on_validation_start(self, trainer, pl_module) -> None:
+        if self._validate_run(trainer):
+            self._t0 = time.perf_counter()
+
+    def on_validation_end(self, trainer, pl_module) -> None:
+        if self._validate_run(trainer):
+            self._say(trainer, "validation")
+
+    def on_test_start(self, trainer, pl_module) -> None:
+        self._t0 = time.perf_counter()
+
+    def on_test_end(self, trainer, pl_module) -> None:
+        self._say(trainer, "test")

@@ -9,6 +9,7 @@ the shipped configs set ``default_root_dir`` to ``runs/<method>``. The default l
 from __future__ import annotations
 
 import logging
+import sys
 import warnings
 from pathlib import Path
 
@@ -69,6 +70,12 @@ def _ckpt_path_arg(args: list[str]) -> str | None:
     return None
 
 
+def _class_path(callback) -> str:
+    """The class path of a callback as the config holds it (a Namespace before instantiation, or an object)."""
+    path = getattr(callback, "class_path", None)
+    return str(path) if path is not None else f"{type(callback).__module__}.{type(callback).__name__}"
+
+
 def _cli_class():
     from jsonargparse import Namespace
     from lightning.pytorch.cli import LightningCLI
@@ -87,6 +94,13 @@ def _cli_class():
                     *(trainer.get("callbacks") or []),
                     Namespace(class_path="nik.learn.callbacks.StableLastCheckpoint", init_args=Namespace()),
                 ]
+            if trainer.get("enable_progress_bar") is not False and not sys.stdout.isatty():
+                callbacks = trainer.get("callbacks") or []
+                if not any("ProgressBar" in _class_path(cb) for cb in callbacks):  # bars would fill the log
+                    trainer["callbacks"] = [
+                        *callbacks,
+                        Namespace(class_path="nik.learn.callbacks.EpochLines", init_args=Namespace()),
+                    ]
             ckpt = cfg.get("ckpt_path")
             if ckpt is not None and str(ckpt) not in _SPECIAL_CKPT:
                 check_resume_checkpoint(ckpt)

@@ -277,4 +277,5 @@ class FinalCheckpoint(L.Callback):
     def on_fit_end(self, trainer, pl_module) -> None:
         if trainer.fast_dev_run:
             return
-        trainer.save_checkpoint(Path(trainer.default_root_dir) / self.filename)
+        # full state, like every checkpoint nik writes (weights_only said, so Lightning has nothing to note)
+        trainer.save_checkpoint(Path(trainer.default_root_dir) / self.filename, weights_only=False)

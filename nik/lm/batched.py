@@ -46,6 +46,7 @@ from nik.poses import matrix_to_quaternion
 from nik.robots.joints import wrap_into, wrap_mask
 from nik.robots.model import Robot
 from nik.robots.reach import within_reach
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["LMCfg", "LMRun", "lm_run", "lm_solve", "so3_log"]
 
@@ -326,8 +327,8 @@ def lm_solve(
     q0: torch.Tensor | None,
     *,
     cfg: LMCfg | None = None,
-    tol_pos: float = 1e-4,
-    tol_rot: float = 1e-3,
+    tol_pos: float = DEFAULT_TOL_POS,
+    tol_rot: float = DEFAULT_TOL_ROT,
     max_iters: int | None = None,
     restarts: int | None = None,
     generator: torch.Generator | None = None,

@@ -58,10 +58,12 @@ def load_checkpoint(
         the network in eval mode; ``net.robot`` is rebuilt from the stored definition.
 
     Raises:
-        CheckpointError: unreadable file, no nik block, or a robot mismatch (both robots named).
+        CheckpointError: a folder, an unreadable file, no nik block, or a robot mismatch (both robots named).
         FileNotFoundError: no such file.
     """
     path = Path(path)
+    if path.is_dir():
+        raise CheckpointError(f"checkpoint {path} is a folder, not a checkpoint file (.ckpt)")
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
     try:

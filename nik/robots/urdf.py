@@ -1,8 +1,12 @@
 """URDF arms through pytorch-kinematics (the only module of nik that imports it).
 
-pytorch-kinematics parses the file and gives the serial chain from the root to the tool
-link; nik then converts that chain once into its own FK normal form, so a URDF arm runs
-on nik's FK like any other.
+A URDF file holds much that kinematics never reads (visuals, materials, textures, collisions, inertias,
+transmissions, gazebo and sensor tags) and pytorch-kinematics' parser rejects a file if any of that is
+incomplete, or if the file opens with an XML declaration naming its encoding. So nik first reduces the file to
+its kinematics (:func:`kinematic_urdf`: ``<robot name>``, ``<link name>`` and each joint's type, origin, axis,
+parent, child and limit), read from bytes by the standard XML parser; pytorch-kinematics then parses that and
+gives the serial chain from the root to the tool link; nik converts that chain once into its own FK normal form,
+so a URDF arm runs on nik's FK like any other.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ import io
 import json
 import math
 import os
-import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -23,24 +27,92 @@ from nik.errors import RobotDefinitionError
 from nik.poses import rpy_to_matrix
 from nik.robots.model import NormalFormBuilder, Robot
 
-__all__ = ["URDF_CACHE_FORMAT", "load_urdf", "default_end_link", "build_pk_chain"]
+__all__ = ["URDF_CACHE_FORMAT", "load_urdf", "default_end_link", "build_pk_chain", "kinematic_urdf"]
 
 #: Version of the cached parse results (bump when the conversion to the normal form changes).
-URDF_CACHE_FORMAT = 1
+URDF_CACHE_FORMAT = 2
+
+#: joint types of the URDF format; floating and planar joints are kept as fixed (an error only on the arm's chain)
+_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+_ORIGIN_ATTRS = ("xyz", "rpy")
 
 
-_XML_DECLARATION = re.compile(r"^\s*<\?xml[^>]*\?>")
+def _local(tag) -> str:
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
 
 
-def _no_declaration(text: str) -> str:
-    """``text`` without a leading ``<?xml ... encoding=...?>``: lxml refuses str input that declares an encoding."""
-    return _XML_DECLARATION.sub("", text, count=1)
+def _kinematic_tree(data: str | bytes, source: str) -> tuple[ET.Element, set[str]]:
+    """The ``<robot>`` reduced to links and joints, and the names of its floating / planar joints."""
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as err:
+        raise RobotDefinitionError(f"{source}: not a readable URDF (XML: {err})") from err
+    if _local(root.tag) != "robot":
+        raise RobotDefinitionError(f"{source}: root element is <{_local(root.tag)}>, expected <robot>")
+    ns = root.tag[: -len("robot")]
+    out = ET.Element("robot", name=root.get("name", ""))
+    links, joints, free = set(), [], set()
+    for el in root:
+        if el.tag == ns + "link":
+            name = el.get("name")
+            if not name:
+                raise RobotDefinitionError(f"{source}: a <link> has no name")
+            link = ET.SubElement(out, "link", name=name)
+            origin = el.find(ns + "origin")  # a link-level origin (not standard URDF) moves the link in pk
+            if origin is not None:
+                ET.SubElement(link, "origin", {k: origin.get(k) for k in _ORIGIN_ATTRS if origin.get(k) is not None})
+            links.add(name)
+        elif el.tag == ns + "joint":
+            joints.append(el)
+    if not joints:
+        raise RobotDefinitionError(f"{source}: has no joints (links: {sorted(links)})")
+    for el in joints:
+        name, jtype = el.get("name"), el.get("type")
+        if not name:
+            raise RobotDefinitionError(f"{source}: a <joint> has no name")
+        if jtype not in _JOINT_TYPES:
+            raise RobotDefinitionError(
+                f"{source}: joint {name!r} has unknown type {jtype!r} (expected one of {', '.join(_JOINT_TYPES)})"
+            )
+        if jtype in ("floating", "planar"):
+            free.add(name)
+            jtype = "fixed"
+        joint = ET.SubElement(out, "joint", name=name, type=jtype)
+        for role in ("parent", "child"):
+            ref = el.find(ns + role)
+            link = ref.get("link") if ref is not None else None
+            if not link:
+                raise RobotDefinitionError(f"{source}: joint {name!r} has no <{role} link=...>")
+            if link not in links:
+                raise RobotDefinitionError(f"{source}: joint {name!r}: {role} link {link!r} is not declared")
+            ET.SubElement(joint, role, link=link)
+        origin = el.find(ns + "origin")
+        if origin is not None:
+            ET.SubElement(joint, "origin", {k: origin.get(k) for k in _ORIGIN_ATTRS if origin.get(k) is not None})
+        axis = el.find(ns + "axis")
+        if axis is not None and axis.get("xyz") is not None:
+            ET.SubElement(joint, "axis", xyz=axis.get("xyz"))
+        limit = el.find(ns + "limit")
+        if limit is not None:  # effort and velocity play no part; the parser wants them
+            attrs = {k: limit.get(k) for k in ("lower", "upper") if limit.get(k) is not None}
+            ET.SubElement(joint, "limit", attrs, effort=limit.get("effort", "0"), velocity=limit.get("velocity", "0"))
+    return out, free
+
+
+def kinematic_urdf(data: str | bytes, source: str = "URDF") -> str:
+    """A URDF reduced to what kinematics reads, as a string pytorch-kinematics' parser accepts.
+
+    ``data`` is the file's bytes (best: the XML declaration then says how to decode them) or text. Kept: the
+    robot's name, every link's name, each joint's name, type, ``origin`` (xyz, rpy), ``axis``, ``parent``,
+    ``child`` and ``limit`` (lower, upper). Floating and planar joints become fixed (:func:`load_urdf` refuses
+    one between the root and the tool link). Raises :class:`RobotDefinitionError` naming a malformed link or
+    joint.
+    """
+    return ET.tostring(_kinematic_tree(data, source)[0], encoding="unicode")
 
 
 def _parse_chain(text: str, source: str):
     import pytorch_kinematics as pk
-
-    text = _no_declaration(text)
 
     try:
         with contextlib.redirect_stderr(io.StringIO()):  # the parser prints notes on unknown tags
@@ -49,9 +121,9 @@ def _parse_chain(text: str, source: str):
         raise RobotDefinitionError(f"{source}: not a readable URDF ({type(err).__name__}: {err})") from err
 
 
-def default_end_link(text: str, source: str = "URDF") -> str:
+def default_end_link(data: str | bytes, source: str = "URDF") -> str:
     """The child link of the last joint of the longest chain of revolute joints (first found on ties)."""
-    chain = _parse_chain(text, source)
+    chain = _parse_chain(kinematic_urdf(data, source), source)
     best = (0, None)
 
     def visit(frame, count):
@@ -69,12 +141,12 @@ def default_end_link(text: str, source: str = "URDF") -> str:
     return best[1]
 
 
-def build_pk_chain(text: str, end_link: str, root_link: str = ""):
-    """pytorch-kinematics ``SerialChain`` from the root (or ``root_link``) to ``end_link``."""
+def build_pk_chain(data: str | bytes, end_link: str, root_link: str = ""):
+    """pytorch-kinematics ``SerialChain`` from the root (or ``root_link``) to ``end_link`` of a URDF's bytes or text."""
     import pytorch_kinematics as pk
 
     with contextlib.redirect_stderr(io.StringIO()):
-        return pk.build_serial_chain_from_urdf(_no_declaration(text), end_link, root_link)
+        return pk.build_serial_chain_from_urdf(kinematic_urdf(data), end_link, root_link)
 
 
 def load_urdf(
@@ -105,7 +177,7 @@ def load_urdf(
     must give them); fixed joints are merged into the constant transforms.
 
     The result is kept in nik's user cache folder (``$XDG_CACHE_HOME/nik/robots``, default
-    ``~/.cache/nik/robots``) under the SHA-256 of the file's text, these arguments, the installed
+    ``~/.cache/nik/robots``) under the SHA-256 of the file's bytes, these arguments, the installed
     pytorch-kinematics and :data:`URDF_CACHE_FORMAT`, with a checksum verified on load: importing
     pytorch-kinematics and parsing cost about half a second, reading the cached normal form a millisecond.
     An unwritable cache folder only means parsing every time.
@@ -115,17 +187,20 @@ def load_urdf(
     path = Path(path)
     if not path.is_file():
         raise RobotDefinitionError(f"URDF file not found: {path}")
-    text = path.read_text()
-    key = _cache_key(text, end_link, root_link, name, origins)
+    data = path.read_bytes()
+    key = _cache_key(data, end_link, root_link, name, origins)
     robot = _cached_robot(key, path)
     if robot is None:
-        robot = _parse_robot(path, text, end_link, root_link, name, origins)
+        robot = _parse_robot(path, data, end_link, root_link, name, origins)
         _store_robot(key, robot)
     return robot
 
 
-def _parse_robot(path: Path, text: str, end_link, root_link, name, origins) -> Robot:
-    """:func:`load_urdf` without the cache: pytorch-kinematics parses ``text``, nik builds the normal form."""
+def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) -> Robot:
+    """:func:`load_urdf` without the cache: the file reduced to its kinematics, parsed by pytorch-kinematics,
+    converted to the normal form."""
+    tree, free = _kinematic_tree(data, str(path))
+    text = ET.tostring(tree, encoding="unicode")
     chain = _parse_chain(text, str(path))
     end_link = end_link or default_end_link(text, str(path))
     links = {f.link.name for f in _frames(chain._root)}
@@ -137,6 +212,11 @@ def _parse_robot(path: Path, text: str, end_link, root_link, name, origins) -> R
     except Exception as err:
         raise RobotDefinitionError(f"{path}: cannot build a chain to {end_link!r}: {err}") from err
 
+    on_chain = [f.joint.name for f in serial._serial_frames[1:] if f.joint.name in free]
+    if on_chain:
+        raise RobotDefinitionError(
+            f"{path}: joint {on_chain[0]!r} is floating or planar; nik models revolute and prismatic joints only"
+        )
     urdf = _parse_urdf(text) if origins == "float64" else None
     builder = NormalFormBuilder()
     names, limits = [], []
@@ -166,8 +246,7 @@ def _parse_robot(path: Path, text: str, end_link, root_link, name, origins) -> R
     if not names:
         raise RobotDefinitionError(f"{path}: no revolute or prismatic joint between the root and {end_link!r}")
     if name is None:
-        m = re.search(r'<robot[^>]*\bname\s*=\s*"([^"]+)"', text)
-        name = m.group(1) if m else path.stem
+        name = tree.get("name") or path.stem
     return Robot(
         name,
         builder.finish(),
@@ -183,7 +262,7 @@ def _parse_robot(path: Path, text: str, end_link, root_link, name, origins) -> R
 # ---------------------------------------------------------------------------
 # the cache of parsed arms
 # ---------------------------------------------------------------------------
-def _cache_key(text: str, end_link, root_link, name, origins) -> str:
+def _cache_key(data: bytes, end_link, root_link, name, origins) -> str:
     import importlib.util
 
     spec = importlib.util.find_spec("pytorch_kinematics")
@@ -191,7 +270,7 @@ def _cache_key(text: str, end_link, root_link, name, origins) -> str:
     if spec is not None and spec.origin:  # a reinstalled pytorch-kinematics is a new key
         st = os.stat(spec.origin)
         stamp = f"{spec.origin}:{st.st_size}:{st.st_mtime_ns}"
-    h = hashlib.sha256(text.encode())
+    h = hashlib.sha256(data)
     h.update(json.dumps([end_link, root_link, name, origins, URDF_CACHE_FORMAT, stamp]).encode())
     return h.hexdigest()
 
@@ -246,7 +325,7 @@ def _parse_urdf(text: str):
     from pytorch_kinematics.urdf_parser_py.urdf import URDF
 
     with contextlib.redirect_stderr(io.StringIO()):
-        return URDF.from_xml_string(_no_declaration(text))
+        return URDF.from_xml_string(text)
 
 
 def _axis(joint) -> np.ndarray:

@@ -17,6 +17,7 @@ from nik.swarm.objectives import make_objective
 from nik.swarm.problem import SwarmProblem, make_problem
 from nik.swarm.pso import PSOCfg, pso_init, pso_step
 from nik.swarm.sapso import SAPSOCfg, sapso_init, sapso_step
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["ALGORITHMS", "METHODS", "SwarmResult", "SwarmRun", "default_cfg", "refine", "run_swarm"]
 
@@ -150,8 +151,8 @@ def refine(
     method: str = "ipso",
     q_init: torch.Tensor | None = None,
     cfg=None,
-    tol_pos: float = 1e-4,
-    tol_rot: float = 1e-3,
+    tol_pos: float = DEFAULT_TOL_POS,
+    tol_rot: float = DEFAULT_TOL_ROT,
     max_iters: int | None = None,
     seed: int = 0,
     polish: bool = False,

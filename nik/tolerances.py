@@ -1,0 +1,23 @@
+"""The one success tolerance of nik: 0.1 mm and 0.1 degree, what every table in the docs measures.
+
+Every solver, refinement, the evaluation, the CLI and the benchmarks default to these (ground room: no imports
+from nik, no torch, so the CLI can show them without loading anything).
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["DEFAULT_TOL_POS", "DEFAULT_TOL_POS_MM", "DEFAULT_TOL_ROT", "DEFAULT_TOL_ROT_DEG", "describe"]
+
+#: Position tolerance in millimetres (what users read) and metres (what nik computes in).
+DEFAULT_TOL_POS_MM = 0.1
+DEFAULT_TOL_POS = 1e-4  # m
+#: Rotation tolerance (geodesic angle) in degrees and radians: 0.1 deg = 1.745e-3 rad.
+DEFAULT_TOL_ROT_DEG = 0.1
+DEFAULT_TOL_ROT = math.radians(DEFAULT_TOL_ROT_DEG)  # rad
+
+
+def describe(tol_pos: float, tol_rot: float) -> str:
+    """``"0.1 mm / 0.1 deg"``: tolerances given in metres and radians, printed in mm and degrees, rounded."""
+    return f"{tol_pos * 1e3:.3g} mm / {math.degrees(tol_rot):.3g} deg"
