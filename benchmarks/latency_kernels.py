@@ -246,7 +246,10 @@ def main() -> None:
     calls = 300 if args.quick else 3000
     torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__} ({torch.get_num_threads()} threads), numba {K._jit.numba.__version__}")
-    print(f"numba cache: {K.CACHE.mode} ({K.CACHE.folder})\n")
+    folder = K.CACHE.folder
+    if folder is not None and folder.is_relative_to(ROOT):
+        folder = folder.relative_to(ROOT)
+    print(f"numba cache: {K.CACHE.mode} ({folder})\n")
     if not args.no_compile:
         print("\n".join(compile_times()) + "\n")
 
