@@ -237,28 +237,182 @@ def unreachable_scenario(robot_name: str, rounds: int, seed: int) -> dict:
     return {"robot": robot_name, "reachable_s": a, "mixed_s": b, "ratio": b / a, "success_900": succ}
 
 
-def latency(robot_name: str, n: int, seed: int) -> dict:
-    """One pose per call, median over ``n`` poses (after one warm-up call), nik and rtb."""
-    robot = nik.load_robot(robot_name)
-    T = targets(robot, n, seed)
-    solver = nik.IKSolver(robot)
-    ets, _ = rtb_model(robot)
-    run_nik(robot, T[:1], solver=solver)
-    t_nik, t_rtb, q_nik = [], [], []
-    for i in range(n):
-        q, dt = run_nik(robot, T[i : i + 1], solver=solver)
-        t_nik.append(dt)
-        q_nik.append(q)
+# ---------------------------------------------------------------------------
+# One pose per call: nik, Robotics Toolbox ik_LM, TRAC-IK
+# ---------------------------------------------------------------------------
+#: A 7-DOF arm without a shipped network, from example-robot-data (``pip install example-robot-data``).
+EXAMPLE_ROBOTS = {"xarm7": "xarm_description/urdf/xarm7.urdf"}
+TRACIK_TIMEOUT = 0.005  # s, TRAC-IK's usual default
+TRACIK_EPS = 1e-5  # its convergence threshold on the Cartesian error
+LATENCY_BLOCK = 30  # poses a solver solves in a row before the next solver takes the same poses
+
+
+def example_robot_file(name: str) -> Path | None:
+    """The URDF of ``name`` in the installed example-robot-data (its files live under ``cmeel.prefix``), or None."""
+    for entry in sys.path:
+        path = Path(entry) / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / EXAMPLE_ROBOTS[name]
+        if path.is_file():
+            return path
+    return None
+
+
+def latency_robot(name: str):
+    """``(robot, urdf_path, tool_link)``: nik's model and a URDF file with the same FK (the shipped or
+    example-robot-data file, else one written from nik's normal form), or Nones when the arm is not available."""
+    path = example_robot_file(name) if name in EXAMPLE_ROBOTS else URDF.get(name)
+    if name in EXAMPLE_ROBOTS and path is None:
+        return None, None, None
+    robot = nik.load_robot(path if name in EXAMPLE_ROBOTS else name)
+    end = robot.end_link
+    if path is not None:
+        path = kinematics_only(Path(path))
+    else:  # an arm defined by a table: a URDF written from nik's normal form
+        import tempfile
+
+        from nik.evaluate import robot_to_urdf
+
+        text, end = robot_to_urdf(robot)
+        path = Path(tempfile.mkdtemp()) / f"{name}.urdf"
+        path.write_text(text)
+    return robot, Path(path), end
+
+
+def kinematics_only(path: Path) -> Path:
+    """A copy of the URDF without visual, collision and inertial elements and without the joints' safety
+    controllers: none is needed for kinematics; Robotics Toolbox's xacro step would look for the mesh packages,
+    KDL (under TRAC-IK) mishandles a root link with an inertia, and pytracik reads a joint with a safety
+    controller as limits [0, 0] (it then solved none of the panda poses)."""
+    import tempfile
+    import xml.etree.ElementTree as ET
+
+    tree = ET.parse(path)
+    for link in tree.getroot().findall("link"):
+        for tag in ("visual", "collision", "inertial"):
+            for element in link.findall(tag):
+                link.remove(element)
+    for joint in tree.getroot().findall("joint"):
+        for element in joint.findall("safety_controller"):
+            joint.remove(element)
+    out = Path(tempfile.mkdtemp()) / path.name
+    tree.write(out)
+    return out
+
+
+def urdf_root(path: Path) -> str:
+    """The root link of a URDF: the link that is no joint's child."""
+    import xml.etree.ElementTree as ET
+
+    tree = ET.parse(path).getroot()
+    children = {e.find("child").get("link") for e in tree.findall("joint")}
+    return next(e.get("name") for e in tree.findall("link") if e.get("name") not in children)
+
+
+def tracik_solver(robot, path: Path, end: str):
+    """A TRAC-IK solver of the same chain, or None when pytracik is not installed."""
+    if not available("pytracik"):
+        return None
+    import pytracik
+
+    root = urdf_root(path)
+    text = path.read_text()
+    with redirect_stdout(io.StringIO()):
+        solver = pytracik.TRAC_IK(root, end, text, TRACIK_TIMEOUT, TRACIK_EPS, pytracik.SolveType.Speed)
+    q = robot.sample(16, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    gap = max(
+        float(np.abs(pytracik.fk(solver, qi) - Ti).max()) for qi, Ti in zip(q.numpy(), robot.fk(q).numpy(), strict=True)
+    )
+    if gap > 1e-6:
+        raise RuntimeError(f"TRAC-IK model of {robot.name} disagrees with nik's FK by {gap:.2e} m")
+    return solver
+
+
+def rtb_from_file(robot, path: Path, end: str):
+    if not available("roboticstoolbox"):
+        return None
+    import roboticstoolbox as rtb
+
+    with redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ets = rtb.Robot.URDF(str(path.resolve())).ets(end=end)
+    q = robot.sample(16, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    gap = max(float(np.abs(ets.eval(qi) - Ti).max()) for qi, Ti in zip(q.numpy(), robot.fk(q).numpy(), strict=True))
+    if gap > 1e-6:
+        raise RuntimeError(f"rtb model of {robot.name} disagrees with nik's FK by {gap:.2e} m")
+    return ets
+
+
+def latency_table(names: list[str], n: int, seed: int) -> tuple[list[str], list[str]]:
+    """One pose per call, ``n`` reachable poses per arm, the solvers interleaved by blocks of ``LATENCY_BLOCK`` poses;
+    per solver: median / p95 / max microseconds per call, calls over 2 ms, success, joints outside the limits.
+    Returns the table's lines and notes (peers left out, and why)."""
+    from scipy.spatial.transform import Rotation
+
+    torch.set_num_threads(1)
+    nik.set_threads(1)
+    lines = [
+        "| robot | solver | median us | p95 us | max us | calls > 2 ms | success % | joints outside limits |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    notes = []
+    if not available("pytracik"):
+        notes.append("TRAC-IK left out: pytracik is not installed (pip install -e .[bench])")
+    if not available("roboticstoolbox"):
+        notes.append("Robotics Toolbox left out: roboticstoolbox-python is not installed (pip install -e .[bench])")
+    for name in names:
+        robot, path, end = latency_robot(name)
+        if robot is None:
+            notes.append(f"{name} left out: example-robot-data is not installed (pip install example-robot-data)")
+            continue
+        T = targets(robot, n, seed)
+        Tn = T.numpy()
+        quats = Rotation.from_matrix(Tn[:, :3, :3]).as_quat()  # x, y, z, w for TRAC-IK (outside the timing)
+        solver = nik.IKSolver(robot)
+        ets = rtb_from_file(robot, path, end)
+        tracik = tracik_solver(robot, path, end)
+        mid = ((robot.limits[:, 0] + robot.limits[:, 1]) / 2).numpy()
+        calls = {f"nik ({solver.initial_source} solver)": []}
         if ets is not None:
-            _, dt = run_rtb(ets, T[i : i + 1])
-            t_rtb.append(dt)
-    succ, _ = score(robot, T, torch.cat(q_nik))
-    return {
-        "robot": robot_name,
-        "nik_ms": statistics.median(t_nik) * 1e3,
-        "rtb_ms": statistics.median(t_rtb) * 1e3 if t_rtb else float("nan"),
-        "success": succ,
-    }
+            calls["rtb ik_LM"] = []
+        if tracik is not None:
+            calls["TRAC-IK (pytracik)"] = []
+        answers = {k: [] for k in calls}
+        solver.solve(T[0], tol_pos=TOL_POS, tol_rot=TOL_ROT)  # warm-up: loads the compiled kernels
+        # interleaved by blocks of poses (each solver solves a block, then the next solver the same block):
+        # pose by pose, each call would run in caches the other library just filled (TRAC-IK's threads and
+        # timeouts left nik's next call 5x slower than its own steady state), which measures the neighbour
+        for start in range(0, n, LATENCY_BLOCK):
+            for label in calls:
+                for i in range(start, min(start + LATENCY_BLOCK, n)):
+                    if label.startswith("nik"):
+                        t = time.perf_counter_ns()
+                        q = solver.solve(T[i], tol_pos=TOL_POS, tol_rot=TOL_ROT).q[0]
+                        dt = time.perf_counter_ns() - t
+                    elif label.startswith("rtb"):
+                        np.random.seed(i)
+                        t = time.perf_counter_ns()
+                        q = ets.ik_LM(Tn[i], tol=1e-10, joint_limits=True).q
+                        dt = time.perf_counter_ns() - t
+                    else:
+                        import pytracik
+
+                        x, y, z = Tn[i, :3, 3]
+                        qx, qy, qz, qw = quats[i]
+                        t = time.perf_counter_ns()
+                        r = pytracik.ik(tracik, mid, x, y, z, qx, qy, qz, qw)
+                        dt = time.perf_counter_ns() - t
+                        q = r[1:] if r[0] >= 0 else mid  # no solution: counts as a failure
+                    calls[label].append(dt / 1e3)
+                    answers[label].append(torch.as_tensor(np.asarray(q, dtype=np.float64)))
+        for label, times in calls.items():
+            ts = np.asarray(times)
+            succ, outside = score(robot, T, torch.stack(answers[label]))
+            lines.append(
+                f"| {name} | {label} | {np.median(ts):.0f} | {np.percentile(ts, 95):.0f} | {ts.max():.0f} | "
+                f"{int((ts > 2000).sum())} | {succ:.1f} | {outside} |"
+            )
+        print(f"  ({name}: latency rows done)", flush=True)
+    nik.set_threads(None)
+    return lines, notes
 
 
 def main(argv=None) -> int:
@@ -268,7 +422,9 @@ def main(argv=None) -> int:
     p.add_argument("--threads", default="1,2", help="comma-separated torch thread counts")
     p.add_argument("--rounds", type=int, default=2, help="interleaved rounds per row (median)")
     p.add_argument("--pk-max-n", type=int, default=10000, help="leave pytorch-kinematics out above this size")
-    p.add_argument("--latency-n", type=int, default=200, help="single poses for the latency row")
+    p.add_argument("--latency-n", type=int, default=300, help="poses per arm of the one-pose latency table")
+    p.add_argument("--latency-robots", default="panda,ur5,kuka_kr,xarm7", help="arms of the one-pose latency table")
+    p.add_argument("--latency-only", action="store_true", help="only the one-pose latency table")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--proxy-noise",
@@ -282,6 +438,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.quick:
         args.sizes, args.threads, args.rounds, args.latency_n = "200", "1", 1, 20
+        args.latency_robots = "panda,ur5"
     robots = [r.strip() for r in args.robots.split(",") if r.strip()]
     sizes = [int(s) for s in args.sizes.split(",")]
     thread_list = [int(s) for s in args.threads.split(",")]
@@ -296,6 +453,8 @@ def main(argv=None) -> int:
     if not available("roboticstoolbox"):
         say("(roboticstoolbox-python is not installed: pip install -e .[bench]; its rows and ratios are n/a)")
     rows = []
+    if args.latency_only:
+        thread_list = []
     for th in thread_list:
         for n in sizes:
             for rb in robots:
@@ -312,7 +471,11 @@ def main(argv=None) -> int:
             f"| {r['robot']} | {r['n']:,} | {r['threads']} | {r['solver']} | {r['ms']:.4f} | {r['success']:.2f} | "
             f"{r['outside']} | {times_rtb(r['vs_rtb'])} |"
         )
-    unreach = [unreachable_scenario(rb, max(args.rounds, 2), args.seed) for rb in ["kuka_kr", "panda"]]
+    unreach = (
+        []
+        if args.latency_only
+        else [unreachable_scenario(rb, max(args.rounds, 2), args.seed) for rb in ["kuka_kr", "panda"]]
+    )
     md += [
         "",
         "10 % unreachable (1,000 targets, 100 at 3 x the reach; nik, one thread):",
@@ -325,14 +488,18 @@ def main(argv=None) -> int:
             f"| {u['robot']} | {u['reachable_s']:.3f} | {u['mixed_s']:.3f} | {u['ratio']:.2f} "
             f"| {u['success_900']:.2f} |"
         )
-    lat = latency("panda", args.latency_n, args.seed)
+    lat, notes = latency_table(
+        [r.strip() for r in args.latency_robots.split(",") if r.strip()], args.latency_n, args.seed
+    )
     md += [
         "",
-        f"Single pose per call (panda, median of {args.latency_n} calls, one thread):",
+        f"One pose per call ({args.latency_n} reachable poses per arm, the solvers interleaved by blocks of "
+        f"{LATENCY_BLOCK} poses, one "
+        f"thread; TRAC-IK: Speed, timeout {TRACIK_TIMEOUT * 1e3:g} ms, eps {TRACIK_EPS:g}, seeded at the middle of "
+        "the limits; rtb: ik_LM, tol 1e-10, joint limits on):",
         "",
-        "| robot | nik ms | rtb ik_LM ms | nik success % |",
-        "|---|---|---|---|",
-        f"| {lat['robot']} | {lat['nik_ms']:.3f} | {ms_or_na(lat['rtb_ms'])} | {lat['success']:.1f} |",
+        *lat,
+        *(["", *(f"- {note}" for note in notes)] if notes else []),
     ]
     say()
     for line in md:

@@ -91,14 +91,21 @@ def test_solver_uses_the_shipped_network_by_default_and_not_with_checkpoint_none
     assert nik.IKSolver("kuka_kr", analytic=False).initial_source == "network"
 
 
-def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys):
+def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys, monkeypatch):
     from nik.cli import main
+    from nik.ik import lean
     from nik.poses import matrix_to_quaternion
 
     robot = nik.load_robot("panda")
     T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(4), dtype=torch.float64))
     pose = torch.cat([T[0, :3, 3], matrix_to_quaternion(T[0, :3, :3])]).tolist()
-    assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, pose)]) == 0
+    args = ["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, pose)]
+    assert main(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    # one pose takes the compiled path, which starts from uniform configurations (nik.ik.lean) and says so
+    assert doc["results"][0]["success"] is True and doc["initial_guess"] == "multistart"
+    monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0)  # the batched torch pipeline: the shipped network's guess
+    assert main(args) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["results"][0]["success"] is True
     assert doc["initial_guess"] == "network"

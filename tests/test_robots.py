@@ -285,3 +285,36 @@ def test_definition_round_trip_keeps_joint_types_and_they_enter_the_hash():
     as_revolute = nik.Robot.from_definition(definition)
     assert not bool(as_revolute.prismatic.any())
     assert as_revolute.definition_hash != robot.definition_hash
+
+
+# ---------------------------------------------------------------------------
+# the cache of parsed URDF arms: load_robot("panda") without importing pytorch-kinematics
+# ---------------------------------------------------------------------------
+def test_a_urdf_arm_is_parsed_once_and_read_back_identical(tmp_path, monkeypatch):
+    import json
+
+    from nik.robots import urdf
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    parsed = []
+    real = urdf._parse_robot
+    monkeypatch.setattr(urdf, "_parse_robot", lambda *a: parsed.append(1) or real(*a))
+    first = nik.load_robot("panda")
+    again = nik.load_robot("panda")
+    assert parsed == [1]  # the second load read the cache
+    assert again.definition_hash == first.definition_hash and again.source == first.source
+    assert torch.equal(again.G, first.G) and again.joint_names == first.joint_names
+    (stored,) = (tmp_path / "nik" / "robots").glob("*.json")
+    doc = json.loads(stored.read_text())
+    doc["robot"]["G"][1][0][3] += 0.1  # a changed file no longer matches its checksum: parsed again
+    stored.write_text(json.dumps(doc))
+    third = nik.load_robot("panda")
+    assert parsed == [1, 1] and torch.equal(third.G, first.G)
+
+
+def test_an_unwritable_cache_folder_only_means_parsing_every_time(tmp_path, monkeypatch):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocker))  # nik/robots cannot be created under a file
+    a, b = nik.load_robot("ur5"), nik.load_robot("ur5")
+    assert a.definition_hash == b.definition_hash

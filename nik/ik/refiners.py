@@ -1,8 +1,8 @@
 """Refiners: ``(robot, T, q0) -> RefineResult`` joint answers brought to tolerance from guesses.
 
 - :func:`lm_refine`: Levenberg-Marquardt (:func:`nik.lm.lm_solve`) with restarts only for the
-  targets that fail and are within reach; one pose on the CPU takes the numpy lean path
-  (:mod:`nik.lm.single`), where torch's per-op overhead would dominate;
+  targets that fail and are within reach; one pose on the CPU takes the compiled kernel
+  (:mod:`nik.lm.compiled`), where torch's per-op overhead would dominate;
 - :func:`swarm_refine`: the swarm methods through :func:`nik.swarm.refine`, answers measured by FK.
 """
 
@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
-from nik.lm import LMCfg, SingleLM, best_of, lm_solve, lm_solve_one
-from nik.lm.single import _residual as _residual_one
+from nik.lm import LMCfg, lm_solve
 from nik.poses import pose_error
 from nik.robots import Robot
 
@@ -47,9 +47,9 @@ def lm_refine(
     """Levenberg-Marquardt from ``q0: (B, dof)`` (None: a multistart guess), restarting only the
     targets that fail and are within reach (``restarts=False``: none). ``T: (B, 4, 4)``."""
     cfg = cfg if isinstance(cfg, LMCfg) else LMCfg()
-    g = torch.Generator(device=T.device).manual_seed(int(seed))
     if T.shape[0] == 1 and T.device.type == "cpu":
-        return _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, g)
+        return _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, int(seed))
+    g = torch.Generator(device=T.device).manual_seed(int(seed))
     q, it = lm_solve(
         robot,
         T,
@@ -67,48 +67,28 @@ def lm_refine(
     return RefineResult(q, pos, rot, it)
 
 
-def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, g) -> RefineResult:
-    """:func:`lm_refine` for one pose on the CPU: the numpy lean path (:mod:`nik.lm.single`)."""
-    model = _SINGLE_CACHE.get(id(robot))
-    if model is None or model[0] is not robot:
-        model = (robot, SingleLM.from_robot(robot))
-        _SINGLE_CACHE[id(robot)] = model
-    model = model[1]
-    Tn = T[0].detach().to(torch.float64).numpy()
+def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, seed) -> RefineResult:
+    """:func:`lm_refine` for one pose on the CPU: the compiled kernel (:mod:`nik.lm.compiled`)."""
+    from nik.lm.compiled import CompiledLM
 
-    def sample():
-        return robot.sample(1, generator=g, dtype=torch.float64)[0].numpy()
-
-    if q0 is None:
-        # one vectorised FK of many candidates costs about one LM iteration here: take more than the batch does
-        cand = robot.sample(SINGLE_FIRST_STARTS, generator=g, dtype=torch.float64).numpy()
-        start = best_of(model, Tn, cand, cfg.rot_weight)
-    else:
-        start = q0.reshape(-1, robot.dof)[0].detach().to(torch.float64).numpy()
-    n_restarts = cfg.restarts + cfg.tail_starts * (1 + cfg.tail_restarts) if restarts else 0
-    if reachable is not None and not bool(reachable[0]):
-        n_restarts = 0
-    q, it = lm_solve_one(
-        model,
+    Tn = np.ascontiguousarray(T.detach().numpy().reshape(1, 4, 4), dtype=np.float64)
+    start = None if q0 is None else np.ascontiguousarray(q0.detach().numpy().reshape(1, -1), dtype=np.float64)
+    run = CompiledLM.of(robot, cfg).solve(
         Tn,
         start,
-        cfg=cfg,
         tol_pos=tol_pos,
         tol_rot=tol_rot,
-        first_iters=cfg.iters if max_iters is None else int(max_iters),
-        restarts=n_restarts,
-        sample=sample,
+        seed=seed,
+        max_iters=max_iters,
+        restarts=restarts,
+        reachable=None if reachable is None else reachable.numpy(),
     )
-    _, _, pos, rot = _residual_one(Tn, model.fk_many(q[None])[0], cfg.rot_weight)
-    q = torch.as_tensor(q, dtype=T.dtype).reshape(1, -1)
-    err = torch.tensor([pos, rot], dtype=T.dtype)
-    return RefineResult(q, err[:1], err[1:], torch.tensor([it], dtype=torch.long))
-
-
-_SINGLE_CACHE: dict = {}
-
-#: Uniform candidates whose best (by pose error) starts the one-pose LM when there is no guess.
-SINGLE_FIRST_STARTS = 64
+    return RefineResult(
+        torch.from_numpy(run.q).to(T.dtype),
+        torch.from_numpy(run.pos_err).to(T.dtype),
+        torch.from_numpy(run.rot_err).to(T.dtype),
+        torch.from_numpy(run.iterations),
+    )
 
 
 def swarm_refine(

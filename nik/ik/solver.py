@@ -20,6 +20,11 @@ it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve
    flag and ``reachable`` (False where the reach bound proves the target out of reach;
    :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
 
+CPU batches of up to :data:`nik.ik.lean.LEAN_MAX_BATCH` poses (:data:`~nik.ik.lean.LEAN_MAX_BATCH_CLOSED_FORM` on
+an arm with a closed form) take a compiled path instead (:mod:`nik.ik.lean`: the same checks, the closed form or
+LM from uniform starts through numba kernels, the same result contract), chosen in one place at the top of
+:meth:`IKSolver.solve`.
+
 Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`, refiners
 ``(robot, T, q0) -> RefineResult`` in :mod:`nik.ik.refiners`. Units are SI (metres, radians) throughout.
 """
@@ -31,7 +36,7 @@ from pathlib import Path
 
 import torch
 
-from nik.ik import stages
+from nik.ik import lean, networks, stages
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.robots import Robot, load_robot
@@ -43,15 +48,6 @@ __all__ = ["REFINE_METHODS", "IKSolver"]
 
 #: Values of ``IKSolver(refine=...)``.
 REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
-
-
-def _shipped_network(robot: Robot):
-    """The network shipped for ``robot`` when one exists for its name and definition hash, else None."""
-    from nik.nets.pretrained import available, load_pretrained, read_meta
-
-    if robot.name not in available() or read_meta(robot.name).get("robot_hash") != robot.definition_hash:
-        return None
-    return load_pretrained(robot)
 
 
 class IKSolver:
@@ -110,7 +106,7 @@ class IKSolver:
         fallback = {True: "auto", False: "none"}.get(fallback, fallback)
         if fallback not in ("auto", "analytic", "multistart", "none"):
             raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
-        self.net = None
+        self._net, self._load_net = None, None
         self.closed_form = False
         if analytic:
             from nik.analytic import family
@@ -118,29 +114,44 @@ class IKSolver:
             self.closed_form = family(self.robot) is not None
         if isinstance(checkpoint, str) and checkpoint == "auto":
             if not self.closed_form:
-                self.net = _shipped_network(self.robot)
+                self._load_net = networks.shipped_network(self.robot, self.device)  # loaded on first use
         elif checkpoint is not None:
-            from nik.nets import load_checkpoint
-
-            self.net = load_checkpoint(checkpoint, robot=self.robot)
-        if self.net is not None:
-            self.net = self.net.to(self.device)
+            self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
         if fallback == "analytic" and not self.closed_form:
             raise ValueError(f"IKSolver: fallback='analytic' needs an arm with a closed form; {self.robot.name} is not")
         if fallback == "auto":
             fallback = "analytic" if self.closed_form else "multistart"
         self.fallback = fallback
 
+    @property
+    def net(self):
+        """The network (None without one). The shipped one is loaded on first use and shared by every solver of
+        the same robot in this process (:mod:`nik.ik.networks`); the solver only reads it."""
+        if self._load_net is not None:
+            self._net, self._load_net = self._load_net(), None
+        return self._net
+
+    @net.setter
+    def net(self, value) -> None:
+        self._net, self._load_net = value, None
+
+    @property
+    def has_network(self) -> bool:
+        """True when the solver has a network (without loading it)."""
+        return self._net is not None or self._load_net is not None
+
     def __repr__(self) -> str:
         return (
-            f"IKSolver(robot={self.robot.name!r}, network={self.net is not None}, "
+            f"IKSolver(robot={self.robot.name!r}, network={self.has_network}, "
             f"analytic={self.closed_form}, refine={self.refine!r})"
         )
 
     @property
     def initial_source(self) -> str:
-        """Where :meth:`solve` takes its initial guess: ``network``, ``analytic`` or ``multistart``."""
-        if self.net is not None:
+        """Where :meth:`solve` takes its initial guess on the batched torch path: ``network``, ``analytic`` or
+        ``multistart``. CPU batches the compiled path takes (:mod:`nik.ik.lean`) start from uniform
+        configurations; each result's ``source`` says which."""
+        if self.has_network:
             return "network"
         return "analytic" if self.closed_form else "multistart"
 
@@ -192,6 +203,10 @@ class IKSolver:
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
         check_tolerances(tol_pos, tol_rot)
+        if lean.applies(self):  # a few CPU poses: the compiled path, when it takes the input
+            res = lean.solve(self, T_target, tol_pos, tol_rot, seed, q_near, max_iters, representation)
+            if res is not None:
+                return res
         T = as_poses(T_target, representation)
         reachable = within_reach(self.robot, T)
         msg = unreachable_message(self.robot, T, reachable)

@@ -1,0 +1,92 @@
+"""From a fresh process to the first one-pose solve, against ``python -c "import torch"``.
+
+Each round starts, in turn, a process that only imports torch and one that runs the whole first solve
+(``import nik``, ``load_robot``, ``IKSolver``, ``solve`` of one pose), the two interleaved; each is timed from
+its start to the moment it is done (torch imported; the pose solved), not to its exit. The table gives medians
+over the rounds and the difference. The solve process also reports where its time went, and the
+cost of a second ``IKSolver`` of the same robot. Caches are warm (the compiled kernels and the parsed URDF
+from an earlier run: the first round after a change is left out).
+
+    python benchmarks/startup.py                 # panda, 7 rounds
+    python benchmarks/startup.py --robot ur5 --rounds 11
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+_TORCH = "import time\nimport torch\nprint(time.time())"
+
+_SOLVE = """
+import json, time
+t0 = time.perf_counter()
+import torch
+t1 = time.perf_counter()
+import nik
+t2 = time.perf_counter()
+robot = nik.load_robot({robot!r})
+t3 = time.perf_counter()
+solver = nik.IKSolver(robot)
+t4 = time.perf_counter()
+T = torch.tensor({pose!r}, dtype=torch.float64)
+res = solver.solve(T)
+t5 = time.perf_counter()
+nik.IKSolver(robot)
+t6 = time.perf_counter()
+print(json.dumps({{"import torch": t1 - t0, "import nik": t2 - t1, "load_robot": t3 - t2, "IKSolver": t4 - t3,
+                  "first solve": t5 - t4, "second IKSolver": t6 - t5, "success": bool(res.success.all()),
+                  "source": res.source, "done": time.time() - (t6 - t5)}}))
+"""
+
+
+def run(code: str) -> tuple[float, str]:
+    """Seconds from starting the process to the moment it reports (its last line: a wall-clock time, or JSON
+    with ``done``), so that the process's exit is not counted; and its output."""
+    start = time.time()
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    last = done.stdout.strip().splitlines()[-1]
+    end = json.loads(last)["done"] if last.startswith("{") else float(last)
+    return end - start, done.stdout
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", default="panda")
+    parser.add_argument("--rounds", type=int, default=7)
+    args = parser.parse_args()
+    sys.path.insert(0, str(ROOT))
+    import torch
+
+    import nik
+
+    robot = nik.load_robot(args.robot)
+    pose = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(5), dtype=torch.float64))[0].tolist()
+    code = _SOLVE.format(robot=args.robot, pose=pose)
+    run(code)  # warms the caches (kernels, URDF) if a change left them cold
+    base, full, parts = [], [], []
+    for _ in range(args.rounds):
+        base.append(run(_TORCH)[0])
+        dt, out = run(code)
+        full.append(dt)
+        parts.append(json.loads(out.strip().splitlines()[-1]))
+    b, f = statistics.median(base), statistics.median(full)
+    print(f"{args.robot}, {args.rounds} rounds, medians (s):")
+    print(f"  start to torch imported             {b:.3f}")
+    print(f"  fresh process to first solve        {f:.3f}")
+    print(f"  difference                          {f - b:.3f}")
+    print("  inside the solve process:")
+    for key in ("import torch", "import nik", "load_robot", "IKSolver", "first solve", "second IKSolver"):
+        print(f"    {key:20s} {statistics.median(p[key] for p in parts) * 1e3:8.1f} ms")
+    print(f"  success {all(p['success'] for p in parts)}, source {parts[-1]['source']}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,241 @@
+"""nik.ik.lean: a few CPU poses through the compiled path keep the contract of the torch path of IKSolver.solve."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.ik import lean, stages
+from nik.poses import matrix_to_quaternion, matrix_to_rpy
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+
+
+def _targets(robot, n, seed):
+    q = robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    return q, robot.fk(q)
+
+
+def _out_of_reach(robot, T):
+    """``T`` with its last pose moved 3 m beyond the first joint axis (provably unreachable)."""
+    T = T.clone()
+    T[-1, :3, 3] = robot.G[0, :3, 3] + torch.tensor([3.0, 0.0, 0.0], dtype=T.dtype)
+    return T
+
+
+_LEAN_MAX_BATCH = lean.LEAN_MAX_BATCH
+
+
+@pytest.fixture
+def torch_path(monkeypatch):
+    """Within the test, IKSolver.solve never takes the compiled path."""
+
+    def use(enabled: bool):
+        monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0 if enabled else _LEAN_MAX_BATCH)
+
+    return use
+
+
+@pytest.fixture
+def no_stages(monkeypatch):
+    """The torch stages fail if called: proves the compiled path answered."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the torch stages ran")
+
+    monkeypatch.setattr(stages, "guess", refuse)
+    monkeypatch.setattr(stages, "refine", refuse)
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_both_paths_solve_the_same_targets_inside_the_limits_and_flag_the_same_ones(name, torch_path):
+    robot = nik.load_robot(name)
+    _, T = _targets(robot, 12, seed=21)
+    T = _out_of_reach(robot, T)
+    solver = nik.IKSolver(robot, analytic=False)  # ur5 has a closed form: here its network and LM
+    with pytest.warns(UserWarning, match="beyond the reach"):
+        fast = solver.solve(T, seed=3)
+    torch_path(True)
+    with pytest.warns(UserWarning, match="beyond the reach"):
+        slow = solver.solve(T, seed=3)
+    for res in (fast, slow):
+        assert res.q.shape == (12, robot.dof) and res.q.dtype == torch.float64
+        assert res.success.dtype == torch.bool and res.iterations.dtype == torch.long
+        assert bool(robot.within_limits(res.q).all())
+        pos, rot = nik.pose_error(T, robot.fk(res.q))  # honest errors: those of the returned joints
+        torch.testing.assert_close(res.pos_err, pos, atol=1e-12, rtol=0)
+        torch.testing.assert_close(res.rot_err, rot, atol=1e-9, rtol=0)
+        assert torch.equal(res.success, (pos <= DEFAULT_TOL_POS) & (rot <= DEFAULT_TOL_ROT))
+    assert torch.equal(fast.success, slow.success)
+    assert bool(fast.success[:-1].all()) and not bool(fast.success[-1])
+    assert torch.equal(fast.reachable, slow.reachable) and fast.reachable.tolist() == [True] * 11 + [False]
+    assert fast.source == "multistart"
+
+
+def test_one_pose_takes_the_compiled_path_with_the_same_answer_for_the_same_seed(no_stages):
+    robot = nik.load_robot("panda")
+    _, T = _targets(robot, 1, seed=22)
+    solver = nik.IKSolver(robot)
+    a, b, c = solver.solve(T[0], seed=5), solver.solve(T, seed=5), solver.solve(T, seed=6)
+    assert bool(a.success.all()) and torch.equal(a.q, b.q) and torch.equal(a.iterations, b.iterations)
+    assert not torch.equal(a.q, c.q)  # another seed, other starts: another point of the self-motion
+
+
+def test_quaternion_and_rpy_targets_give_the_matrix_answer(no_stages):
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 3, seed=23)
+    solver = nik.IKSolver(robot, analytic=False)
+    ref = solver.solve(T, seed=1)
+    quat = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
+    rpy = torch.cat([T[:, :3, 3], matrix_to_rpy(T[:, :3, :3])], dim=-1)
+    for other in (quat, rpy, quat.numpy().tolist()):
+        res = solver.solve(other, seed=1)
+        assert bool(res.success.all())
+        torch.testing.assert_close(res.q, ref.q, atol=1e-6, rtol=0)  # the same starts, poses equal to 1e-15
+
+
+def test_float32_targets_get_float32_answers_inside_the_float32_limits(no_stages):
+    robot = nik.load_robot("panda")
+    _, T = _targets(robot, 4, seed=24)
+    res = nik.IKSolver(robot).solve(T.float(), tol_pos=1e-3, tol_rot=1e-2)
+    assert res.q.dtype == torch.float32 and res.pos_err.dtype == torch.float32
+    assert bool(robot.within_limits(res.q).all()) and bool(res.success.all())
+    pos, rot = nik.pose_error(T, robot.fk(res.q.double()))
+    torch.testing.assert_close(res.pos_err.double(), pos, atol=1e-7, rtol=0)
+    torch.testing.assert_close(res.rot_err.double(), rot, atol=1e-6, rtol=0)
+
+
+def test_q_near_picks_the_solution_near_the_current_configuration(no_stages):
+    robot = nik.load_robot("panda")
+    q, T = _targets(robot, 6, seed=25)
+    near = robot.clamp(q + 0.05)
+    solver = nik.IKSolver(robot)
+    res = solver.solve(T, q_near=near, seed=0)
+    free = solver.solve(T, seed=0)
+    assert bool(res.success.all()) and bool(robot.within_limits(res.q).all())
+    d_near = torch.linalg.vector_norm(res.q - near, dim=-1)
+    assert float(d_near.max()) < 0.3  # the solution next to q_near, not another one of the self-motion
+    assert float(d_near.mean()) < float(torch.linalg.vector_norm(free.q - near, dim=-1).mean())
+    assert bool((res.iterations > free.iterations).all())  # both runs are counted
+
+
+def _set(r, c, v):
+    def spoil(T):
+        T[0, r, c] = v
+        return T
+
+    return spoil
+
+
+BAD = [
+    ("nan", _set(0, 3, math.nan)),
+    ("skew", _set(0, 1, 0.3)),
+    ("bottom", _set(3, 0, 1.0)),
+    ("shape", lambda T: T[:, :3]),
+    ("quat norm", lambda T: torch.tensor([[0.3, 0.1, 0.4, 2.0, 0.0, 0.0, 0.0]], dtype=torch.float64)),
+    ("rpy nan", lambda T: torch.tensor([[0.3, 0.1, 0.4, 0.0, math.nan, 0.0]], dtype=torch.float64)),
+]
+
+
+@pytest.mark.parametrize("kind, spoil", BAD, ids=[b[0] for b in BAD])
+def test_bad_targets_raise_the_same_message_on_both_paths(kind, spoil, torch_path):
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 1, seed=26)
+    solver = nik.IKSolver(robot, checkpoint=None, analytic=False)
+    with pytest.raises(ValueError) as fast:
+        solver.solve(spoil(T.clone()))
+    torch_path(True)
+    with pytest.raises(ValueError) as slow:
+        solver.solve(spoil(T.clone()))
+    assert str(fast.value) == str(slow.value) and "T_target" in str(fast.value)
+
+
+@pytest.mark.parametrize("q_near", [[0.1, 0.2], [[0.0] * 6] * 2, [math.nan] * 6], ids=["short", "rows", "nan"])
+def test_bad_q_near_and_tolerances_raise_the_same_message_on_both_paths(q_near, torch_path):
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 1, seed=27)
+    solver = nik.IKSolver(robot, checkpoint=None, analytic=False)
+    messages = []
+    for use_torch in (False, True):
+        torch_path(use_torch)
+        with pytest.raises(ValueError, match="q_near") as err:
+            solver.solve(T, q_near=q_near)
+        with pytest.raises(ValueError, match="tol_pos") as tol:
+            solver.solve(T, tol_pos=-1.0)
+        messages.append((str(err.value), str(tol.value)))
+    assert messages[0] == messages[1]
+
+
+def test_configurations_it_does_not_reproduce_take_the_torch_path():
+    robot = nik.load_robot("ur5")
+    assert lean.applies(nik.IKSolver(robot))  # its closed form, compiled
+    assert lean.applies(nik.IKSolver(robot, analytic=False))
+    # no guess: restarts on both paths
+    assert lean.applies(nik.IKSolver(robot, checkpoint=None, analytic=False, fallback="none"))
+    assert not lean.applies(nik.IKSolver(robot, analytic=False, fallback="none"))  # the network's guess alone
+    assert not lean.applies(nik.IKSolver(robot, refine="ipso"))
+    kuka = nik.load_robot("kuka_kr")
+    assert lean.applies(nik.IKSolver(kuka))  # the closed form, compiled
+    assert not lean.applies(nik.IKSolver(kuka, analytic=False, fallback="none"))  # its network's guess alone
+    _, T = _targets(robot, lean.LEAN_MAX_BATCH + 1, seed=28)
+    assert lean._poses(T, None) is None and lean._poses(T[: lean.LEAN_MAX_BATCH], None) is not None
+    assert lean._poses(T[:1].to(torch.float16), None) is None
+    assert lean._poses(T[: lean.LEAN_MAX_BATCH_CLOSED_FORM + 1], None, lean.LEAN_MAX_BATCH_CLOSED_FORM) is None
+
+
+def test_numpy_targets_and_lists_are_accepted_as_float64(no_stages):
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 2, seed=29)
+    solver = nik.IKSolver(robot, analytic=False)
+    for form in (T.numpy(), T.numpy().tolist(), T[0].numpy()):
+        res = solver.solve(form)
+        assert res.q.dtype == torch.float64 and bool(res.success.all())
+    assert isinstance(np.asarray(res.q), np.ndarray)
+
+
+@pytest.mark.parametrize("name", ["kuka_kr", "puma560", "ur5"])
+def test_closed_form_arms_get_the_closed_form_solution_on_both_paths(name, torch_path):
+    robot = nik.load_robot(name)
+    q, T = _targets(robot, 16, seed=30)
+    T = _out_of_reach(robot, T)
+    near = robot.clamp(q + 0.3)
+    solver = nik.IKSolver(robot)
+    results = []
+    for use_torch in (False, True):
+        torch_path(use_torch)
+        with pytest.warns(UserWarning, match="beyond the reach"):
+            results.append((solver.solve(T), solver.solve(T, q_near=near)))
+    for res in (*results[0], *results[1]):
+        assert res.source == "analytic" and bool(robot.within_limits(res.q).all())
+        assert res.success.tolist() == [True] * 15 + [False]
+        assert int(res.iterations[:15].sum()) == 0  # exact: no LM needed
+        pos, rot = nik.pose_error(T, robot.fk(res.q))
+        torch.testing.assert_close(res.pos_err, pos, atol=1e-12, rtol=0)
+        assert float(pos[:15].max()) < 1e-9 and float(rot[:15].max()) < 1e-9
+    # with q_near the choice is the same solution (nearest, by joint motion); without, the one farthest inside
+    # the limits (two wrist flips can tie on that score, so only success and limits are compared there)
+    torch.testing.assert_close(results[0][1].q[:15], results[1][1].q[:15], atol=1e-9, rtol=0)
+    torch.testing.assert_close(results[0][1].q[15], results[1][1].q[15], atol=1e-9, rtol=0)  # best effort too
+
+
+def test_closed_form_path_is_compiled_for_one_pose(no_stages):
+    robot = nik.load_robot("kuka_kr")
+    _, T = _targets(robot, 1, seed=31)
+    res = nik.IKSolver(robot).solve(T[0])
+    assert res.source == "analytic" and bool(res.success.all()) and float(res.pos_err[0]) < 1e-9
+
+
+def test_float32_poses_on_a_closed_form_arm_get_the_torch_paths_choice(torch_path):
+    robot = nik.load_robot("kuka_kr")
+    _, T = _targets(robot, 8, seed=32)
+    T = T.float()  # a float32 rotation is orthonormal to about 1e-7: the closed form's check is 2e-5 then
+    solver = nik.IKSolver(robot)
+    fast = solver.solve(T, tol_pos=1e-3, tol_rot=1e-2)
+    torch_path(True)
+    slow = solver.solve(T, tol_pos=1e-3, tol_rot=1e-2)
+    assert fast.q.dtype == torch.float32 and bool(fast.success.all()) and bool(slow.success.all())
+    assert bool(robot.within_limits(fast.q).all())
+    torch.testing.assert_close(fast.q, slow.q, atol=1e-3, rtol=0)  # the same solution of the 8
