@@ -356,9 +356,7 @@ def latency_table(names: list[str], n: int, seed: int) -> tuple[list[str], list[
     notes = []
     if not available("pytracik"):
         notes.append("TRAC-IK left out: pytracik is not installed (pip install -e .[bench])")
-    if not available("roboticstoolbox"):
-        notes.append("Robotics Toolbox left out: roboticstoolbox-python is not installed (pip install -e .[bench])")
-    for name in names:
+    for name in names:  # (a missing Robotics Toolbox is said once, at the top of the run)
         robot, path, end = latency_robot(name)
         if robot is None:
             notes.append(f"{name} left out: example-robot-data is not installed (pip install example-robot-data)")
