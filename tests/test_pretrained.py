@@ -37,11 +37,19 @@ def test_shipped_file_matches_its_robot_and_reproduces_its_recorded_validation_e
     assert "train.py fit --config configs/train/" in meta["training"]["command"]
 
 
-def test_unknown_robot_names_the_robots_that_have_one():
+def test_an_unknown_definition_names_the_robots_that_have_one():
     definition = nik.load_robot("ur5").to_definition()
     definition["name"] = "my_arm"
+    definition["limits"][0][0] += 0.1  # another arm: the hash differs
     with pytest.raises(CheckpointError, match="my_arm.*pretrained networks exist for: .*panda"):
         load_pretrained(nik.Robot.from_definition(definition))
+
+
+def test_the_same_arm_under_another_name_gets_its_network():
+    definition = nik.load_robot("ur5").to_definition()
+    definition["name"] = "my_arm"
+    net = load_pretrained(nik.Robot.from_definition(definition))
+    assert net.robot.name == "my_arm" and net.config() == read_meta("ur5")["net"]
 
 
 def _tiny(tmp_path, name="ur5"):

@@ -30,8 +30,9 @@ def register(sub) -> None:
     s.add_argument(
         "--checkpoint",
         default="auto",
-        help="trained network (.ckpt) for the initial guess; 'auto' (default): the network shipped with nik for "
-        "this robot, if any (not used where the closed form applies); 'none': no network",
+        help="trained network for the initial guess: an exported NAME.safetensors (+ NAME.json beside it, e.g. from "
+        "nik train) or a Lightning .ckpt; 'auto' (default): the network installed or shipped for this robot's "
+        "definition, if any (not used where the closed form applies); 'none': no network",
     )
     s.add_argument(
         "--refine",
@@ -87,7 +88,10 @@ def register(sub) -> None:
     )
     e.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
     e.add_argument(
-        "--checkpoint", default=None, help="trained network (.ckpt); without it the network rows are left out"
+        "--checkpoint",
+        default=None,
+        help="trained network (NAME.safetensors from nik train / export, or a Lightning .ckpt); without it the "
+        "network rows are left out",
     )
     e.add_argument("--data", required=True, help="dataset directory (nik generate)")
     e.add_argument("--n", type=int, default=1000, help="number of test poses (default 1000)")
@@ -342,9 +346,9 @@ def _cmd_evaluate(args) -> int:
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
     if args.checkpoint is not None:  # refuse a bad checkpoint in one line, before any progress output
-        from nik.nets import load_checkpoint
+        from nik.nets import load_network
 
-        load_checkpoint(args.checkpoint, robot=robot)
+        load_network(args.checkpoint, robot=robot)
     report = evaluate(
         robot,
         data=args.data,

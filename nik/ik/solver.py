@@ -43,13 +43,13 @@ __all__ = ["REFINE_METHODS", "IKSolver"]
 REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 
-def _shipped_network(robot: Robot):
-    """The network shipped for ``robot`` when one exists for its name and definition hash, else None."""
-    from nik.nets.pretrained import available, load_pretrained, read_meta
+def _known_network(robot: Robot):
+    """The network installed or shipped for ``robot``'s definition hash (:mod:`nik.nets.registry`), else None."""
+    from nik.nets.pair import load_pair
+    from nik.nets.registry import find_network
 
-    if robot.name not in available() or read_meta(robot.name).get("robot_hash") != robot.definition_hash:
-        return None
-    return load_pretrained(robot)
+    path = find_network(robot)
+    return None if path is None else load_pair(path, robot=robot)
 
 
 class IKSolver:
@@ -57,12 +57,14 @@ class IKSolver:
 
     Args:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
-        checkpoint: ``"auto"`` (default): the network shipped with nik for this robot
-            (:func:`nik.models.load_pretrained`) when one exists for its name and definition hash, else none;
-            on a PUMA-like arm with ``analytic=True`` the closed form stays the guess and no network is
-            loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
-            :func:`nik.models.save_checkpoint`), loaded safely by :func:`nik.nets.load_checkpoint`; one
-            made for another robot is refused. ``None``: no network. A multi-solution network
+        checkpoint: ``"auto"`` (default): the network for this robot's definition hash, whatever its name:
+            one installed in the user folder (``nik train --install``, :mod:`nik.nets.registry`), else the
+            one shipped with nik (:func:`nik.models.load_pretrained`), else none; on a PUMA-like arm with
+            ``analytic=True`` the closed form stays the guess and no network is loaded. A path: an exported
+            network (``NAME.safetensors`` with its ``NAME.json``, e.g. from ``nik train``; its SHA-256 is
+            checked) or a Lightning ``.ckpt`` from ``train.py`` (or :func:`nik.models.save_checkpoint`), loaded
+            safely by :func:`nik.nets.load_network`; one made for another robot definition is refused, a
+            damaged file raises :class:`nik.CheckpointError`. ``None``: no network. A multi-solution network
             (:mod:`nik.nets.multi`) guesses its best hypothesis by FK; targets the refinement leaves outside
             tolerance then get LM from each of its other hypotheses (before any ``fallback``);
             :meth:`solve_all` starts LM from all of them.
@@ -116,11 +118,11 @@ class IKSolver:
             self.closed_form = is_puma_like(self.robot)
         if isinstance(checkpoint, str) and checkpoint == "auto":
             if not self.closed_form:
-                self.net = _shipped_network(self.robot)
+                self.net = _known_network(self.robot)
         elif checkpoint is not None:
-            from nik.nets import load_checkpoint
+            from nik.nets import load_network
 
-            self.net = load_checkpoint(checkpoint, robot=self.robot)
+            self.net = load_network(checkpoint, robot=self.robot)
         if self.net is not None:
             self.net = self.net.to(self.device)
         if fallback == "analytic" and not self.closed_form:
