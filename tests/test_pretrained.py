@@ -99,14 +99,32 @@ def test_solver_uses_the_shipped_network_by_default_and_not_with_checkpoint_none
     assert nik.IKSolver("kuka_kr", analytic=False).initial_source == "network"
 
 
-def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys):
+def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys, tmp_path):
     from nik.cli import main
     from nik.poses import matrix_to_quaternion
 
     robot = nik.load_robot("panda")
-    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(4), dtype=torch.float64))
-    pose = torch.cat([T[0, :3, 3], matrix_to_quaternion(T[0, :3, :3])]).tolist()
-    assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, pose)]) == 0
+    T = robot.fk(robot.sample(3, generator=torch.Generator().manual_seed(4), dtype=torch.float64))
+    rows = [torch.cat([t[:3, 3], matrix_to_quaternion(t[:3, :3])]).tolist() for t in T]
+    csv = tmp_path / "poses.csv"
+    csv.write_text("x,y,z,qw,qx,qy,qz\n" + "".join(",".join(map(repr, r)) + "\n" for r in rows))
+    assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--poses", str(csv)]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["results"][0]["success"] is True
-    assert doc["initial_guess"] == "network"
+    assert all(r["success"] for r in doc["results"]) and doc["initial_guess"] == "network"
+    # one pose: the lean path without the network is the faster one, and the answer says so
+    assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, rows[0])]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["results"][0]["success"] is True and doc["initial_guess"] == "multistart"
+
+
+def test_one_pose_on_the_cpu_skips_the_network_only_where_a_refinement_follows():
+    robot = nik.load_robot("panda")
+    T = robot.fk(robot.sample(2, generator=torch.Generator().manual_seed(6), dtype=torch.float64))
+    with_net, without = nik.IKSolver(robot), nik.IKSolver(robot, checkpoint=None)
+    one = with_net.solve(T[:1], seed=3)
+    assert one.source == "multistart" and with_net.source_for(T[:1]) == "multistart"
+    assert torch.equal(one.q, without.solve(T[:1], seed=3).q)  # exactly the path without a network
+    assert with_net.solve(T, seed=3).source == "network"
+    raw = nik.IKSolver(robot, refine="none").solve(T[:1])
+    assert raw.source == "network"  # the raw guess was asked for
+    torch.testing.assert_close(raw.q, load_pretrained("panda").predict(T[:1]))

@@ -137,10 +137,33 @@ class IKSolver:
             f"analytic={self.closed_form}, refine={self.refine!r})"
         )
 
+    #: Smallest batch for which :meth:`solve` uses the network's guess on the CPU when a refinement follows.
+    #: Measured (``benchmarks/learned.py``, panda, one thread, CPU time): for one pose the torch network's guess
+    #: alone (about 1.8 ms: per-op overhead, FK of its 8 hypotheses) costs more than the whole lean one-pose LM
+    #: without it (about 1 ms; 3.8 vs 1.1 ms per target in all, 8.1 vs 5.5 ms with ``q_near``), while from two
+    #: poses on the network wins (2 poses: 3.5 vs 10.3 ms per target; 128: 0.62 vs 1.03 ms). A compiled
+    #: one-pose forward pass may lower this to 1: re-measure with ``benchmarks/learned.py``.
+    network_min_batch = 2
+
     @property
     def initial_source(self) -> str:
-        """Where :meth:`solve` takes its initial guess: ``network``, ``analytic`` or ``multistart``."""
+        """Where :meth:`solve` takes its initial guess for a batch: ``network``, ``analytic`` or ``multistart``
+        (for one pose on the CPU see :meth:`source_for`)."""
         if self.net is not None:
+            return "network"
+        return "analytic" if self.closed_form else "multistart"
+
+    def uses_network(self, T: torch.Tensor) -> bool:
+        """Whether :meth:`solve` uses the network for targets ``T: (B, 4, 4)``: it has one, and either ``B`` is at
+        least :attr:`network_min_batch`, or ``T`` is not on the CPU, or ``refine="none"`` (the raw guess is asked)."""
+        if self.net is None:
+            return False
+        return self.refine == "none" or T.device.type != "cpu" or T.shape[0] >= self.network_min_batch
+
+    def source_for(self, T: torch.Tensor) -> str:
+        """Where :meth:`solve` takes the initial guess for ``T: (B, 4, 4)``: ``network``, ``analytic`` or
+        ``multistart`` (:meth:`uses_network`)."""
+        if self.uses_network(T):
             return "network"
         return "analytic" if self.closed_form else "multistart"
 

@@ -131,7 +131,14 @@ def _quiet() -> None:
     _quiet_lightning()
     for name in ("lightning.pytorch", "lightning.fabric"):
         logging.getLogger(name).setLevel(logging.WARNING)
-    for msg in (".*does not have many workers.*", ".*LeafSpec.*", ".*treespec.*", ".*Total length of .*"):
+    for msg in (
+        ".*does not have many workers.*",
+        ".*LeafSpec.*",
+        ".*treespec.*",
+        ".*Total length of .*",
+        ".*IterableDataset.*has `__len__` defined.*",
+        ".*smaller than the logging interval.*",
+    ):
         warnings.filterwarnings("ignore", message=msg)
 
 
@@ -223,7 +230,7 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
         enable_progress_bar=False,
         enable_model_summary=False,
         num_sanity_val_steps=0,
-        log_every_n_steps=50,
+        log_every_n_steps=max(1, min(50, cfg.steps_per_epoch)),
         devices=1,
     )
     trainer.fit(model, datamodule=dm, ckpt_path=ckpt_path)
