@@ -42,7 +42,7 @@ from nik.robots.reach import reach_center, reach_radius  # noqa: E402
 
 TOL_POS = 1e-4  # m
 TOL_ROT = math.radians(0.1)  # rad
-URDF = {"panda": ROOT / "configs/robots/urdf/panda.urdf", "ur5": ROOT / "configs/robots/urdf/ur5.urdf"}
+URDF = {name: ROOT / f"configs/robots/urdf/{name}.urdf" for name in ("panda", "ur5", "xarm7")}
 
 
 #: Targets come from their own random stream: were it the solvers' (nik's seed 0), a multistart would
@@ -256,7 +256,9 @@ def latency(robot_name: str, n: int, seed: int) -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--robots", default="panda,ur5", help="comma-separated (panda,ur5: the arms with shipped URDFs)")
+    p.add_argument(
+        "--robots", default="panda,ur5", help="comma-separated (panda, ur5, xarm7: the arms with shipped URDFs)"
+    )
     p.add_argument("--sizes", default="1000,10000", help="comma-separated numbers of targets")
     p.add_argument("--threads", default="1,2", help="comma-separated torch thread counts")
     p.add_argument("--rounds", type=int, default=2, help="interleaved rounds per row (median)")
