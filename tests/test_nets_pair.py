@@ -274,3 +274,15 @@ def test_cli_refuses_a_damaged_network_with_exit_2_and_no_traceback(pair, tmp_pa
         assert proc.returncode == 2, proc.stderr
         assert "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
         assert "SHA-256" in proc.stderr and ".safetensors" in proc.stderr
+
+
+def test_nik_evaluate_takes_an_exported_pair(pair, tmp_path, capsys):
+    from nik.cli import main
+
+    path, _ = pair
+    data = tmp_path / "data"
+    assert main(["generate", "--robot", "panda", "--n", "200", "--out", str(data), "--no-progress"]) == 0
+    args = ["evaluate", "--robot", "panda", "--checkpoint", str(path), "--data", str(data), "--n", "3"]
+    args += ["--refinements", "lm", "--swarm", "lm", "--no-pk", "--out", str(tmp_path / "eval")]
+    assert main(args) == 0
+    assert "| network + lm |" in (tmp_path / "eval" / "evaluation.md").read_text()
