@@ -4,8 +4,10 @@
 
 1. the **raw network**: median and p95 of the position (mm) and rotation (deg) error of its best hypothesis
    by FK (what the JSON records as ``validation``);
-2. **network + LM** against **no network** (``IKSolver(robot, checkpoint=None)``: the closed form where
-   the arm has one, else LM from uniform starts), success within the solver's default tolerances
+2. the solver **with the network** (``IKSolver(robot, checkpoint=path)``) against **no network**
+   (``IKSolver(robot, checkpoint=None)``: the closed form where the arm has one, else LM from uniform
+   starts); each row names the guess the solver used (for one pose on the CPU the solver with the network
+   skips it: :attr:`nik.IKSolver.network_min_batch`); success within the solver's default tolerances
    (0.1 mm, 1e-3 rad) and milliseconds per target, on one batch of ``n_batch`` targets (median of
    ``repeats`` runs, the two solvers interleaved) and on ``n_one`` single poses solved one at a time
    (median time of one call).
@@ -42,10 +44,10 @@ class NetworkReport:
             f"raw network, best of {r['K']} hypotheses by FK ({r['n']} targets): position median "
             f"{r['pos_mm_median']:.2f} mm, p95 {r['pos_mm_p95']:.2f} mm; rotation median "
             f"{r['rot_deg_median']:.2f} deg, p95 {r['rot_deg_p95']:.2f} deg",
-            f"{'case':<28} {'solver':<34} {'success':>8} {'ms / target':>12}",
+            f"{'case':<24} {'solver':<42} {'success':>8} {'ms / target':>12}",
         ]
         for row in self.rows:
-            out.append(f"{row['case']:<28} {row['solver']:<34} {100 * row['success']:7.2f}% {row['ms']:12.4f}")
+            out.append(f"{row['case']:<24} {row['solver']:<42} {100 * row['success']:7.2f}% {row['ms']:12.4f}")
         return out
 
 
@@ -83,8 +85,11 @@ def network_report(
         "rot_deg_p95": float(torch.quantile(r, 0.95)),
     }
     report = NetworkReport(robot.name, raw)
-    names = {"network + LM": with_net, f"no network ({without.initial_source})": without}
     Tb = _targets(robot, n_batch, seed + 1)
+    names = {
+        f"with the network (guess: {with_net.source_for(Tb)})": with_net,
+        f"no network (guess: {without.source_for(Tb)})": without,
+    }
     times = {k: [] for k in names}
     ok = {}
     for _ in range(repeats):
@@ -97,6 +102,10 @@ def network_report(
         ms = 1e3 * statistics.median(times[k]) / n_batch
         report.rows.append({"case": f"batch of {n_batch}", "solver": k, "success": ok[k], "ms": ms})
     To = _targets(robot, n_one, seed + 2)
+    names = {
+        f"with the network (guess: {with_net.source_for(To[:1])})": with_net,
+        f"no network (guess: {without.source_for(To[:1])})": without,
+    }
     one = {k: [] for k in names}
     hits = {k: 0 for k in names}
     for i in range(n_one):
