@@ -14,7 +14,7 @@ import nik
 from nik.learn.multi import MultiSolutionIK, plot_history
 from nik.models import load_checkpoint
 from nik.nets.export import main as export_main
-from nik.nets.multi import BranchIKNet, MultiHypIKNet
+from nik.nets.multi import BranchHeadsIKNet, MultiHypIKNet
 from nik.nets.pretrained import load, validation_error
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,7 +45,7 @@ def _config(robot: str, tmp_path: Path, data: Path) -> Path:
     return path
 
 
-@pytest.mark.parametrize("robot,cls", [("kuka_kr", BranchIKNet), ("panda", MultiHypIKNet)])
+@pytest.mark.parametrize("robot,cls", [("kuka_kr", BranchHeadsIKNet), ("panda", MultiHypIKNet)])
 def test_shipped_config_trains_in_two_phases_and_exports(robot, cls, tmp_path):
     from nik.data import generate_dataset
 
