@@ -138,11 +138,14 @@ class IKSolver:
         )
 
     #: Smallest batch for which :meth:`solve` uses the network's guess on the CPU when a refinement follows.
-    #: Measured (``benchmarks/learned.py``, panda, one thread, CPU time): for one pose the torch network's guess
-    #: alone (about 1.8 ms: per-op overhead, FK of its 8 hypotheses) costs more than the whole lean one-pose LM
-    #: without it (about 1 ms; 3.8 vs 1.1 ms per target in all, 8.1 vs 5.5 ms with ``q_near``), while from two
-    #: poses on the network wins (2 poses: 3.5 vs 10.3 ms per target; 128: 0.62 vs 1.03 ms). A compiled
-    #: one-pose forward pass may lower this to 1: re-measure with ``benchmarks/learned.py``.
+    #: Measured (one thread, idle machine, 200 single poses, ms per call, with the network / without, mean and
+    #: median): xarm7 3.90 / 2.13 and 3.44 / 1.48; ur5 2.16 / 1.91 and 2.04 / 1.17; kuka_kr (analytic=False)
+    #: 2.28 / 1.94 and 2.16 / 1.16; panda 2.59 / 3.19 and 2.17 / 1.34 (the network avoids panda's slow tail,
+    #: p95 3.8 vs 11.8 ms, but costs the typical pose 0.8 ms); with ``q_near`` alike. The torch network's guess
+    #: for one pose costs about 1 ms of per-op overhead, more than the lean one-pose LM it would save. From two
+    #: poses on (the batched path) the network wins: 2 poses 2.8-4.9 vs 8.4-13.8 ms per target, 16 poses 0.8-1.4
+    #: vs 3.3-3.9 ms (the same four arms). Set it to 1 on an instance to use the network for single poses too (a
+    #: compiled one-pose forward pass may make that the better default: re-measure with ``benchmarks/learned.py``).
     network_min_batch = 2
 
     @property
