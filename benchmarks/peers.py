@@ -42,7 +42,7 @@ from nik.robots.reach import reach_center, reach_radius  # noqa: E402
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT, describe  # noqa: E402
 
 TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
-URDF = {"panda": ROOT / "configs/robots/urdf/panda.urdf", "ur5": ROOT / "configs/robots/urdf/ur5.urdf"}
+URDF = {name: ROOT / f"configs/robots/urdf/{name}.urdf" for name in ("panda", "ur5", "xarm7")}
 
 
 #: Targets come from their own random stream: were it the solvers' (nik's seed 0), a multistart would
@@ -415,7 +415,9 @@ def latency_table(names: list[str], n: int, seed: int) -> tuple[list[str], list[
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--robots", default="panda,ur5", help="comma-separated (panda,ur5: the arms with shipped URDFs)")
+    p.add_argument(
+        "--robots", default="panda,ur5", help="comma-separated (panda, ur5, xarm7: the arms with shipped URDFs)"
+    )
     p.add_argument("--sizes", default="1000,10000", help="comma-separated numbers of targets")
     p.add_argument("--threads", default="1,2", help="comma-separated torch thread counts")
     p.add_argument("--rounds", type=int, default=2, help="interleaved rounds per row (median)")

@@ -102,7 +102,7 @@ def test_builtin_fk_matches_explicit_products_at_100_configurations(name):
     assert_close(robot.fk(q), expected, atol=1e-9, rtol=0)
 
 
-@pytest.mark.parametrize("name", ["panda", "ur5"])
+@pytest.mark.parametrize("name", ["panda", "ur5", "xarm7"])
 def test_urdf_arm_fk_matches_pytorch_kinematics(name):
     robot = nik.load_robot(name)
     chain = build_pk_chain(open(robot.source).read(), robot.end_link).to(dtype=torch.float64)

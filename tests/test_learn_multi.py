@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ import nik
 from nik.learn.multi import MultiSolutionIK, plot_history
 from nik.models import load_checkpoint
 from nik.nets.export import main as export_main
-from nik.nets.multi import BranchIKNet, MultiHypIKNet
+from nik.nets.multi import BranchHeadsIKNet, MultiHypIKNet
 from nik.nets.pretrained import load, validation_error
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,7 +45,7 @@ def _config(robot: str, tmp_path: Path, data: Path) -> Path:
     return path
 
 
-@pytest.mark.parametrize("robot,cls", [("kuka_kr", BranchIKNet), ("panda", MultiHypIKNet)])
+@pytest.mark.parametrize("robot,cls", [("kuka_kr", BranchHeadsIKNet), ("panda", MultiHypIKNet)])
 def test_shipped_config_trains_in_two_phases_and_exports(robot, cls, tmp_path):
     from nik.data import generate_dataset
 
@@ -67,9 +68,28 @@ def test_shipped_config_trains_in_two_phases_and_exports(robot, cls, tmp_path):
     shipped = load(robot, out)
     assert torch.equal(shipped.hypotheses(T), net.hypotheses(T))
     meta = (out / f"{robot}.json").read_text()
-    assert f"configs/train/{robot}.yaml" in meta
     rec = validation_error(shipped, seed=12345, n=2000)
     assert f'"best_pos_mm_median": {rec["best_pos_mm_median"]}' in meta
+    training = json.loads(meta)["training"]
+    # what really ran: the training command with its config file, the dataset (checksums), this export
+    assert training["command"] == f"python train.py fit --config {tmp_path / 'cfg.yaml'}"
+    assert training["data"]["path"] == str(data) and training["data"]["sha256"]["q.npy"]
+    assert training["export_command"].startswith("python -m nik.nets.export ")
+    assert "config_file" not in training  # no config file is claimed unless --config names one
+
+
+def test_export_writes_under_runs_by_default_never_into_the_package(tmp_path, monkeypatch):
+    from nik.nets.checkpoint import save_checkpoint
+    from nik.nets.multi import MultiHypIKNet
+    from nik.nets.pretrained import PRETRAINED_DIR
+
+    before = sorted(p.name for p in PRETRAINED_DIR.iterdir())
+    ckpt = save_checkpoint(MultiHypIKNet(nik.load_robot("panda"), hidden=[8], heads=2), tmp_path / "x.ckpt")
+    monkeypatch.chdir(tmp_path)
+    assert export_main([str(ckpt)]) == 0
+    assert (tmp_path / "runs" / "panda" / "panda.safetensors").is_file()
+    assert (tmp_path / "runs" / "panda" / "panda.json").is_file()
+    assert sorted(p.name for p in PRETRAINED_DIR.iterdir()) == before
 
 
 def test_plot_history_writes_a_png(tmp_path):

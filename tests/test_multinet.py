@@ -9,7 +9,7 @@ import torch
 
 import nik
 from nik.data.branches import URBranchClassifier, branch_classifier, ik_branch_classifier, ur_branch_classifier
-from nik.nets.multi import BranchIKNet, MultiHypIKNet, build_net, hypothesis_pose_error
+from nik.nets.multi import BranchHeadsIKNet, BranchIKNet, MultiHypIKNet, build_net, hypothesis_pose_error
 
 
 def _poses(robot, n, seed):
@@ -41,7 +41,16 @@ def test_a_prismatic_joint_is_a_scaled_value_not_sincos():
     torch.testing.assert_close(net.decode(y)[:, 2].double(), q[:, 2], rtol=0, atol=1e-5)
 
 
-@pytest.mark.parametrize("cls,name", [(BranchIKNet, "kuka_kr"), (BranchIKNet, "ur5"), (MultiHypIKNet, "panda")])
+@pytest.mark.parametrize(
+    "cls,name",
+    [
+        (BranchHeadsIKNet, "kuka_kr"),
+        (BranchHeadsIKNet, "ur5"),
+        (BranchIKNet, "kuka_kr"),
+        (BranchIKNet, "ur5"),
+        (MultiHypIKNet, "panda"),
+    ],
+)
 def test_hypotheses_are_inside_the_limits_and_predict_is_the_best_by_fk(cls, name):
     robot = nik.load_robot(name)
     torch.manual_seed(0)
@@ -59,10 +68,11 @@ def test_hypotheses_are_inside_the_limits_and_predict_is_the_best_by_fk(cls, nam
     assert torch.equal(twin.eval().hypotheses(T), hyp)
 
 
-def test_branch_net_hypothesis_k_is_its_output_for_label_k():
+@pytest.mark.parametrize("cls", [BranchHeadsIKNet, BranchIKNet])
+def test_branch_net_hypothesis_k_is_its_output_for_label_k(cls):
     robot = nik.load_robot("kuka_kr")
     torch.manual_seed(1)
-    net = BranchIKNet(robot, hidden=[8]).eval()
+    net = cls(robot, hidden=[8]).eval()
     _, T = _poses(robot, 5, 4)
     hyp = net.hypotheses(T)
     for k in (0, 5, 7):
@@ -71,9 +81,23 @@ def test_branch_net_hypothesis_k_is_its_output_for_label_k():
         net.predict_branch(T, 8)
 
 
+@pytest.mark.parametrize("cls,passes", [(BranchHeadsIKNet, 1), (MultiHypIKNet, 1), (BranchIKNet, 8)])
+def test_one_forward_pass_gives_every_hypothesis_except_in_the_legacy_branch_net(cls, passes):
+    """Rows through the trunk's last hidden layer per target: 1 (one pass), 8 for the legacy label-input net."""
+    robot = nik.load_robot("ur5")
+    net = cls(robot, hidden=[16, 16]).eval()
+    rows = []
+    net.layers[1].register_forward_hook(lambda mod, inp, out: rows.append(inp[0].reshape(-1, 16).shape[0]))
+    _, T = _poses(robot, 10, 5)
+    assert net.hypotheses(T).shape == (10, 8, robot.dof)
+    assert sum(rows) == passes * 10
+
+
 def test_bad_configurations_are_refused():
     with pytest.raises(ValueError, match="no IK branch labels"):
         BranchIKNet(nik.load_robot("panda"))
+    with pytest.raises(ValueError, match="no IK branch labels"):
+        BranchHeadsIKNet(nik.load_robot("panda"))
     with pytest.raises(ValueError, match="heads"):
         MultiHypIKNet(nik.load_robot("panda"), heads=0)
     with pytest.raises(ValueError, match="kind"):

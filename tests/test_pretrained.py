@@ -18,7 +18,7 @@ SHIPPED = available()
 
 
 def test_the_issue_arms_have_a_shipped_network():
-    assert {"kuka_kr", "ur5", "panda"} <= set(SHIPPED)
+    assert {"kuka_kr", "ur5", "panda", "xarm7"} <= set(SHIPPED)
     assert pretrained_robots() == SHIPPED
 
 
@@ -34,14 +34,23 @@ def test_shipped_file_matches_its_robot_and_reproduces_its_recorded_validation_e
     now = validation_error(net, seed=rec["seed"], n=rec["n"])
     for key, value in rec.items():
         assert math.isclose(now[key], value, rel_tol=1e-4, abs_tol=1e-9), (key, now[key], value)
-    assert "train.py fit --config configs/train/" in meta["training"]["command"]
+    command = meta["training"]["command"]
+    assert command.startswith(f"nik train {name} ") or "train.py fit --config configs/train/" in command
 
 
-def test_unknown_robot_names_the_robots_that_have_one():
+def test_an_unknown_definition_names_the_robots_that_have_one():
     definition = nik.load_robot("ur5").to_definition()
     definition["name"] = "my_arm"
+    definition["limits"][0][0] += 0.1  # another arm: the hash differs
     with pytest.raises(CheckpointError, match="my_arm.*pretrained networks exist for: .*panda"):
         load_pretrained(nik.Robot.from_definition(definition))
+
+
+def test_the_same_arm_under_another_name_gets_its_network():
+    definition = nik.load_robot("ur5").to_definition()
+    definition["name"] = "my_arm"
+    net = load_pretrained(nik.Robot.from_definition(definition))
+    assert net.robot.name == "my_arm" and net.config() == read_meta("ur5")["net"]
 
 
 def _tiny(tmp_path, name="ur5"):
@@ -91,21 +100,37 @@ def test_solver_uses_the_shipped_network_by_default_and_not_with_checkpoint_none
     assert nik.IKSolver("kuka_kr", analytic=False).initial_source == "network"
 
 
-def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys, monkeypatch):
+def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys, tmp_path, monkeypatch):
     from nik.cli import main
     from nik.ik import lean
     from nik.poses import matrix_to_quaternion
 
     robot = nik.load_robot("panda")
-    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(4), dtype=torch.float64))
-    pose = torch.cat([T[0, :3, 3], matrix_to_quaternion(T[0, :3, :3])]).tolist()
-    args = ["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, pose)]
-    assert main(args) == 0
+    T = robot.fk(robot.sample(3, generator=torch.Generator().manual_seed(4), dtype=torch.float64))
+    rows = [torch.cat([t[:3, 3], matrix_to_quaternion(t[:3, :3])]).tolist() for t in T]
+    csv = tmp_path / "poses.csv"
+    csv.write_text("x,y,z,qw,qx,qy,qz\n" + "".join(",".join(map(repr, r)) + "\n" for r in rows))
+    # a few CPU poses take the compiled path, which starts from uniform configurations (nik.ik.lean) and says so
+    assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, rows[0])]) == 0
     doc = json.loads(capsys.readouterr().out)
-    # one pose takes the compiled path, which starts from uniform configurations (nik.ik.lean) and says so
     assert doc["results"][0]["success"] is True and doc["initial_guess"] == "multistart"
     monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0)  # the batched torch pipeline: the shipped network's guess
-    assert main(args) == 0
+    assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--poses", str(csv)]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["results"][0]["success"] is True
-    assert doc["initial_guess"] == "network"
+    assert all(r["success"] for r in doc["results"]) and doc["initial_guess"] == "network"
+
+
+def test_one_pose_on_the_cpu_skips_the_network_only_where_a_refinement_follows(monkeypatch):
+    from nik.ik import lean
+
+    monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0)  # the torch path's own choice (network_min_batch)
+    robot = nik.load_robot("panda")
+    T = robot.fk(robot.sample(2, generator=torch.Generator().manual_seed(6), dtype=torch.float64))
+    with_net, without = nik.IKSolver(robot), nik.IKSolver(robot, checkpoint=None)
+    one = with_net.solve(T[:1], seed=3)
+    assert one.source == "multistart" and with_net.source_for(T[:1]) == "multistart"
+    assert torch.equal(one.q, without.solve(T[:1], seed=3).q)  # exactly the path without a network
+    assert with_net.solve(T, seed=3).source == "network"
+    raw = nik.IKSolver(robot, refine="none").solve(T[:1])
+    assert raw.source == "network"  # the raw guess was asked for
+    torch.testing.assert_close(raw.q, load_pretrained("panda").predict(T[:1]))

@@ -33,10 +33,10 @@ def write(tmp_path, text, name="arm.yaml"):
 
 def test_builtins_are_listed_and_load():
     names = nik.builtin_robots()
-    for required in ["puma560", "kuka_kr", "rebot_v_6r", "panda", "ur5"]:
+    for required in ["puma560", "kuka_kr", "rebot_v_6r", "panda", "ur5", "xarm7"]:
         assert required in names
     dofs = {n: nik.load_robot(n).dof for n in names}
-    assert dofs["panda"] == 7 and dofs["ur5"] == 6 and dofs["kuka_kr"] == 6
+    assert dofs["panda"] == 7 and dofs["ur5"] == 6 and dofs["kuka_kr"] == 6 and dofs["xarm7"] == 7
 
 
 def test_robot_attributes_follow_the_interface():

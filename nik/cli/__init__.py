@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.invocation = ["nik", *(sys.argv[1:] if argv is None else [str(a) for a in argv])]  # recorded by nik train
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

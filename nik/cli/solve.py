@@ -33,8 +33,9 @@ def register(sub) -> None:
     s.add_argument(
         "--checkpoint",
         default="auto",
-        help="trained network (.ckpt) for the initial guess; 'auto' (default): the network shipped with nik for "
-        "this robot, if any (not used where the closed form applies); 'none': no network",
+        help="trained network for the initial guess: an exported NAME.safetensors (+ NAME.json beside it, e.g. from "
+        "nik train) or a Lightning .ckpt; 'auto' (default): the network installed or shipped for this robot's "
+        "definition, if any (not used where the closed form applies); 'none': no network",
     )
     s.add_argument(
         "--refine",
@@ -99,7 +100,8 @@ def register(sub) -> None:
         "--checkpoint",
         default="auto",
         help="network of the network rows: 'auto' (default): the one shipped with nik for this robot, as "
-        "IKSolver(robot) picks it; 'none': no network rows; else a trained network (.ckpt / .safetensors). "
+        "IKSolver(robot) picks it; 'none': no network rows; else a trained network (NAME.safetensors from "
+        "nik train / export, or a Lightning .ckpt). "
         "The rows 'default pipeline' (IKSolver(robot)) and 'LM multistart, no network' are always there",
     )
     e.add_argument("--data", required=True, help="dataset directory (nik generate)")
@@ -357,9 +359,9 @@ def _cmd_evaluate(args) -> int:
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
     if str(args.checkpoint).lower() not in ("auto", "none"):  # refuse a bad one in one line, before any output
-        from nik.nets import load_checkpoint
+        from nik.nets import load_network
 
-        load_checkpoint(args.checkpoint, robot=robot)
+        load_network(args.checkpoint, robot=robot)
     out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name
     report = evaluate(
         robot,

@@ -1,15 +1,62 @@
-"""``nik compare``: argument parsing only; the work is in :mod:`nik.learn.compare`.
+"""``nik train`` (a network for an arm) and ``nik compare``: argument parsing only; the work is in
+:mod:`nik.learn.recipe` and :mod:`nik.learn.compare`, imported when the command runs (Lightning is heavy).
 
-Training itself is ``python train.py fit --config configs/train/<method>.yaml`` (LightningCLI).
+The full LightningCLI stays ``python train.py fit --config configs/train/<method>.yaml``.
 """
 
 from __future__ import annotations
+
+import shlex
+import sys
 
 __all__ = ["register"]
 
 
 def register(sub) -> None:
     from nik.learn.compare import build_parser
+
+    t = sub.add_parser(
+        "train",
+        help="train a network for an arm and export it (ROBOT: built-in name, YAML or URDF)",
+        description="Train a multi-solution network for ROBOT (a built-in name, a YAML robot file or a URDF with "
+        "--end-link) within a wall-clock budget, on fresh forward-kinematics samples at every step (or --data), "
+        "export it as NAME.safetensors + NAME.json (SHA-256 recorded) and print its evaluation: raw error (mm, deg) "
+        "and network + LM against no network, on a batch and on single poses. The kind is chosen from the arm: "
+        "one head per IK branch where nik labels the branches (PUMA- and UR-type 6R arms), else K heads. "
+        "Progress goes to stderr; the run lives in RUNS/NAME/ (last.ckpt, history.csv, curve.png, report.txt).",
+    )
+    t.add_argument("robot", metavar="ROBOT", help="built-in robot name, YAML robot file or URDF")
+    t.add_argument("--end-link", default=None, help="URDF: the tool link (default: the end of the longest chain)")
+    t.add_argument("--minutes", type=float, default=20.0, help="training wall-clock budget in minutes (default 20)")
+    t.add_argument("--data", default=None, help="dataset folder (nik generate); default: fresh FK samples every step")
+    t.add_argument(
+        "--out", default=None, help="NAME.safetensors to write (+ NAME.json); default RUNS/NAME/NAME.safetensors"
+    )
+    t.add_argument(
+        "--install",
+        action="store_true",
+        help="also copy the network to the user folder ($NIK_HOME/networks, else ~/.local/share/nik/networks): "
+        "IKSolver(robot) and nik solve then use it for this arm (matched by its definition, not its name)",
+    )
+    t.add_argument("--resume", action="store_true", help="continue RUNS/NAME/last.ckpt (the budget counts both parts)")
+    t.add_argument("--name", default=None, help="run and file name (default: the robot's name)")
+    t.add_argument("--runs", default="runs", help="folder of the runs (default runs)")
+    t.add_argument(
+        "--kind", choices=["auto", "branch_heads", "multihead"], default="auto", help="network kind (default auto)"
+    )
+    t.add_argument("--hidden", type=int, nargs="+", default=None, help="hidden layer sizes (default 256 256 256 256)")
+    t.add_argument("--heads", type=int, default=8, help="hypotheses of a multi-head network (default 8)")
+    t.add_argument("--batch-size", type=int, default=1024, help="samples per step (default 1024)")
+    t.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate at the start (default 1e-3, cosine)")
+    t.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    t.add_argument("--max-steps", type=int, default=None, help="also stop after this many steps")
+    t.add_argument("--val-n", type=int, default=5000, help="validation samples (default 5000)")
+    t.add_argument("--steps-per-epoch", type=int, default=200, help="steps between validations (default 200)")
+    t.add_argument("--eval-batch", type=int, default=1000, help="targets of the batch evaluation (default 1000)")
+    t.add_argument("--eval-one", type=int, default=50, help="single poses of the one-pose evaluation (default 50)")
+    t.add_argument("--no-eval", action="store_true", help="skip the evaluation after training")
+    t.add_argument("--threads", type=int, default=None, metavar="N", help="torch threads (default: torch's setting)")
+    t.set_defaults(func=_cmd_train)
 
     p = sub.add_parser(
         "compare",
@@ -20,6 +67,47 @@ def register(sub) -> None:
     )
     build_parser(p)
     p.set_defaults(func=_cmd_compare)
+
+
+def _cmd_train(args) -> int:
+    from nik.learn.recipe import DEFAULT_HIDDEN, TrainCfg, train_network
+
+    cfg = TrainCfg(
+        robot=args.robot,
+        end_link=args.end_link,
+        minutes=args.minutes,
+        data=args.data,
+        out=args.out,
+        name=args.name,
+        runs=args.runs,
+        install=args.install,
+        resume=args.resume,
+        kind=args.kind,
+        hidden=tuple(args.hidden) if args.hidden else DEFAULT_HIDDEN,
+        heads=args.heads,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        seed=args.seed,
+        max_steps=args.max_steps,
+        val_n=args.val_n,
+        steps_per_epoch=args.steps_per_epoch,
+        evaluate=not args.no_eval,
+        eval_batch=args.eval_batch,
+        eval_one=args.eval_one,
+        command=shlex.join(getattr(args, "invocation", None) or ["nik", *sys.argv[1:]]),
+    )
+    res = train_network(cfg)
+    print(
+        f"trained {res.kind} network for {res.wall_s / 60:.1f} min ({res.steps} steps, {res.samples / 1e6:.2f} M "
+        f"samples); wrote {res.out} and {res.out.with_suffix('.json')}"
+    )
+    if res.installed is not None:
+        print(f"installed as {res.installed}")
+    if res.report is not None:
+        print("evaluation (position mm, rotation deg; success within 0.1 mm / 1e-3 rad; CPU, this process):")
+        for line in res.report.lines():
+            print("  " + line)
+    return 0
 
 
 def _cmd_compare(args) -> int:

@@ -1,5 +1,5 @@
-"""The network of an :class:`~nik.ik.solver.IKSolver`: the one shipped for its robot, or a checkpoint, loaded once
-per process.
+"""The network of an :class:`~nik.ik.solver.IKSolver`: the one known for its robot (installed or shipped), or a
+file it was given, loaded once per process.
 
 Loading a shipped network costs tens of milliseconds (building a 3 x 512 MLP, copying half a million weights),
 more than solving a pose. So every solver of the same robot shares the network loaded first (a solver only
@@ -18,7 +18,6 @@ import torch
 __all__ = ["checkpoint_network", "clear", "shipped_network"]
 
 _LOADED: dict[tuple, torch.nn.Module] = {}
-_META: dict[tuple, dict] = {}
 
 
 def _stamp(path: Path) -> tuple:
@@ -35,44 +34,36 @@ def _load_once(path: Path, robot, device, load: Callable[[], torch.nn.Module]) -
 
 
 def shipped_network(robot, device) -> Callable[[], torch.nn.Module] | None:
-    """A loader of the network shipped for ``robot`` (on ``device``) when one exists for its name and definition
-    hash, else None. Checking reads the small ``.json`` once per file; the weights load when the loader is called,
-    once per process."""
-    from nik.nets.pretrained import PRETRAINED_DIR
+    """A loader of the network known for ``robot``'s definition hash, whatever its name (one installed in the
+    user folder, else the one shipped: :func:`nik.nets.registry.find_network`), on ``device``; None when there is
+    none. Finding reads the small ``.json`` files once per file; the weights load (SHA-256 checked) when the
+    loader is called, once per process."""
+    from nik.nets.registry import find_network
 
-    meta_path = PRETRAINED_DIR / f"{robot.name}.json"
-    weights = meta_path.with_suffix(".safetensors")
-    if not (meta_path.is_file() and weights.is_file()):
-        return None
-    key = _stamp(meta_path)
-    meta = _META.get(key)
-    if meta is None:
-        from nik.nets.pretrained import read_meta
-
-        meta = _META[key] = read_meta(robot.name)
-    if meta.get("robot_hash") != robot.definition_hash:
+    path = find_network(robot)
+    if path is None:
         return None
 
     def load():
-        from nik.nets.pretrained import load_pretrained
+        from nik.nets.pair import load_pair
 
-        return _load_once(weights, robot, device, lambda: load_pretrained(robot))
+        return _load_once(path, robot, device, lambda: load_pair(path, robot=robot))
 
     return load
 
 
 def checkpoint_network(path, robot, device) -> torch.nn.Module:
-    """The network of the checkpoint ``path`` for ``robot`` on ``device`` (:func:`nik.nets.load_checkpoint`: one
-    made for another robot is refused), loaded once per process."""
-    from nik.nets import load_checkpoint
+    """The network of the file ``path`` for ``robot`` on ``device``: an exported pair or a Lightning checkpoint
+    (:func:`nik.nets.load_network`: one made for another robot definition, or a damaged file, is refused), loaded
+    once per process."""
+    from nik.nets import load_network
 
     path = Path(path)
-    if not path.is_file():  # let load_checkpoint word the error
-        return load_checkpoint(path, robot=robot).to(device)
-    return _load_once(path.resolve(), robot, device, lambda: load_checkpoint(path, robot=robot))
+    if not path.is_file():  # let load_network word the error
+        return load_network(path, robot=robot).to(device)
+    return _load_once(path.resolve(), robot, device, lambda: load_network(path, robot=robot))
 
 
 def clear() -> None:
     """Forget every loaded network (the next solver loads its own)."""
     _LOADED.clear()
-    _META.clear()

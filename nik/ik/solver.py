@@ -55,12 +55,14 @@ class IKSolver:
 
     Args:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
-        checkpoint: ``"auto"`` (default): the network shipped with nik for this robot
-            (:func:`nik.models.load_pretrained`) when one exists for its name and definition hash, else none;
-            on an arm with a closed form (:func:`nik.analytic.family`) and ``analytic=True`` the closed form
-            stays the guess and no network is loaded. A path: a trained network (``.ckpt`` from ``train.py`` or
-            :func:`nik.models.save_checkpoint`), loaded safely by :func:`nik.nets.load_checkpoint`; one
-            made for another robot is refused. ``None``: no network. A multi-solution network
+        checkpoint: ``"auto"`` (default): the network for this robot's definition hash, whatever its name:
+            one installed in the user folder (``nik train --install``, :mod:`nik.nets.registry`), else the
+            one shipped with nik (:func:`nik.models.load_pretrained`), else none; on an arm with a closed form
+            and ``analytic=True`` the closed form stays the guess and no network is loaded. A path: an exported
+            network (``NAME.safetensors`` with its ``NAME.json``, e.g. from ``nik train``; its SHA-256 is
+            checked) or a Lightning ``.ckpt`` from ``train.py`` (or :func:`nik.models.save_checkpoint`), loaded
+            safely by :func:`nik.nets.load_network`; one made for another robot definition is refused, a
+            damaged file raises :class:`nik.CheckpointError`. ``None``: no network. A multi-solution network
             (:mod:`nik.nets.multi`) guesses its best hypothesis by FK; targets the refinement leaves outside
             tolerance then get LM from each of its other hypotheses (before any ``fallback``);
             :meth:`solve_all` starts LM from all of them.
@@ -146,12 +148,38 @@ class IKSolver:
             f"analytic={self.closed_form}, refine={self.refine!r})"
         )
 
+    #: Smallest batch for which :meth:`solve` uses the network's guess on the CPU when a refinement follows.
+    #: Measured (one thread, idle machine, 200 single poses, ms per call, with the network / without, mean and
+    #: median): xarm7 3.90 / 2.13 and 3.44 / 1.48; ur5 2.16 / 1.91 and 2.04 / 1.17; kuka_kr (analytic=False)
+    #: 2.28 / 1.94 and 2.16 / 1.16; panda 2.59 / 3.19 and 2.17 / 1.34 (the network avoids panda's slow tail,
+    #: p95 3.8 vs 11.8 ms, but costs the typical pose 0.8 ms); with ``q_near`` alike. The torch network's guess
+    #: for one pose costs about 1 ms of per-op overhead, more than the lean one-pose LM it would save. From two
+    #: poses on (the batched path) the network wins: 2 poses 2.8-4.9 vs 8.4-13.8 ms per target, 16 poses 0.8-1.4
+    #: vs 3.3-3.9 ms (the same four arms). Set it to 1 on an instance to use the network for single poses too (a
+    #: compiled one-pose forward pass may make that the better default: re-measure with ``benchmarks/learned.py``).
+    network_min_batch = 2
+
     @property
     def initial_source(self) -> str:
-        """Where :meth:`solve` takes its initial guess on the batched torch path: ``network``, ``analytic`` or
-        ``multistart``. CPU batches the compiled path takes (:mod:`nik.ik.lean`) start from uniform
-        configurations; each result's ``source`` says which."""
+        """Where :meth:`solve` takes its initial guess for a batch on the torch path: ``network``, ``analytic`` or
+        ``multistart`` (for given targets see :meth:`source_for`; CPU batches the compiled path takes,
+        :mod:`nik.ik.lean`, start from the closed form or uniform configurations, and each result's ``source`` says
+        which)."""
         if self.has_network:
+            return "network"
+        return "analytic" if self.closed_form else "multistart"
+
+    def uses_network(self, T: torch.Tensor) -> bool:
+        """Whether :meth:`solve` uses the network for targets ``T: (B, 4, 4)``: it has one, and either ``B`` is at
+        least :attr:`network_min_batch`, or ``T`` is not on the CPU, or ``refine="none"`` (the raw guess is asked)."""
+        if not self.has_network:
+            return False
+        return self.refine == "none" or T.device.type != "cpu" or T.shape[0] >= self.network_min_batch
+
+    def source_for(self, T: torch.Tensor) -> str:
+        """Where :meth:`solve` takes the initial guess for ``T: (B, 4, 4)``: ``network``, ``analytic`` or
+        ``multistart`` (:meth:`uses_network`)."""
+        if self.uses_network(T):
             return "network"
         return "analytic" if self.closed_form else "multistart"
 

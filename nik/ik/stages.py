@@ -103,7 +103,7 @@ class Answers:
 def first_guess(solver, T: torch.Tensor, *, q_near: torch.Tensor | None, seed: int) -> torch.Tensor:
     """``(B, dof)`` the raw initial guess for ``T: (B, 4, 4)``: the network's, the closed form's (the solution
     nearest ``q_near``, or the one farthest inside the limits), else the best of 64 uniform configurations."""
-    if solver.net is not None:
+    if solver.uses_network(T):
         return network_guess(solver.net, solver.robot, T)
     if solver.closed_form:
         return analytic_guess(solver.robot, T, q_near=q_near)
@@ -113,7 +113,7 @@ def first_guess(solver, T: torch.Tensor, *, q_near: torch.Tensor | None, seed: i
 def guess(solver, job: Job) -> Answers | None:
     """Stage 1: the initial guess with its FK errors; None where the refiner starts from uniform
     configurations itself (no network, no closed form, a refinement to follow)."""
-    if solver.initial_source == "multistart" and solver.refine != "none":
+    if solver.source_for(job.T) == "multistart" and solver.refine != "none":
         return None
     q0 = first_guess(solver, job.T, q_near=job.q_near, seed=job.seed)
     pos, rot = pose_error(job.T, solver.robot.fk(q0))
@@ -140,7 +140,7 @@ def refine(solver, job: Job, answers: Answers | None) -> Answers:
         res = refine_from(solver, job, torch.arange(T.shape[0], device=T.device), None)
         return Answers(res.q.to(T.dtype), res.pos_err.to(T.dtype), res.rot_err.to(T.dtype), res.iterations.long())
     todo = ~answers.ok(job)
-    if solver.initial_source == "analytic":
+    if solver.source_for(T) == "analytic":
         todo &= job.reachable
     idx = todo.nonzero().squeeze(1)
     if idx.numel() == 0:
@@ -173,7 +173,7 @@ def more_hypotheses(solver, job: Job, answers: Answers) -> Answers:
     from nik.lm import lm_solve
 
     failing = ~answers.ok(job)
-    if getattr(solver.net, "n_hypotheses", 1) <= 1 or not bool(failing.any()):
+    if not solver.uses_network(job.T) or getattr(solver.net, "n_hypotheses", 1) <= 1 or not bool(failing.any()):
         return answers
     robot, idx = solver.robot, failing.nonzero().squeeze(1)
     T = job.T[idx]
@@ -194,7 +194,7 @@ def fallback(solver, job: Job, answers: Answers) -> Answers:
     ``analytic``, the closed-form solution nearest the answer so far (or ``q_near``); ``multistart``, LM
     from uniform starts. Skipped where it would repeat the first pass (the closed form without a network;
     LM whose restarts are the multistart already) and with ``fallback="none"``."""
-    first_pass_is_fallback = (solver.net is None and solver.closed_form) or (
+    first_pass_is_fallback = (not solver.uses_network(job.T) and solver.closed_form) or (
         solver.refine == "lm" and solver.fallback == "multistart"
     )
     todo = ~answers.ok(job) & job.reachable
@@ -221,7 +221,7 @@ def final_check(solver, job: Job, answers: Answers) -> IKResult:
         answers.rot_err,
         answers.ok(job),
         answers.iterations,
-        solver.initial_source,
+        solver.source_for(job.T),
         reachable=job.reachable,
     )
 

@@ -73,6 +73,13 @@ class History(L.Callback):
         self.filename = filename
         self.rows: list[dict] = []
 
+    def state_dict(self) -> dict:
+        """The rows so far (saved in checkpoints, so a resumed run's history and curve cover the whole run)."""
+        return {"rows": [dict(r) for r in self.rows]}
+
+    def load_state_dict(self, state_dict: dict) -> None:
+        self.rows = [dict(r) for r in state_dict.get("rows", [])]
+
     def on_validation_end(self, trainer, pl_module) -> None:
         if trainer.sanity_checking:
             return

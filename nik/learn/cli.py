@@ -76,7 +76,7 @@ def _class_path(callback) -> str:
     return str(path) if path is not None else f"{type(callback).__module__}.{type(callback).__name__}"
 
 
-def _cli_class():
+def _cli_class(command: str | None = None):
     from jsonargparse import Namespace
     from lightning.pytorch.cli import LightningCLI
 
@@ -105,6 +105,10 @@ def _cli_class():
             if ckpt is not None and str(ckpt) not in _SPECIAL_CKPT:
                 check_resume_checkpoint(ckpt)
 
+        def instantiate_classes(self) -> None:
+            super().instantiate_classes()
+            self.model.run_command = command  # what really ran, recorded in the checkpoints
+
     return NikCLI
 
 
@@ -116,16 +120,19 @@ def cli_main(args: list[str] | None = None, *, run: bool = True):
         CheckpointError, FileNotFoundError: ``--ckpt_path`` names a file that is missing or not a loadable
             nik checkpoint (checked with ``weights_only=True`` before Lightning reads it).
     """
+    import shlex
     import sys
 
     from nik.learn.datamodule import IKDataModule
     from nik.learn.modules import IKModule
 
-    ckpt = _ckpt_path_arg(sys.argv[1:] if args is None else list(args))
+    argv = sys.argv[1:] if args is None else [str(a) for a in args]
+    command = shlex.join(["python", "train.py", *argv])
+    ckpt = _ckpt_path_arg(argv)
     if ckpt is not None and ckpt not in _SPECIAL_CKPT:
         check_resume_checkpoint(ckpt)
     _quiet_lightning()
-    return _cli_class()(
+    return _cli_class(command)(
         IKModule,
         IKDataModule,
         subclass_mode_model=True,

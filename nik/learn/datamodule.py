@@ -116,6 +116,23 @@ class IKDataModule(L.LightningDataModule):
                 )
             setattr(self, f"{name}_data", (pose.contiguous(), q.contiguous()))
 
+    def describe(self) -> dict:
+        """Plain data naming the training data (recorded in checkpoints and exported networks): the dataset's
+        path, size, seed, sampler and the SHA-256 of its files, and the filters applied here."""
+        meta = getattr(self, "meta", None) or {}
+        return {
+            "source": "dataset",
+            "path": str(self.path),
+            "n": meta.get("n"),
+            "seed": meta.get("seed"),
+            "sampler": meta.get("sampler"),
+            "ranges": (meta.get("ranges") or {}).get("source"),
+            "sha256": {k: v.get("sha256") for k, v in (meta.get("files") or {}).items()},
+            "branch": self.branch,
+            "max_train": self.max_train,
+            "dtype": str(self.dtype).replace("torch.", ""),
+        }
+
     def _loader(self, tensors, batch_size: int | None, shuffle: bool) -> DataLoader:
         data = TensorBatches(*tensors)
         n = len(data)

@@ -76,6 +76,9 @@ class IKModule(L.LightningModule):
         self.sample_evals = 0
         self._t0: float | None = None
         self._wall_before = 0.0  # seconds spent in earlier (resumed) fits
+        #: the command line of this run (set by train.py's CLI and ``nik train``), recorded in checkpoints
+        self.run_command: str | None = None
+        self._earlier_commands: list[str] = []  # of the runs this one resumed
 
     # -- network ---------------------------------------------------------------
     def net_config(self) -> dict:
@@ -173,9 +176,19 @@ class IKModule(L.LightningModule):
             "sample_evals": int(self.sample_evals),
             "wall_s": float(self.wall_s),
         }
+        run = {"command": self.run_command or "not recorded (trained through the Python API)"}
+        if self._earlier_commands:
+            run["resumed_from_commands"] = list(self._earlier_commands)
+        dm = self.trainer.datamodule if self._trainer is not None else None
+        if dm is not None and hasattr(dm, "describe"):
+            run["data"] = dm.describe()
+        extra["run"] = run
         checkpoint["nik"] = extra
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
+        run = checkpoint.get("nik", {}).get("run", {})
+        earlier = run.get("resumed_from_commands", [])
+        self._earlier_commands = [*earlier, run["command"]] if "command" in run else list(earlier)
         counters = checkpoint.get("nik", {}).get("counters", {})
         self.loss_evals = int(counters.get("loss_evals", 0))
         self.sample_evals = int(counters.get("sample_evals", 0))

@@ -1,11 +1,12 @@
 """Lightning module for the multi-solution networks (:mod:`nik.nets.multi`) and a training-curve plot.
 
-:class:`MultiSolutionIK` trains a :class:`nik.nets.multi.BranchIKNet` (``kind: branch``) or a
-:class:`nik.nets.multi.MultiHypIKNet` (``kind: multihead``) with Adam and a cosine learning rate
+:class:`MultiSolutionIK` trains a :class:`nik.nets.multi.BranchHeadsIKNet` (``kind: branch_heads``; the legacy
+:class:`nik.nets.multi.BranchIKNet` is ``kind: branch``) or a :class:`nik.nets.multi.MultiHypIKNet`
+(``kind: multihead``) with Adam and a cosine learning rate
 (time- or step-based, as :class:`nik.learn.modules.GradientIK`), in two phases of one run:
 
-1. **joint space** until ``pose_start`` of the run: the branch net regresses the ``(sin, cos)``
-   encoding of the sample's joints given its branch label (computed from the joints); the
+1. **joint space** until ``pose_start`` of the run: a branch net regresses the ``(sin, cos)``
+   encoding of the sample's joints on the hypothesis of its branch label (computed from the joints); the
    multi-head net uses a relaxed winner-takes-all loss, ``(1 - wta_eps) min_k l_k + wta_eps mean_k l_k``
    over its K heads (the best head learns the sample, the others are pulled only a little, so no
    head stays unused);
@@ -27,7 +28,10 @@ import lightning as L
 import torch
 
 from nik.learn.modules import GradientIK
-from nik.nets.multi import BranchIKNet, MultiHypIKNet, hypothesis_pose_error
+from nik.nets.multi import BranchHeadsIKNet, BranchIKNet, MultiHypIKNet, hypothesis_pose_error
+
+#: Kinds trained on the hypothesis of each sample's branch label (the others: relaxed winner-takes-all).
+BRANCH_KINDS = ("branch_heads", "branch")
 
 __all__ = ["MultiSolutionIK", "CurvePlot", "FinalCheckpoint", "pose_loss_per_sample", "plot_history"]
 
@@ -45,7 +49,7 @@ class MultiSolutionIK(GradientIK):
     """Two-phase training of a multi-solution network (module docstring).
 
     Args:
-        kind: ``branch`` (arms with branch labels) or ``multihead``.
+        kind: ``branch_heads`` (arms with branch labels; one pass), ``multihead``, or the legacy ``branch``.
         hidden: hidden layer sizes.
         activation: one of :data:`nik.nets.ACTIVATIONS`.
         heads: K of the multi-head net (ignored for ``branch``: always 8).
@@ -59,7 +63,7 @@ class MultiSolutionIK(GradientIK):
 
     def __init__(
         self,
-        kind: str = "branch",
+        kind: str = "branch_heads",
         hidden: tuple[int, ...] = (512, 512, 512),
         activation: str = "silu",
         heads: int = 8,
@@ -73,8 +77,8 @@ class MultiSolutionIK(GradientIK):
         weight_decay: float = 0.0,
         eval_samples: int = 20000,
     ):
-        if kind not in ("branch", "multihead"):
-            raise ValueError(f"model.kind must be branch or multihead, got {kind!r}")
+        if kind not in (*BRANCH_KINDS, "multihead"):
+            raise ValueError(f"model.kind must be branch_heads, multihead or branch, got {kind!r}")
         if not 0.0 <= pose_start <= 1.0:
             raise ValueError(f"model.pose_start must be in [0, 1], got {pose_start}")
         super().__init__(
@@ -99,6 +103,8 @@ class MultiSolutionIK(GradientIK):
     # -- network -----------------------------------------------------------------
     def build(self, robot):
         h = self.hparams
+        if h.kind == "branch_heads":
+            return BranchHeadsIKNet(robot, hidden=h.hidden, activation=h.activation)
         if h.kind == "branch":
             return BranchIKNet(robot, hidden=h.hidden, activation=h.activation)
         return MultiHypIKNet(robot, hidden=h.hidden, activation=h.activation, heads=h.heads)
@@ -120,7 +126,8 @@ class MultiSolutionIK(GradientIK):
         """Loss of each sample (branch: ``(B,)``) or each sample and head (multi-head: ``(B, K)``)."""
         h, net = self.hparams, self.net
         target = net.encode(q)
-        if h.kind == "branch":
+        labelled = h.kind in BRANCH_KINDS
+        if labelled:
             y = net.raw_branch(T, net.labels(q))
             loss = (y - target).square().sum(-1)
         else:
@@ -128,13 +135,13 @@ class MultiSolutionIK(GradientIK):
             loss = (y - target[:, None]).square().sum(-1)
         if pose:
             pl = pose_loss_per_sample(
-                net.decode(y) if h.kind == "branch" else net.decode(y).transpose(0, 1),
+                net.decode(y) if labelled else net.decode(y).transpose(0, 1),
                 T,
                 net.robot,
                 length_scale=net.length_scale,
                 rot_weight=h.rot_weight,
             )
-            pl = pl if h.kind == "branch" else pl.transpose(0, 1)
+            pl = pl if labelled else pl.transpose(0, 1)
             loss = pl + h.joint_weight * loss
         return loss
 
@@ -172,7 +179,7 @@ class MultiSolutionIK(GradientIK):
             "pos_mm_p95": float(torch.quantile(bpos, 0.95)),
             "rot_deg_p95": float(torch.quantile(brot, 0.95)),
         }
-        if isinstance(net, BranchIKNet):
+        if isinstance(net, BranchIKNet | BranchHeadsIKNet):
             lab = net.labels(q)[:, None]
             spos, srot = pos.gather(1, lab)[:, 0] * 1e3, torch.rad2deg(rot.gather(1, lab)[:, 0])
             out["label_pos_mm"] = float(spos.median())

@@ -1,4 +1,5 @@
-"""Checkpoints of IK networks: a Lightning ``.ckpt`` (or :func:`save_checkpoint` file) read safely.
+"""Checkpoints of IK networks: a Lightning ``.ckpt`` (or :func:`save_checkpoint` file) read safely; and
+:func:`load_network`, which reads any network file (an exported pair or a checkpoint).
 
 A checkpoint holds ``state_dict`` (keys ``net.*``) and a ``checkpoint["nik"]`` block of plain data: the
 robot's definition and hash and the network's architecture, so ``torch.load(weights_only=True)`` reads it
@@ -15,9 +16,10 @@ import torch
 from nik.errors import CheckpointError
 from nik.nets.mlp import IKNet
 from nik.nets.multi import build_net
+from nik.nets.pair import architecture_mismatch, load_pair
 from nik.robots import Robot, load_robot
 
-__all__ = ["CHECKPOINT_FORMAT", "checkpoint_extra", "load_checkpoint", "save_checkpoint"]
+__all__ = ["CHECKPOINT_FORMAT", "checkpoint_extra", "load_checkpoint", "load_network", "save_checkpoint"]
 
 #: Version of the ``checkpoint["nik"]`` block.
 CHECKPOINT_FORMAT = 1
@@ -51,19 +53,21 @@ def load_checkpoint(
 
     Args:
         path: the checkpoint.
-        robot: optional robot (object, built-in name or file) the network must belong to; a
-            checkpoint made for a different robot definition is refused.
+        robot: optional robot (object, built-in name or file) the network must belong to, matched by
+            definition hash (not name); a checkpoint made for a different robot definition is refused.
+            The network's ``robot`` is then this one.
 
     Returns:
-        the network in eval mode; ``net.robot`` is rebuilt from the stored definition.
+        the network in eval mode; without ``robot``, ``net.robot`` is rebuilt from the stored definition.
 
     Raises:
-        CheckpointError: a folder, an unreadable file, no nik block, or a robot mismatch (both robots named).
+        CheckpointError: a folder, an unreadable or damaged file, no nik block, a robot mismatch (both
+            robots named) or weights that do not fit the stored architecture (the field named); one line.
         FileNotFoundError: no such file.
     """
     path = Path(path)
     if path.is_dir():
-        raise CheckpointError(f"checkpoint {path} is a folder, not a checkpoint file (.ckpt)")
+        raise CheckpointError(f"{path} is a folder, not a checkpoint file")
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
     try:
@@ -72,7 +76,8 @@ def load_checkpoint(
             ckpt = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as err:  # torch's own text spans several lines and suggests weights_only=False: not ours
         raise CheckpointError(
-            f"{path} is not a loadable nik checkpoint (torch.load(weights_only=True) refused it: {type(err).__name__})"
+            f"{path} is not a loadable nik checkpoint (torch.load(weights_only=True) refused it: "
+            f"{type(err).__name__}; damaged, truncated or not a checkpoint)"
         ) from err
     if not isinstance(ckpt, dict) or "nik" not in ckpt or "state_dict" not in ckpt:
         raise CheckpointError(f"{path} is not a loadable nik checkpoint (no 'nik' block with the robot and network)")
@@ -81,7 +86,7 @@ def load_checkpoint(
         stored = Robot.from_definition(extra["robot"])
         cfg = dict(extra["net"])
     except (KeyError, TypeError, ValueError) as err:
-        raise CheckpointError(f"{path}: malformed nik block: {err}") from err
+        raise CheckpointError(f"{path}: malformed nik block: {str(err).splitlines()[0]}") from err
     if robot is not None:
         robot = load_robot(robot)
         if robot.definition_hash != stored.definition_hash:
@@ -89,13 +94,25 @@ def load_checkpoint(
                 f"checkpoint {path} was trained for robot {stored.name!r} (hash {stored.definition_hash}), "
                 f"not for robot {robot.name!r} (hash {robot.definition_hash})"
             )
-    if "kind" in cfg:  # a multi-solution network (nik.nets.multi), e.g. from configs/train/<robot>.yaml
-        net = build_net(stored, cfg)
-    else:
-        net = IKNet(stored, **cfg)
-    state = {k[len("net.") :]: v for k, v in ckpt["state_dict"].items() if k.startswith("net.")}
+    owner = robot if robot is not None else stored
     try:
-        net.load_state_dict(state)
-    except RuntimeError as err:
-        raise CheckpointError(f"{path}: weights do not fit the stored architecture {cfg}: {err}") from err
+        net = build_net(owner, cfg) if "kind" in cfg else IKNet(owner, **cfg)
+    except (TypeError, ValueError) as err:
+        reason = str(err).splitlines()[0]
+        raise CheckpointError(f"{path}: the stored architecture {cfg} is not valid: {reason}") from err
+    state = {k[len("net.") :]: v for k, v in ckpt["state_dict"].items() if k.startswith("net.")}
+    problem = architecture_mismatch(net, state, cfg)
+    if problem is not None:
+        raise CheckpointError(f"{path}: the weights do not fit the stored architecture: {problem}")
+    net.load_state_dict(state)
     return net.to(torch.float32).eval() if "kind" in cfg else net.eval()
+
+
+def load_network(path: str | Path, *, robot: Robot | str | Path | None = None):
+    """Any network file: an exported pair (``NAME.safetensors`` or ``NAME.json``, :func:`nik.nets.pair.load_pair`,
+    SHA-256 checked) or a Lightning / :func:`save_checkpoint` file (:func:`load_checkpoint`), matched to
+    ``robot`` by definition hash. Raises ``CheckpointError`` (one line) or ``FileNotFoundError``."""
+    p = Path(path)
+    if p.suffix in (".safetensors", ".json"):
+        return load_pair(p, robot=robot)
+    return load_checkpoint(p, robot=robot)

@@ -1,68 +1,88 @@
-"""Export a trained multi-solution network to the package: ``python -m nik.nets.export CKPT --robot NAME``.
+"""Export a trained multi-solution network: ``python -m nik.nets.export CKPT [--robot NAME] [--out FILE]``.
 
 Reads the Lightning checkpoint of :class:`nik.learn.multi.MultiSolutionIK` safely
 (``torch.load(weights_only=True)``), rebuilds the network from its ``checkpoint["nik"]`` block and writes
-``<robot>.safetensors`` + ``<robot>.json`` (:func:`nik.nets.pretrained.save`) with the training command,
-the config file's text and the recorded validation error.
+the pair ``NAME.safetensors`` + ``NAME.json`` (:func:`nik.nets.pretrained.save`) where ``--out`` says
+(default ``runs/<robot>/<robot>.safetensors``; the package's folder only when named, ``--out nik/nets/weights``),
+recording the training command and data the checkpoint carries (what really ran), this export's command,
+the config file's text when ``--config`` names one, the SHA-256 of the weights and the validation error.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shlex
+import sys
 from pathlib import Path
 
 import torch
 
 from nik.errors import CheckpointError
-from nik.nets.multi import build_net
-from nik.nets.pretrained import PRETRAINED_DIR, save
-from nik.robots import Robot, load_robot
+from nik.nets.pretrained import save
 
-__all__ = ["load_training_checkpoint", "main"]
+__all__ = ["cli", "command_line", "default_out", "load_training_checkpoint", "main"]
 
 
 def load_training_checkpoint(path: str | Path, robot=None):
-    """The network in a ``MultiSolutionIK`` checkpoint, eval mode; ``robot`` (optional) must match its hash."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"checkpoint not found: {path}")
-    ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    extra = ckpt.get("nik") if isinstance(ckpt, dict) else None
-    if not extra or "kind" not in extra.get("net", {}):
+    """The network in a ``MultiSolutionIK`` checkpoint, eval mode, and its ``checkpoint["nik"]`` block;
+    ``robot`` (optional) must match its definition hash. Raises ``CheckpointError`` (one line)."""
+    from nik.nets.checkpoint import load_checkpoint
+
+    net = load_checkpoint(path, robot=robot)
+    if not hasattr(net, "hypotheses"):
         raise CheckpointError(f"{path} is not a checkpoint of a multi-solution network (nik.learn.multi)")
-    stored = Robot.from_definition(extra["robot"])
-    if robot is not None:
-        robot = load_robot(robot) if not isinstance(robot, Robot) else robot
-        if robot.definition_hash != stored.definition_hash:
-            raise CheckpointError(f"{path} was trained for another definition of {stored.name!r}")
-    net = build_net(stored, extra["net"])
-    net.load_state_dict({k[4:]: v for k, v in ckpt["state_dict"].items() if k.startswith("net.")})
-    return net.to(torch.float32).eval(), extra
+    ckpt = torch.load(Path(path), map_location="cpu", weights_only=True)
+    return net, ckpt["nik"]
+
+
+def default_out(name: str) -> Path:
+    """Where an export goes unless ``--out`` says otherwise: ``runs/<name>/<name>.safetensors``."""
+    return Path("runs") / name / f"{name}.safetensors"
+
+
+def command_line(argv: list[str] | None, prog: str) -> str:
+    """The command as it ran: ``sys.argv`` (or ``prog`` + ``argv`` when called with a list), shell-quoted."""
+    if argv is None:
+        return shlex.join(["python", "-m", "nik.nets.export", *sys.argv[1:]])
+    return " ".join([prog, shlex.join(argv)]).strip()
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m nik.nets.export", description=__doc__.splitlines()[0])
     ap.add_argument("checkpoint", help="runs/<robot>/last.ckpt of train.py with configs/train/<robot>.yaml")
     ap.add_argument("--robot", default=None, help="robot the checkpoint must belong to (default: its own)")
-    ap.add_argument("--config", default=None, help="training config to record (default configs/train/<robot>.yaml)")
+    ap.add_argument("--config", default=None, help="training config file to record with the network (its text)")
     ap.add_argument("--wall-min", type=float, default=None, help="training wall-clock minutes to record")
-    ap.add_argument("--out", default=str(PRETRAINED_DIR), help="output folder (default: the package's)")
+    ap.add_argument(
+        "--out",
+        default=None,
+        help="NAME.safetensors to write (+ NAME.json beside it), or a folder for <robot>.safetensors; default "
+        "runs/<robot>/<robot>.safetensors. The package's folder only when named: --out nik/nets/weights",
+    )
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     net, extra = load_training_checkpoint(args.checkpoint, args.robot)
     name = net.robot.name
-    cfg = Path(args.config) if args.config else Path("configs/train") / f"{name}.yaml"
+    run = extra.get("run", {})
     training = {
-        "command": f"python train.py fit --config configs/train/{name}.yaml",
-        "config_file": str(cfg),
-        "config": cfg.read_text() if cfg.is_file() else None,
+        "command": run.get("command", "not recorded (the checkpoint was written before nik recorded it)"),
+        "data": run.get("data", "not recorded"),
+        "export_command": command_line(argv, "python -m nik.nets.export"),
+        "checkpoint": str(args.checkpoint),
         "counters": extra.get("counters", {}),
     }
+    if args.config is not None:
+        cfg = Path(args.config)
+        if not cfg.is_file():
+            raise FileNotFoundError(f"--config: no such file: {cfg}")
+        training["config_file"] = str(cfg)
+        training["config"] = cfg.read_text()
     if args.wall_min is not None:
         training["wall_min"] = args.wall_min
-    path = save(net, args.out, training=training)
-    print(f"wrote {path} and {path.with_suffix('.safetensors')}")
+    out = Path(args.out) if args.out is not None else default_out(name)
+    path = save(net, out, training=training)
+    print(f"wrote {path.with_suffix('.safetensors')} and {path}")
     val = json.loads(path.read_text())["validation"]
     print(
         f"validation ({val['n']} poses, seed {val['seed']}), best hypothesis: median "
@@ -72,5 +92,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def cli(argv: list[str] | None = None) -> int:
+    """:func:`main` with nik's input errors as one line on stderr and exit status 2 (no traceback)."""
+    try:
+        return main(argv)
+    except (ValueError, FileNotFoundError) as err:
+        print(f"python -m nik.nets.export: error: {err}", file=sys.stderr)
+        return 2
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(cli())

@@ -4,13 +4,18 @@ A pose of a 6R arm has up to 8 joint solutions, a pose of a 7-DOF arm a continuu
 regression (:class:`nik.nets.IKNet`) averages them into a joint vector that is none of them.
 Two networks here give *hypotheses* ``(B, K, dof)`` instead:
 
-- :class:`BranchIKNet` (arms with IK branch labels, :func:`nik.data.branches.ik_branch_classifier`:
-  PUMA type such as ``puma560``, ``kuka_kr``, ``rebot_v_6r``; UR type such as ``ur5``): input is
-  the pose and the one-hot branch label (shoulder + 2 elbow + 4 wrist, 0..7); given both, the
-  solution is unique, so a regression is well posed. Its K = 8 hypotheses are the 8 branches.
+- :class:`BranchHeadsIKNet` (arms with IK branch labels, :func:`nik.data.branches.ik_branch_classifier`:
+  PUMA type such as ``puma560``, ``kuka_kr``, ``rebot_v_6r``; UR type such as ``ur5``): one trunk on the
+  pose and 8 output heads, head ``k`` = branch ``k`` (shoulder + 2 elbow + 4 wrist, 0..7), trained on
+  the head of each sample's label; given pose and label the solution is unique, so each head's
+  regression is well posed. One forward pass gives all 8 hypotheses.
 - :class:`MultiHypIKNet` (any arm, redundant ones included, e.g. ``panda``): one trunk and K
   output heads, trained with a relaxed winner-takes-all loss (the best head gets the gradient,
   the others a small share) in joint space and then through FK; its hypotheses are the K heads.
+- :class:`BranchIKNet` (kind ``branch``, kept to load older files): the label enters as a one-hot
+  input, so its 8 hypotheses take 8 forward passes of the whole MLP (8 x the cost of one pass of a
+  :class:`BranchHeadsIKNet` of the same size; measured in ``benchmarks/learned.py``). New networks are
+  :class:`BranchHeadsIKNet`.
 
 Both share the output encoding: revolute joints are predicted as ``(sin, cos)`` pairs (wrap-free:
 a joint with a range of 2 pi or more has no seam; the angle is taken within ``out_center +- pi``
@@ -33,7 +38,7 @@ from nik.nets.mlp import ACTIVATIONS
 from nik.poses import POSE_DIMS, pose_error, pose_to_vector
 from nik.robots import Robot
 
-__all__ = ["KINDS", "BranchIKNet", "MultiHypIKNet", "build_net", "hypothesis_pose_error"]
+__all__ = ["KINDS", "BranchHeadsIKNet", "BranchIKNet", "MultiHypIKNet", "build_net", "hypothesis_pose_error"]
 
 
 def hypothesis_pose_error(robot: Robot, T: torch.Tensor, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -199,8 +204,81 @@ class _HypothesisNet(nn.Module):
         return self.ranked_hypotheses(T)[0][:, 0]
 
 
-class BranchIKNet(_HypothesisNet):
-    """Pose + one-hot IK branch label -> joints; 8 hypotheses, one per branch (module docstring).
+def _require_branch_labels(robot: Robot, cls: str) -> None:
+    from nik.data.branches import ik_branch_classifier
+
+    if ik_branch_classifier(robot) is None:
+        raise ValueError(
+            f"{cls}: robot {robot.name!r} has no IK branch labels (PUMA type: parallel axes 2, 3 and a "
+            "spherical wrist; UR type: parallel axes 2, 3, 4); use MultiHypIKNet"
+        )
+
+
+class _Labelled:
+    """Branch labels of joints and the hypothesis of a given branch (shared by the branch networks)."""
+
+    def labels(self, q: torch.Tensor) -> torch.Tensor:
+        """Branch labels ``(B,)`` long of joints ``q: (B, dof)`` (the training condition)."""
+        from nik.data.branches import ik_branch_classifier
+
+        if not hasattr(self, "_clf"):
+            self._clf = ik_branch_classifier(self.robot)
+        return self._clf(q).long()
+
+    @torch.no_grad()
+    def predict_branch(self, T: torch.Tensor, branch) -> torch.Tensor:
+        """``T: (B, 4, 4)``, ``branch`` int or ``(B,)`` -> the joints of that branch ``(B, dof)``, inside the limits."""
+        self._check(T)
+        b = torch.as_tensor(branch, device=self.in_mean.device).long().expand(T.shape[0])
+        if bool(((b < 0) | (b > 7)).any()):
+            raise ValueError("branch labels must be in 0..7")
+        q = self.decode(self.raw_branch(T.to(self.in_mean.device), b))
+        return self.robot.clamp(q.to(T.dtype)).to(T.device)
+
+
+class BranchHeadsIKNet(_Labelled, _HypothesisNet):
+    """Pose -> 8 hypotheses from one trunk and 8 heads, head ``k`` = IK branch ``k`` (module docstring).
+
+    One forward pass gives every hypothesis. Training (:class:`nik.learn.multi.MultiSolutionIK`,
+    ``kind: branch_heads``) supervises only the head of each sample's branch label.
+
+    Args:
+        robot: an arm with a branch classifier (PUMA or UR type).
+        hidden: hidden layer sizes of the trunk, e.g. ``[256, 256, 256, 256]``.
+        activation: one of :data:`nik.nets.mlp.ACTIVATIONS`.
+        representation: input pose representation (default ``rot6d``).
+    """
+
+    kind = "branch_heads"
+
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        hidden: Sequence[int] = (256, 256, 256, 256),
+        activation: str = "silu",
+        representation: str = "rot6d",
+    ):
+        _require_branch_labels(robot, "BranchHeadsIKNet")
+        super().__init__(
+            robot, hidden=hidden, activation=activation, n_extra_in=0, n_heads=8, representation=representation
+        )
+
+    def raw_hypotheses(self, T: torch.Tensor) -> torch.Tensor:
+        y = self.mlp(self.features(T))
+        return y.reshape(*y.shape[:-1], 8, self.head_dim)
+
+    def raw_branch(self, T: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
+        """Raw output ``(B, head_dim)`` of head ``branch: (B,)`` (0..7) for poses ``T: (B, 4, 4)``."""
+        y = self.raw_hypotheses(T)
+        idx = branch.long().to(y.device)[:, None, None].expand(-1, 1, self.head_dim)
+        return y.gather(1, idx)[:, 0]
+
+
+class BranchIKNet(_Labelled, _HypothesisNet):
+    """Legacy (kind ``branch``): pose + one-hot IK branch label -> joints; 8 hypotheses, one per branch,
+    by 8 forward passes (module docstring). Kept so that files made with it still load; new networks are
+    :class:`BranchHeadsIKNet` (one pass).
 
     Args:
         robot: an arm with a branch classifier (PUMA or UR type).
@@ -219,25 +297,11 @@ class BranchIKNet(_HypothesisNet):
         activation: str = "silu",
         representation: str = "rot6d",
     ):
-        from nik.data.branches import ik_branch_classifier
-
-        if ik_branch_classifier(robot) is None:
-            raise ValueError(
-                f"BranchIKNet: robot {robot.name!r} has no IK branch labels (PUMA type: parallel axes 2, 3 and a "
-                "spherical wrist; UR type: parallel axes 2, 3, 4); use MultiHypIKNet"
-            )
+        _require_branch_labels(robot, "BranchIKNet")
         super().__init__(
             robot, hidden=hidden, activation=activation, n_extra_in=8, n_heads=1, representation=representation
         )
         self.n_heads = 8  # hypotheses: one per branch (the output layer has one head)
-
-    def labels(self, q: torch.Tensor) -> torch.Tensor:
-        """Branch labels ``(B,)`` long of joints ``q: (B, dof)`` (the training condition)."""
-        from nik.data.branches import ik_branch_classifier
-
-        if not hasattr(self, "_clf"):
-            self._clf = ik_branch_classifier(self.robot)
-        return self._clf(q).long()
 
     def raw_branch(self, T: torch.Tensor, branch: torch.Tensor) -> torch.Tensor:
         """Raw output ``(B, head_dim)`` for poses ``T: (B, 4, 4)`` and labels ``branch: (B,)`` in 0..7."""
@@ -251,16 +315,6 @@ class BranchIKNet(_HypothesisNet):
         onehot = torch.eye(8, dtype=x.dtype, device=x.device)
         inp = torch.cat([x[:, None].expand(B, 8, x.shape[-1]), onehot.expand(B, 8, 8)], dim=-1)
         return self.mlp(inp)
-
-    @torch.no_grad()
-    def predict_branch(self, T: torch.Tensor, branch) -> torch.Tensor:
-        """``T: (B, 4, 4)``, ``branch`` int or ``(B,)`` -> the joints of that branch ``(B, dof)``, inside the limits."""
-        self._check(T)
-        b = torch.as_tensor(branch, device=self.in_mean.device).long().expand(T.shape[0])
-        if bool(((b < 0) | (b > 7)).any()):
-            raise ValueError("branch labels must be in 0..7")
-        q = self.decode(self.raw_branch(T.to(self.in_mean.device), b))
-        return self.robot.clamp(q.to(T.dtype)).to(T.device)
 
 
 class MultiHypIKNet(_HypothesisNet):
@@ -300,11 +354,12 @@ class MultiHypIKNet(_HypothesisNet):
 
 
 #: Network kinds by the ``kind`` of their :meth:`config`.
-KINDS = {"branch": BranchIKNet, "multihead": MultiHypIKNet}
+KINDS = {"branch_heads": BranchHeadsIKNet, "multihead": MultiHypIKNet, "branch": BranchIKNet}
 
 
 def build_net(robot: Robot, config: dict) -> _HypothesisNet:
-    """Rebuild a network from its :meth:`config` (plain data): ``{"kind": "branch" | "multihead", ...}``."""
+    """Rebuild a network from its :meth:`config` (plain data): ``{"kind": "branch_heads" | "multihead" | "branch",
+    ...}``."""
     cfg = dict(config)
     kind = cfg.pop("kind", None)
     if kind not in KINDS:

@@ -1,9 +1,10 @@
-"""Trained multi-solution networks shipped with nik: ``<robot>.safetensors`` + ``<robot>.json``.
+"""Trained multi-solution networks for an arm: the shipped ones and the user's, found by definition hash.
 
-The ``.safetensors`` file holds the weights and buffers (read without pickle); the ``.json`` file holds
-plain data: the robot's name, definition hash and definition, the architecture (:meth:`config` of
-:mod:`nik.nets.multi`), how it was trained (command and config), and its recorded validation error with
-the seed and size of the validation set that reproduces it (:func:`validation_error`).
+A network is a pair ``NAME.safetensors`` + ``NAME.json`` (:mod:`nik.nets.pair`: the weights, read without
+pickle, and plain data: the robot's name, definition hash and definition, the architecture, the SHA-256 of
+the weights, how it was trained and its recorded validation error with the seed and size of the validation
+set that reproduces it, :func:`validation_error`). Which pair an arm gets is :mod:`nik.nets.registry`'s
+business (the user folder, then the shipped one, by hash).
 
 :func:`load_pretrained` (also ``nik.models.load_pretrained``) is the public entry point; ``python -m
 nik.nets.export`` writes a pair from a training checkpoint. The shipped files live in ``nik/nets/weights/``.
@@ -11,14 +12,14 @@ nik.nets.export`` writes a pair from a training checkpoint. The shipped files li
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import torch
 
 from nik.errors import CheckpointError
-from nik.nets.multi import build_net, hypothesis_pose_error
+from nik.nets.multi import hypothesis_pose_error
+from nik.nets.pair import load_pair, pair_paths, read_pair_meta, save_pair
+from nik.nets.registry import SHIPPED_DIR, find_network, index
 from nik.robots import Robot, load_robot
 
 __all__ = [
@@ -34,7 +35,7 @@ __all__ = [
 ]
 
 #: Folder of the shipped files (inside the package).
-PRETRAINED_DIR = Path(__file__).resolve().parent / "weights"
+PRETRAINED_DIR = SHIPPED_DIR
 #: Default validation set of a shipped network: ``n`` uniform joint vectors inside the limits from ``seed``.
 VALIDATION = {"seed": 12345, "n": 2000}
 
@@ -46,13 +47,9 @@ def available(directory: str | Path | None = None) -> list[str]:
 
 
 def read_meta(name: str, directory: str | Path | None = None) -> dict:
-    """The ``.json`` block of robot ``name``'s shipped network."""
+    """The ``.json`` block of the network ``name`` in ``directory`` (default: the shipped folder)."""
     d = Path(directory) if directory is not None else PRETRAINED_DIR
-    path = d / f"{name}.json"
-    try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise CheckpointError(f"cannot read {path}: {err}") from err
+    return read_pair_meta(d / f"{name}.json")
 
 
 @torch.no_grad()
@@ -81,78 +78,44 @@ def validation_error(net, *, seed: int, n: int) -> dict:
     return out
 
 
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        write(tmp)
-        tmp.replace(path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def save(net, directory: str | Path, *, training: dict | None = None, validation: dict | None = None) -> Path:
-    """Write ``<robot>.safetensors`` and ``<robot>.json`` for ``net`` into ``directory``; returns the json path.
+    """Write ``net`` as a pair (:func:`nik.nets.pair.save_pair`): ``directory`` is a folder (the pair is named
+    after the robot) or a ``NAME.safetensors`` path; returns the ``.json`` path.
 
     The validation error is measured here (:func:`validation_error` with ``validation``, default
-    :data:`VALIDATION`) and recorded."""
-    from safetensors.torch import save_file
-
-    d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
-    name = net.robot.name
-    net = net.eval()
-    state = {k: v.detach().cpu().contiguous().clone() for k, v in net.state_dict().items()}
+    :data:`VALIDATION`) and recorded, with the SHA-256 of the weights."""
     val = dict(VALIDATION, **(validation or {}))
-    meta = {
-        "format": 1,
-        "robot": name,
-        "robot_hash": net.robot.definition_hash,
-        "robot_definition": net.robot.to_definition(),
-        "net": net.config(),
-        "n_params": int(net.n_params),
-        "training": training or {},
-        "validation": validation_error(net, seed=val["seed"], n=val["n"]),
-    }
-    _atomic_write(
-        d / f"{name}.safetensors", lambda p: (save_file(state, str(p), metadata={"robot": name}), p.chmod(0o644))
-    )
-    _atomic_write(d / f"{name}.json", lambda p: p.write_text(json.dumps(meta, indent=2, sort_keys=False) + "\n"))
-    return d / f"{name}.json"
+    record = validation_error(net.eval(), seed=val["seed"], n=val["n"])
+    return pair_paths(save_pair(net, directory, training=training, validation=record))[1]
 
 
 def load(robot, directory: str | Path | None = None):
-    """The shipped network of ``robot`` (a :class:`nik.Robot` or a built-in name), in eval mode.
+    """The network for ``robot`` (a :class:`nik.Robot`, built-in name or robot file), eval mode: the pair
+    in ``directory`` (default: the user folder, then the shipped one; :mod:`nik.nets.registry`) whose
+    recorded robot hash is the robot's definition hash, whatever its name. Its weights' SHA-256 is checked.
 
     Raises:
-        CheckpointError: no network for this robot (the message names the robots that have one), or
-            one made for a different definition of it (hash mismatch), or unreadable files.
+        CheckpointError: no network for this robot's definition (the message names the robots that have
+            one, and says so when a network of that name exists for another definition), or a damaged file.
     """
-    from safetensors.torch import load_file
-
-    d = Path(directory) if directory is not None else PRETRAINED_DIR
     if not isinstance(robot, Robot):
         robot = load_robot(robot)
-    have = available(d)
-    if robot.name not in have:
+    dirs = [Path(directory)] if directory is not None else None
+    path = find_network(robot, dirs)
+    if path is None:
+        have = sorted({st.stem for st, _ in index(dirs)})
+        same_name = [st for st, h in index(dirs) if st.stem == robot.name]
+        if same_name:
+            other = read_pair_meta(same_name[0]).get("robot_hash")
+            raise CheckpointError(
+                f"the network {same_name[0]} was trained for robot definition hash {other}, not for this "
+                f"robot's {robot.definition_hash} (the arm was changed); train one for it: nik train {robot.name}"
+            )
         raise CheckpointError(
-            f"no pretrained network for robot {robot.name!r}; "
-            f"pretrained networks exist for: {', '.join(have) or 'none'}"
+            f"no pretrained network for robot {robot.name!r} (definition hash {robot.definition_hash}); "
+            f"pretrained networks exist for: {', '.join(have) or 'none'}; train one: nik train ROBOT"
         )
-    meta = read_meta(robot.name, d)
-    if meta.get("robot_hash") != robot.definition_hash:
-        raise CheckpointError(
-            f"the pretrained network for {robot.name!r} was trained for robot definition hash "
-            f"{meta.get('robot_hash')}, not for this robot's {robot.definition_hash} (the arm was changed); "
-            "train one for it (README, Learned multi-solution networks)"
-        )
-    try:
-        net = build_net(robot, meta["net"])
-        state = load_file(str(d / f"{robot.name}.safetensors"))
-        net.load_state_dict(state)
-    except (KeyError, ValueError, RuntimeError, OSError) as err:
-        raise CheckpointError(f"cannot load the pretrained network for {robot.name!r}: {err}") from err
-    return net.eval()
+    return load_pair(path, robot=robot)
 
 
 def pretrained_robots() -> list[str]:
@@ -161,13 +124,15 @@ def pretrained_robots() -> list[str]:
 
 
 def load_pretrained(robot: Robot | str | Path):
-    """The network shipped with nik for ``robot`` (a :class:`nik.Robot`, built-in name or robot file), eval mode.
+    """The network for ``robot`` (a :class:`nik.Robot`, built-in name or robot file), eval mode: the one
+    installed in the user folder (``nik train --install``) or else shipped with nik, matched by the robot's
+    definition hash (the same arm under another name gets it).
 
     It is a multi-solution network (:mod:`nik.nets.multi`): ``net.hypotheses(T)`` gives ``(B, K, dof)``
     joint hypotheses, ``net.predict(T)`` the best of them by FK. Read from safetensors (no pickle).
 
     Raises:
-        CheckpointError: no network is shipped for this robot (the message names the robots that have
-            one), or the shipped one was trained for a different definition of it (hash mismatch).
+        CheckpointError: no network for this robot's definition (the message names the robots that have
+            one), or a damaged file (the SHA-256 of its weights is checked).
     """
     return load(robot)

@@ -1,0 +1,120 @@
+"""Does a trained network pay for itself? The figures ``nik train`` prints when it has exported one.
+
+:func:`network_report` measures, on targets from uniform joints inside the limits (seeded):
+
+1. the **raw network**: median and p95 of the position (mm) and rotation (deg) error of its best hypothesis
+   by FK (what the JSON records as ``validation``);
+2. the solver **with the network** (``IKSolver(robot, checkpoint=path)``) against **no network**
+   (``IKSolver(robot, checkpoint=None)``: the closed form where the arm has one, else LM from uniform
+   starts); each row names the guess the solver used (for one pose on the CPU the solver with the network
+   skips it: :attr:`nik.IKSolver.network_min_batch`); success within the solver's default tolerances
+   (0.1 mm, 1e-3 rad) and milliseconds per target, on one batch of ``n_batch`` targets (median of
+   ``repeats`` runs, the two solvers interleaved) and on ``n_one`` single poses solved one at a time
+   (median time of one call).
+
+Timings depend on the machine and its load; the two solvers run in the same process, interleaved.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from nik.ik import IKSolver
+from nik.nets.multi import hypothesis_pose_error
+
+__all__ = ["NetworkReport", "network_report"]
+
+
+@dataclass
+class NetworkReport:
+    """Figures of one network (module docstring). Errors in mm and degrees, times in ms per target."""
+
+    robot: str
+    raw: dict
+    rows: list[dict] = field(default_factory=list)  # {"case", "solver", "success", "ms"}
+
+    def lines(self) -> list[str]:
+        r = self.raw
+        out = [
+            f"raw network, best of {r['K']} hypotheses by FK ({r['n']} targets): position median "
+            f"{r['pos_mm_median']:.2f} mm, p95 {r['pos_mm_p95']:.2f} mm; rotation median "
+            f"{r['rot_deg_median']:.2f} deg, p95 {r['rot_deg_p95']:.2f} deg",
+            f"{'case':<24} {'solver':<42} {'success':>8} {'ms / target':>12}",
+        ]
+        for row in self.rows:
+            out.append(f"{row['case']:<24} {row['solver']:<42} {100 * row['success']:7.2f}% {row['ms']:12.4f}")
+        return out
+
+
+def _targets(robot, n: int, seed: int) -> torch.Tensor:
+    g = torch.Generator().manual_seed(int(seed))
+    return robot.fk(robot.sample(int(n), generator=g, dtype=torch.float64))
+
+
+def network_report(
+    robot,
+    checkpoint: str | Path,
+    *,
+    n_raw: int = 2000,
+    n_batch: int = 1000,
+    n_one: int = 50,
+    repeats: int = 3,
+    seed: int = 2026,
+) -> NetworkReport:
+    """Measure the network at ``checkpoint`` for ``robot`` (module docstring)."""
+    with_net = IKSolver(robot, checkpoint=checkpoint)
+    without = IKSolver(robot, checkpoint=None)
+    net = with_net.net
+    T = _targets(robot, n_raw, seed)
+    with torch.no_grad():
+        hyp = net.hypotheses(T)
+    pos, rot = hypothesis_pose_error(robot, T, hyp)
+    best = (pos + 0.1 * rot).argmin(-1, keepdim=True)
+    p, r = pos.gather(1, best)[:, 0] * 1e3, torch.rad2deg(rot.gather(1, best)[:, 0])
+    raw = {
+        "n": int(n_raw),
+        "K": int(hyp.shape[1]),
+        "pos_mm_median": float(p.median()),
+        "pos_mm_p95": float(torch.quantile(p, 0.95)),
+        "rot_deg_median": float(r.median()),
+        "rot_deg_p95": float(torch.quantile(r, 0.95)),
+    }
+    report = NetworkReport(robot.name, raw)
+    Tb = _targets(robot, n_batch, seed + 1)
+    names = {
+        f"with the network (guess: {with_net.source_for(Tb)})": with_net,
+        f"no network (guess: {without.source_for(Tb)})": without,
+    }
+    times = {k: [] for k in names}
+    ok = {}
+    for _ in range(repeats):
+        for k, solver in names.items():
+            t0 = time.perf_counter()
+            res = solver.solve(Tb, seed=0)
+            times[k].append(time.perf_counter() - t0)
+            ok[k] = float(res.success.double().mean())
+    for k in names:
+        ms = 1e3 * statistics.median(times[k]) / n_batch
+        report.rows.append({"case": f"batch of {n_batch}", "solver": k, "success": ok[k], "ms": ms})
+    To = _targets(robot, n_one, seed + 2)
+    names = {
+        f"with the network (guess: {with_net.source_for(To[:1])})": with_net,
+        f"no network (guess: {without.source_for(To[:1])})": without,
+    }
+    one = {k: [] for k in names}
+    hits = {k: 0 for k in names}
+    for i in range(n_one):
+        for k, solver in names.items():
+            t0 = time.perf_counter()
+            res = solver.solve(To[i : i + 1], seed=0)
+            one[k].append(time.perf_counter() - t0)
+            hits[k] += int(res.success[0])
+    for k in names:
+        ms = 1e3 * statistics.median(one[k])
+        report.rows.append({"case": f"one pose ({n_one} poses)", "solver": k, "success": hits[k] / n_one, "ms": ms})
+    return report

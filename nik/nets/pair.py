@@ -1,0 +1,233 @@
+"""An exported network: ``NAME.safetensors`` (weights, read without pickle) + ``NAME.json`` (plain data).
+
+The JSON holds what rebuilds and checks the network:
+
+- ``robot``, ``robot_hash``, ``robot_definition``: the arm it was trained for (matched by the hash of
+  the definition, never by the name: :attr:`nik.Robot.definition_hash`);
+- ``net``: the architecture (:meth:`config` of :mod:`nik.nets.multi`, ``kind`` included);
+- ``weights_sha256``, ``weights_bytes``: the SHA-256 and size of the ``.safetensors`` file beside it;
+- ``training``: the command that really ran (``sys.argv``), the data it used, counters;
+- ``validation``: its recorded error on a seeded validation set (:func:`nik.nets.pretrained.validation_error`).
+
+:func:`load_pair` checks, in this order, that the files exist, the JSON parses and has every field, the
+weights' SHA-256 matches, the robot's definition hash matches, the architecture is known and every tensor
+has the shape the architecture needs; any failure is a :class:`nik.CheckpointError` of one line naming the
+file and the problem (a field of the JSON where the architecture does not fit). :func:`save_pair` writes
+both files to temporary names and renames them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import torch
+
+from nik.errors import CheckpointError
+from nik.robots import Robot, load_robot
+
+__all__ = ["PAIR_FORMAT", "architecture_mismatch", "load_pair", "pair_paths", "read_pair_meta", "save_pair"]
+
+#: Version of the JSON; 2 added ``weights_sha256`` (format 1 files are refused: re-export them).
+PAIR_FORMAT = 2
+_REQUIRED = ("robot_hash", "net", "weights_sha256")
+
+
+def _one_line(err: BaseException | str) -> str:
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__
+
+
+def pair_paths(path: str | Path) -> tuple[Path, Path]:
+    """``(NAME.safetensors, NAME.json)`` for either file of a pair (or a path without suffix)."""
+    p = Path(path)
+    if p.suffix == ".json":
+        return p.with_suffix(".safetensors"), p
+    if p.suffix == ".safetensors":
+        return p, p.with_suffix(".json")
+    return p.with_name(p.name + ".safetensors"), p.with_name(p.name + ".json")
+
+
+def read_pair_meta(path: str | Path) -> dict:
+    """The JSON of the pair at ``path`` (either file), checked for the fields every pair has.
+
+    Raises:
+        FileNotFoundError: neither file exists. CheckpointError: a folder, no JSON beside the weights,
+            unreadable JSON, a missing field, or format 1 (no SHA-256 recorded).
+    """
+    st, js = pair_paths(path)
+    for p in (st, js):
+        if p.is_dir():
+            raise CheckpointError(f"{p} is a folder, not a network file (expected NAME.safetensors + NAME.json)")
+    if not st.exists() and not js.exists():
+        raise FileNotFoundError(f"network file not found: {st}")
+    if not js.exists():
+        raise CheckpointError(f"{st}: no {js.name} beside it (the robot and architecture of the network)")
+    try:
+        meta = json.loads(js.read_text())
+    except json.JSONDecodeError as err:
+        raise CheckpointError(f"{js}: not valid JSON ({err.msg} at line {err.lineno}); the file is damaged") from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise CheckpointError(f"{js}: unreadable ({_one_line(err)})") from err
+    if not isinstance(meta, dict):
+        raise CheckpointError(f"{js}: expected a JSON object, got {type(meta).__name__}")
+    if meta.get("format") == 1 or ("weights_sha256" not in meta and "net" in meta):
+        raise CheckpointError(
+            f"{js}: records no SHA-256 of its weights (format 1, before nik checked files); "
+            "re-export it with python -m nik.nets.export"
+        )
+    missing = [k for k in _REQUIRED if k not in meta]
+    if missing:
+        raise CheckpointError(f"{js}: field {missing[0]!r} is missing; not a nik network file")
+    return meta
+
+
+def architecture_mismatch(net: torch.nn.Module, state: dict[str, torch.Tensor], cfg: dict) -> str | None:
+    """One line naming the field of ``cfg`` (the JSON's ``net``) whose architecture does not fit the tensors
+    in ``state``, or None when every tensor of ``net`` is there with the right shape and nothing more."""
+    want = net.state_dict()
+    hidden = cfg.get("hidden")
+    n_layers = len(getattr(net, "layers", []))
+    file_layers = len({k.split(".")[1] for k in state if k.startswith("layers.")})
+    if file_layers != n_layers:
+        return f"net.hidden={hidden} makes {n_layers} layers, the weights have {file_layers}"
+    for key, t in want.items():
+        if key not in state:
+            return f"tensor {key!r} is missing from the weights (net.kind={cfg.get('kind')!r})"
+        got = tuple(state[key].shape)
+        if got == tuple(t.shape):
+            continue
+        field = "net"
+        if key.startswith("layers."):
+            i = int(key.split(".")[1])
+            out_dim_differs = got[0] != t.shape[0]
+            if out_dim_differs and i < n_layers - 1:
+                field = f"net.hidden[{i}]={hidden[i]}" if hidden else "net.hidden"
+            elif out_dim_differs:
+                if "heads" in cfg:
+                    field = f"net.heads={cfg['heads']}"
+                elif "output" in cfg:
+                    field = f"net.output={cfg['output']!r}"
+                else:
+                    field = f"net.kind={cfg.get('kind')!r}"
+            elif i > 0:
+                field = f"net.hidden[{i - 1}]={hidden[i - 1]}" if hidden else "net.hidden"
+            else:
+                field = f"net.representation={cfg.get('representation')!r} / net.kind={cfg.get('kind')!r}"
+        elif key in ("in_mean", "in_std"):
+            field = f"net.representation={cfg.get('representation')!r}"
+        return f"{field} needs {key} of shape {tuple(t.shape)}, the weights hold {got}"
+    extra = sorted(set(state) - set(want))
+    if extra:
+        return f"the weights hold tensor {extra[0]!r} that net.kind={cfg.get('kind')!r} does not have"
+    return None
+
+
+def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
+    """The network of the pair at ``path`` (``NAME.safetensors`` or ``NAME.json``), eval mode, float32.
+
+    Args:
+        path: either file of the pair.
+        robot: the arm it must belong to (object, built-in name or file), matched by definition hash, so the
+            same arm under another name gets it; the network's ``robot`` is then this one. None: the arm
+            stored in the JSON.
+
+    Raises:
+        FileNotFoundError: no such file. CheckpointError: anything else wrong (module docstring), one line.
+    """
+    from safetensors.torch import load as st_load
+
+    from nik.nets.multi import build_net
+
+    st, js = pair_paths(path)
+    meta = read_pair_meta(st)
+    if not st.exists():
+        raise FileNotFoundError(f"network file not found: {st} (its {js.name} exists)")
+    try:
+        data = st.read_bytes()
+    except OSError as err:
+        raise CheckpointError(f"{st}: unreadable ({_one_line(err)})") from err
+    digest = hashlib.sha256(data).hexdigest()
+    if digest != meta["weights_sha256"]:
+        size = meta.get("weights_bytes")
+        how = f"{len(data)} bytes, {size} recorded: truncated or grown" if size not in (None, len(data)) else "damaged"
+        raise CheckpointError(
+            f"{st}: SHA-256 {digest[:16]}... differs from {str(meta['weights_sha256'])[:16]}... recorded in "
+            f"{js.name} ({how}, or not the file that was exported)"
+        )
+    if robot is not None:
+        robot = robot if isinstance(robot, Robot) else load_robot(robot)
+        if robot.definition_hash != meta["robot_hash"]:
+            raise CheckpointError(
+                f"{st} was trained for robot {meta.get('robot')!r} (definition hash {meta['robot_hash']}), "
+                f"not for {robot.name!r} (hash {robot.definition_hash}): another arm, or the arm was changed"
+            )
+    else:
+        try:
+            robot = Robot.from_definition(meta["robot_definition"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise CheckpointError(f"{js}: field 'robot_definition' is missing or malformed ({_one_line(err)})") from err
+        if robot.definition_hash != meta["robot_hash"]:
+            raise CheckpointError(f"{js}: field 'robot_definition' does not have the recorded robot_hash")
+    cfg = meta["net"]
+    try:
+        net = build_net(robot, cfg)
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f"{js}: field 'net' does not describe a network: {_one_line(err)}") from err
+    try:
+        state = st_load(data)
+    except Exception as err:  # SafetensorError and friends: never let them escape raw
+        raise CheckpointError(f"{st}: not a readable safetensors file ({_one_line(err)})") from err
+    problem = architecture_mismatch(net, state, cfg)
+    if problem is not None:
+        raise CheckpointError(f"{st} does not fit the architecture in {js.name}: {problem}")
+    net.load_state_dict(state)
+    return net.to(torch.float32).eval()
+
+
+def _atomic_write(path: Path, write) -> None:
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    try:
+        write(tmp)
+        tmp.replace(path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def save_pair(net, path: str | Path, *, training: dict | None = None, validation: dict | None = None) -> Path:
+    """Write ``net`` as ``path`` (``NAME.safetensors``, or a folder: ``<folder>/<robot name>.safetensors``)
+    and the JSON beside it; returns the ``.safetensors`` path. ``validation``: the recorded error
+    (:func:`nik.nets.pretrained.validation_error`'s dict), stored as given."""
+    from safetensors.torch import save as st_save
+
+    p = Path(path)
+    if p.suffix not in (".safetensors", ".json"):
+        p = p / f"{net.robot.name}.safetensors"
+    st, js = pair_paths(p)
+    st.parent.mkdir(parents=True, exist_ok=True)
+    net = net.eval()
+    state = {k: v.detach().cpu().contiguous().clone() for k, v in net.state_dict().items()}
+    data = st_save(state, metadata={"robot": net.robot.name, "robot_hash": net.robot.definition_hash})
+    meta = {
+        "format": PAIR_FORMAT,
+        "robot": net.robot.name,
+        "robot_hash": net.robot.definition_hash,
+        "robot_definition": net.robot.to_definition(),
+        "net": net.config(),
+        "n_params": int(net.n_params),
+        "weights_sha256": hashlib.sha256(data).hexdigest(),
+        "weights_bytes": len(data),
+        "training": training or {},
+        "validation": validation or {},
+    }
+
+    def write_weights(tmp: Path) -> None:
+        tmp.write_bytes(data)
+        tmp.chmod(0o644)
+
+    _atomic_write(st, write_weights)
+    _atomic_write(js, lambda tmp: tmp.write_text(json.dumps(meta, indent=2) + "\n"))
+    return st
