@@ -152,10 +152,10 @@ def test_rows_computed_before_a_failure_are_written(monkeypatch, tmp_path):
 
 # ---- rows for what users run: the default pipeline, LM multistart, the shipped network (--checkpoint auto) -----------
 @pytest.fixture(scope="module")
-def puma_data(tmp_path_factory):
+def kuka_data(tmp_path_factory):  # kuka_kr: an arm with a closed form and a shipped network
     from nik.data import generate_dataset
 
-    return generate_dataset("puma560", 80, tmp_path_factory.mktemp("puma") / "d", seed=2, progress=False)
+    return generate_dataset("kuka_kr", 80, tmp_path_factory.mktemp("kuka") / "d", seed=2, progress=False)
 
 
 def _methods(out):
@@ -165,18 +165,18 @@ def _methods(out):
     return [r["method"] for r in doc["rows"]], doc
 
 
-def test_cli_checkpoint_auto_evaluates_the_shipped_network_and_the_default_pipeline(puma_data, tmp_path, capsys):
+def test_cli_checkpoint_auto_evaluates_the_shipped_network_and_the_default_pipeline(kuka_data, tmp_path, capsys):
     from nik.cli import main
 
     out = tmp_path / "auto"
-    argv = ["evaluate", "--robot", "puma560", "--data", str(puma_data), "--n", "4", "--no-pk", "--swarm", "lm"]
+    argv = ["evaluate", "--robot", "kuka_kr", "--data", str(kuka_data), "--n", "4", "--no-pk", "--swarm", "lm"]
     assert main([*argv, "--checkpoint", "auto", "--refinements", "lm", "--out", str(out)]) == 0, capsys.readouterr()
     methods, doc = _methods(out)
     for row in ("default pipeline", "LM multistart, no network", "network", "network + lm", "analytic (closed form)"):
         assert row in methods
     assert "shipped" in (out / "evaluation.md").read_text()
     rows = {r["method"]: r for r in doc["rows"]}
-    assert rows["default pipeline"]["success_01mm_01deg"] == 1.0  # closed form + LM on a PUMA arm
+    assert rows["default pipeline"]["success_01mm_01deg"] == 1.0  # closed form + LM on a spherical-wrist arm
     # without a network: the same table less the network rows, and it says why
     out = tmp_path / "none"
     assert main([*argv, "--checkpoint", "none", "--out", str(out)]) == 0

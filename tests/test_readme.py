@@ -65,10 +65,9 @@ SHRINK = [
     ),
     ("paper_d.py --out runs/paper_d", "paper_d.py --runs 1 --out runs/paper_d"),
     (
-        "--config configs/train/stanford.yaml ",
-        "--config configs/train/stanford.yaml --trainer.max_steps 2 --model.hidden [32] --model.eval_samples 200 ",
+        "nik train stanford --minutes 20 ",
+        "nik train stanford --minutes 20 --max-steps 3 --hidden 32 --val-n 100 --eval-batch 20 --eval-one 2 ",
     ),
-    ("--robot stanford --wall-min 28", "--robot stanford --wall-min 28 --out runs/stanford/pretrained"),
     ("paper_a.py --n 100", "paper_a.py --n 2 --iters 20"),
     ("refine.py --n 1000 --swarm-n 100 --boundary", "refine.py --n 4 --swarm-n 1 --skip-uniform"),
     (
@@ -212,6 +211,7 @@ def test_shell_then_python_blocks_of_readme_and_docs_run_in_a_fresh_copy(tmp_pat
     assert (work / "runs" / "solutions.csv").is_file()
     assert not (work / "poses.csv").exists() and not (work / "solutions.csv").exists()  # examples write under runs/
     assert (work / "runs" / "stanford" / "last.ckpt").is_file()
+    assert (work / "runs" / "stanford" / "stanford.safetensors").is_file()
     assert (work / "runs" / "adam" / "last.ckpt").is_file()
     assert (work / "runs" / "solver_eval_puma560" / "last.ckpt").is_file()
     assert (work / "runs" / "eval" / "puma560" / "errors.png").is_file()
