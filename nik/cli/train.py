@@ -104,7 +104,7 @@ def _cmd_train(args) -> int:
     if res.installed is not None:
         print(f"installed as {res.installed}")
     if res.report is not None:
-        print("evaluation (position mm, rotation deg; success within 0.1 mm / 1e-3 rad; CPU, this process):")
+        print("evaluation (position mm, rotation deg; success within 0.1 mm / 0.1 deg; CPU, this process):")
         for line in res.report.lines():
             print("  " + line)
     return 0

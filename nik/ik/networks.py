@@ -4,7 +4,7 @@ file it was given, loaded once per process.
 Loading a shipped network costs tens of milliseconds (building a 3 x 512 MLP, copying half a million weights),
 more than solving a pose. So every solver of the same robot shares the network loaded first (a solver only
 reads it, in eval mode): loaded networks are kept by file (path, size, modification time), robot definition
-hash and device. A changed file is a new key, so it is loaded again.
+hash and name, and device. A changed file is a new key, so it is loaded again.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ def _stamp(path: Path) -> tuple:
 
 
 def _load_once(path: Path, robot, device, load: Callable[[], torch.nn.Module]) -> torch.nn.Module:
-    key = (*_stamp(path), robot.definition_hash, str(device))
+    key = (*_stamp(path), robot.definition_hash, robot.name, str(device))  # the net's robot is this one
     net = _LOADED.get(key)
     if net is None:
         net = _LOADED[key] = load().to(device)

@@ -116,7 +116,9 @@ class IKSolver:
             self.closed_form = family(self.robot) is not None
         if isinstance(checkpoint, str) and checkpoint == "auto":
             if not self.closed_form:
-                self._load_net = networks.shipped_network(self.robot, self.device)  # loaded on first use
+                # loaded (SHA-256 checked: a damaged file is refused here) once per process, shared by every solver
+                load = networks.shipped_network(self.robot, self.device)
+                self._net = None if load is None else load()
         elif checkpoint is not None:
             self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
         if fallback == "analytic" and not self.closed_form:
@@ -127,8 +129,8 @@ class IKSolver:
 
     @property
     def net(self):
-        """The network (None without one). The shipped one is loaded on first use and shared by every solver of
-        the same robot in this process (:mod:`nik.ik.networks`); the solver only reads it."""
+        """The network (None without one). A known network is loaded once per process and shared by every solver of
+        the same robot (:mod:`nik.ik.networks`); the solver only reads it."""
         if self._load_net is not None:
             self._net, self._load_net = self._load_net(), None
         return self._net
