@@ -5,11 +5,12 @@
 joint limits (a seeded ``torch.Generator``), ``pose = robot.fk(q)`` in float64, then cast to ``dtype``.
 The network never sees a sample twice, so there is nothing to overfit and nothing to store.
 
-Why (``benchmarks/learned.py``, training data section): FK of a batch of 1,024 takes about 0.5 ms on one
-CPU thread (branch labels another 1.6 ms), while one training step of a 4 x 256 network on that batch takes
-30-45 ms: streaming costs 1-7 % of the step, and a fixed file of a million samples is seen a dozen times in
-a 20-minute run. Validation uses a fixed seeded set (``val_n`` samples), and a fixed seeded sample of
-``norm_n`` poses sets the network's input normalisation (``train_data``, as the file module has it).
+Why (``benchmarks/learned.py``, stream section, one CPU thread): a batch of 1,024 fresh samples costs 0.9 ms
+(2.6 ms with the branch labels of a UR-type arm), one training step of the 4 x 256 network on it 24-30 ms:
+streaming costs 3 % of the step (11 % with labels), while a fixed file of a million samples would be seen
+40 times over in the 45 million samples of a 24-minute run. Validation uses a fixed seeded set (``val_n``
+samples), and a fixed seeded sample of ``norm_n`` poses sets the network's input normalisation
+(``train_data``, as the file module has it).
 
 An "epoch" is ``steps_per_epoch`` batches (validation and the resumable ``last.ckpt`` follow each one).
 The generator of epoch ``e`` is seeded from ``(seed, e)``, so a run resumed at epoch ``e`` draws what the
