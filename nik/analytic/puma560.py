@@ -378,16 +378,20 @@ def _solve(Tf, base, tool, off, lo, hi, k: dict, quaternion: bool) -> tuple[torc
 _compiled_kernels: dict = {}
 
 
-def _kernel(compiled: bool):
-    if not compiled:
-        return _solve
-    if "fn" not in _compiled_kernels:
+def compiled_once(fn, what: str):
+    """``fn`` compiled by ``torch.compile(dynamic=True)``, once per process; ``fn`` itself (with one warning naming
+    ``what``) where compiling is unavailable. Serves both closed forms' ``compiled=True``."""
+    if fn not in _compiled_kernels:
         try:
-            _compiled_kernels["fn"] = torch.compile(_solve, dynamic=True)
+            _compiled_kernels[fn] = torch.compile(fn, dynamic=True)
         except Exception as err:  # pragma: no cover - platform dependent
-            warnings.warn(f"torch.compile unavailable ({err}); puma560_ik runs eager", stacklevel=3)
-            _compiled_kernels["fn"] = _solve
-    return _compiled_kernels["fn"]
+            warnings.warn(f"torch.compile unavailable ({err}); {what} runs eager", stacklevel=4)
+            _compiled_kernels[fn] = fn
+    return _compiled_kernels[fn]
+
+
+def _kernel(compiled: bool):
+    return compiled_once(_solve, "puma560_ik") if compiled else _solve
 
 
 def _constants(g: PumaGeometry) -> dict:

@@ -12,7 +12,6 @@ own FK after the closed form.
 from __future__ import annotations
 
 import math
-import warnings
 import weakref
 
 import numpy as np
@@ -20,7 +19,7 @@ import torch
 
 from nik.analytic.geometry import POLISH_ABOVE, arm_geometry
 from nik.analytic.kernels import KernelConstants, build_constants, run_kernel
-from nik.analytic.puma560 import wrap_into_limits
+from nik.analytic.puma560 import compiled_once, wrap_into_limits
 from nik.kinematics import generate_fk_source
 from nik.poses import pose_error
 
@@ -78,19 +77,8 @@ def _polish(robot, Tf: torch.Tensor, q: torch.Tensor, steps: int = 3) -> torch.T
     return qf.reshape(shape)
 
 
-_compiled: dict = {}
-
-
 def _kernel(compiled: bool):
-    if not compiled:
-        return run_kernel
-    if "fn" not in _compiled:
-        try:
-            _compiled["fn"] = torch.compile(run_kernel, dynamic=True)
-        except Exception as err:  # pragma: no cover - platform dependent
-            warnings.warn(f"torch.compile unavailable ({err}); nik.analytic.solve runs eager", stacklevel=3)
-            _compiled["fn"] = run_kernel
-    return _compiled["fn"]
+    return compiled_once(run_kernel, "nik.analytic.solve") if compiled else run_kernel
 
 
 def reaches(T_target: torch.Tensor, T: torch.Tensor, tol_pos: float, tol_rot: float) -> torch.Tensor:
