@@ -161,7 +161,7 @@ class EndLinkChoice:
     candidates: tuple[str, ...] = ()
     left_out: tuple[str, ...] = ()
 
-    def note(self, source: str) -> str | None:
+    def note(self) -> str | None:
         """One line for the user when the choice left joints out or had several candidates; else None."""
         parts = []
         if len(self.candidates) > 1:
@@ -172,7 +172,7 @@ class EndLinkChoice:
         if not parts:
             return None
         return (
-            f"{source}: default tool link {self.link!r}, {self.arm_joints} revolute arm joints; "
+            f"default tool link {self.link!r}, {self.arm_joints} revolute arm joints; "
             + "; ".join(parts)
             + "; pass end_link (--end-link) to choose another"
         )
@@ -322,8 +322,8 @@ def load_urdf(
         _store_robot(key, robot, note)
     else:
         robot, note = hit
-    if note:
-        warnings.warn(note, RobotDefinitionWarning, stacklevel=2)
+    if note:  # kept in the cache without the file's name: the key is the file's content
+        warnings.warn(f"{path.name}: {note}", RobotDefinitionWarning, stacklevel=2)
     return with_frames(robot, base=base, tool=tool)
 
 
@@ -336,7 +336,7 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
     note = None
     if not end_link:
         choice = choose_end_link(text, str(path))
-        end_link, note = choice.link, choice.note(path.name)
+        end_link, note = choice.link, choice.note()
     links = {f.link.name for f in _frames(chain._root)}
     for role, link in (("end_link", end_link), ("root_link", root_link)):
         if link is not None and link not in links:
