@@ -77,7 +77,9 @@ def test_default_end_link_leaves_gripper_joints_out_and_names_them(tmp_path, gri
 
 @pytest.mark.parametrize("tool", ["tool0", "j2s6_end_effector", "ee_link", "link_eef", "gripper_tcp", "flange"])
 def test_default_end_link_is_a_conventional_tool_link_past_fixed_joints(tmp_path, tool):
-    text = urdf(("j_mount", "fixed", "l3", "mount"), ("j_tool", "fixed", "mount", tool), ("j_cam", "fixed", "l3", "cam"))
+    text = urdf(
+        ("j_mount", "fixed", "l3", "mount"), ("j_tool", "fixed", "mount", tool), ("j_cam", "fixed", "l3", "cam")
+    )
     robot, notes = load(tmp_path, text)
     assert robot.end_link == tool and robot.dof == 3
     assert_fk_is_pk_chain_to(robot, text, tool)

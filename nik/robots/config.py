@@ -171,7 +171,9 @@ def robot_from_config(
     _no_unknown(data, _TOP_KEYS, source)
     length, angle = _units(data, source)
     frames = {
-        key: as_frame(given, name=key) if given is not None else _frame(data.get(key), length, angle, f"{source}: {key}")
+        key: as_frame(given, name=key)
+        if given is not None
+        else _frame(data.get(key), length, angle, f"{source}: {key}")
         for key, given in (("base", base), ("tool", tool))
     }
     if "urdf" in data:

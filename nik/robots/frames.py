@@ -43,13 +43,17 @@ def as_frame(value, *, name: str = "tool") -> np.ndarray | None:
             value = value.detach().cpu().double().numpy()
         a = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise RobotDefinitionError(f"{name}: expected a (4, 4) transform or (7,) x y z qw qx qy qz, got {value!r}") from err
+        raise RobotDefinitionError(
+            f"{name}: expected a (4, 4) transform or (7,) x y z qw qx qy qz, got {value!r}"
+        ) from err
     if a.shape == (7,):
         if not np.isfinite(a).all():
             raise RobotDefinitionError(f"{name}: contains NaN or inf ({a.tolist()})")
         norm = float(np.linalg.norm(a[3:]))
         if abs(norm - 1.0) > QUATERNION_TOL:
-            raise RobotDefinitionError(f"{name}: quaternion (w, x, y, z) {a[3:].tolist()} has norm {norm:.6g}, expected 1")
+            raise RobotDefinitionError(
+                f"{name}: quaternion (w, x, y, z) {a[3:].tolist()} has norm {norm:.6g}, expected 1"
+            )
         T = np.eye(4)
         T[:3, :3] = quaternion_to_matrix(torch.from_numpy(a[3:] / norm)).numpy()
         T[:3, 3] = a[:3]

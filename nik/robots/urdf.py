@@ -165,9 +165,13 @@ class EndLinkChoice:
         """One line for the user when the choice left joints out or had several candidates; else None."""
         parts = []
         if len(self.candidates) > 1:
-            parts.append(f"candidates {', '.join(self.candidates)} (the first of the kinds {', '.join(TOOL_LINK_KINDS)})")
+            parts.append(
+                f"candidates {', '.join(self.candidates)} (the first of the kinds {', '.join(TOOL_LINK_KINDS)})"
+            )
         if self.left_out:
-            names = ", ".join(self.left_out[:6]) + (f" and {len(self.left_out) - 6} more" if len(self.left_out) > 6 else "")
+            names = ", ".join(self.left_out[:6]) + (
+                f" and {len(self.left_out) - 6} more" if len(self.left_out) > 6 else ""
+            )
             parts.append(f"left out of the arm: joint(s) {names}, which move past link {self.arm_end!r}")
         if not parts:
             return None
@@ -179,7 +183,8 @@ class EndLinkChoice:
 
 
 def _words(name: str) -> set[str]:
-    """The lower-case words of a name, split at non-alphanumerics and camel case (``jointGripper``: joint, gripper; ``LHand``: l, hand)."""
+    """The lower-case words of a name, split at non-alphanumerics and camel case (``jointGripper``: joint,
+    gripper; ``LHand``: l, hand)."""
     split = re.sub(r"([A-Z])([A-Z][a-z])", r"\1_\2", re.sub(r"([a-z0-9])([A-Z])", r"\1_\2", name))
     return set(re.split(r"[^a-z0-9]+", split.lower())) - {""}
 
@@ -208,7 +213,8 @@ def choose_end_link(data: str | bytes, source: str = "URDF") -> EndLinkChoice:
 
     1. The arm: the longest chain of revolute (or continuous) joints from the root, not counting gripper joints
        (a name containing one of :data:`GRIPPER_WORDS`, any case, or the word ``hand``; they count when
-       every revolute joint is one); the first such chain in file order on ties. ``arm_end`` is the child link of its last joint.
+       every revolute joint is one); the first such chain in file order on ties. ``arm_end`` is the child
+       link of its last joint.
     2. The tool link: of ``arm_end`` and the links reached from it through fixed joints only, the first by
        the kinds of :data:`TOOL_LINK_KINDS` (``*tcp*``, ``*end_effector*``, ``tool0``, ``ee`` or ``eef`` as
        a word of the name, ``flange`` as a word, ``tool`` as a word); within a kind the nearest to
@@ -245,15 +251,11 @@ def choose_end_link(data: str | bytes, source: str = "URDF") -> EndLinkChoice:
         if kind is not None:
             found.append((kind, depth, order, frame.link.name))
         order += 1
-        todo += [
-            (c, depth + 1) for c in frame.children if c.joint.joint_type == "fixed" and c.joint.name not in free
-        ]
+        todo += [(c, depth + 1) for c in frame.children if c.joint.joint_type == "fixed" and c.joint.name not in free]
     found.sort()
     left_out = tuple(f.joint.name for f in _frames(end) if f is not end and f.joint.joint_type != "fixed")
     candidates = tuple(name for *_, name in found)
-    return EndLinkChoice(
-        candidates[0] if candidates else end.link.name, end.link.name, count, candidates, left_out
-    )
+    return EndLinkChoice(candidates[0] if candidates else end.link.name, end.link.name, count, candidates, left_out)
 
 
 def default_end_link(data: str | bytes, source: str = "URDF") -> str:
