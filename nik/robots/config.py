@@ -101,12 +101,13 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
             a ``.urdf`` file, or a :class:`Robot` (returned as is, or with the frames below).
         end_link: for URDF arms, the tool link. Default (:func:`nik.robots.urdf.choose_end_link`):
 
-            1. the arm is the longest chain of revolute joints from the root, gripper joints not counted
-               (names containing ``gripper``, ``finger``, ``jaw``, ``knuckle`` or ``thumb``); the first on ties;
+            1. the arm is the longest chain of revolute joints from the root, gripper and hand joints not
+               counted (names containing ``gripper``, ``finger``, ``jaw``, ``knuckle`` or ``thumb``, any case, or
+               the word ``hand``); the first on ties;
             2. of the last arm joint's child link and the links reached from it through fixed joints only, the
                first whose name is ``*tcp*``, else ``*end_effector*``, else ``tool0``, else has a word ``ee`` or
-               ``eef`` (``ee_link``, ``link_eef``), else a word ``flange`` (the nearest to the arm's end within a
-               kind, then file order);
+               ``eef`` (``ee_link``, ``link_eef``), else a word ``flange``, else a word ``tool``
+               (``arm_tool_link``); the nearest to the arm's end within a kind, then file order;
             3. else that child link: the last link of the longest chain of revolute joints.
 
             The moving joints past the arm (a gripper's) are left out; a :class:`nik.RobotDefinitionWarning`

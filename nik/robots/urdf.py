@@ -12,6 +12,7 @@ so a URDF arm runs on nik's FK like any other.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import io
 import json
@@ -142,7 +143,7 @@ GRIPPER_WORDS = ("gripper", "finger", "jaw", "knuckle", "thumb")
 #: Conventional tool-link names, best first: a tool link is picked by the first kind its name fits
 #: (``*tcp*``, ``*end_effector*``, ``tool0``, a word ``ee`` or ``eef``, a word ``flange``, a word ``tool``;
 #: the words of ``arm_tool_link`` are arm, tool, link, of ``gripperMover`` gripper, mover).
-TOOL_LINK_KINDS = ("*tcp*", "*end_effector*", "tool0", "*_ee*", "flange", "*_tool_*")
+TOOL_LINK_KINDS = ("*tcp*", "*end_effector*", "tool0", "ee|eef", "flange", "tool")
 
 
 @dataclass(frozen=True)
@@ -166,7 +167,7 @@ class EndLinkChoice:
         parts = []
         if len(self.candidates) > 1:
             parts.append(
-                f"candidates {', '.join(self.candidates)} (the first of the kinds {', '.join(TOOL_LINK_KINDS)})"
+                f"candidates {', '.join(self.candidates)} (preferred in the order {', '.join(TOOL_LINK_KINDS)})"
             )
         if self.left_out:
             names = ", ".join(self.left_out[:6]) + (
@@ -320,25 +321,26 @@ def load_urdf(
     key = _cache_key(data, end_link, root_link, name, origins)
     hit = _cached_robot(key, path)
     if hit is None:
-        robot, note = _parse_robot(path, data, end_link, root_link, name, origins)
-        _store_robot(key, robot, note)
+        robot, choice = _parse_robot(path, data, end_link, root_link, name, origins)
+        _store_robot(key, robot, choice)
     else:
-        robot, note = hit
-    if note:  # kept in the cache without the file's name: the key is the file's content
+        robot, choice = hit
+    note = choice.note() if choice is not None else None
+    if note:
         warnings.warn(f"{path.name}: {note}", RobotDefinitionWarning, stacklevel=2)
     return with_frames(robot, base=base, tool=tool)
 
 
-def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) -> tuple[Robot, str | None]:
+def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) -> tuple[Robot, EndLinkChoice | None]:
     """:func:`load_urdf` without the cache or frames: the file reduced to its kinematics, parsed by
-    pytorch-kinematics, converted to the normal form; and the note on the default tool link (or None)."""
+    pytorch-kinematics, converted to the normal form; and how the default tool link was chosen (or None)."""
     tree, free = _kinematic_tree(data, str(path))
     text = ET.tostring(tree, encoding="unicode")
     chain = _parse_chain(text, str(path))
-    note = None
+    choice = None
     if not end_link:
         choice = choose_end_link(text, str(path))
-        end_link, note = choice.link, choice.note()
+        end_link = choice.link
     links = {f.link.name for f in _frames(chain._root)}
     for role, link in (("end_link", end_link), ("root_link", root_link)):
         if link is not None and link not in links:
@@ -393,7 +395,7 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         source=str(path),
         prismatic=builder.prismatic,
     )
-    return robot, note
+    return robot, choice
 
 
 # ---------------------------------------------------------------------------
@@ -418,12 +420,12 @@ def _cache_file(key: str) -> Path:
     return cache_home() / "robots" / f"{key[:32]}.json"
 
 
-def _cached_robot(key: str, path: Path) -> tuple[Robot, str | None] | None:
-    """The robot stored under ``key`` (its ``source`` set to ``path``) and its note, or None when absent,
-    unreadable or its checksum or key does not match."""
+def _cached_robot(key: str, path: Path) -> tuple[Robot, EndLinkChoice | None] | None:
+    """The robot stored under ``key`` (its ``source`` set to ``path``) and how its default tool link was chosen,
+    or None when absent, unreadable or its checksum or key does not match."""
     try:
         doc = json.loads(_cache_file(key).read_text())
-        body = json.dumps([doc["robot"], doc.get("note")], sort_keys=True)
+        body = json.dumps([doc["robot"], doc.get("choice")], sort_keys=True)
         if doc.get("key") != key or doc.get("sha256") != hashlib.sha256(body.encode()).hexdigest():
             return None
         d = doc["robot"]
@@ -437,18 +439,22 @@ def _cached_robot(key: str, path: Path) -> tuple[Robot, str | None] | None:
             source=str(path),
             prismatic=d.get("prismatic"),
         )
-        return robot, doc.get("note")
+        c = doc.get("choice")
+        if c is not None:
+            c = EndLinkChoice(**{**c, "candidates": tuple(c["candidates"]), "left_out": tuple(c["left_out"])})
+        return robot, c
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
 
-def _store_robot(key: str, robot: Robot, note: str | None) -> None:
-    """Write ``robot``'s definition and the note on its default tool link under ``key`` (temporary name, then
+def _store_robot(key: str, robot: Robot, choice: EndLinkChoice | None) -> None:
+    """Write ``robot``'s definition and how its default tool link was chosen under ``key`` (temporary name, then
     rename); silently skipped when the folder is not writable."""
     d = robot.to_definition()
-    body = json.dumps([d, note], sort_keys=True)
+    c = None if choice is None else dataclasses.asdict(choice)
+    body = json.dumps([d, c], sort_keys=True)
     sha = hashlib.sha256(body.encode()).hexdigest()
-    doc = {"format": URDF_CACHE_FORMAT, "key": key, "sha256": sha, "robot": d, "note": note}
+    doc = {"format": URDF_CACHE_FORMAT, "key": key, "sha256": sha, "robot": d, "choice": c}
     target = _cache_file(key)
     tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
     try:
