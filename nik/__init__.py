@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import importlib
 
-from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError
+from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError, RobotDefinitionWarning
 from nik.poses import pose_error
 from nik.robots import Robot, builtin_robots, load_robot
 
@@ -41,6 +41,7 @@ __all__ = [
     "NikError",
     "Robot",
     "RobotDefinitionError",
+    "RobotDefinitionWarning",
     "__version__",
     "builtin_robots",
     "load_robot",

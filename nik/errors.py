@@ -1,4 +1,4 @@
-"""Error classes of nik. All derive from ``ValueError`` so callers may catch either."""
+"""Error classes of nik. All derive from ``ValueError`` so callers may catch either; and its one warning class."""
 
 from __future__ import annotations
 
@@ -17,3 +17,8 @@ class DatasetError(NikError):
 
 class CheckpointError(NikError):
     """A checkpoint is missing, corrupt, or was made for another robot."""
+
+
+class RobotDefinitionWarning(UserWarning):
+    """A robot loaded, with a choice the user should know of (the default tool link of a URDF left a gripper
+    out of the arm, or several links fitted)."""

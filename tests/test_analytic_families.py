@@ -204,10 +204,14 @@ def test_within_tolerance_an_arm_keeps_its_family_and_exact_solutions(name, fact
 #   meet (DH a5 = 0): three parallel.
 # - Kinova Jaco 2 j2s6s200 ("s6s": spherical wrist, 6 DOF), alone and on ANYmal: shoulder and elbow parallel,
 #   the three wrist axes meet: spherical wrist.
-# - SO-100 / SO-101: five arm joints (pitch axes 2, 3, 4 parallel, then wrist roll) and the gripper jaw as joint 6,
-#   whose axis does not meet the roll axis: neither.
+# - SO-100 / SO-101: five arm joints (pitch axes 2, 3, 4 parallel, then wrist roll) and, when asked for by its
+#   end_link (the default leaves the gripper out), the gripper jaw as joint 6, whose axis does not meet the roll
+#   axis: neither.
+# - TALOS left arm (arm_left_2 .. 7 in this file): shoulder roll and upper-arm yaw are perpendicular, so neither
+#   a PUMA shoulder (axes 2 and 3 parallel) nor three parallel axes, though its wrist axes meet: neither.
 # - Alexander (a leg to the foot): hip pitch, knee and ankle pitch parallel (axes 3, 4, 5), not a wrist: neither.
-# - Unitree Z1 (to link06, before the gripper): joints 2, 3, 4 parallel pitch axes, 5 and 6 meet: three parallel.
+# - Unitree Z1 (to link06, before the gripper: the default leaves jointGripper out): joints 2, 3, 4 parallel pitch
+#   axes, 5 and 6 meet: three parallel.
 ERD_KNOWN = {
     ("ur_description/urdf/ur3_gripper.urdf", None): "three_parallel",
     ("ur_description/urdf/ur3_joint_limited_robot.urdf", None): "three_parallel",
@@ -219,11 +223,12 @@ ERD_KNOWN = {
     ("ur_description/urdf/ur10_robot.urdf", None): "three_parallel",
     ("kinova_description/robots/kinova.urdf", None): "spherical_wrist",
     ("anymal_b_simple_description/robots/anymal-kinova.urdf", None): "spherical_wrist",
-    ("so_arm_description/urdf/so100.urdf", None): None,
-    ("so_arm_description/urdf/so101.urdf", None): None,
+    ("so_arm_description/urdf/so100.urdf", "jaw"): None,
+    ("so_arm_description/urdf/so101.urdf", "moving_jaw_so101_v1_link"): None,
+    ("talos_data/robots/talos_left_arm.urdf", None): None,
     ("alexander_description/urdf/alexander_v1.lowerBodyOnly.urdf", None): None,
-    ("z1_description/urdf/z1.urdf", "link06"): "three_parallel",
-    ("b1_description/urdf/b1-z1.urdf", "link06"): "three_parallel",
+    ("z1_description/urdf/z1.urdf", None): "three_parallel",
+    ("b1_description/urdf/b1-z1.urdf", None): "three_parallel",
 }
 
 

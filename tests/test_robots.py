@@ -83,8 +83,10 @@ def test_default_limits_are_plus_minus_180_degrees(tmp_path):
     assert robot.name == "arm"
 
 
-def test_urdf_default_end_link_is_last_link_of_longest_revolute_chain():
-    assert nik.load_robot("configs/robots/urdf/panda.urdf").end_link == "panda_link7"
+def test_urdf_default_end_link_is_the_tcp_and_builtins_keep_theirs():
+    with pytest.warns(nik.RobotDefinitionWarning, match="panda_finger_joint1, panda_finger_joint2"):
+        assert nik.load_robot("configs/robots/urdf/panda.urdf").end_link == "panda_hand_tcp"
+    assert nik.load_robot("panda").end_link == "panda_link7"  # configs/robots/panda.yaml names it
     assert nik.load_robot("ur5").end_link == "wrist_3_link"
 
 

@@ -59,7 +59,7 @@ def _q(robot, n=16):
 def _same_robot(robot, reference):
     assert robot.dof == reference.dof == 3
     assert robot.joint_names == reference.joint_names
-    assert robot.end_link == reference.end_link == "l3"  # default tool link: the last moving joint's child
+    assert robot.end_link == reference.end_link == "tool"  # default: the link named tool, fixed past the last joint
     assert_close(robot.limits, reference.limits, atol=0, rtol=0)
     q = _q(reference)
     assert_close(robot.fk(q), reference.fk(q), atol=0, rtol=0)
@@ -192,7 +192,7 @@ def test_floating_joint_off_the_chain_is_ignored_and_on_the_chain_is_an_error(tm
     extra = '<link name="cam"/><joint name="float" type="floating"><parent link="base"/><child link="cam"/></joint>'
     path = tmp_path / "arm.urdf"
     path.write_text(arm(extra_top=extra))
-    _same_robot(load_urdf(path, end_link="l3"), reference)
+    _same_robot(load_urdf(path, end_link="tool"), reference)
     with pytest.raises(RobotDefinitionError, match="joint 'float' is floating"):
         load_urdf(path, end_link="cam")
 

@@ -293,6 +293,8 @@ def _cmd_solve(args) -> int:
                 {
                     "robot": robot.name,
                     "end_link": robot.end_link,
+                    "base": None if robot.base is None else robot.base.tolist(),  # 4x4, metres
+                    "tool": None if robot.tool is None else robot.tool.tolist(),
                     "joint_names": robot.joint_names,
                     "joint_units_si": si,
                     "joint_units_display": shown,

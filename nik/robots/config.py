@@ -8,8 +8,8 @@ YAML schema (see ``shared/spec/interface.md``)::
     convention: dh | mdh | poe
     unit: mm | m              # lengths (default m)
     angles: deg | rad         # angles: alpha, theta, revolute offset and limits (default rad)
-    base: {position: [x, y, z], rpy: [r, p, y]}     # optional, dh/mdh only
-    tool: {position: [x, y, z], rpy: [r, p, y]}     # optional, dh/mdh only
+    base: {position: [x, y, z], rpy: [r, p, y]}     # optional: T = base @ arm @ tool (any convention, URDF too)
+    tool: {position: [x, y, z], rpy: [r, p, y]}     # optional: the tool (TCP) in the last link's frame
     joints:
       - {alpha: -90, a: 0, d: 0, offset: 0, limits: [-160, 160], name: j1}   # dh / mdh, revolute
       - {type: prismatic, alpha: 0, a: 0, d: 0, theta: 0, limits: [300, 900]}  # dh / mdh, prismatic
@@ -34,7 +34,13 @@ Joint fields:
   no part (a translation has no axis position).
 
 or, for an arm described by a URDF: ``{name: ..., urdf: path/relative/to/this/file.urdf,
-end_link: ..., root_link: ...}``. Unknown keys are errors, so a typo never goes unnoticed.
+end_link: ..., root_link: ..., base: ..., tool: ...}``. Unknown keys are errors, so a typo never goes unnoticed.
+
+Frames (``base``, ``tool``, and ``home`` of poe): ``position`` (the file's length unit) and at most one of
+``rpy`` (the file's angle unit, ``R = Rz(yaw) Ry(pitch) Rx(roll)``), ``rotation`` (3x3 rows) or
+``quaternion`` (w, x, y, z). ``base`` places the arm's first frame (the URDF's root link) in the world,
+``tool`` the tool centre point in the frame of the last link (the URDF's ``end_link``); both are folded into
+the normal form (:mod:`nik.robots.frames`). :func:`load_robot`'s ``base=`` / ``tool=`` replace the file's.
 """
 
 from __future__ import annotations
@@ -47,6 +53,7 @@ import yaml
 
 from nik.errors import RobotDefinitionError
 from nik.poses import rpy_to_matrix
+from nik.robots.frames import as_frame, with_frames
 from nik.robots.model import Robot, dh_chain, mdh_chain, poe_chain
 
 __all__ = ["BUILTIN_DIR", "builtin_robots", "load_robot", "robot_from_config"]
@@ -86,22 +93,41 @@ def _is_robot_file(path: Path) -> bool:
     return isinstance(data, dict) and ("joints" in data or "urdf" in data)
 
 
-def load_robot(name_or_path, *, end_link: str | None = None) -> Robot:
+def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=None) -> Robot:
     """Load a robot by built-in name, YAML file or URDF file.
 
     Args:
         name_or_path: a built-in name (:func:`builtin_robots`), a ``.yaml``/``.yml`` robot file,
-            a ``.urdf`` file, or a :class:`Robot` (returned as is).
-        end_link: for URDF arms, the tool link (default: the last link of the longest chain of
-            revolute joints).
+            a ``.urdf`` file, or a :class:`Robot` (returned as is, or with the frames below).
+        end_link: for URDF arms, the tool link. Default (:func:`nik.robots.urdf.choose_end_link`):
+
+            1. the arm is the longest chain of revolute joints from the root, gripper and hand joints not
+               counted (names containing ``gripper``, ``finger``, ``jaw``, ``knuckle`` or ``thumb``, any case, or
+               the word ``hand``); the first on ties;
+            2. of the last arm joint's child link and the links reached from it through fixed joints only, the
+               first whose name is ``*tcp*``, else ``*end_effector*``, else ``tool0``, else has a word ``ee`` or
+               ``eef`` (``ee_link``, ``link_eef``), else a word ``flange``, else a word ``tool``
+               (``arm_tool_link``); the nearest to the arm's end within a kind, then file order;
+            3. else that child link: the last link of the longest chain of revolute joints.
+
+            The moving joints past the arm (a gripper's) are left out; a :class:`nik.RobotDefinitionWarning`
+            names them, and the candidates where several links fit. Built-in arms name their ``end_link``.
+        base: the pose of the robot's base (first frame, a URDF's root link) in your world frame.
+        tool: the tool centre point (TCP) in the frame of the last link (``end_link``, the flange).
+            Each a ``(4, 4)`` transform or ``(7,)`` x, y, z (metres) and quaternion w, x, y, z; FK is then
+            ``base @ T(q) @ tool`` for every solver (:mod:`nik.robots.frames`), replacing a robot file's own
+            ``base:`` / ``tool:``. The definition hash changes with a frame other than the identity, so a
+            network trained without it is not used for it.
 
     Raises:
-        RobotDefinitionError (a ValueError) naming the robot or file and what is wrong.
+        RobotDefinitionError (a ValueError) naming the robot or file and what is wrong (a frame that is not a
+        finite rigid transform included).
     """
     if isinstance(name_or_path, Robot):
-        return name_or_path
+        return with_frames(name_or_path, base=base, tool=tool)
     if not isinstance(name_or_path, (str, Path)):
         raise RobotDefinitionError(f"load_robot expects a name or a path, got {type(name_or_path).__name__}")
+    base, tool = as_frame(base, name="base"), as_frame(tool, name="tool")
     text = str(name_or_path)
     path = Path(text)
     if path.suffix.lower() in {".urdf", ".yaml", ".yml"} or path.exists():
@@ -110,33 +136,47 @@ def load_robot(name_or_path, *, end_link: str | None = None) -> Robot:
         if path.suffix.lower() == ".urdf":
             from nik.robots.urdf import load_urdf
 
-            return load_urdf(path, end_link=end_link)
-        return robot_from_file(path, end_link=end_link)
+            return load_urdf(path, end_link=end_link, base=base, tool=tool)
+        return robot_from_file(path, end_link=end_link, base=base, tool=tool)
     builtin = BUILTIN_DIR / f"{text}.yaml"
     if builtin.is_file() and _is_robot_file(builtin):
-        return robot_from_file(builtin, end_link=end_link)
+        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool)
     raise RobotDefinitionError(
         f"unknown robot {text!r}: not a built-in ({', '.join(builtin_robots())}) and not a robot file"
     )
 
 
-def robot_from_file(path: str | Path, *, end_link: str | None = None) -> Robot:
+def robot_from_file(path: str | Path, *, end_link: str | None = None, base=None, tool=None) -> Robot:
     """Load a YAML robot file; see the module docstring for the schema."""
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as err:
         raise RobotDefinitionError(f"{path}: not valid YAML ({err})") from err
-    return robot_from_config(data, source=str(path), base_dir=path.parent, end_link=end_link)
+    return robot_from_config(data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool)
 
 
 def robot_from_config(
-    data, *, source: str = "robot config", base_dir: Path | None = None, end_link: str | None = None
+    data,
+    *,
+    source: str = "robot config",
+    base_dir: Path | None = None,
+    end_link: str | None = None,
+    base=None,
+    tool=None,
 ) -> Robot:
-    """Build a :class:`Robot` from a parsed YAML mapping."""
+    """Build a :class:`Robot` from a parsed YAML mapping; ``base`` / ``tool`` (as in :func:`load_robot`)
+    replace the mapping's."""
     if not isinstance(data, dict):
         raise RobotDefinitionError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
     _no_unknown(data, _TOP_KEYS, source)
+    length, angle = _units(data, source)
+    frames = {
+        key: as_frame(given, name=key)
+        if given is not None
+        else _frame(data.get(key), length, angle, f"{source}: {key}")
+        for key, given in (("base", base), ("tool", tool))
+    }
     if "urdf" in data:
         from nik.robots.urdf import load_urdf
 
@@ -144,21 +184,32 @@ def robot_from_config(
         if not urdf.is_absolute() and base_dir is not None:
             urdf = base_dir / urdf
         return load_urdf(
-            urdf, end_link=end_link or data.get("end_link"), root_link=data.get("root_link"), name=data.get("name")
+            urdf,
+            end_link=end_link or data.get("end_link"),
+            root_link=data.get("root_link"),
+            name=data.get("name"),
+            **frames,
         )
+    return with_frames(_chain_from_config(data, source, length, angle), **frames)
 
-    name = data.get("name") or Path(source).stem
-    convention = data.get("convention")
-    if convention not in ("dh", "mdh", "poe"):
-        raise RobotDefinitionError(f"{source}: convention must be one of dh, mdh, poe; got {convention!r}")
+
+def _units(data: dict, source: str) -> tuple[float, float]:
+    """Metres per length unit and radians per angle unit of a robot file (``unit``, ``angles``)."""
     unit = data.get("unit", "m")
     if unit not in ("mm", "m"):
         raise RobotDefinitionError(f"{source}: unit must be 'mm' or 'm', got {unit!r}")
     angles = data.get("angles", "rad")
     if angles not in ("deg", "rad"):
         raise RobotDefinitionError(f"{source}: angles must be 'deg' or 'rad', got {angles!r}")
-    length = 1e-3 if unit == "mm" else 1.0
-    angle = math.pi / 180 if angles == "deg" else 1.0
+    return (1e-3 if unit == "mm" else 1.0), (math.pi / 180 if angles == "deg" else 1.0)
+
+
+def _chain_from_config(data: dict, source: str, length: float, angle: float) -> Robot:
+    """The robot of a dh / mdh / poe mapping, without its base and tool frames."""
+    name = data.get("name") or Path(source).stem
+    convention = data.get("convention")
+    if convention not in ("dh", "mdh", "poe"):
+        raise RobotDefinitionError(f"{source}: convention must be one of dh, mdh, poe; got {convention!r}")
 
     joints = data.get("joints")
     if not isinstance(joints, list) or not joints:
@@ -210,14 +261,9 @@ def robot_from_config(
             * length
             for i, j in enumerate(joints)
         ]
-        base = _frame(data.get("base"), length, angle, f"{source}: base")
-        tool = _frame(data.get("tool"), length, angle, f"{source}: tool")
         builder = dh_chain if convention == "dh" else mdh_chain
-        G = builder(alpha, a, d, base=base, tool=tool, prismatic=prismatic, theta=theta)
+        G = builder(alpha, a, d, prismatic=prismatic, theta=theta)
     else:
-        for key in ("base", "tool"):
-            if key in data:
-                raise RobotDefinitionError(f"{source}: '{key}' is for dh/mdh; poe uses 'home'")
         axes, points = [], []
         for i, j in enumerate(joints):
             where = f"{source}: joints[{i}]"
@@ -267,17 +313,23 @@ def _limits(value, where: str) -> np.ndarray:
 
 
 def _frame(spec, length: float, angle: float, where: str) -> np.ndarray | None:
-    """``{position: [x, y, z], rpy: [r, p, y] | rotation: 3x3}`` -> 4x4, or None."""
+    """``{position: [x, y, z], rpy: [r, p, y] | rotation: 3x3 | quaternion: [w, x, y, z]}`` -> 4x4, or None."""
     if spec is None:
         return None
     if not isinstance(spec, dict):
-        raise RobotDefinitionError(f"{where}: expected a mapping with 'position' and optionally 'rpy' or 'rotation'")
-    _no_unknown(spec, {"position", "rpy", "rotation"}, where)
+        raise RobotDefinitionError(
+            f"{where}: expected a mapping with 'position' and optionally 'rpy', 'rotation' or 'quaternion'"
+        )
+    _no_unknown(spec, {"position", "rpy", "rotation", "quaternion"}, where)
     T = np.eye(4)
     T[:3, 3] = _vector(spec.get("position", [0, 0, 0]), 3, f"{where}.position") * length
-    if "rpy" in spec and "rotation" in spec:
-        raise RobotDefinitionError(f"{where}: give 'rpy' or 'rotation', not both")
-    if "rpy" in spec:
+    given = [key for key in ("rpy", "rotation", "quaternion") if key in spec]
+    if len(given) > 1:
+        raise RobotDefinitionError(f"{where}: give one of 'rpy', 'rotation', 'quaternion', not {' and '.join(given)}")
+    if "quaternion" in spec:
+        quat = _vector(spec["quaternion"], 4, f"{where}.quaternion")
+        T[:3, :3] = as_frame(np.concatenate([np.zeros(3), quat]), name=f"{where}.quaternion")[:3, :3]
+    elif "rpy" in spec:
         import torch
 
         rpy = torch.tensor(_vector(spec["rpy"], 3, f"{where}.rpy") * angle, dtype=torch.float64)

@@ -212,7 +212,9 @@ class Robot:
         limits: (dof, 2) float64 tensor (lower, upper) of the joint variable ``q``: radians, or metres
             for prismatic joints.
         prismatic: (dof,) bool tensor, True for prismatic joints (all False for a revolute arm).
-        end_link: tool link name for URDF arms, else None.
+        end_link: tool link name for URDF arms, else None (with a ``tool`` frame, FK is at that link times it).
+        base, tool: (4, 4) float64 base and tool (TCP) frames already folded into ``G`` (``T = base @ ... @ tool``),
+            or None; see :mod:`nik.robots.frames`.
         G: (dof + 1, 4, 4) float64 normal-form transforms (see :mod:`nik.kinematics`).
         offsets: (dof,) float64, ``theta = q + offset`` (revolute) or ``d = q + offset`` (prismatic).
     """
@@ -248,6 +250,10 @@ class Robot:
             self.prismatic = flags
         self.end_link = end_link
         self.source = source
+        #: base and tool frames folded into ``G`` by :func:`nik.robots.frames.with_frames` ((4, 4) float64,
+        #: metres), recorded for reports; None when the definition has none of its own.
+        self.base: torch.Tensor | None = None
+        self.tool: torch.Tensor | None = None
         self._cache: dict[tuple[torch.dtype, torch.device], tuple[torch.Tensor, torch.Tensor]] = {}
         self._kernel: FKKernel | None = None
         self._arrays: tuple[np.ndarray, np.ndarray] | None = None
@@ -262,7 +268,8 @@ class Robot:
         """A plain-data (JSON-able) description that :meth:`from_definition` rebuilds exactly.
 
         ``"prismatic"`` (one bool per joint) appears only when some joint is prismatic, so the
-        definitions of revolute arms are what they were before prismatic joints existed.
+        definitions of revolute arms are what they were before prismatic joints existed; ``"base"`` and
+        ``"tool"`` (4x4 lists, metres) only where such a frame was given (already part of ``"G"``).
         """
         definition = {
             "name": self.name,
@@ -274,13 +281,17 @@ class Robot:
         }
         if self.has_prismatic:
             definition["prismatic"] = self.prismatic.tolist()
+        for key in ("base", "tool"):  # already folded into G; recorded only where a frame was given
+            frame = getattr(self, key)
+            if frame is not None:
+                definition[key] = frame.tolist()
         return definition
 
     @classmethod
     def from_definition(cls, definition: dict) -> Robot:
         """Rebuild a robot from :meth:`to_definition` output (for checkpoints and datasets)."""
         try:
-            return cls(
+            robot = cls(
                 definition["name"],
                 definition["G"],
                 definition["offsets"],
@@ -289,7 +300,11 @@ class Robot:
                 end_link=definition.get("end_link"),
                 prismatic=definition.get("prismatic"),
             )
-        except (KeyError, TypeError) as err:
+            for key in ("base", "tool"):  # a record only: G holds them already
+                if definition.get(key) is not None:
+                    setattr(robot, key, torch.tensor(definition[key], dtype=torch.float64).reshape(4, 4))
+            return robot
+        except (KeyError, TypeError, RuntimeError) as err:
             raise ValueError(f"malformed robot definition: {err}") from err
 
     @property
@@ -297,7 +312,9 @@ class Robot:
         """SHA-256 (hex, 16 chars) of the kinematics and limits; the name is not part of it.
 
         The joint types enter only when some joint is prismatic, so every revolute arm keeps the
-        hash it had before prismatic joints existed (datasets and checkpoints carry it).
+        hash it had before prismatic joints existed (datasets and checkpoints carry it). Base and tool
+        frames are part of ``G``, so a frame other than the identity changes the hash and none (or an
+        identity) keeps it.
         """
         h = hashlib.sha256()
         for arr in (self.G, self.offsets, self.limits):

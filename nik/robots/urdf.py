@@ -12,25 +12,40 @@ so a URDF arm runs on nik's FK like any other.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import io
 import json
 import math
 import os
+import re
+import warnings
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from nik.errors import RobotDefinitionError
+from nik.errors import RobotDefinitionError, RobotDefinitionWarning
 from nik.poses import rpy_to_matrix
+from nik.robots.frames import with_frames
 from nik.robots.model import NormalFormBuilder, Robot
 
-__all__ = ["URDF_CACHE_FORMAT", "load_urdf", "default_end_link", "build_pk_chain", "kinematic_urdf"]
+__all__ = [
+    "GRIPPER_WORDS",
+    "TOOL_LINK_KINDS",
+    "URDF_CACHE_FORMAT",
+    "EndLinkChoice",
+    "build_pk_chain",
+    "choose_end_link",
+    "default_end_link",
+    "kinematic_urdf",
+    "load_urdf",
+]
 
 #: Version of the cached parse results (bump when the conversion to the normal form changes).
-URDF_CACHE_FORMAT = 2
+URDF_CACHE_FORMAT = 3  # 3: the default tool link prefers conventional names and leaves grippers out
 
 #: joint types of the URDF format; floating and planar joints are kept as fixed (an error only on the arm's chain)
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
@@ -121,24 +136,132 @@ def _parse_chain(text: str, source: str):
         raise RobotDefinitionError(f"{source}: not a readable URDF ({type(err).__name__}: {err})") from err
 
 
-def default_end_link(data: str | bytes, source: str = "URDF") -> str:
-    """The child link of the last joint of the longest chain of revolute joints (first found on ties)."""
-    chain = _parse_chain(kinematic_urdf(data, source), source)
+#: A joint whose name (any case) contains one of these, or has the word ``hand``, is a gripper or hand joint:
+#: the default rule never counts it as an arm joint.
+GRIPPER_WORDS = ("gripper", "finger", "jaw", "knuckle", "thumb")
+
+#: Conventional tool-link names, best first: a tool link is picked by the first kind its name fits
+#: (``*tcp*``, ``*end_effector*``, ``tool0``, a word ``ee`` or ``eef``, a word ``flange``, a word ``tool``;
+#: the words of ``arm_tool_link`` are arm, tool, link, of ``gripperMover`` gripper, mover).
+TOOL_LINK_KINDS = ("*tcp*", "*end_effector*", "tool0", "ee|eef", "flange", "tool")
+
+
+@dataclass(frozen=True)
+class EndLinkChoice:
+    """How :func:`choose_end_link` picked a URDF's default tool link.
+
+    ``link``: the tool link. ``arm_end``: the child link of the arm's last joint (interface.md's fallback).
+    ``arm_joints``: how many revolute joints the arm has up to ``arm_end``. ``candidates``: every link at the
+    end of the arm with a conventional tool-link name, best first. ``left_out``: names of the moving joints
+    past ``arm_end`` (grippers, fingers), not part of the arm.
+    """
+
+    link: str
+    arm_end: str
+    arm_joints: int
+    candidates: tuple[str, ...] = ()
+    left_out: tuple[str, ...] = ()
+
+    def note(self) -> str | None:
+        """One line for the user when the choice left joints out or had several candidates; else None."""
+        parts = []
+        if len(self.candidates) > 1:
+            parts.append(
+                f"candidates {', '.join(self.candidates)} (preferred in the order {', '.join(TOOL_LINK_KINDS)})"
+            )
+        if self.left_out:
+            names = ", ".join(self.left_out[:6]) + (
+                f" and {len(self.left_out) - 6} more" if len(self.left_out) > 6 else ""
+            )
+            parts.append(f"left out of the arm: joint(s) {names}, which move past link {self.arm_end!r}")
+        if not parts:
+            return None
+        return (
+            f"default tool link {self.link!r}, {self.arm_joints} revolute arm joints; "
+            + "; ".join(parts)
+            + "; pass end_link (--end-link) to choose another"
+        )
+
+
+def _words(name: str) -> set[str]:
+    """The lower-case words of a name, split at non-alphanumerics and camel case (``jointGripper``: joint,
+    gripper; ``LHand``: l, hand)."""
+    split = re.sub(r"([A-Z])([A-Z][a-z])", r"\1_\2", re.sub(r"([a-z0-9])([A-Z])", r"\1_\2", name))
+    return set(re.split(r"[^a-z0-9]+", split.lower())) - {""}
+
+
+def _is_gripper_joint(name: str) -> bool:
+    low = name.lower()
+    return any(word in low for word in GRIPPER_WORDS) or "hand" in _words(name)
+
+
+def _tool_kind(link: str) -> int | None:
+    """Index in :data:`TOOL_LINK_KINDS` of the first kind ``link`` fits, or None."""
+    low, words = link.lower(), _words(link)
+    fits = (
+        "tcp" in low,
+        "end_effector" in low or "endeffector" in low,
+        low == "tool0",
+        bool(words & {"ee", "eef"}),
+        "flange" in words,
+        "tool" in words,
+    )
+    return next((i for i, fit in enumerate(fits) if fit), None)
+
+
+def choose_end_link(data: str | bytes, source: str = "URDF") -> EndLinkChoice:
+    """The default tool link of a URDF (its bytes or text), and how it was found.
+
+    1. The arm: the longest chain of revolute (or continuous) joints from the root, not counting gripper joints
+       (a name containing one of :data:`GRIPPER_WORDS`, any case, or the word ``hand``; they count when
+       every revolute joint is one); the first such chain in file order on ties. ``arm_end`` is the child
+       link of its last joint.
+    2. The tool link: of ``arm_end`` and the links reached from it through fixed joints only, the first by
+       the kinds of :data:`TOOL_LINK_KINDS` (``*tcp*``, ``*end_effector*``, ``tool0``, ``ee`` or ``eef`` as
+       a word of the name, ``flange`` as a word, ``tool`` as a word); within a kind the nearest to
+       ``arm_end``, then file order.
+    3. Otherwise ``arm_end`` itself: the last link of the longest chain of revolute joints.
+
+    Moving joints past ``arm_end`` are left out of the arm (:attr:`EndLinkChoice.left_out`).
+    """
+    tree, free = _kinematic_tree(data, source)
+    chain = _parse_chain(ET.tostring(tree, encoding="unicode"), source)
+    frames = list(_frames(chain._root))
+    revolute = [f for f in frames if f.joint.joint_type == "revolute"]
+    if not revolute:
+        raise RobotDefinitionError(f"{source}: has no revolute joints")
+    skip = not all(_is_gripper_joint(f.joint.name) for f in revolute)  # gripper joints count only when all are
     best = (0, None)
 
     def visit(frame, count):
         nonlocal best
-        if frame.joint.joint_type == "revolute":
+        if frame.joint.joint_type == "revolute" and not (skip and _is_gripper_joint(frame.joint.name)):
             count += 1
             if count > best[0]:
-                best = (count, frame.link.name)
+                best = (count, frame)
         for child in frame.children:
             visit(child, count)
 
     visit(chain._root, 0)
-    if best[1] is None:
-        raise RobotDefinitionError(f"{source}: has no revolute joints")
-    return best[1]
+    count, end = best
+    found, order = [], 0
+    todo = [(end, 0)]
+    while todo:  # breadth first through fixed joints from the arm's end
+        frame, depth = todo.pop(0)
+        kind = _tool_kind(frame.link.name)
+        if kind is not None:
+            found.append((kind, depth, order, frame.link.name))
+        order += 1
+        todo += [(c, depth + 1) for c in frame.children if c.joint.joint_type == "fixed" and c.joint.name not in free]
+    found.sort()
+    left_out = tuple(f.joint.name for f in _frames(end) if f is not end and f.joint.joint_type != "fixed")
+    candidates = tuple(name for *_, name in found)
+    return EndLinkChoice(candidates[0] if candidates else end.link.name, end.link.name, count, candidates, left_out)
+
+
+def default_end_link(data: str | bytes, source: str = "URDF") -> str:
+    """The default tool link of a URDF: :attr:`EndLinkChoice.link` of :func:`choose_end_link`."""
+    return choose_end_link(data, source).link
 
 
 def build_pk_chain(data: str | bytes, end_link: str, root_link: str = ""):
@@ -156,14 +279,21 @@ def load_urdf(
     root_link: str | None = None,
     name: str | None = None,
     origins: str = "pk",
+    base=None,
+    tool=None,
 ) -> Robot:
     """Load a serial arm of revolute and prismatic joints from a URDF file.
 
     Args:
         path: the ``.urdf`` file.
-        end_link: the tool link; default :func:`default_end_link`.
+        end_link: the tool link; default :func:`choose_end_link` (a conventional tool link at the end of the
+            arm, gripper joints left out); a :class:`nik.errors.RobotDefinitionWarning` names the joints it
+            left out and the candidates when several links fit.
         root_link: the base link; default the URDF's root.
         name: robot name; default the URDF's ``<robot name>``.
+        base, tool: frames (``(4, 4)`` or ``(7,)`` xyz + quaternion w, x, y, z; metres) of the root link in the
+            world and of the tool centre point in ``end_link``'s frame: FK is ``base @ T_end_link(q) @ tool``
+            (:mod:`nik.robots.frames`).
 
         origins: where the fixed joint transforms come from. ``"pk"`` (default): the transforms
             pytorch-kinematics parsed, so nik and pytorch-kinematics agree to machine precision on
@@ -189,20 +319,28 @@ def load_urdf(
         raise RobotDefinitionError(f"URDF file not found: {path}")
     data = path.read_bytes()
     key = _cache_key(data, end_link, root_link, name, origins)
-    robot = _cached_robot(key, path)
-    if robot is None:
-        robot = _parse_robot(path, data, end_link, root_link, name, origins)
-        _store_robot(key, robot)
-    return robot
+    hit = _cached_robot(key, path)
+    if hit is None:
+        robot, choice = _parse_robot(path, data, end_link, root_link, name, origins)
+        _store_robot(key, robot, choice)
+    else:
+        robot, choice = hit
+    note = choice.note() if choice is not None else None
+    if note:
+        warnings.warn(f"{path.name}: {note}", RobotDefinitionWarning, stacklevel=2)
+    return with_frames(robot, base=base, tool=tool)
 
 
-def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) -> Robot:
-    """:func:`load_urdf` without the cache: the file reduced to its kinematics, parsed by pytorch-kinematics,
-    converted to the normal form."""
+def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) -> tuple[Robot, EndLinkChoice | None]:
+    """:func:`load_urdf` without the cache or frames: the file reduced to its kinematics, parsed by
+    pytorch-kinematics, converted to the normal form; and how the default tool link was chosen (or None)."""
     tree, free = _kinematic_tree(data, str(path))
     text = ET.tostring(tree, encoding="unicode")
     chain = _parse_chain(text, str(path))
-    end_link = end_link or default_end_link(text, str(path))
+    choice = None
+    if not end_link:
+        choice = choose_end_link(text, str(path))
+        end_link = choice.link
     links = {f.link.name for f in _frames(chain._root)}
     for role, link in (("end_link", end_link), ("root_link", root_link)):
         if link is not None and link not in links:
@@ -247,7 +385,7 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         raise RobotDefinitionError(f"{path}: no revolute or prismatic joint between the root and {end_link!r}")
     if name is None:
         name = tree.get("name") or path.stem
-    return Robot(
+    robot = Robot(
         name,
         builder.finish(),
         np.zeros(len(names)),
@@ -257,6 +395,7 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         source=str(path),
         prismatic=builder.prismatic,
     )
+    return robot, choice
 
 
 # ---------------------------------------------------------------------------
@@ -281,16 +420,16 @@ def _cache_file(key: str) -> Path:
     return cache_home() / "robots" / f"{key[:32]}.json"
 
 
-def _cached_robot(key: str, path: Path) -> Robot | None:
-    """The robot stored under ``key`` (its ``source`` set to ``path``), or None when absent, unreadable or its
-    checksum or key does not match."""
+def _cached_robot(key: str, path: Path) -> tuple[Robot, EndLinkChoice | None] | None:
+    """The robot stored under ``key`` (its ``source`` set to ``path``) and how its default tool link was chosen,
+    or None when absent, unreadable or its checksum or key does not match."""
     try:
         doc = json.loads(_cache_file(key).read_text())
-        body = json.dumps(doc["robot"], sort_keys=True)
+        body = json.dumps([doc["robot"], doc.get("choice")], sort_keys=True)
         if doc.get("key") != key or doc.get("sha256") != hashlib.sha256(body.encode()).hexdigest():
             return None
         d = doc["robot"]
-        return Robot(
+        robot = Robot(
             d["name"],
             np.asarray(d["G"], dtype=np.float64),
             d["offsets"],
@@ -300,16 +439,22 @@ def _cached_robot(key: str, path: Path) -> Robot | None:
             source=str(path),
             prismatic=d.get("prismatic"),
         )
+        c = doc.get("choice")
+        if c is not None:
+            c = EndLinkChoice(**{**c, "candidates": tuple(c["candidates"]), "left_out": tuple(c["left_out"])})
+        return robot, c
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
 
-def _store_robot(key: str, robot: Robot) -> None:
-    """Write ``robot``'s definition under ``key`` (temporary name, then rename); silently skipped when the
-    folder is not writable."""
+def _store_robot(key: str, robot: Robot, choice: EndLinkChoice | None) -> None:
+    """Write ``robot``'s definition and how its default tool link was chosen under ``key`` (temporary name, then
+    rename); silently skipped when the folder is not writable."""
     d = robot.to_definition()
-    body = json.dumps(d, sort_keys=True)
-    doc = {"format": URDF_CACHE_FORMAT, "key": key, "sha256": hashlib.sha256(body.encode()).hexdigest(), "robot": d}
+    c = None if choice is None else dataclasses.asdict(choice)
+    body = json.dumps([d, c], sort_keys=True)
+    sha = hashlib.sha256(body.encode()).hexdigest()
+    doc = {"format": URDF_CACHE_FORMAT, "key": key, "sha256": sha, "robot": d, "choice": c}
     target = _cache_file(key)
     tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
     try:

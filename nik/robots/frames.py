@@ -1,0 +1,115 @@
+"""Base and tool (TCP) frames of an arm, folded into its normal form.
+
+Every arm is ``T(q) = G_0 J_1 G_1 ... J_n G_n`` (:mod:`nik.kinematics`). A base frame ``B`` (the pose of
+the arm's root in the user's frame) and a tool frame ``X`` (the tool centre point in the frame of the last
+link, the flange) make it ``B T(q) X``: nik folds them into the first and last constant factors,
+``G_0 <- B G_0`` and ``G_n <- G_n X``. So every consumer of the normal form, the torch FK, the compiled
+kernels, the swarms, LM, the closed forms and their family detection, sees the frames with no change of
+its own, and the definition hash (over ``G``) differs exactly when a frame is not the identity.
+
+A frame is given as a ``(4, 4)`` homogeneous transform or a ``(7,)`` vector ``x, y, z`` (metres) and a
+unit quaternion ``w, x, y, z``; anything else, a non-finite entry, a rotation that is not orthonormal or
+a quaternion whose norm is not 1 is a ``ValueError`` of one line naming the frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from nik.errors import RobotDefinitionError
+from nik.poses import ORTHONORMAL_TOL, quaternion_to_matrix, validate_pose
+
+__all__ = ["QUATERNION_TOL", "as_frame", "with_frames"]
+
+#: Largest accepted ``| |quaternion| - 1 |`` (four decimals typed by hand); the quaternion is then normalised.
+QUATERNION_TOL = 1e-3
+
+#: Rotations that depart from orthonormal by more than this (but within the accepted ORTHONORMAL_TOL)
+#: are projected onto the nearest rotation, so the stored frame is a rigid transform to float64 rounding.
+_PROJECT_ABOVE = 1e-12
+
+
+def as_frame(value, *, name: str = "tool") -> np.ndarray | None:
+    """``value``, a ``(4, 4)`` transform or ``(7,)`` xyz + quaternion (w, x, y, z), metres -> ``(4, 4)`` float64.
+
+    None stays None. Raises :class:`nik.RobotDefinitionError` (a ``ValueError``) naming ``name`` when the
+    value is not a finite rigid transform.
+    """
+    if value is None:
+        return None
+    try:
+        if isinstance(value, torch.Tensor):
+            value = value.detach().cpu().double().numpy()
+        a = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise RobotDefinitionError(
+            f"{name}: expected a (4, 4) transform or (7,) x y z qw qx qy qz, got {value!r}"
+        ) from err
+    if a.shape == (7,):
+        if not np.isfinite(a).all():
+            raise RobotDefinitionError(f"{name}: contains NaN or inf ({a.tolist()})")
+        norm = float(np.linalg.norm(a[3:]))
+        if abs(norm - 1.0) > QUATERNION_TOL:
+            raise RobotDefinitionError(
+                f"{name}: quaternion (w, x, y, z) {a[3:].tolist()} has norm {norm:.6g}, expected 1"
+            )
+        T = np.eye(4)
+        T[:3, :3] = quaternion_to_matrix(torch.from_numpy(a[3:] / norm)).numpy()
+        T[:3, 3] = a[:3]
+        return T
+    if a.shape != (4, 4):
+        raise RobotDefinitionError(
+            f"{name}: expected a (4, 4) transform or (7,) x y z qw qx qy qz (metres), got shape {a.shape}"
+        )
+    try:
+        validate_pose(torch.from_numpy(a), name=name, tol=ORTHONORMAL_TOL)
+    except ValueError as err:
+        raise RobotDefinitionError(str(err).replace("pose 0", "the frame")) from None
+    R = a[:3, :3]
+    if np.abs(R.T @ R - np.eye(3)).max() > _PROJECT_ABOVE:
+        u, _, vt = np.linalg.svd(R)
+        a[:3, :3] = u @ vt
+    a[3] = (0.0, 0.0, 0.0, 1.0)
+    return a
+
+
+def with_frames(robot, *, base=None, tool=None):
+    """A copy of ``robot`` whose FK is ``base @ robot.fk(q) @ tool`` (each frame as in :func:`as_frame`).
+
+    None (or absent) leaves that side as it is; with neither, ``robot`` itself is returned. The frames are
+    folded into ``G`` (module docstring) and recorded, composed with any the robot already had, in
+    :attr:`Robot.base` / :attr:`Robot.tool`.
+    """
+    B, X = as_frame(base, name="base"), as_frame(tool, name="tool")
+    if B is None and X is None:
+        return robot
+    from nik.robots.model import Robot
+
+    G = robot.G.numpy().copy()
+    if B is not None:
+        G[0] = B @ G[0]
+    if X is not None:
+        G[-1] = G[-1] @ X
+    out = Robot(
+        robot.name,
+        G,
+        robot.offsets,
+        robot.limits,
+        robot.joint_names,
+        end_link=robot.end_link,
+        source=robot.source,
+        prismatic=robot.prismatic,
+    )
+    out.base = _compose(B, robot.base, left=True)
+    out.tool = _compose(X, robot.tool, left=False)
+    return out
+
+
+def _compose(new: np.ndarray | None, old: torch.Tensor | None, *, left: bool) -> torch.Tensor | None:
+    if new is None:
+        return old
+    if old is None:
+        return torch.from_numpy(new)
+    old = old.numpy()
+    return torch.from_numpy(new @ old if left else old @ new)

@@ -1,0 +1,191 @@
+"""The default tool link of a URDF (nik/robots/urdf.py, ``choose_end_link``): a conventional tool link at the end
+of the arm, gripper joints left out and named, the candidates named when several fit; the built-in arms keep
+their definitions (the shipped networks are matched by their hash).
+
+The reference FK is pytorch-kinematics' serial chain to the link the rule should pick.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+import warnings
+from pathlib import Path
+
+import pytest
+import torch
+from torch.testing import assert_close
+
+import nik
+from nik.errors import RobotDefinitionWarning
+from nik.robots.urdf import build_pk_chain, choose_end_link
+
+_JOINT = """  <joint name="{name}" type="{type}">
+    <parent link="{parent}"/><child link="{child}"/>
+    <origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/>
+  </joint>
+"""
+
+
+def urdf(*joints: tuple[str, str, str, str]) -> str:
+    """A URDF of the 3-joint arm base -> l1 -> l2 -> l3, then ``joints``: (name, type, parent, child) each."""
+    arm = [("j1", "revolute", "base", "l1"), ("j2", "revolute", "l1", "l2"), ("j3", "revolute", "l2", "l3")]
+    rows = arm + list(joints)
+    links = ["base"] + [child for *_, child in rows]
+    out = ['<robot name="arm">'] + [f'  <link name="{link}"/>' for link in links]
+    for i, (name, jtype, parent, child) in enumerate(rows):
+        xyz = f"{0.05 * (i % 3)} {0.02 * i} {0.1 + 0.03 * i}"
+        rpy = f"{0.1 * i} {0.2 if i % 2 else -0.3} 0"
+        axis = ["0 0 1", "0 1 0", "1 0 0"][i % 3]
+        out.append(_JOINT.format(name=name, type=jtype, parent=parent, child=child, xyz=xyz, rpy=rpy, axis=axis))
+    return "\n".join(out + ["</robot>"])
+
+
+def load(tmp_path, text, **kw):
+    """``nik.load_robot`` of ``text`` and the RobotDefinitionWarnings it gave."""
+    path = tmp_path / "arm.urdf"
+    path.write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        robot = nik.load_robot(path, **kw)
+    notes = [str(w.message) for w in caught if issubclass(w.category, RobotDefinitionWarning)]
+    return robot, notes
+
+
+def assert_fk_is_pk_chain_to(robot, text, link):
+    chain = build_pk_chain(text, link).to(dtype=torch.float64)
+    q = robot.sample(6, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    assert_close(robot.fk(q), chain.forward_kinematics(q).get_matrix(), atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize(
+    "gripper",
+    [("jointGripper", "revolute"), ("left_finger_joint", "prismatic"), ("jaw", "revolute"), ("LHand", "revolute")],
+)
+def test_default_end_link_leaves_gripper_joints_out_and_names_them(tmp_path, gripper):
+    name, jtype = gripper
+    text = urdf(("gripper_stator", "fixed", "l3", "stator"), (name, jtype, "stator", "mover"))
+    robot, notes = load(tmp_path, text)
+    assert robot.dof == 3 and robot.joint_names == ["j1", "j2", "j3"]
+    assert robot.end_link == "l3"  # no conventional name: the end of the arm's revolute joints
+    assert_fk_is_pk_chain_to(robot, text, "l3")
+    assert len(notes) == 1 and name in notes[0] and "left out" in notes[0] and "\n" not in notes[0]
+    explicit, notes = load(tmp_path, text, end_link="mover")  # asked for: the gripper joint is the arm's
+    assert explicit.dof == 4 and not notes
+
+
+@pytest.mark.parametrize("tool", ["tool0", "j2s6_end_effector", "ee_link", "link_eef", "gripper_tcp", "flange"])
+def test_default_end_link_is_a_conventional_tool_link_past_fixed_joints(tmp_path, tool):
+    text = urdf(
+        ("j_mount", "fixed", "l3", "mount"), ("j_tool", "fixed", "mount", tool), ("j_cam", "fixed", "l3", "cam")
+    )
+    robot, notes = load(tmp_path, text)
+    assert robot.end_link == tool and robot.dof == 3
+    assert_fk_is_pk_chain_to(robot, text, tool)
+    assert not notes  # one candidate, nothing left out: nothing to say
+
+
+def test_default_end_link_names_every_candidate_when_several_fit(tmp_path):
+    text = urdf(("j_a", "fixed", "l3", "ee_link"), ("j_b", "fixed", "l3", "tool0"), ("j_c", "fixed", "tool0", "flange"))
+    robot, notes = load(tmp_path, text)
+    assert robot.end_link == "tool0"  # tool0 before ee and flange
+    (note,) = notes
+    assert "candidates tool0, ee_link, flange" in note and "end_link" in note
+    assert choose_end_link(text).candidates == ("tool0", "ee_link", "flange")
+    text = urdf(("j_a", "fixed", "l3", "flange"), ("j_b", "fixed", "flange", "hand_tcp"))
+    assert load(tmp_path, text)[0].end_link == "hand_tcp"  # a TCP before the flange it is mounted on
+
+
+def test_a_tool_link_behind_a_moving_joint_is_no_candidate(tmp_path):
+    text = urdf(("finger_joint", "prismatic", "l3", "finger"), ("j_tip", "fixed", "finger", "finger_tcp"))
+    robot, notes = load(tmp_path, text)
+    assert robot.end_link == "l3" and robot.dof == 3
+    assert "finger_joint" in notes[0]
+
+
+def test_without_a_conventional_name_the_default_is_the_end_of_the_longest_revolute_chain(tmp_path):
+    text = urdf(("j_x", "fixed", "l3", "wrist_camera"), ("j4_short", "revolute", "l1", "side"))
+    robot, notes = load(tmp_path, text)
+    assert robot.end_link == "l3" and robot.dof == 3 and not notes  # interface.md's rule, unchanged
+
+
+def test_default_end_link_note_repeats_when_the_arm_comes_from_the_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    text = urdf(("jointGripper", "revolute", "l3", "mover"))
+    first, notes1 = load(tmp_path, text)
+    assert list((tmp_path / "cache").rglob("*.json"))  # the parse was cached
+    second, notes2 = load(tmp_path, text)
+    assert notes1 == notes2 and len(notes1) == 1
+    assert second.definition_hash == first.definition_hash and second.end_link == first.end_link == "l3"
+
+
+def test_cli_prints_the_note_as_one_line(tmp_path, capsys):
+    from nik.cli import main
+
+    path = tmp_path / "arm.urdf"
+    path.write_text(urdf(("jointGripper", "revolute", "l3", "mover")))
+    assert main(["solve", "--robot", str(path), "--pose", "0.1", "0.05", "0.3", "1", "0", "0", "0"]) in (0, 1)
+    captured = capsys.readouterr()
+    notes = [line for line in captured.err.splitlines() if line.startswith("nik: note:")]
+    assert len(notes) == 1 and "jointGripper" in notes[0]
+    assert "tool link l3" in captured.out
+
+
+# ---------------------------------------------------------------------------
+# the built-in arms keep their definitions
+# ---------------------------------------------------------------------------
+WEIGHTS = Path(nik.__file__).parent / "nets" / "weights"
+
+
+@pytest.mark.parametrize("meta", sorted(WEIGHTS.glob("*.json")), ids=lambda p: p.stem)
+def test_builtin_arms_keep_the_definition_hash_their_shipped_network_was_trained_for(meta):
+    doc = json.loads(meta.read_text())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RobotDefinitionWarning)  # a built-in names its tool link: no note
+        robot = nik.load_robot(doc["robot"])
+    assert robot.definition_hash == doc["robot_hash"]
+
+
+def test_builtin_urdf_arms_name_their_end_link():
+    import yaml
+
+    for name in nik.builtin_robots():
+        data = yaml.safe_load((nik.robots.BUILTIN_DIR / f"{name}.yaml").read_text())
+        if "urdf" in data:
+            assert data.get("end_link"), f"{name}: a built-in URDF arm must name its end_link (its hash depends on it)"
+            assert nik.load_robot(name).end_link == data["end_link"]
+
+
+# ---------------------------------------------------------------------------
+# example-robot-data: the arms of the issue
+# ---------------------------------------------------------------------------
+def _erd(rel: str) -> Path:
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip('example-robot-data not installed (pip install -e ".[urdf-tests]")')
+    path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")) / rel
+    if not path.is_file():
+        pytest.skip(f"{rel} is not in this version of example-robot-data")
+    return path
+
+
+def test_unitree_z1_loads_as_its_six_arm_joints_without_the_gripper(tmp_path):
+    path = _erd("z1_description/urdf/z1.urdf")
+    robot, notes = load(tmp_path, path.read_text())
+    assert robot.dof == 6 and "jointGripper" not in robot.joint_names
+    assert robot.end_link == "link06"
+    assert "jointGripper" in notes[0]
+    assert_fk_is_pk_chain_to(robot, path.read_bytes(), "link06")
+
+
+def test_kinova_jaco2_ends_at_its_end_effector_160_mm_past_link_6(tmp_path):
+    path = _erd("kinova_description/robots/kinova.urdf")
+    robot, _ = load(tmp_path, path.read_text())
+    assert robot.dof == 6 and robot.end_link == "j2s6s200_end_effector"
+    assert_fk_is_pk_chain_to(robot, path.read_bytes(), "j2s6s200_end_effector")
+    link6 = nik.load_robot(path, end_link="j2s6s200_link_6")
+    q = robot.sample(4, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    gap = torch.linalg.vector_norm(robot.fk(q)[:, :3, 3] - link6.fk(q)[:, :3, 3], dim=-1)
+    assert_close(gap, torch.full((4,), 0.16, dtype=torch.float64), atol=2e-3, rtol=0)
