@@ -37,4 +37,3 @@ def arm_points(robot, q: torch.Tensor) -> torch.Tensor:
     base = torch.zeros(flat.shape[0], 1, 3, dtype=torch.float64)
     out = torch.cat([base, points.transpose(1, 2), T[:, None, :, 3]], dim=1)
     return out.reshape(*batch, robot.dof + 2, 3)
-

@@ -204,8 +204,15 @@ def _read(path: Path):
         hi = float(lim.get("upper", 0)) if lim is not None else 0.0
         rest = min(max(0.0, lo), hi) if lo < hi else 0.0
         joints.append(
-            _Joint(el.get("name"), el.get("type"), el.find("parent").get("link"), el.find("child").get("link"),
-                   _origin(el), a, rest)
+            _Joint(
+                el.get("name"),
+                el.get("type"),
+                el.find("parent").get("link"),
+                el.find("child").get("link"),
+                _origin(el),
+                a,
+                rest,
+            )
         )
     by_parent: dict[str, list[_Joint]] = {}
     for j in joints:

@@ -240,7 +240,9 @@ class Viewer:
 
             self._meshes, self._mesh_note = load_urdf_visuals(robot)
         if self._meshes is not None:
-            self._link_nodes = {link: server.scene.add_frame(f"/arm/{link}", show_axes=False) for link in self._meshes.links}
+            self._link_nodes = {
+                link: server.scene.add_frame(f"/arm/{link}", show_axes=False) for link in self._meshes.links
+            }
             for k, vis in enumerate(self._meshes.visuals):
                 server.scene.add_mesh_simple(f"/arm/{vis.link}/visual{k}", vis.vertices, vis.faces, color=vis.color)
         else:
@@ -277,8 +279,9 @@ class Viewer:
             line = np.stack([self.path[:-1, :3, 3].numpy(), self.path[1:, :3, 3].numpy()], axis=1)
             server.scene.add_line_segments("/path", line, _PATH_RGB, thickness=0.3 * self._radius)
             ok = sum(s.success for s in self._path_shown)
-            gui.add_markdown(f"path: {len(self.path)} waypoints, {ok} reached within "
-                             f"{describe(cfg.tol_pos, cfg.tol_rot)}")
+            gui.add_markdown(
+                f"path: {len(self.path)} waypoints, {ok} reached within {describe(cfg.tol_pos, cfg.tol_rot)}"
+            )
             self._slider = gui.add_slider("waypoint", 0, len(self.path) - 1, 1, 0)
             self._slider.on_update(lambda _: self.show_waypoint(int(self._slider.value)))
             self._play = gui.add_button("play / pause")
@@ -298,10 +301,19 @@ class Viewer:
         """One unit cylinder per segment (scaled to its length) and a sphere per joint: ``[cyl..., sph...]``."""
         scene, r = self.server.scene, self._radius
         n = self.robot.dof + 1
-        cyl = [scene.add_cylinder(f"{name}/link{i}", radius=r, height=1.0, color=rgb, opacity=opacity)
-               for i in range(n)]
-        sph = [scene.add_icosphere(f"{name}/joint{i}", radius=1.25 * r, color=_JOINT_RGB if opacity is None else rgb,
-                                   opacity=opacity, subdivisions=2) for i in range(n + 1)]
+        cyl = [
+            scene.add_cylinder(f"{name}/link{i}", radius=r, height=1.0, color=rgb, opacity=opacity) for i in range(n)
+        ]
+        sph = [
+            scene.add_icosphere(
+                f"{name}/joint{i}",
+                radius=1.25 * r,
+                color=_JOINT_RGB if opacity is None else rgb,
+                opacity=opacity,
+                subdivisions=2,
+            )
+            for i in range(n + 1)
+        ]
         return cyl + sph
 
     def _place_capsules(self, nodes: list, q: torch.Tensor) -> None:
@@ -326,11 +338,20 @@ class Viewer:
         t0 = time.perf_counter()
         with warnings.catch_warnings():  # an unreachable target is shown on the page, not warned about
             warnings.simplefilter("ignore", UserWarning)
-            res = self.solver.solve(T[None], tol_pos=self.cfg.tol_pos, tol_rot=self.cfg.tol_rot, seed=self.cfg.seed,
-                                    q_near=q_near)
+            res = self.solver.solve(
+                T[None], tol_pos=self.cfg.tol_pos, tol_rot=self.cfg.tol_rot, seed=self.cfg.seed, q_near=q_near
+            )
         ms = 1e3 * (time.perf_counter() - t0)
-        return _Shown(T, res.q[0].double(), bool(res.success[0]), bool(res.reachable[0]), float(res.pos_err[0]),
-                      float(res.rot_err[0]), res.source, ms)
+        return _Shown(
+            T,
+            res.q[0].double(),
+            bool(res.success[0]),
+            bool(res.reachable[0]),
+            float(res.pos_err[0]),
+            float(res.rot_err[0]),
+            res.source,
+            ms,
+        )
 
     def _solve_path(self) -> None:
         """Each waypoint solved nearest the previous answer: a joint trajectory without jumps where one exists."""
@@ -375,8 +396,9 @@ class Viewer:
             return
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
-            sols = self.solver.solve_all(self._shown.T[None], tol_pos=self.cfg.tol_pos, tol_rot=self.cfg.tol_rot,
-                                         seed=self.cfg.seed)
+            sols = self.solver.solve_all(
+                self._shown.T[None], tol_pos=self.cfg.tol_pos, tol_rot=self.cfg.tol_rot, seed=self.cfg.seed
+            )
         self.ghosts = sols.double()
         shown = sols[: self.cfg.max_ghosts]
         for k, q in enumerate(shown):
