@@ -53,14 +53,16 @@ def plot_arm(
     """
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower()
-    q = torch.as_tensor(q, dtype=torch.float64).reshape(-1, robot.dof) if torch.as_tensor(q).numel() else None
-    if q is None:
-        raise ValueError("plot_arm: q is empty; expected (dof,) or (B, dof) joint values")
-    arms = arm_points(robot, q).numpy() * 1e3  # (B, dof + 2, 3) mm
+    q = torch.as_tensor(q, dtype=torch.float64)
+    if q.ndim not in (1, 2) or q.shape[-1] != robot.dof or not q.numel():
+        raise ValueError(f"plot_arm: q must be (dof,) or (B, dof) with dof = {robot.dof}, got {tuple(q.shape)}")
+    arms = arm_points(robot, q.reshape(-1, robot.dof)).numpy() * 1e3  # (B, dof + 2, 3) mm
     faint = None
     if ghosts is not None:
         ghosts = torch.as_tensor(ghosts, dtype=torch.float64)
-        faint = arm_points(robot, ghosts.reshape(-1, robot.dof)).numpy() * 1e3 if ghosts.numel() else None
+        if ghosts.numel() and (ghosts.ndim != 2 or ghosts.shape[1] != robot.dof):
+            raise ValueError(f"plot_arm: ghosts must be (K, {robot.dof}), got {tuple(ghosts.shape)}")
+        faint = arm_points(robot, ghosts).numpy() * 1e3 if ghosts.numel() else None
     targets = None
     if T_target is not None:
         targets = validate_pose(torch.as_tensor(T_target, dtype=torch.float64).reshape(-1, 4, 4), name="T_target")

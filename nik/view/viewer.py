@@ -231,7 +231,7 @@ class Viewer:
         server.scene.add_grid("/floor", width=2 * self._size, height=2 * self._size, cell_size=0.1)
         look = arm_points(robot, q_home).mean(0).numpy()  # the arm's middle, seen from a corner, a little above
         server.initial_camera.look_at = tuple(look)
-        server.initial_camera.position = tuple(look + np.array([0.55, 0.75, 0.35]) * self._size)
+        server.initial_camera.position = tuple(look + np.array([0.75, 1.0, 0.5]) * self._size)
 
         self._meshes = None
         self._mesh_note = "links drawn as capsules between joint origins"
@@ -402,7 +402,7 @@ class Viewer:
         self.ghosts = sols.double()
         shown = sols[: self.cfg.max_ghosts]
         for k, q in enumerate(shown):
-            nodes = self._add_capsules(f"/ghosts/{k}", _GHOST_RGB, opacity=0.3)
+            nodes = self._add_capsules(f"/ghosts/{k}", _GHOST_RGB, opacity=0.2)
             self._place_capsules(nodes, q)
             self._ghost_nodes += nodes
         more = f" ({len(shown)} drawn)" if len(sols) > len(shown) else ""
