@@ -216,6 +216,29 @@ def test_viewer_set_target_solves_from_the_current_joints_and_shows_them():
 
 
 @needs_viser
+def test_dragging_the_target_solves_the_newest_pose_in_the_solver_thread():
+    from types import SimpleNamespace
+
+    from nik.poses import matrix_to_quaternion
+    from nik.view import Viewer, ViewerCfg
+
+    robot = nik.load_robot("panda")  # no closed form: LM from the current joints
+    with Viewer(robot, cfg=ViewerCfg(port=0, ghosts=False)) as viewer:
+        start = viewer.joints
+        T = viewer.target
+        for k in range(1, 6):  # the events of one drag, as viser's transform controls send them
+            moved = T.clone()
+            moved[:3, 3] += k * torch.tensor([0.01, 0.0, -0.01], dtype=torch.float64)
+            gizmo = SimpleNamespace(wxyz=matrix_to_quaternion(moved[:3, :3]).numpy(), position=moved[:3, 3].numpy())
+            viewer._dragged(SimpleNamespace(target=gizmo, phase="update"))
+        done = _wait_for(lambda: bool(torch.allclose(viewer.target, moved, atol=1e-12)), timeout=30, every=0.05)
+        assert done, "the solver thread never showed the last pose of the drag"
+        pos, rot = nik.pose_error(moved, robot.fk(viewer.joints))
+        assert viewer.shown.success and float(pos) < 1e-4 and float(rot) < 1e-3
+        assert float((viewer.joints - start).abs().max()) < math.radians(20)  # followed, not a new branch
+
+
+@needs_viser
 def test_viewer_plays_a_path_back_as_a_continuous_trajectory():
     from nik.view import Viewer, ViewerCfg
 

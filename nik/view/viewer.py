@@ -94,7 +94,8 @@ class Viewer:
         poses: optional ``(B, 4, 4)`` targets (metres), chosen with a slider; the first is shown first.
         path: optional ``(N, 4, 4)`` waypoints of a path, played back; its first waypoint is shown first.
 
-    With neither, the first target is the FK of a seeded random configuration within the limits.
+    With neither, the first target is the FK of a seeded random configuration in the middle half of every
+    joint's range (so that a drag does not run into a limit at once).
     The server starts at construction; use as a context manager or call :meth:`stop`.
 
     Raises:
@@ -223,7 +224,9 @@ class Viewer:
     def _build(self) -> None:
         robot, cfg, server = self.robot, self.cfg, self.server
         gen = torch.Generator().manual_seed(cfg.seed)
-        q_home = robot.sample(1, generator=gen, dtype=torch.float64)[0]
+        lo, hi = robot.limits[:, 0], robot.limits[:, 1]
+        middle = torch.stack([0.75 * lo + 0.25 * hi, 0.25 * lo + 0.75 * hi], dim=1)  # the middle half of each range
+        q_home = robot.sample(1, generator=gen, dtype=torch.float64, ranges=middle)[0]  # room to move every way
         pts = arm_points(robot, robot.sample(64, generator=gen, dtype=torch.float64)).reshape(-1, 3)
         self._size = float(max((pts.max(0).values - pts.min(0).values).max(), 0.05))
         self._radius = cfg.link_radius or 0.025 * self._size
@@ -259,13 +262,7 @@ class Viewer:
         self._ghost_text = gui.add_markdown("")
         self._ghost_box.on_update(lambda _: self._locked(self._update_ghosts))
 
-        @self._gizmo.on_update
-        def _dragged(event) -> None:
-            T = torch.eye(4, dtype=torch.float64)
-            T[:3, :3] = quaternion_to_matrix(torch.tensor(np.asarray(event.target.wxyz), dtype=torch.float64))
-            T[:3, 3] = torch.tensor(np.asarray(event.target.position), dtype=torch.float64)
-            self._pending = T
-            self._wake.set()
+        self._gizmo.on_update(self._dragged)
 
         self._path_shown: list[_Shown] = []
         if self.poses is not None:
@@ -417,6 +414,14 @@ class Viewer:
             fn()
 
     # -- threads ---------------------------------------------------------------------------------------
+    def _dragged(self, event) -> None:
+        """The transform controls moved (viser's thread pool): hand the newest pose to the solver thread."""
+        T = torch.eye(4, dtype=torch.float64)
+        T[:3, :3] = quaternion_to_matrix(torch.tensor(np.asarray(event.target.wxyz), dtype=torch.float64))
+        T[:3, 3] = torch.tensor(np.asarray(event.target.position), dtype=torch.float64)
+        self._pending = T
+        self._wake.set()
+
     def _drag_loop(self) -> None:
         """Solve the newest dragged pose; ghosts only once no newer drag waits."""
         while not self._stop.is_set():
