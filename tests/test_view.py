@@ -368,10 +368,11 @@ class DevTools:
         target = self.call("Target.createTarget", {"url": url})["targetId"]
         self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
 
+    def evaluate(self, expression: str):
+        return self.call("Runtime.evaluate", {"expression": expression, "returnByValue": True})["result"].get("value")
+
     def text(self) -> str:
-        res = self.call("Runtime.evaluate", {"expression": "document.body ? document.body.innerText : ''",
-                                             "returnByValue": True})  # fmt: skip
-        return res["result"].get("value") or ""
+        return self.evaluate("document.body ? document.body.innerText : ''") or ""
 
     def screenshot(self) -> bytes:
         return base64.b64decode(self.call("Page.captureScreenshot", {"format": "png"}, timeout=60)["data"])
@@ -413,8 +414,12 @@ def test_page_in_a_headless_browser_draws_the_arm_and_shows_the_joints_of_a_move
             assert text, "the page never showed the joint angles"
             torch.testing.assert_close(_joints_in(text, robot), viewer.joints, atol=1e-5, rtol=0)
 
-            # the arm is drawn: the 3-D view (left of the panel, below the software-rendering notice) is not blank
+            # the arm is drawn: the 3-D view (left of the panel) is not blank
             def drawn():
+                # close the notice "Software WebGL rendering detected" (it would hide part of the view)
+                browser.evaluate(
+                    "document.querySelectorAll('.mantine-Notification-closeButton').forEach(b => b.click())"
+                )
                 png = browser.screenshot()
                 img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)[170:, :540]
                 arm = ((img[..., 2] > img[..., 0] + 40) & (img[..., 2] > 120)).sum()  # the arm's blue capsules

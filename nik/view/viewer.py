@@ -234,7 +234,7 @@ class Viewer:
         server.scene.add_grid("/floor", width=2 * self._size, height=2 * self._size, cell_size=0.1)
         look = arm_points(robot, q_home).mean(0).numpy()  # the arm's middle, seen from a corner, a little above
         server.initial_camera.look_at = tuple(look)
-        server.initial_camera.position = tuple(look + np.array([0.75, 1.0, 0.5]) * self._size)
+        server.initial_camera.position = tuple(look + np.array([0.45, 0.6, 0.3]) * self._size)
 
         self._meshes = None
         self._mesh_note = "links drawn as capsules between joint origins"
@@ -251,7 +251,7 @@ class Viewer:
         else:
             self._capsules = self._add_capsules("/arm", _ARM_RGB, opacity=None)
         self._tool = server.scene.add_frame("/tool", axes_length=0.1 * self._size, axes_radius=0.006 * self._size)
-        self._gizmo = server.scene.add_transform_controls("/target", scale=0.25 * self._size)
+        self._gizmo = server.scene.add_transform_controls("/target", scale=0.15 * self._size)
         server.scene.add_frame("/target/axes", axes_length=0.12 * self._size, axes_radius=0.004 * self._size)
 
         gui = server.gui
@@ -286,6 +286,7 @@ class Viewer:
         else:
             first = robot.fk(q_home)
         self._shown = _Shown(first, q_home, False, True, math.nan, math.nan, "", 0.0)
+        self._solve(first, q_home)  # warm-up (kernels load on the first call): the page shows the time of a move
         with self._lock:
             self._move_gizmo(first)
             if self.path is not None:
