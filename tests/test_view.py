@@ -174,6 +174,18 @@ def test_nik_view_serves_the_page_on_localhost_then_stops(monkeypatch, tmp_path,
     assert seen == {"status": 200, "path": 5}
 
 
+def test_import_nik_view_and_nik_help_load_neither_viser_nor_matplotlib():
+    code = (
+        "import sys, contextlib, io\nimport nik.view\nfrom nik.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "    main(['view', '--help'])\n"
+        "print(sorted(m for m in ('viser', 'matplotlib', 'trimesh', 'lightning') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
 # ---- the Viewer's page API -----------------------------------------------------------------------------------------
 def _joints_in(text: str, robot) -> torch.Tensor:
     """Joint angles (radians) read back from the page's joint text (``name: 12.3456 deg``)."""
