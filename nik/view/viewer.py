@@ -191,7 +191,7 @@ class Viewer:
             T = self.path[i]
             self._move_gizmo(T)
             self._show(self._path_shown[i])
-            self._update_ghosts()
+            self._update_ghosts(skip=self._playing.is_set())  # while the path plays: no ghosts (solve_all per frame)
             return self._shown
 
     def serve_forever(self) -> None:
@@ -353,7 +353,7 @@ class Viewer:
 
     def _solve_path(self) -> None:
         """Each waypoint solved nearest the previous answer: a joint trajectory without jumps where one exists."""
-        q = self._shown.q if hasattr(self, "_shown") else None
+        q = None  # the first waypoint: the solver's own choice
         for T in self.path:
             shown = self._solve(T, q)
             self._path_shown.append(shown)
@@ -384,11 +384,11 @@ class Viewer:
         )
         self._joint_text.content = joint_lines(self.robot, q)
 
-    def _update_ghosts(self) -> None:
+    def _update_ghosts(self, *, skip: bool = False) -> None:
         for node in self._ghost_nodes:
             node.remove()
         self._ghost_nodes = []
-        if not self._ghost_box.value:
+        if skip or not self._ghost_box.value:
             self.ghosts = torch.zeros(0, self.robot.dof, dtype=torch.float64)
             self._ghost_text.content = ""
             return
