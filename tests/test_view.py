@@ -235,7 +235,8 @@ def test_dragging_the_target_solves_the_newest_pose_in_the_solver_thread():
     from nik.view import Viewer, ViewerCfg
 
     robot = nik.load_robot("panda")  # no closed form: LM from the current joints
-    with Viewer(robot, cfg=ViewerCfg(port=0, ghosts=False)) as viewer:
+    with Viewer(robot, cfg=ViewerCfg(port=0)) as viewer:
+        assert len(viewer.ghosts) > 0
         start = viewer.joints
         T = viewer.target
         for k in range(1, 6):  # the events of one drag, as viser's transform controls send them
@@ -245,6 +246,11 @@ def test_dragging_the_target_solves_the_newest_pose_in_the_solver_thread():
             viewer._dragged(SimpleNamespace(target=gizmo, phase="update"))
         done = _wait_for(lambda: bool(torch.allclose(viewer.target, moved, atol=1e-12)), timeout=30, every=0.05)
         assert done, "the solver thread never showed the last pose of the drag"
+        assert len(viewer.ghosts) == 0  # while dragging: the first pose's ghosts are gone, no new ones yet
+        viewer._dragged(SimpleNamespace(target=gizmo, phase="end"))  # release: the ghosts of the final pose
+        assert _wait_for(lambda: len(viewer.ghosts) > 0, timeout=60, every=0.1), "no ghosts after the drag ended"
+        pos, rot = nik.pose_error(moved.expand(len(viewer.ghosts), 4, 4), robot.fk(viewer.ghosts))
+        assert float(pos.max()) < 1e-4 and float(rot.max()) < 1e-3
         pos, rot = nik.pose_error(moved, robot.fk(viewer.joints))
         assert viewer.shown.success and float(pos) < 1e-4 and float(rot) < 1e-3
         assert float((viewer.joints - start).abs().max()) < math.radians(20)  # followed, not a new branch

@@ -7,13 +7,15 @@ What the page shows:
 - a target frame with transform controls: dragging it solves the new pose (one ``IKSolver.solve``, ``q_near``
   the current joints, so the arm moves smoothly) and the GUI shows the success flag, the position and rotation
   errors (mm, deg) and the joint angles (deg; prismatic joints in mm) as text;
-- every solution of the pose (``IKSolver.solve_all``) as faint ghost arms (a check box);
+- every solution of the pose (``IKSolver.solve_all``) as faint ghost arms (a check box), drawn when a drag
+  ends;
 - with ``poses``: a slider over them; with ``path``: the path drawn, its joint trajectory (each waypoint
   solved from the previous one, nearest it) played back with a slider and a play button.
 
 Drags arrive on viser's thread pool; one worker thread solves the newest pose and drops the ones that a
-newer drag superseded, so the page never queues stale solves. :meth:`Viewer.set_target` solves in the
-caller's thread (the page's API for scripts and tests). :meth:`Viewer.stop` stops the server and threads.
+newer drag superseded, so the page never queues stale solves; the ghosts wait for the end of the drag.
+:meth:`Viewer.set_target` solves in the caller's thread (the page's API for scripts and tests).
+:meth:`Viewer.stop` stops the server and threads.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ class ViewerCfg:
     seed: int = 0  # seeds the solver and the starting configuration
     ghosts: bool = True  # draw every solution of the pose (solve_all) as faint arms
     max_ghosts: int = 8  # at most this many ghost arms (a 7-joint arm has a continuum of solutions)
+    ghost_starts: int = 16  # solve_all's uniform starts on an arm without a closed form (256 took seconds on panda)
     link_radius: float | None = None  # metres, the capsules' radius; None: 2.5 % of the arm's size
     meshes: bool = True  # URDF meshes where the files are there (False: capsules always)
     play_rate: float = 10.0  # waypoints per second when a path plays
@@ -118,7 +121,7 @@ class Viewer:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._wake = threading.Event()
-        self._pending: torch.Tensor | None = None
+        self._pending: tuple[torch.Tensor, bool] | None = None  # the newest dragged pose, and whether the drag ended
         self._playing = threading.Event()
         self.ghosts = torch.zeros(0, self.robot.dof, dtype=torch.float64)
         self._ghost_nodes: list = []
@@ -395,7 +398,11 @@ class Viewer:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
             sols = self.solver.solve_all(
-                self._shown.T[None], tol_pos=self.cfg.tol_pos, tol_rot=self.cfg.tol_rot, seed=self.cfg.seed
+                self._shown.T[None],
+                tol_pos=self.cfg.tol_pos,
+                tol_rot=self.cfg.tol_rot,
+                seed=self.cfg.seed,
+                n_starts=self.cfg.ghost_starts,
             )
         self.ghosts = sols.double()
         shown = sols[: self.cfg.max_ghosts]
@@ -420,22 +427,22 @@ class Viewer:
         T = torch.eye(4, dtype=torch.float64)
         T[:3, :3] = quaternion_to_matrix(torch.tensor(np.asarray(event.target.wxyz), dtype=torch.float64))
         T[:3, 3] = torch.tensor(np.asarray(event.target.position), dtype=torch.float64)
-        self._pending = T
+        self._pending = (T, getattr(event, "phase", "end") == "end")
         self._wake.set()
 
     def _drag_loop(self) -> None:
-        """Solve the newest dragged pose; ghosts only once no newer drag waits."""
+        """Solve the newest dragged pose; the ghosts (every solution: slower) once the drag has ended."""
         while not self._stop.is_set():
             if not self._wake.wait(0.5):
                 continue
             self._wake.clear()
-            T, self._pending = self._pending, None
-            if T is None or self._stop.is_set():
+            pending, self._pending = self._pending, None
+            if pending is None or self._stop.is_set():
                 continue
+            T, ended = pending
             with self._lock:
                 self._solve_and_show(T)
-                if self._pending is None:
-                    self._update_ghosts()
+                self._update_ghosts(skip=not ended or self._pending is not None)  # stale ghosts go meanwhile
 
     def _play_loop(self) -> None:
         """While playing, advance the waypoint slider ``play_rate`` times a second (wrapping at the end)."""
