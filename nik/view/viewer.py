@@ -40,7 +40,7 @@ VIEW_EXTRA_MESSAGE = "nik view needs the optional extra: pip install 'nik[view]'
 
 _ARM_RGB = (40, 100, 180)
 _JOINT_RGB = (30, 30, 30)
-_GHOST_RGB = (150, 150, 150)
+_GHOST_RGB = (175, 175, 185)
 _PATH_RGB = (230, 120, 20)
 
 
@@ -124,7 +124,7 @@ class Viewer:
         self._pending: tuple[torch.Tensor, bool] | None = None  # the newest dragged pose, and whether the drag ended
         self._playing = threading.Event()
         self.ghosts = torch.zeros(0, self.robot.dof, dtype=torch.float64)
-        self._ghost_nodes: list = []
+        self._ghost_node = None  # the line segments of every ghost arm
 
         self.server = viser.ViserServer(host=self.cfg.host, port=self.cfg.port, verbose=verbose)
         try:
@@ -252,7 +252,7 @@ class Viewer:
             for k, vis in enumerate(self._meshes.visuals):
                 server.scene.add_mesh_simple(f"/arm/{vis.link}/visual{k}", vis.vertices, vis.faces, color=vis.color)
         else:
-            self._capsules = self._add_capsules("/arm", _ARM_RGB, opacity=None)
+            self._capsules = self._add_capsules("/arm", _ARM_RGB)
         self._tool = server.scene.add_frame("/tool", axes_length=0.1 * self._size, axes_radius=0.006 * self._size)
         self._gizmo = server.scene.add_transform_controls("/target", scale=0.15 * self._size)
         server.scene.add_frame("/target/axes", axes_length=0.12 * self._size, axes_radius=0.004 * self._size)
@@ -298,21 +298,13 @@ class Viewer:
                 self._solve_and_show(first)
             self._update_ghosts()
 
-    def _add_capsules(self, name: str, rgb, *, opacity: float | None) -> list:
+    def _add_capsules(self, name: str, rgb) -> list:
         """One unit cylinder per segment (scaled to its length) and a sphere per joint: ``[cyl..., sph...]``."""
         scene, r = self.server.scene, self._radius
         n = self.robot.dof + 1
-        cyl = [
-            scene.add_cylinder(f"{name}/link{i}", radius=r, height=1.0, color=rgb, opacity=opacity) for i in range(n)
-        ]
+        cyl = [scene.add_cylinder(f"{name}/link{i}", radius=r, height=1.0, color=rgb) for i in range(n)]
         sph = [
-            scene.add_icosphere(
-                f"{name}/joint{i}",
-                radius=1.25 * r,
-                color=_JOINT_RGB if opacity is None else rgb,
-                opacity=opacity,
-                subdivisions=2,
-            )
+            scene.add_icosphere(f"{name}/joint{i}", radius=1.25 * r, color=_JOINT_RGB, subdivisions=2)
             for i in range(n + 1)
         ]
         return cyl + sph
@@ -388,9 +380,11 @@ class Viewer:
         self._joint_text.content = joint_lines(self.robot, q)
 
     def _update_ghosts(self, *, skip: bool = False) -> None:
-        for node in self._ghost_nodes:
-            node.remove()
-        self._ghost_nodes = []
+        """Solve every solution of the shown pose and draw up to ``max_ghosts`` of them as faint arms: one
+        line-segments node for all (one message per update, however many ghosts); ``skip``: none."""
+        if self._ghost_node is not None:
+            self._ghost_node.remove()
+            self._ghost_node = None
         if skip or not self._ghost_box.value:
             self.ghosts = torch.zeros(0, self.robot.dof, dtype=torch.float64)
             self._ghost_text.content = ""
@@ -406,10 +400,12 @@ class Viewer:
             )
         self.ghosts = sols.double()
         shown = sols[: self.cfg.max_ghosts]
-        for k, q in enumerate(shown):
-            nodes = self._add_capsules(f"/ghosts/{k}", _GHOST_RGB, opacity=0.2)
-            self._place_capsules(nodes, q)
-            self._ghost_nodes += nodes
+        if len(shown):
+            pts = arm_points(self.robot, shown.double()).numpy()  # (K, dof + 2, 3)
+            segments = np.stack([pts[:, :-1], pts[:, 1:]], axis=2).reshape(-1, 2, 3)
+            self._ghost_node = self.server.scene.add_line_segments(
+                "/ghosts", segments, _GHOST_RGB, thickness=0.6 * self._radius, thickness_units="world"
+            )
         more = f" ({len(shown)} drawn)" if len(sols) > len(shown) else ""
         self._ghost_text.content = f"{len(sols)} distinct solutions of this pose{more}"
 
