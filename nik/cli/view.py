@@ -40,31 +40,26 @@ def register(sub) -> None:
 def _cmd_view(args) -> int:
     if not 0 <= args.port <= 65535:
         raise ValueError(f"--port must be in 0..65535, got {args.port}")
-    from nik.view import VIEW_EXTRA_MESSAGE, MissingExtraError, Viewer, ViewerCfg, viser_available
+    from nik.view import VIEW_EXTRA_MESSAGE, Viewer, ViewerCfg, viser_available
 
-    if not viser_available():
+    if not viser_available():  # before any work: one line, exit 2
         print(VIEW_EXTRA_MESSAGE, file=sys.stderr)
         return 2
     from nik.cli.common import robot_from_args, tool_link_text
     from nik.ik import IKSolver, as_poses
 
+    def targets(file):
+        if file is None:
+            return None
+        xyzq = read_poses_csv(file)
+        if args.unit == "mm":
+            xyzq[:, :3] *= 1e-3
+        return as_poses(xyzq, "quat", name=str(file))
+
     robot = robot_from_args(args)
-    checkpoint = None if str(args.checkpoint).lower() == "none" else args.checkpoint
-    solver = IKSolver(robot, checkpoint=checkpoint)
-    poses = path = None
-    for name in ("poses", "path"):
-        file = getattr(args, name)
-        if file is not None:
-            xyzq = read_poses_csv(file)
-            if args.unit == "mm":
-                xyzq[:, :3] *= 1e-3
-            T = as_poses(xyzq, "quat", name=str(file))
-            poses, path = (T, path) if name == "poses" else (poses, T)
-    try:
-        viewer = Viewer(solver, cfg=ViewerCfg(host=args.host, port=args.port, seed=args.seed), poses=poses, path=path)
-    except MissingExtraError as err:
-        print(err, file=sys.stderr)
-        return 2
+    poses, path = targets(args.poses), targets(args.path)
+    solver = IKSolver(robot, checkpoint=None if str(args.checkpoint).lower() == "none" else args.checkpoint)
+    viewer = Viewer(solver, cfg=ViewerCfg(host=args.host, port=args.port, seed=args.seed), poses=poses, path=path)
     print(f"nik view: {robot.name}{tool_link_text(robot)} at {viewer.url} (Ctrl-C stops)", flush=True)
     try:
         viewer.serve_forever()  # stops the server on the way out
