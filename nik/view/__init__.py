@@ -14,12 +14,13 @@ viser and matplotlib are optional here and imported only when a viewer starts or
 
 from nik.view.arm import arm_points
 from nik.view.plot import plot_arm
-from nik.view.viewer import VIEW_EXTRA_MESSAGE, MissingExtraError, Viewer, ViewerCfg, viser_available
+from nik.view.viewer import VIEW_EXTRA_MESSAGE, MissingExtraError, Viewer, ViewerCfg, ViewState, viser_available
 
 __all__ = [
     "VIEW_EXTRA_MESSAGE",
     "MissingExtraError",
     "Viewer",
+    "ViewState",
     "ViewerCfg",
     "arm_points",
     "plot_arm",

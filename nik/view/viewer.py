@@ -34,7 +34,7 @@ from nik.robots.model import axis_frame
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT, describe
 from nik.view.arm import arm_points
 
-__all__ = ["VIEW_EXTRA_MESSAGE", "MissingExtraError", "Viewer", "ViewerCfg", "viser_available"]
+__all__ = ["VIEW_EXTRA_MESSAGE", "MissingExtraError", "ViewState", "Viewer", "ViewerCfg", "viser_available"]
 
 VIEW_EXTRA_MESSAGE = "nik view needs the optional extra: pip install 'nik[view]'"
 
@@ -75,8 +75,8 @@ class ViewerCfg:
 
 
 @dataclass
-class _Shown:
-    """What the page shows now: the target ``(4, 4)``, the joints ``(dof,)`` and the solve that gave them."""
+class ViewState:
+    """What the page shows: the target ``T (4, 4)`` (metres), the joints ``q (dof,)`` and the solve that gave them."""
 
     T: torch.Tensor
     q: torch.Tensor
@@ -158,12 +158,12 @@ class Viewer:
             return self._shown.T.clone()
 
     @property
-    def shown(self) -> _Shown:
+    def shown(self) -> ViewState:
         """The last solve: target, joints, success, reachability, errors (SI), guess used, time (ms)."""
         with self._lock:
             return self._shown
 
-    def set_target(self, T) -> _Shown:
+    def set_target(self, T) -> ViewState:
         """Move the target to ``T: (4, 4)`` (or (7,) xyz + wxyz quaternion), solve it from the current joints,
         update the page (arm, text, ghosts) and return what is shown. Runs in the caller's thread."""
         T = _poses(T, "T")[0]
@@ -173,7 +173,7 @@ class Viewer:
             self._update_ghosts()
             return self._shown
 
-    def show_pose(self, i: int) -> _Shown:
+    def show_pose(self, i: int) -> ViewState:
         """Target ``poses[i]`` (the slider does the same)."""
         if self.poses is None:
             raise ValueError("show_pose: this viewer was given no poses")
@@ -183,7 +183,7 @@ class Viewer:
             slider.value = i  # the page's slider follows
         return self.set_target(self.poses[i])
 
-    def show_waypoint(self, i: int) -> _Shown:
+    def show_waypoint(self, i: int) -> ViewState:
         """Show the path's trajectory at waypoint ``i`` (no new solve: the trajectory's joints there)."""
         if self.path is None:
             raise ValueError("show_waypoint: this viewer was given no path")
@@ -267,7 +267,7 @@ class Viewer:
 
         self._gizmo.on_update(self._dragged)
 
-        self._path_shown: list[_Shown] = []
+        self._path_shown: list[ViewState] = []
         if self.poses is not None:
             first = self.poses[0]
             if len(self.poses) > 1:
@@ -288,7 +288,7 @@ class Viewer:
             self._play.on_click(lambda _: self._playing.clear() if self._playing.is_set() else self._playing.set())
         else:
             first = robot.fk(q_home)
-        self._shown = _Shown(first, q_home, False, True, math.nan, math.nan, "", 0.0)
+        self._shown = ViewState(first, q_home, False, True, math.nan, math.nan, "", 0.0)
         self._solve(first, q_home)  # warm-up (kernels load on the first call): the page shows the time of a move
         with self._lock:
             self._move_gizmo(first)
@@ -327,7 +327,7 @@ class Viewer:
             nodes[n + i].position = tuple(pts[i])
 
     # -- solving and showing --------------------------------------------------------------------------
-    def _solve(self, T: torch.Tensor, q_near: torch.Tensor) -> _Shown:
+    def _solve(self, T: torch.Tensor, q_near: torch.Tensor) -> ViewState:
         t0 = time.perf_counter()
         with warnings.catch_warnings():  # an unreachable target is shown on the page, not warned about
             warnings.simplefilter("ignore", UserWarning)
@@ -335,7 +335,7 @@ class Viewer:
                 T[None], tol_pos=self.cfg.tol_pos, tol_rot=self.cfg.tol_rot, seed=self.cfg.seed, q_near=q_near
             )
         ms = 1e3 * (time.perf_counter() - t0)
-        return _Shown(
+        return ViewState(
             T,
             res.q[0].double(),
             bool(res.success[0]),
@@ -357,7 +357,7 @@ class Viewer:
     def _solve_and_show(self, T: torch.Tensor) -> None:
         self._show(self._solve(T, self._shown.q))
 
-    def _show(self, shown: _Shown) -> None:
+    def _show(self, shown: ViewState) -> None:
         self._shown = shown
         q = shown.q
         if self._meshes is not None:
