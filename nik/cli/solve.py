@@ -16,6 +16,8 @@ from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
 __all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solutions_csv"]
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
+#: nik solve --plot draws the solutions of at most this many poses
+PLOT_MAX_POSES = 20
 REFINE_CHOICES = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 
@@ -84,6 +86,18 @@ def register(sub) -> None:
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--max-iters", type=int, default=None, help="iteration limit of the refinement")
     s.add_argument("--device", default="cpu", help="where to compute: cpu (default), cuda or cuda:N")
+    s.add_argument(
+        "--all",
+        action="store_true",
+        help="also find every distinct solution of each pose (IKSolver.solve_all) and print them (degrees); "
+        "--plot draws them as faint arms",
+    )
+    s.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help=f"draw the arm at its solution(s) and the target frame(s) (the first {PLOT_MAX_POSES} poses) to this "
+        "picture (matplotlib; .png, .svg, .pdf)",
+    )
     add_threads_argument(s)
     s.set_defaults(func=_cmd_solve)
 
@@ -260,6 +274,19 @@ def _cmd_solve(args) -> int:
             max_iters=args.max_iters,
         )
     res = res.to("cpu")
+    every = None
+    if args.all:  # one pose at a time: solve_all answers for one pose
+        every = [
+            solver.solve_all(
+                T[i : i + 1].to(solver.device),
+                tol_pos=args.tol_mm * 1e-3,
+                tol_rot=math.radians(args.tol_deg),
+                seed=args.seed,
+            ).cpu()
+            for i in range(len(T))
+        ]
+    if args.plot:
+        _plot(robot, T, res, every, args.plot, tolerance=describe(args.tol_mm * 1e-3, math.radians(args.tol_deg)))
     hint = "pass --unit mm" if args.unit == "m" else ""
     msg = unreachable_message(robot, T, res.reachable, unit_hint=hint)
     if msg is not None:
@@ -286,6 +313,15 @@ def _cmd_solve(args) -> int:
                     "success": bool(res.success[i]),
                     "reachable": bool(res.reachable[i]),
                     "iterations": int(res.iterations[i]),
+                    **(
+                        {
+                            "all_q_display": [
+                                [v * f for v, f in zip(qk, factor, strict=True)] for qk in every[i].tolist()
+                            ]
+                        }
+                        if every is not None
+                        else {}
+                    ),
                 }
             )
         print(
@@ -304,6 +340,7 @@ def _cmd_solve(args) -> int:
                     "tol_deg": args.tol_deg,
                     "results": results,
                     **({"out": str(args.out)} if args.out else {}),
+                    **({"plot": str(args.plot)} if args.plot else {}),
                 },
                 indent=2,
             )
@@ -316,7 +353,33 @@ def _cmd_solve(args) -> int:
         )
     else:
         _print_table(robot, res, tolerance=describe(args.tol_mm * 1e-3, math.radians(args.tol_deg)))
+    if every is not None and not args.json:
+        _print_every(robot, every)
+    if args.plot and not args.json:
+        print(f"wrote {args.plot}")
     return 0 if bool(res.success.all()) else 1
+
+
+def _print_every(robot, every, *, limit: int = 50) -> None:
+    """Every solution of each pose (from ``--all``), joints in degrees (prismatic: mm)."""
+    _, _, factor = _units(robot.prismatic.tolist(), robot.dof)
+    for i, sols in enumerate(every[:limit]):
+        print(f"pose {i}: {len(sols)} distinct solution(s) within the limits (deg; prismatic joints mm)")
+        for qk in sols.tolist():
+            print("  " + "  ".join(f"{v * f:10.4f}" for v, f in zip(qk, factor, strict=True)))
+
+
+def _plot(robot, T, res, every, path, *, tolerance: str) -> None:
+    """``--plot``: the solutions of the first :data:`PLOT_MAX_POSES` poses, their targets, ``--all``'s as ghosts."""
+    import torch
+
+    from nik.view import plot_arm
+
+    n = min(len(res), PLOT_MAX_POSES)
+    ghosts = torch.cat(every[:n]) if every is not None else None
+    shown = f"{n} of {len(res)} poses" if n < len(res) else f"{n} pose{'s' * (n > 1)}"
+    title = f"{robot.name}: {shown}, {int(res.success[:n].sum())} reached within {tolerance}"
+    plot_arm(robot, res.q[:n], path, ghosts=ghosts, T_target=T[:n], title=title)
 
 
 def _print_table(robot, res, *, tolerance: str, limit: int = 50) -> None:

@@ -1,0 +1,135 @@
+"""A picture of the arm at its solution(s): :func:`plot_arm` (matplotlib, imported when it draws).
+
+For docs and machines without a display: each arm is the polyline of :func:`nik.view.arm.arm_points`
+drawn with thick round-capped lines (capsules, seen from one side) and a dot at every joint; the target
+frames as red / green / blue axes (x, y, z); other solutions of the same pose as faint arms. Axes in mm.
+The file is written under a temporary name and then renamed.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from nik.poses import validate_pose
+from nik.view.arm import arm_points
+
+__all__ = ["plot_arm"]
+
+_ARM = "#1f5fa8"
+_GHOST = "#7f7f7f"
+_AXES = ("#d62728", "#2ca02c", "#1f77b4")
+
+
+def plot_arm(
+    robot,
+    q,
+    path: str | Path,
+    *,
+    ghosts=None,
+    T_target=None,
+    title: str | None = None,
+    dpi: int = 110,
+) -> Path:
+    """Draw the arm at ``q`` and write the picture to ``path`` (format from its suffix: ``.png``, ``.svg``, ...).
+
+    Args:
+        robot: a :class:`nik.Robot`.
+        q: ``(dof,)`` or ``(B, dof)`` joint values (radians; metres for prismatic joints): B arms, drawn solid.
+        path: the file to write; its folder is made.
+        ghosts: optional ``(K, dof)``: more solutions (e.g. ``IKSolver.solve_all``), drawn as faint arms.
+        T_target: optional ``(4, 4)`` or ``(B, 4, 4)`` target poses (metres), drawn as axes.
+        title: the picture's title (default: the robot's name).
+        dpi: resolution of raster formats.
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: ``q`` or ``ghosts`` of the wrong width, a malformed target, or a suffix matplotlib cannot write.
+    """
+    path = Path(path)
+    fmt = path.suffix.lstrip(".").lower()
+    q = torch.as_tensor(q, dtype=torch.float64)
+    if q.ndim not in (1, 2) or q.shape[-1] != robot.dof or not q.numel():
+        raise ValueError(f"plot_arm: q must be (dof,) or (B, dof) with dof = {robot.dof}, got {tuple(q.shape)}")
+    arms = arm_points(robot, q.reshape(-1, robot.dof)).numpy() * 1e3  # (B, dof + 2, 3) mm
+    faint = None
+    if ghosts is not None:
+        ghosts = torch.as_tensor(ghosts, dtype=torch.float64)
+        if ghosts.numel() and (ghosts.ndim != 2 or ghosts.shape[1] != robot.dof):
+            raise ValueError(f"plot_arm: ghosts must be (K, {robot.dof}), got {tuple(ghosts.shape)}")
+        faint = arm_points(robot, ghosts).numpy() * 1e3 if ghosts.numel() else None
+    targets = None
+    if T_target is not None:
+        targets = validate_pose(torch.as_tensor(T_target, dtype=torch.float64).reshape(-1, 4, 4), name="T_target")
+        targets = targets.numpy().copy()
+        targets[:, :3, 3] *= 1e3
+
+    from matplotlib.figure import Figure  # lazy: `import nik` never loads matplotlib
+
+    fig = Figure(figsize=(6.4, 5.6), dpi=dpi)
+    if fmt not in fig.canvas.get_supported_filetypes():
+        raise ValueError(
+            f"plot_arm: cannot write {path.name!r}; expected a suffix among "
+            f"{', '.join(sorted(fig.canvas.get_supported_filetypes()))}"
+        )
+    ax = fig.add_subplot(projection="3d")
+    mid, reach = _bounds(arms, faint, targets)
+    if faint is not None:
+        for pts in faint:
+            _draw(ax, pts, color=_GHOST, alpha=0.28, width=4.0)
+    for pts in arms:
+        _draw(ax, pts, color=_ARM, alpha=1.0, width=7.0)
+    if targets is not None:
+        size = 0.12 * reach
+        for T in targets:
+            for k in range(3):
+                end = T[:3, 3] + size * T[:3, k]
+                ax.plot(*zip(T[:3, 3], end, strict=True), color=_AXES[k], linewidth=2.2)
+    _equal_axes(ax, mid, reach)
+    ax.set_title(title or robot.name)
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_zlabel("z (mm)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        fig.savefig(tmp, format=fmt)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def _draw(ax, pts, *, color: str, alpha: float, width: float) -> None:
+    """One arm: round-capped thick segments between consecutive points (zero-length ones skipped), joint dots."""
+    keep = [0] + [i for i in range(1, len(pts)) if ((pts[i] - pts[i - 1]) ** 2).sum() > 1e-12]
+    pts = pts[keep]
+    line = ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=color, alpha=alpha, linewidth=width)[0]
+    line.set_solid_capstyle("round")
+    line.set_solid_joinstyle("round")
+    ax.scatter(pts[1:-1, 0], pts[1:-1, 1], pts[1:-1, 2], color="black", alpha=alpha, s=12, depthshade=False)
+    ax.scatter(*pts[-1], color=color, alpha=alpha, s=30, marker="s", depthshade=False)
+    ax.scatter(*pts[0], color="black", alpha=alpha, s=70, marker="^", depthshade=False)  # the base
+
+
+def _bounds(arms, faint, targets) -> tuple:
+    """Centre ``(3,)`` and size (mm, at least 1) of everything drawn."""
+    pts = [arms.reshape(-1, 3)] + ([faint.reshape(-1, 3)] if faint is not None else [])
+    if targets is not None:
+        pts.append(targets[:, :3, 3])
+    allp = np.concatenate(pts)
+    return 0.5 * (allp.max(0) + allp.min(0)), float(max((allp.max(0) - allp.min(0)).max(), 1.0))
+
+
+def _equal_axes(ax, mid, size: float) -> None:
+    """Equal scales on the three axes around ``mid``, with a little margin."""
+    half = 0.55 * size
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    ax.set_zlim(mid[2] - half, mid[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
