@@ -158,6 +158,24 @@ class CompiledLM:
         )
         return run
 
+    def solve_starts(
+        self, T: np.ndarray, starts: np.ndarray, *, tol_pos: float, tol_rot: float, seed: int, max_iters: int | None = None
+    ) -> CompiledRun:
+        """LM for ``T: (B, 4, 4)`` float64 from each target's starts ``starts: (B, K, dof)`` in turn (the first that
+        reaches the tolerance ends it; no uniform restarts): :func:`nik.kernels.seeded.lm_starts`."""
+        from nik.kernels import lm as klm
+        from nik.kernels.seeded import lm_starts
+
+        B, n = T.shape[0], self.joints.shape[0]
+        opts, iopts = self._options(klm, tol_pos, tol_rot, max_iters, False)
+        run = CompiledRun(
+            np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
+        )
+        T = np.ascontiguousarray(T, dtype=np.float64)
+        starts = np.ascontiguousarray(starts, dtype=np.float64)
+        lm_starts(self.G, self.joints, T, starts, opts, iopts, klm.seed_state(seed), *astuple_run(run), self.work)
+        return run
+
     def _options(self, klm, tol_pos, tol_rot, max_iters, multistart) -> tuple[np.ndarray, np.ndarray]:
         """The kernel's options with the call's tolerances, iteration limit and first starts (kept per value)."""
         key = (float(tol_pos), float(tol_rot), max_iters, multistart)

@@ -1,4 +1,5 @@
-"""nik.ik.lean: a few CPU poses through the compiled path keep the contract of the torch path of IKSolver.solve."""
+"""nik.ik.backends: the one pipeline gives the same contract on the compiled backend and on torch (successes,
+limits, reach flags, error messages), the network's guess serves on the compiled backend, and the choice of backend."""
 
 from __future__ import annotations
 
@@ -9,9 +10,11 @@ import pytest
 import torch
 
 import nik
-from nik.ik import lean, stages
+from nik.ik import backends, stages
 from nik.poses import matrix_to_quaternion, matrix_to_rpy
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+
+BACKENDS = ["compiled", "torch"]
 
 
 def _targets(robot, n, seed):
@@ -26,41 +29,28 @@ def _out_of_reach(robot, T):
     return T
 
 
-_LEAN_MAX_BATCH = lean.LEAN_MAX_BATCH
-
-
 @pytest.fixture
-def torch_path(monkeypatch):
-    """Within the test, IKSolver.solve never takes the compiled path."""
-
-    def use(enabled: bool):
-        monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0 if enabled else _LEAN_MAX_BATCH)
-
-    return use
-
-
-@pytest.fixture
-def no_stages(monkeypatch):
-    """The torch stages fail if called: proves the compiled path answered."""
+def no_torch(monkeypatch):
+    """The torch backend fails if called: proves the compiled backend answered."""
 
     def refuse(*args, **kwargs):
-        raise AssertionError("the torch stages ran")
+        raise AssertionError("the torch backend ran")
 
-    monkeypatch.setattr(stages, "guess", refuse)
-    monkeypatch.setattr(stages, "refine", refuse)
+    monkeypatch.setattr(backends, "torch_backend", refuse)
 
 
 @pytest.mark.parametrize("name", ["panda", "ur5"])
-def test_both_paths_solve_the_same_targets_inside_the_limits_and_flag_the_same_ones(name, torch_path):
+@pytest.mark.parametrize("checkpoint", ["auto", None], ids=["network", "no_network"])
+def test_both_backends_solve_the_same_targets_inside_the_limits_and_flag_the_same_ones(name, checkpoint):
     robot = nik.load_robot(name)
     _, T = _targets(robot, 12, seed=21)
     T = _out_of_reach(robot, T)
-    solver = nik.IKSolver(robot, analytic=False)  # ur5 has a closed form: here its network and LM
-    with pytest.warns(UserWarning, match="beyond the reach"):
-        fast = solver.solve(T, seed=3)
-    torch_path(True)
-    with pytest.warns(UserWarning, match="beyond the reach"):
-        slow = solver.solve(T, seed=3)
+    results = []
+    for backend in BACKENDS:  # ur5 has a closed form: here its network (or none) and LM
+        solver = nik.IKSolver(robot, checkpoint=checkpoint, analytic=False, backend=backend)
+        with pytest.warns(UserWarning, match="beyond the reach"):
+            results.append(solver.solve(T, seed=3))
+    fast, slow = results
     for res in (fast, slow):
         assert res.q.shape == (12, robot.dof) and res.q.dtype == torch.float64
         assert res.success.dtype == torch.bool and res.iterations.dtype == torch.long
@@ -72,19 +62,19 @@ def test_both_paths_solve_the_same_targets_inside_the_limits_and_flag_the_same_o
     assert torch.equal(fast.success, slow.success)
     assert bool(fast.success[:-1].all()) and not bool(fast.success[-1])
     assert torch.equal(fast.reachable, slow.reachable) and fast.reachable.tolist() == [True] * 11 + [False]
-    assert fast.source == "multistart"
+    assert fast.source == slow.source == ("network" if checkpoint else "multistart")
 
 
-def test_one_pose_takes_the_compiled_path_with_the_same_answer_for_the_same_seed(no_stages):
+def test_one_pose_takes_the_compiled_backend_with_the_same_answer_for_the_same_seed(no_torch):
     robot = nik.load_robot("panda")
     _, T = _targets(robot, 1, seed=22)
-    solver = nik.IKSolver(robot)
+    solver = nik.IKSolver(robot, checkpoint=None)
     a, b, c = solver.solve(T[0], seed=5), solver.solve(T, seed=5), solver.solve(T, seed=6)
     assert bool(a.success.all()) and torch.equal(a.q, b.q) and torch.equal(a.iterations, b.iterations)
     assert not torch.equal(a.q, c.q)  # another seed, other starts: another point of the self-motion
 
 
-def test_quaternion_and_rpy_targets_give_the_matrix_answer(no_stages):
+def test_quaternion_and_rpy_targets_give_the_matrix_answer(no_torch):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 3, seed=23)
     solver = nik.IKSolver(robot, analytic=False)
@@ -97,7 +87,7 @@ def test_quaternion_and_rpy_targets_give_the_matrix_answer(no_stages):
         torch.testing.assert_close(res.q, ref.q, atol=1e-6, rtol=0)  # the same starts, poses equal to 1e-15
 
 
-def test_float32_targets_get_float32_answers_inside_the_float32_limits(no_stages):
+def test_float32_targets_get_float32_answers_inside_the_float32_limits(no_torch):
     robot = nik.load_robot("panda")
     _, T = _targets(robot, 4, seed=24)
     res = nik.IKSolver(robot).solve(T.float(), tol_pos=1e-3, tol_rot=1e-2)
@@ -108,7 +98,7 @@ def test_float32_targets_get_float32_answers_inside_the_float32_limits(no_stages
     torch.testing.assert_close(res.rot_err.double(), rot, atol=1e-6, rtol=0)
 
 
-def test_q_near_picks_the_solution_near_the_current_configuration(no_stages):
+def test_q_near_picks_the_solution_near_the_current_configuration(no_torch):
     robot = nik.load_robot("panda")
     q, T = _targets(robot, 6, seed=25)
     near = robot.clamp(q + 0.05)
@@ -141,26 +131,24 @@ BAD = [
 
 
 @pytest.mark.parametrize("kind, spoil", BAD, ids=[b[0] for b in BAD])
-def test_bad_targets_raise_the_same_message_on_both_paths(kind, spoil, torch_path):
+def test_bad_targets_raise_the_same_message_on_both_backends(kind, spoil):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 1, seed=26)
-    solver = nik.IKSolver(robot, checkpoint=None, analytic=False)
+    fast_solver, slow_solver = (nik.IKSolver(robot, checkpoint=None, analytic=False, backend=b) for b in BACKENDS)
     with pytest.raises(ValueError) as fast:
-        solver.solve(spoil(T.clone()))
-    torch_path(True)
+        fast_solver.solve(spoil(T.clone()))
     with pytest.raises(ValueError) as slow:
-        solver.solve(spoil(T.clone()))
+        slow_solver.solve(spoil(T.clone()))
     assert str(fast.value) == str(slow.value) and "T_target" in str(fast.value)
 
 
 @pytest.mark.parametrize("q_near", [[0.1, 0.2], [[0.0] * 6] * 2, [math.nan] * 6], ids=["short", "rows", "nan"])
-def test_bad_q_near_and_tolerances_raise_the_same_message_on_both_paths(q_near, torch_path):
+def test_bad_q_near_and_tolerances_raise_the_same_message_on_both_backends(q_near):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 1, seed=27)
-    solver = nik.IKSolver(robot, checkpoint=None, analytic=False)
     messages = []
-    for use_torch in (False, True):
-        torch_path(use_torch)
+    for backend in BACKENDS:
+        solver = nik.IKSolver(robot, checkpoint=None, analytic=False, backend=backend)
         with pytest.raises(ValueError, match="q_near") as err:
             solver.solve(T, q_near=q_near)
         with pytest.raises(ValueError, match="tol_pos") as tol:
@@ -169,24 +157,62 @@ def test_bad_q_near_and_tolerances_raise_the_same_message_on_both_paths(q_near, 
     assert messages[0] == messages[1]
 
 
-def test_configurations_it_does_not_reproduce_take_the_torch_path():
-    robot = nik.load_robot("ur5")
-    assert lean.applies(nik.IKSolver(robot))  # its closed form, compiled
-    assert lean.applies(nik.IKSolver(robot, analytic=False))
-    # no guess: restarts on both paths
-    assert lean.applies(nik.IKSolver(robot, checkpoint=None, analytic=False, fallback="none"))
-    assert not lean.applies(nik.IKSolver(robot, analytic=False, fallback="none"))  # the network's guess alone
-    assert not lean.applies(nik.IKSolver(robot, refine="ipso"))
-    kuka = nik.load_robot("kuka_kr")
-    assert lean.applies(nik.IKSolver(kuka))  # the closed form, compiled
-    assert not lean.applies(nik.IKSolver(kuka, analytic=False, fallback="none"))  # its network's guess alone
-    _, T = _targets(robot, lean.LEAN_MAX_BATCH + 1, seed=28)
-    assert lean._poses(T, None) is None and lean._poses(T[: lean.LEAN_MAX_BATCH], None) is not None
-    assert lean._poses(T[:1].to(torch.float16), None) is None
-    assert lean._poses(T[: lean.LEAN_MAX_BATCH_CLOSED_FORM + 1], None, lean.LEAN_MAX_BATCH_CLOSED_FORM) is None
+def test_the_backend_is_chosen_by_input_and_configuration():
+    T = torch.eye(4, dtype=torch.float64).expand(3, 4, 4)
+    ur5 = nik.load_robot("ur5")
+    assert backends.choose(nik.IKSolver(ur5), T).name == "compiled"  # its closed form, compiled
+    assert backends.choose(nik.IKSolver(ur5, analytic=False), T).name == "compiled"  # its network, compiled
+    assert backends.choose(nik.IKSolver(ur5, analytic=False, fallback="none"), T).name == "compiled"
+    assert backends.choose(nik.IKSolver(ur5, refine="ipso"), T).name == "torch"  # swarms run on torch
+    assert backends.choose(nik.IKSolver(ur5, refine="none"), T).name == "torch"
+    assert backends.choose(nik.IKSolver(ur5, backend="torch"), T).name == "torch"
+    big = torch.eye(4, dtype=torch.float64).expand(backends.CLOSED_FORM_CROSSOVER + 1, 4, 4)
+    assert backends.choose(nik.IKSolver(ur5), big).name == "torch"  # the batched closed form is faster there
+    assert backends.choose(nik.IKSolver(ur5, backend="compiled"), big).name == "compiled"
+    # an LM arm: every CPU batch is compiled (its cost per pose does not grow with the batch)
+    huge = torch.eye(4, dtype=torch.float64).expand(20_000, 4, 4)
+    assert backends.choose(nik.IKSolver("panda"), huge).name == "compiled"
+    with pytest.raises(ValueError, match="backend must be"):
+        nik.IKSolver(ur5, backend="gpu")
+    with pytest.raises(ValueError, match="LM only"):
+        nik.IKSolver(ur5, refine="pso", backend="compiled")
 
 
-def test_numpy_targets_and_lists_are_accepted_as_float64(no_stages):
+@pytest.mark.parametrize("name", ["panda", "xarm7"])
+def test_the_network_guess_serves_on_the_compiled_backend_with_fewer_lm_iterations(name, no_torch):
+    robot = nik.load_robot(name)
+    _, T = _targets(robot, 40, seed=33)
+    with_net = nik.IKSolver(robot).solve(T, seed=0)
+    without = nik.IKSolver(robot, checkpoint=None).solve(T, seed=0)
+    assert with_net.source == "network" and without.source == "multistart"
+    assert bool(with_net.success.all()) and bool(robot.within_limits(with_net.q).all())
+    pos, rot = nik.pose_error(T, robot.fk(with_net.q))
+    assert bool(((pos <= DEFAULT_TOL_POS) & (rot <= DEFAULT_TOL_ROT)).all())
+    # the network's hypotheses start LM near a solution: far fewer iterations than uniform starts
+    assert float(with_net.iterations.double().mean()) < 0.5 * float(without.iterations.double().mean())
+    one = nik.IKSolver(robot).solve(T[0], seed=0)  # one pose too
+    assert one.source == "network" and bool(one.success.all())
+
+
+def test_a_failing_best_hypothesis_is_followed_by_the_next_ones_then_uniform_restarts():
+    robot = nik.load_robot("panda")
+    _, T = _targets(robot, 16, seed=34)
+    solver = nik.IKSolver(robot, backend="compiled")
+    job = backends.compiled_backend().job(solver, T, None, None, DEFAULT_TOL_POS, DEFAULT_TOL_ROT, 0, 2)
+    answers = stages.guess(solver, job)
+    assert answers.hypotheses.shape == (16, 8, 7)
+    scores = [nik.pose_error(T, robot.fk(torch.from_numpy(answers.hypotheses[:, k].copy()))) for k in range(8)]
+    score = torch.stack([p + 0.1 * r for p, r in scores], dim=1)
+    assert bool((score[:, 1:] >= score[:, :-1] - 1e-12).all())  # ranked best first by FK
+    answers = stages.refine(solver, job, answers)  # 2 LM iterations from the best hypothesis: many still fail
+    failing = int((~answers.ok(job)).sum())
+    more = stages.more_hypotheses(solver, job, answers)
+    assert failing > 0 and int((~more.ok(job)).sum()) <= failing
+    done = stages.fallback(solver, job, more)
+    assert bool(done.ok(job).all()) and bool((done.iterations >= more.iterations).all())
+
+
+def test_numpy_targets_and_lists_are_accepted_as_float64(no_torch):
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 2, seed=29)
     solver = nik.IKSolver(robot, analytic=False)
@@ -197,15 +223,14 @@ def test_numpy_targets_and_lists_are_accepted_as_float64(no_stages):
 
 
 @pytest.mark.parametrize("name", ["kuka_kr", "puma560", "ur5"])
-def test_closed_form_arms_get_the_closed_form_solution_on_both_paths(name, torch_path):
+def test_closed_form_arms_get_the_closed_form_solution_on_both_backends(name):
     robot = nik.load_robot(name)
     q, T = _targets(robot, 16, seed=30)
     T = _out_of_reach(robot, T)
     near = robot.clamp(q + 0.3)
-    solver = nik.IKSolver(robot)
     results = []
-    for use_torch in (False, True):
-        torch_path(use_torch)
+    for backend in BACKENDS:
+        solver = nik.IKSolver(robot, backend=backend)
         with pytest.warns(UserWarning, match="beyond the reach"):
             results.append((solver.solve(T), solver.solve(T, q_near=near)))
     for res in (*results[0], *results[1]):
@@ -221,21 +246,18 @@ def test_closed_form_arms_get_the_closed_form_solution_on_both_paths(name, torch
     torch.testing.assert_close(results[0][1].q[15], results[1][1].q[15], atol=1e-9, rtol=0)  # best effort too
 
 
-def test_closed_form_path_is_compiled_for_one_pose(no_stages):
+def test_closed_form_is_compiled_for_one_pose(no_torch):
     robot = nik.load_robot("kuka_kr")
     _, T = _targets(robot, 1, seed=31)
     res = nik.IKSolver(robot).solve(T[0])
     assert res.source == "analytic" and bool(res.success.all()) and float(res.pos_err[0]) < 1e-9
 
 
-def test_float32_poses_on_a_closed_form_arm_get_the_torch_paths_choice(torch_path):
+def test_float32_poses_on_a_closed_form_arm_get_the_same_choice_on_both_backends():
     robot = nik.load_robot("kuka_kr")
     _, T = _targets(robot, 8, seed=32)
     T = T.float()  # a float32 rotation is orthonormal to about 1e-7: the closed form's check is 2e-5 then
-    solver = nik.IKSolver(robot)
-    fast = solver.solve(T, tol_pos=1e-3, tol_rot=1e-2)
-    torch_path(True)
-    slow = solver.solve(T, tol_pos=1e-3, tol_rot=1e-2)
+    fast, slow = (nik.IKSolver(robot, backend=b).solve(T, tol_pos=1e-3, tol_rot=1e-2) for b in BACKENDS)
     assert fast.q.dtype == torch.float32 and bool(fast.success.all()) and bool(slow.success.all())
     assert bool(robot.within_limits(fast.q).all())
     torch.testing.assert_close(fast.q, slow.q, atol=1e-3, rtol=0)  # the same solution of the 8
