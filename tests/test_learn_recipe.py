@@ -57,7 +57,7 @@ def test_acceptance_nik_train_exports_a_network_that_loads_by_path_under_another
     assert main([*args, "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert f"wrote {out}" in printed and "multihead" in printed
-    expected_rows = ("raw network, best of 8", "with the network (guess: multistart)", "no network (guess: multistart)")
+    expected_rows = ("raw network, best of 8", "with the network (guess: network)", "no network (guess: multistart)")
     for expected in (*expected_rows, "batch of 20", "one pose (2 poses)"):
         assert expected in printed
     meta = json.loads(out.with_suffix(".json").read_text())

@@ -38,6 +38,24 @@ def test_shipped_file_matches_its_robot_and_reproduces_its_recorded_validation_e
     assert command.startswith(f"nik train {name} ") or "train.py fit --config configs/train/" in command
 
 
+@pytest.mark.parametrize("name", available(single_pose=True))
+def test_shipped_single_pose_network_matches_its_arm_and_reproduces_its_recorded_validation_error(name):
+    from nik.nets.pair import load_pair
+    from nik.nets.registry import find_network, find_single_pose_network
+
+    meta = read_meta(name)
+    robot = nik.load_robot(meta["robot"])
+    assert meta["role"] == "single_pose" and meta["robot_hash"] == robot.definition_hash
+    assert find_single_pose_network(robot).stem == name and find_network(robot).stem == meta["robot"]
+    net = load_pair(PRETRAINED_DIR / f"{name}.safetensors", robot=robot)
+    assert net.n_params < load_pretrained(robot).n_params / 3  # a cheaper forward pass than the main network's
+    rec = meta["validation"]
+    now = validation_error(net, seed=rec["seed"], n=rec["n"])
+    for key, value in rec.items():
+        assert math.isclose(now[key], value, rel_tol=1e-4, abs_tol=1e-9), (key, now[key], value)
+    assert nik.IKSolver(robot).single_pose_net is not None
+
+
 def test_an_unknown_definition_names_the_robots_that_have_one():
     definition = nik.load_robot("ur5").to_definition()
     definition["name"] = "my_arm"

@@ -165,26 +165,23 @@ class IKSolver:
         )
 
     #: Smallest batch for which :meth:`solve` uses the network's guess when a refinement follows (1: always).
-    #: On the compiled backend the network's guess pays from one pose on: its hypotheses for a few poses come
-    #: from the packed forward pass (:mod:`nik.nets.compiled`) of the single-pose network where one is known
-    #: (:attr:`single_pose_max`), and they save more LM than they cost (``benchmarks/learned.py --sections pays``,
-    #: docs/learned.md). On the torch backend the per-operation overhead of a forward pass (about a millisecond
-    #: for one pose) is paid only where torch runs at all: the GPU and the swarms.
+    #: On the compiled backend the network pays from one pose on (``benchmarks/learned.py --sections pays``,
+    #: docs/learned.md); on torch the per-operation overhead of a forward pass (about a millisecond for one pose)
+    #: is paid only where torch runs at all: the GPU, the swarms, ``refine="none"``.
     network_min_batch = 1
-    #: Largest batch whose hypotheses come from the single-pose network (when the solver has one; above it, the
-    #: main network): measured where the small network's cheaper forward pass stops paying for its worse guesses.
-    single_pose_max = 8
 
     @property
     def single_pose_net(self):
-        """The small network for single poses that the solver uses for batches up to :attr:`single_pose_max`
-        (None: the main network serves every size). Known networks only (``checkpoint="auto"``)."""
+        """The arm's small network for the CPU (``nik train --single-pose``, recorded role ``single_pose``), found
+        with the main one (``checkpoint="auto"``); None where there is none."""
         return self._net_one
 
-    def network_for(self, batch: int):
-        """The network that guesses a batch of ``batch`` poses: the single-pose one up to :attr:`single_pose_max`
-        where there is one, else :attr:`net`."""
-        if self._net_one is not None and batch <= self.single_pose_max:
+    def network_for(self, batch: int, backend: str = "compiled"):
+        """The network that guesses a batch of ``batch`` poses on ``backend``: on the compiled backend (the CPU) the
+        single-pose network where the arm has one, whatever the batch size (measured, panda and xarm7, one thread:
+        its 3 x 128 forward pass costs a fifth of the main 4 x 256 one and its guesses need about half an LM
+        iteration more, so it is the faster guess at 16, 100 and 1,000 poses: docs/learned.md); else :attr:`net`."""
+        if self._net_one is not None and backend == "compiled":
             return self._net_one
         return self.net
 

@@ -72,6 +72,12 @@ class Answers:
         """``(B,)``: the error used to compare two answers (metres + 0.1 x radians)."""
         return self.pos_err + 0.1 * self.rot_err
 
+    def merge(self, job: Job, idx, other: Refined, *, strict: bool) -> Answers:
+        """In place: target ``idx[i]`` takes row ``i`` of ``other`` where that is better (``strict``: a lower
+        :meth:`score`, else one not higher), and ``other``'s iterations are added to targets ``idx``."""
+        job.backend.merge(self, job, idx, other, strict)
+        return self
+
     def take(self, job: Job, idx, other: Refined, mask, it=None) -> Answers:
         """A copy with target ``idx[i]`` replaced by row ``i`` of ``other`` where ``mask[i]`` (``idx, mask: (b,)``),
         and the iterations ``it: (b,)`` (default ``other.iterations``) added to targets ``idx``."""
@@ -96,7 +102,7 @@ def first_guess(solver, T: torch.Tensor, *, q_near: torch.Tensor | None, seed: i
     """``(B, dof)`` the raw initial guess for ``T: (B, 4, 4)`` (torch): the network's, the closed form's (the
     solution nearest ``q_near``, or the one farthest inside the limits), else the best of 64 uniform configurations."""
     if solver.uses_network(T.shape[0]):
-        return network_guess(solver.network_for(T.shape[0]), solver.robot, T)
+        return network_guess(solver.net, solver.robot, T)
     if solver.closed_form:
         return analytic_guess(solver.robot, T, q_near=q_near)
     return multistart_guess(solver.robot, T, seed=seed)
@@ -143,9 +149,8 @@ def refine(solver, job: Job, answers: Answers | None) -> Answers:
     idx = be.nonzero(todo)
     if idx.shape[0] == 0:
         return answers
-    res = be.refine(solver, job, idx, answers.q[idx], restarts)
-    better = (res.pos_err + 0.1 * res.rot_err) <= answers.score()[idx]
-    return answers.take(job, idx, res, better)
+    res = be.refine(solver, job, idx, be.rows(answers.q, idx), restarts)
+    return answers.merge(job, idx, res, strict=False)
 
 
 def near(solver, job: Job, answers: Answers) -> Answers:
@@ -175,9 +180,8 @@ def more_hypotheses(solver, job: Job, answers: Answers) -> Answers:
     idx = be.nonzero(~answers.ok(job))
     if idx.shape[0] == 0:
         return answers
-    res = be.lm_starts(solver, job, idx, answers.hypotheses[idx, 1:])
-    better = (res.pos_err + 0.1 * res.rot_err) < answers.score()[idx]
-    return answers.take(job, idx, res, better)
+    res = be.lm_starts(solver, job, idx, be.rows(answers.hypotheses, idx)[:, 1:])
+    return answers.merge(job, idx, res, strict=True)
 
 
 def fallback(solver, job: Job, answers: Answers) -> Answers:
@@ -196,13 +200,12 @@ def fallback(solver, job: Job, answers: Answers) -> Answers:
     if idx.shape[0] == 0:
         return answers
     if solver.fallback == "analytic":
-        start = job.q_near[idx] if job.q_near is not None else answers.q[idx]
+        start = be.rows(job.q_near if job.q_near is not None else answers.q, idx)
         q, pos, rot = be.closed_form(solver, job, idx, start)
         res = Refined(q, pos, rot, be.zeros_long(idx.shape[0]))
     else:
         res = be.refine(solver, job, idx, None, True)
-    better = (res.pos_err + 0.1 * res.rot_err) < answers.score()[idx]
-    return answers.take(job, idx, res, better)
+    return answers.merge(job, idx, res, strict=True)
 
 
 def final_check(solver, job: Job, answers: Answers) -> IKResult:

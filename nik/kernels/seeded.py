@@ -26,7 +26,7 @@ from nik.kernels.chain import _chain
 from nik.kernels.lm import _bounds, _copy, _lm_one, _residual
 from nik.kernels.mlp import mlp_forward
 
-__all__ = ["hypotheses", "lm_starts", "rank"]
+__all__ = ["hypotheses", "lm_starts", "merge", "rank", "ranked_hypotheses"]
 
 _TWO_PI = 2.0 * math.pi
 
@@ -43,7 +43,8 @@ def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, 
 
     ``in_mean, in_std: (9,)`` standardise the ``rot6d`` input; ``out_center, out_half: (n,)`` and
     ``prismatic: (n,)`` bool decode each head; scratch ``x: (B, 9)``, ``y: (B, K * head_dim)``,
-    ``work``: :func:`nik.kernels.mlp.mlp_work`. Unclamped (as ``forward`` of ``nik.nets.multi``).
+    ``work``: :func:`nik.kernels.mlp.mlp_work`, all in the dtype of ``flat`` (float32 or float64). Unclamped (as
+    ``forward`` of ``nik.nets.multi``).
     """
     B = T.shape[0]
     for b in range(B):
@@ -59,11 +60,29 @@ def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, 
             o = k * head_dim
             for j in range(n):
                 if prismatic[j]:
-                    q[b, k, j] = out_center[j] + out_half[j] * y[b, o]
+                    q[b, k, j] = out_center[j] + out_half[j] * float(y[b, o])
                     o += 1
                 else:
-                    q[b, k, j] = _decode_angle(y[b, o], y[b, o + 1], out_center[j])
+                    q[b, k, j] = _decode_angle(float(y[b, o]), float(y[b, o + 1]), out_center[j])
                     o += 2
+
+
+@kernel
+def ranked_hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads, G, joints, T):
+    """:func:`hypotheses` then :func:`rank` in one call, scratch allocated here: returns ``(q (B, K, n) ranked,
+    pos (B,), rot (B,))`` (the best hypothesis' errors, metres and radians)."""
+    B, n = T.shape[0], out_center.shape[0]
+    widest = 9
+    for layer in range(layout.shape[0]):
+        widest = max(widest, layout[layer, 0], layout[layer, 1])
+    x = np.empty((B, 9), dtype=flat.dtype)
+    y = np.empty((B, layout[layout.shape[0] - 1, 0]), dtype=flat.dtype)
+    work = np.empty((2, B * widest), dtype=flat.dtype)
+    q = np.empty((B, heads, n))
+    hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, T, x, y, work, q)
+    pos, rot = np.empty(B), np.empty(B)
+    rank(G, joints, T, q, pos, rot)
+    return q, pos, rot
 
 
 @kernel
@@ -121,3 +140,20 @@ def lm_starts(G, joints, Tt, starts, opts, iopts, seed, q, iterations, converged
                 converged[b] = True
                 break
         iterations[b] = total
+
+
+@kernel
+def merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, strict, tol_pos, tol_rot):
+    """In place: target ``idx[i]`` of the answers ``q, pos, rot, iterations, ok`` takes row ``i`` of the refined
+    ``rq, rpos, rrot`` where that is better (metres + 0.1 x radians; ``strict``: lower, else not higher), and
+    ``rit[i]`` is added to its iterations; ``ok`` is kept equal to ``pos <= tol_pos and rot <= tol_rot``."""
+    n = q.shape[1]
+    for i in range(idx.shape[0]):
+        b = idx[i]
+        new, old = rpos[i] + 0.1 * rrot[i], pos[b] + 0.1 * rot[b]
+        if new < old or (not strict and new == old):
+            for j in range(n):
+                q[b, j] = rq[i, j]
+            pos[b], rot[b] = rpos[i], rrot[i]
+            ok[b] = pos[b] <= tol_pos and rot[b] <= tol_rot
+        iterations[b] += rit[i]

@@ -2,9 +2,9 @@
 
 :func:`pack` takes a :class:`~nik.nets.multi.MultiHypIKNet` or :class:`~nik.nets.multi.BranchHeadsIKNet` with
 the ``rot6d`` input (the kinds ``nik train`` makes) and returns a :class:`PackedNet`: its weights as one flat
-float64 array (:func:`nik.kernels.mlp.mlp_pack`) and the buffers of its input standardisation and output decoding.
-:meth:`PackedNet.hypotheses` then gives what ``net.forward`` gives (``(B, K, dof)``, unclamped; computed in
-float64 from the float32 weights, so within float32 rounding of torch's answer) through
+float32 array (:func:`nik.kernels.mlp.mlp_pack`; float32 as in torch, and twice the SIMD lanes of float64) and the
+buffers of its input standardisation and output decoding. :meth:`PackedNet.hypotheses` then gives what
+``net.forward`` gives (``(B, K, dof)``, unclamped, within float32 rounding of torch's answer) through
 :func:`nik.kernels.seeded.hypotheses`, without torch's per-operation overhead: for one pose of a 4 x 256 network
 tens of microseconds instead of about 200 (``benchmarks/learned.py``). Other kinds (a plain ``IKNet``, the legacy
 ``branch`` kind) are not packed: :func:`pack` returns None and the caller runs torch.
@@ -24,7 +24,7 @@ class PackedNet:
     """The arrays of :func:`nik.kernels.seeded.hypotheses` for one network.
 
     Attributes:
-        flat, layout: the MLP (:func:`nik.kernels.mlp.mlp_pack`); activation: its code.
+        flat, layout: the MLP (:func:`nik.kernels.mlp.mlp_pack`, float32); activation: its code.
         in_mean, in_std: (9,) input standardisation; out_center, out_half: (dof,); prismatic: (dof,) bool.
         heads: K, the hypotheses per pose; n_params: the network's parameter count.
     """
@@ -50,14 +50,25 @@ class PackedNet:
 
         B = T.shape[0]
         q = np.empty((B, self.heads, self.out_center.shape[0]))
-        x = np.empty((B, 9))
-        y = np.empty((B, int(self.layout[-1, 0])))
-        work = np.empty((2, B * self.widest))
+        x = np.empty((B, 9), dtype=np.float32)
+        y = np.empty((B, int(self.layout[-1, 0])), dtype=np.float32)
+        work = np.empty((2, B * self.widest), dtype=np.float32)
         hypotheses(
             self.flat, self.layout, self.activation, self.in_mean, self.in_std, self.out_center, self.out_half,
             self.prismatic, T, x, y, work, q,
         )  # fmt: skip
         return q
+
+    def ranked_hypotheses(self, G: np.ndarray, joints: np.ndarray, T: np.ndarray):
+        """Every hypothesis for ``T: (B, 4, 4)`` float64 brought inside the limits of the model ``G, joints``
+        (:func:`nik.kernels.chain.chain_model`) and ranked by FK pose error, best first: ``(q (B, K, dof),
+        pos (B,), rot (B,))``, the errors (metres, radians) of the best (:func:`nik.kernels.seeded.ranked_hypotheses`)."""
+        from nik.kernels.seeded import ranked_hypotheses
+
+        return ranked_hypotheses(
+            self.flat, self.layout, self.activation, self.in_mean, self.in_std, self.out_center, self.out_half,
+            self.prismatic, self.heads, G, joints, T,
+        )  # fmt: skip
 
 
 def pack(net) -> PackedNet | None:
@@ -76,7 +87,7 @@ def pack(net) -> PackedNet | None:
         return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=dtype)
 
     return PackedNet(
-        flat,
+        flat.astype(np.float32),
         layout,
         ACTIVATIONS[net.activation],
         arr(net.in_mean),

@@ -6,7 +6,7 @@ piece of work is one kernel call over the whole batch:
 - the checks of :mod:`nik.ik.targets` (:func:`~nik.ik.targets.pose_array`) and the reach bound
   (:func:`nik.kernels.poses.reach_flags`);
 - the network's hypotheses: for up to :data:`PACKED_MAX_BATCH` poses the packed network's compiled forward pass
-  (:mod:`nik.nets.compiled`; the solver's single-pose network when it has one, :mod:`nik.ik.networks`), for more
+  (:mod:`nik.nets.compiled`; the arm's single-pose network when it has one: :meth:`nik.IKSolver.network_for`), for more
   the torch forward pass (one batched float32 matmul per layer); then every hypothesis ranked by compiled FK
   (:func:`nik.kernels.seeded.rank`);
 - Levenberg-Marquardt (:class:`nik.lm.compiled.CompiledLM`, the solver's :class:`~nik.lm.LMCfg`): from a guess,
@@ -46,8 +46,10 @@ CLOSED_FORM_TOL = {torch.float64: 1e-9, torch.float32: 2e-5}
 #: radians): the Jaco2's wrist axes miss each other by 8e-8 m, its closed-form solutions by about as much.
 APPROXIMATE_CHECK_TOL = 1e-5
 #: Most poses whose hypotheses the packed network's compiled forward pass computes; above, torch's batched
-#: forward pass (float32 matmuls) is cheaper per pose. Measured (``benchmarks/learned.py --sections forward``).
-PACKED_MAX_BATCH = 8
+#: forward pass (float32 matmuls) is cheaper per pose. Measured with panda's and xarm7's single-pose networks
+#: (whole solver, one thread, CPU us per target; kernel / torch): 16 poses 26 / 73, 100 poses 20 / 28,
+#: 1,000 poses 19 / 15: the crossover lies between 100 and 1,000.
+PACKED_MAX_BATCH = 256
 
 
 _KERNELS = None
@@ -62,7 +64,11 @@ def _kernels():
         from nik.kernels import closed, lm, poses, seeded
 
         _KERNELS = SimpleNamespace(
-            reach_flags=poses.reach_flags, rank=seeded.rank, closed_guess=closed.guess, pose_errors=lm.pose_errors
+            reach_flags=poses.reach_flags,
+            rank=seeded.rank,
+            merge=seeded.merge,
+            closed_guess=closed.guess,
+            pose_errors=lm.pose_errors,
         )
     return _KERNELS
 
@@ -114,6 +120,11 @@ class CompiledBackend:
         return x.copy()
 
     @staticmethod
+    def rows(x, idx):
+        """``x[idx]`` (``idx``: sorted indices from :meth:`nonzero`, or None for every row); no copy when they are all."""
+        return x if idx is None or idx.shape[0] == x.shape[0] else x[idx]
+
+    @staticmethod
     def put(dst, idx, src) -> None:
         dst[idx] = src
 
@@ -124,6 +135,14 @@ class CompiledBackend:
     @staticmethod
     def zeros_long(n: int):
         return np.zeros(n, dtype=np.int64)
+
+    @staticmethod
+    def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
+        """:meth:`nik.ik.stages.Answers.merge` in one kernel call."""
+        _kernels().merge(
+            answers.q, answers.pos_err, answers.rot_err, answers.iterations, answers.ok(job), idx, res.q,
+            res.pos_err, res.rot_err, res.iterations, strict, job.tol_pos, job.tol_rot,
+        )  # fmt: skip
 
     # -- state ---------------------------------------------------------------------
     @staticmethod
@@ -151,33 +170,29 @@ class CompiledBackend:
 
     # -- guesses -----------------------------------------------------------------------
     def network(self, solver, job: Job):
-        rank = _kernels().rank
         st = self.state(solver)
         B = job.size
-        net = solver.network_for(B)
-        packed = None
+        net = solver.network_for(B, self.name)
         if B <= PACKED_MAX_BATCH:
             packed = st.packed.get(id(net))
             if packed is None:
                 from nik.nets.compiled import pack
 
                 packed = st.packed[id(net)] = pack(net) or False
-        if packed:
-            hyp = packed.hypotheses(job.T)
-        else:
-            with torch.no_grad():
-                ref = net.in_mean
-                hyp = net(torch.from_numpy(job.T).to(device=ref.device, dtype=ref.dtype))
-            hyp = np.ascontiguousarray(hyp.reshape(B, -1, solver.robot.dof).cpu().numpy(), dtype=np.float64)
+            if packed:
+                return packed.ranked_hypotheses(st.G, st.joints, job.T)
+        with torch.no_grad():
+            ref = net.in_mean
+            hyp = net(torch.from_numpy(job.T).to(device=ref.device, dtype=ref.dtype))
+        hyp = np.ascontiguousarray(hyp.reshape(B, -1, solver.robot.dof).cpu().numpy(), dtype=np.float64)
         pos, rot = np.empty(B), np.empty(B)
-        rank(st.G, st.joints, job.T, hyp, pos, rot)
+        _kernels().rank(st.G, st.joints, job.T, hyp, pos, rot)
         return hyp, pos, rot
 
     def closed_form(self, solver, job: Job, idx, q_near):
         guess = _kernels().closed_guess
         st = self.state(solver)
-        T = job.T if idx is None else job.T[idx]
-        reachable = job.reachable if idx is None else job.reachable[idx]
+        T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
         B, n = T.shape[0], st.joints.shape[0]
         q, pos, rot, ok = np.empty((B, n)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
         use_near = q_near is not None
@@ -189,8 +204,7 @@ class CompiledBackend:
 
     # -- refiners ----------------------------------------------------------------------
     def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
-        T = job.T if idx is None else job.T[idx]
-        reachable = job.reachable if idx is None else job.reachable[idx]
+        T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
         run = self.state(solver).lm.solve(
             T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters,
             restarts=restarts, reachable=reachable,
@@ -198,7 +212,7 @@ class CompiledBackend:
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
 
     def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
-        T = job.T if idx is None else job.T[idx]
+        T = self.rows(job.T, idx)
         run = self.state(solver).lm.solve_starts(
             T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters
         )

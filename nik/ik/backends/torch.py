@@ -45,6 +45,11 @@ class TorchBackend:
         return x.clone()
 
     @staticmethod
+    def rows(x, idx):
+        """``x[idx]`` (``idx``: indices, or None for every row)."""
+        return x if idx is None else x[idx]
+
+    @staticmethod
     def put(dst, idx, src) -> None:
         dst[idx] = src.to(dst.dtype)
 
@@ -55,6 +60,19 @@ class TorchBackend:
     @staticmethod
     def zeros_long(n: int, like=None):
         return torch.zeros(n, dtype=torch.long, device=None if like is None else like.device)
+
+    @staticmethod
+    def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
+        """:meth:`nik.ik.stages.Answers.merge` with tensor operations."""
+        new = res.pos_err + 0.1 * res.rot_err
+        old = answers.score()[idx]
+        keep = idx[new < old if strict else new <= old]
+        mask = new < old if strict else new <= old
+        answers.q[keep] = res.q[mask].to(answers.q.dtype)
+        answers.pos_err[keep] = res.pos_err[mask].to(answers.pos_err.dtype)
+        answers.rot_err[keep] = res.rot_err[mask].to(answers.rot_err.dtype)
+        answers.iterations[idx] += res.iterations.to(answers.iterations.dtype)
+        answers._ok = None
 
     # -- the job -------------------------------------------------------------------
     def job(self, solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job:
@@ -69,7 +87,7 @@ class TorchBackend:
 
     # -- guesses -----------------------------------------------------------------------
     def network(self, solver, job: Job):
-        net, T = solver.network_for(job.size), job.T
+        net, T = solver.network_for(job.size, self.name), job.T
         if hasattr(net, "ranked_hypotheses"):
             hyp = net.ranked_hypotheses(T)[0]
         else:  # a plain network: one hypothesis
