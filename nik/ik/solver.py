@@ -22,7 +22,7 @@ it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve
 
 The stages are written once; a backend computes them (:mod:`nik.ik.backends`, chosen per call by
 :func:`nik.ik.backends.choose`): compiled numba kernels on numpy for CPU targets with ``refine="lm"`` (any batch
-size on an LM arm; up to :data:`~nik.ik.backends.CLOSED_FORM_CROSSOVER` poses on a closed-form arm), torch
+size), torch
 otherwise (the GPU, the swarms, ``refine="none"``). Both validate the input in one place (:mod:`nik.ik.targets`),
 keep the same result contract, and name the guess that served in ``IKResult.source``.
 

@@ -61,12 +61,19 @@ class Answers:
     iterations: Any
     hypotheses: Any = None
     _ok: Any = None
+    _failing: int | None = None
 
     def ok(self, job: Job):
         """``(B,)`` bool: within both tolerances (computed once)."""
         if self._ok is None:
             self._ok = (self.pos_err <= job.tol_pos) & (self.rot_err <= job.tol_rot)
         return self._ok
+
+    def failing(self, job: Job) -> int:
+        """How many targets are outside tolerance (kept up to date by :meth:`merge`)."""
+        if self._failing is None:
+            self._failing = int((~self.ok(job)).sum())
+        return self._failing
 
     def score(self):
         """``(B,)``: the error used to compare two answers (metres + 0.1 x radians)."""
@@ -75,7 +82,7 @@ class Answers:
     def merge(self, job: Job, idx, other: Refined, *, strict: bool) -> Answers:
         """In place: target ``idx[i]`` takes row ``i`` of ``other`` where that is better (``strict``: a lower
         :meth:`score`, else one not higher), and ``other``'s iterations are added to targets ``idx``."""
-        job.backend.merge(self, job, idx, other, strict)
+        self._failing = job.backend.merge(self, job, idx, other, strict)
         return self
 
     def take(self, job: Job, idx, other: Refined, mask, it=None) -> Answers:
@@ -143,6 +150,8 @@ def refine(solver, job: Job, answers: Answers | None) -> Answers:
     if answers is None:
         res = be.refine(solver, job, None, None, restarts)
         return Answers(res.q, res.pos_err, res.rot_err, res.iterations)
+    if answers.failing(job) == 0:
+        return answers
     todo = ~answers.ok(job)
     if source(solver, job) == "analytic":
         todo &= job.reachable
@@ -174,7 +183,7 @@ def more_hypotheses(solver, job: Job, answers: Answers) -> Answers:
     """Stage 4: targets still outside tolerance after refining the best hypothesis of a multi-solution network
     get LM from its other ``K - 1`` hypotheses (no uniform restarts); the answer is kept where it improves on the
     current one."""
-    if answers.hypotheses is None:
+    if answers.hypotheses is None or answers.failing(job) == 0:
         return answers
     be = job.backend
     idx = be.nonzero(~answers.ok(job))
@@ -195,6 +204,8 @@ def fallback(solver, job: Job, answers: Answers) -> Answers:
         return answers  # the closed form was the guess
     if solver.fallback == "multistart" and solver.refine == "lm" and _restarts_first(solver, answers):
         return answers  # LM restarted from uniform starts in the refine stage
+    if answers.failing(job) == 0:
+        return answers
     be = job.backend
     idx = be.nonzero(~answers.ok(job) & job.reachable)
     if idx.shape[0] == 0:

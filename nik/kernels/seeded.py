@@ -157,3 +157,8 @@ def merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, strict, tol_pos
             pos[b], rot[b] = rpos[i], rrot[i]
             ok[b] = pos[b] <= tol_pos and rot[b] <= tol_rot
         iterations[b] += rit[i]
+    failing = 0
+    for b in range(ok.shape[0]):
+        if not ok[b]:
+            failing += 1
+    return failing

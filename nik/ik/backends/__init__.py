@@ -9,9 +9,9 @@ below; a backend implements it:
 - :class:`~nik.ik.backends.torch.TorchBackend` (``"torch"``): torch tensors on any device (the GPU), the batched
   LM of :mod:`nik.lm`, the swarms, the batched closed form.
 
-:func:`choose` picks the backend of a call: the compiled one for CPU targets with ``refine="lm"`` (the swarms run on
-torch), except a closed-form arm's batches above :data:`CLOSED_FORM_CROSSOVER` (where the batched torch closed form
-was measured faster per pose); torch otherwise. Whatever the backend, the answers satisfy the same contract (joints
+:func:`choose` picks the backend of a call: the compiled one for CPU targets with ``refine="lm"``, whatever the batch
+size (its cost per pose does not grow with the batch, so a large batch never costs more per pose than the same
+batch in chunks); torch otherwise (targets on a GPU, the swarms, ``refine="none"``). Whatever the backend, the answers satisfy the same contract (joints
 inside the limits, errors measured by FK, honest ``success`` and ``reachable``), the same seed gives the same answer,
 and ``IKResult.source`` names the guess that served.
 
@@ -33,13 +33,7 @@ from __future__ import annotations
 
 from nik.ik.backends.base import Job, Refined
 
-__all__ = ["CLOSED_FORM_CROSSOVER", "Job", "Refined", "choose", "compiled_backend", "torch_backend"]
-
-#: Largest CPU batch a closed-form arm solves on the compiled backend. ``benchmarks/crossover.py`` (one thread):
-#: the compiled path was 34-59x faster for one pose, 2.1-2.2x at 1,024 targets, 0.83x (ur5) / 3.3x (kuka_kr) at
-#: 4,096 and 1.06x / 1.38x at 10,000: the crossover lies between 1,024 and 4,096 targets. LM arms have none: the
-#: compiled backend takes every CPU batch (its cost per pose does not grow with the batch).
-CLOSED_FORM_CROSSOVER = 2_048
+__all__ = ["Job", "Refined", "choose", "compiled_backend", "torch_backend"]
 
 _COMPILED = None
 _TORCH = None
@@ -77,24 +71,4 @@ def choose(solver, T_target):
         if forced == "compiled":
             raise ValueError(f"IKSolver(backend='compiled'): targets on {T_target.device}, expected the CPU")
         return torch_backend()
-    if forced == "auto" and (solver.closed_form or solver.fallback == "analytic"):
-        if compiled_backend().state(solver).closed is None:
-            return torch_backend()
-        if solver.closed_form and _rows(T_target) > CLOSED_FORM_CROSSOVER:
-            return torch_backend()
     return compiled_backend()
-
-
-def _rows(T_target) -> int:
-    """The number of poses in ``T_target`` by its shape (1 for one pose); 0 when it has none."""
-    shape = getattr(T_target, "shape", None)
-    if shape is None:
-        try:
-            import numpy as np
-
-            shape = np.shape(T_target)
-        except (TypeError, ValueError):
-            return 0
-    if len(shape) >= 2 and tuple(shape[-2:]) == (4, 4):
-        return 1 if len(shape) == 2 else int(shape[0])
-    return 1 if len(shape) == 1 else (int(shape[0]) if shape else 0)

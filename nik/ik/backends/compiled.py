@@ -137,9 +137,9 @@ class CompiledBackend:
         return np.zeros(n, dtype=np.int64)
 
     @staticmethod
-    def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
-        """:meth:`nik.ik.stages.Answers.merge` in one kernel call."""
-        _kernels().merge(
+    def merge(answers, job: Job, idx, res: Refined, strict: bool) -> int:
+        """:meth:`nik.ik.stages.Answers.merge` in one kernel call; returns how many targets still fail."""
+        return _kernels().merge(
             answers.q, answers.pos_err, answers.rot_err, answers.iterations, answers.ok(job), idx, res.q,
             res.pos_err, res.rot_err, res.iterations, strict, job.tol_pos, job.tol_rot,
         )  # fmt: skip

@@ -63,7 +63,8 @@ class TorchBackend:
 
     @staticmethod
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
-        """:meth:`nik.ik.stages.Answers.merge` with tensor operations."""
+        """:meth:`nik.ik.stages.Answers.merge` with tensor operations (the failing count is counted again when
+        asked: None)."""
         new = res.pos_err + 0.1 * res.rot_err
         old = answers.score()[idx]
         keep = idx[new < old if strict else new <= old]
