@@ -19,10 +19,11 @@ Sections (``--sections``):
 - ``cost``: per target on a batch of ``--n-cost`` (10,000): the network's forward pass (all hypotheses,
   decoded and clamped: ``net.hypotheses``), ranking them by FK, and the whole solver that uses the network
   (``IKSolver(robot, analytic=False)``); the forward pass's share of the solver's time (goal: <= 20 %);
-- ``pays``: the default ``IKSolver(robot)`` against ``IKSolver(robot, checkpoint=None)`` on a batch of
-  ``--n-cost`` targets and on ``--n-one`` single poses (one call each; with and without ``q_near``), plus
-  the same with ``analytic=False`` for arms with a closed form (their network matters only there): success
-  (0.1 mm / 1e-3 rad, the solver's defaults) and ms per target; goal: the default no slower than without;
+- ``pays``: the default ``IKSolver(robot)`` against ``IKSolver(robot, checkpoint=None)`` on batches of
+  ``--pays-sizes`` (100, 1,000, 10,000) targets and on ``--n-one`` single poses (one call each, interleaved pose by
+  pose; with and without ``q_near``; median and p99 per call), plus the same with ``analytic=False`` for arms with a
+  closed form (their network matters only there): success (0.1 mm / 0.1 deg), ms per target, LM iterations, the
+  guess each result reports; goals: >= 2x at every batch size, single poses p99 >= 2x lower, median no slower;
 - ``stream``: training data per step of ``nik train`` (batch 1,024): drawing fresh FK samples (and branch
   labels), taking a batch from a tensor in memory (a fixed file's data after loading), and one training step
   of the default 4 x 256 network (pose loss, Adam);
@@ -44,7 +45,7 @@ import torch
 import nik
 from nik.nets import load_pretrained
 from nik.nets.multi import BranchHeadsIKNet, BranchIKNet, hypothesis_pose_error
-from nik.nets.registry import SHIPPED_DIR, index
+from nik.nets.registry import SHIPPED_DIR, index, role_of
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
@@ -222,49 +223,64 @@ def section_cost(robots, args) -> list[str]:
 
 
 # -- pays ----------------------------------------------------------------------------------
-def _one_by_one(solver, T, q_near=None) -> float:
-    ok = 0
+def _pose_by_pose(solvers: dict, T: torch.Tensor, q_near=None) -> dict:
+    """Single poses, one call each, the solvers interleaved pose by pose (A B A B ...), after one warm-up call
+    each: ``{name: (success share, sources, wall us per call (n,), cpu us per call (n,))}``."""
+    for s in solvers.values():
+        s.solve(T[:1], seed=0)
+    out = {k: [0, set(), [], []] for k in solvers}
     for i in range(T.shape[0]):
         kw = {} if q_near is None else {"q_near": q_near[i]}
-        ok += int(solver.solve(T[i : i + 1], seed=0, **kw).success[0])
-    return ok / T.shape[0]
+        for k, s in solvers.items():
+            c0, t0 = time.thread_time(), time.perf_counter()
+            res = s.solve(T[i], seed=0, **kw)
+            out[k][2].append(1e6 * (time.perf_counter() - t0))
+            out[k][3].append(1e6 * (time.thread_time() - c0))
+            out[k][0] += int(res.success[0])
+            out[k][1].add(res.source)
+    return {k: (v[0] / T.shape[0], v[1], torch.tensor(v[2]), torch.tensor(v[3])) for k, v in out.items()}
 
 
 def pays_rows(name: str, label: str, kw: dict, args) -> list[str]:
-    """Rows of one arm and solver variant: batch, one pose, one pose with q_near."""
+    """Rows of one arm and solver variant: batches of each ``--pays-sizes``, single poses (with and without
+    ``q_near``); the guess column is the ``source`` of the results (the guess that served)."""
     robot = nik.load_robot(name)
-    _, Tb = _targets(robot, args.n_cost, args.seed + 20)
-    _, To = _targets(robot, args.n_one, args.seed + 21)
-    q_near = robot.sample(args.n_one, generator=torch.Generator().manual_seed(args.seed + 22), dtype=torch.float64)
     a = nik.IKSolver(robot, **kw)
     b = nik.IKSolver(robot, checkpoint=None, **kw)
-    forced = nik.IKSolver(robot, **kw)
-    forced.network_min_batch = 1  # the network used for one pose too: what the default avoids, measured
-    cases = [
-        (f"batch of {args.n_cost}", a, Tb, lambda s: float(s.solve(Tb, seed=0).success.double().mean()), args.n_cost),
-        (f"one pose ({args.n_one} calls)", a, To[:1], lambda s: _one_by_one(s, To), args.n_one),
-        (f"one pose + q_near ({args.n_one} calls)", a, To[:1], lambda s: _one_by_one(s, To, q_near), args.n_one),
-    ]
-    if forced.net is not None:
-        cases += [
-            (f"one pose, network forced ({args.n_one})", forced, To[:1], lambda s: _one_by_one(s, To), args.n_one),
-            (
-                f"one pose + q_near, network forced ({args.n_one})",
-                forced,
-                To[:1],
-                lambda s: _one_by_one(s, To, q_near),
-                args.n_one,
-            ),
-        ]
     rows = []
-    for case, a, probe, fn, n in cases:
-        res = timed({"a": lambda fn=fn, a=a: fn(a), "b": lambda fn=fn: fn(b)}, args.repeats)
+    for n in args.pays_sizes:
+        _, Tb = _targets(robot, n, args.seed + 20 + n)
+        holder = {}
+
+        def run(s, key, Tb=Tb, holder=holder):
+            holder[key] = s.solve(Tb, seed=0)
+            return float(holder[key].success.double().mean())
+
+        res = timed({"a": lambda: run(a, "a"), "b": lambda: run(b, "b")}, args.repeats)
         wa, wb = 1e3 * res["a"][1] / n, 1e3 * res["b"][1] / n
         ca, cb = 1e3 * res["a"][2] / n, 1e3 * res["b"][2] / n
+        ita, itb = (float(holder[k].iterations.double().mean()) for k in "ab")
         rows.append(
-            f"| {name} | {label} | {case} | {a.source_for(probe)} | {100 * res['a'][0]:.2f} % | {wa:.4f} / {ca:.4f} "
-            f"| {b.source_for(probe)} | {100 * res['b'][0]:.2f} % | {wb:.4f} / {cb:.4f} | {wb / wa:.2f}x / "
-            f"{cb / ca:.2f}x |"
+            f"| {name} | {label} | batch of {n:,} | {holder['a'].source} | {100 * res['a'][0]:.2f} % | "
+            f"{wa:.4f} / {ca:.4f} | {ita:.1f} | {holder['b'].source} | {100 * res['b'][0]:.2f} % | "
+            f"{wb:.4f} / {cb:.4f} | {itb:.1f} | {wb / wa:.2f}x / {cb / ca:.2f}x |"
+        )
+        print(rows[-1], flush=True)
+    _, To = _targets(robot, args.n_one, args.seed + 21)
+    q_near = robot.sample(args.n_one, generator=torch.Generator().manual_seed(args.seed + 22), dtype=torch.float64)
+    for case, near in ((f"one pose ({args.n_one} calls)", None), (f"one pose + q_near ({args.n_one} calls)", q_near)):
+        res = _pose_by_pose({"a": a, "b": b}, To, near)
+        (sa, srca, wa, ca), (sb, srcb, wb, cb) = res["a"], res["b"]
+
+        def q(x, p):
+            return float(torch.quantile(x.double(), p))
+
+        rows.append(
+            f"| {name} | {label} | {case} | {'/'.join(sorted(srca))} | {100 * sa:.2f} % | median {q(wa, .5) / 1e3:.4f} / "
+            f"{q(ca, .5) / 1e3:.4f}, p99 {q(wa, .99) / 1e3:.4f} / {q(ca, .99) / 1e3:.4f} | | {'/'.join(sorted(srcb))} | "
+            f"{100 * sb:.2f} % | median {q(wb, .5) / 1e3:.4f} / {q(cb, .5) / 1e3:.4f}, p99 {q(wb, .99) / 1e3:.4f} / "
+            f"{q(cb, .99) / 1e3:.4f} | | median {q(wb, .5) / q(wa, .5):.2f}x / {q(cb, .5) / q(ca, .5):.2f}x, p99 "
+            f"{q(wb, .99) / q(wa, .99):.2f}x / {q(cb, .99) / q(ca, .99):.2f}x |"
         )
         print(rows[-1], flush=True)
     return rows
@@ -277,14 +293,16 @@ def section_pays(robots, args) -> list[str]:
         if nik.IKSolver(name, checkpoint=None).closed_form:
             rows += pays_rows(name, "analytic=False", {"analytic": False}, args)
     return [
-        f"Does the network pay for itself? `IKSolver(robot, **kw)` (its guess: the network where it uses one) "
-        f"against `IKSolver(robot, checkpoint=None, **kw)`, on a batch of {args.n_cost} targets and on {args.n_one} "
-        "single poses (one call each; q_near: a random configuration per pose); 'network forced': the network used for "
-        "one pose too (`network_min_batch = 1`), what the default avoids. Success within 0.1 mm / 1e-3 rad; "
-        f"ms per target, wall / CPU (median of {args.repeats}, interleaved). Speed-up > 1: the default is faster.",
+        "Does the network pay for itself? `IKSolver(robot, **kw)` (its network where it has one: on the CPU the "
+        "compiled backend and the arm's single-pose network) against "
+        f"`IKSolver(robot, checkpoint=None, **kw)`, on batches of {', '.join(f'{n:,}' for n in args.pays_sizes)} "
+        f"targets (median of {args.repeats} interleaved runs) and on {args.n_one} single poses (one call each, the "
+        "two solvers interleaved pose by pose; q_near: a random configuration per pose). 'guess' is the `source` "
+        "the results report. Success within 0.1 mm / 0.1 deg; ms per target, wall / CPU of this thread; 'it': LM "
+        "iterations per target. Speed-up > 1: the default is faster.",
         "",
-        "| arm | solver | case | guess | success | ms | guess without network | success | ms | speed-up |",
-        "|---|---|---|---|---:|---:|---|---:|---:|---:|",
+        "| arm | solver | case | guess | success | ms | it | guess without network | success | ms | it | speed-up |",
+        "|---|---|---|---|---:|---:|---:|---|---:|---:|---:|---:|",
         *rows,
         "",
     ]
@@ -468,8 +486,11 @@ def main(argv=None) -> int:
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS), help="default: all")
     ap.add_argument("--robots", nargs="+", default=None, help="default: every robot with a shipped network")
     ap.add_argument("--n", type=int, default=2000, help="random targets per arm (raw, lm)")
-    ap.add_argument("--n-cost", type=int, default=10000, help="batch size of the cost and pays sections")
-    ap.add_argument("--n-one", type=int, default=100, help="single poses of the pays section")
+    ap.add_argument("--n-cost", type=int, default=10000, help="batch size of the cost section")
+    ap.add_argument("--n-one", type=int, default=300, help="single poses of the pays section")
+    ap.add_argument(
+        "--pays-sizes", type=int, nargs="+", default=[100, 1000, 10000], help="batch sizes of the pays section"
+    )
     ap.add_argument("--n-all", type=int, default=100, help="targets for the all-solutions count")
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--repeats", type=int, default=3, help="interleaved timed repeats")
@@ -481,7 +502,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     nik.set_threads(args.threads)
-    robots = args.robots or sorted({st.stem for st, _ in index([SHIPPED_DIR])})
+    robots = args.robots or sorted({st.stem for st, _ in index([SHIPPED_DIR]) if role_of(st) is None})
     lines = [
         f"`python benchmarks/learned.py {' '.join(argv) if argv is not None else ''}`".replace(" `", "`"),
         "",

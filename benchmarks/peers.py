@@ -78,6 +78,7 @@ def run_nik(robot, T, *, solver=None):
         t = time.perf_counter()
         res = solver.solve(T, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=0)
         dt = time.perf_counter() - t
+    run_nik.source = res.source  # the guess that served (the row's label)
     return res.q, dt
 
 
@@ -196,7 +197,7 @@ def compare(
                 "robot": robot_name,
                 "n": n,
                 "threads": threads,
-                "solver": name + (f" ({solver.initial_source})" if name == "nik" else ""),
+                "solver": name + (f" (guess: {run_nik.source})" if name == "nik" else ""),
                 "ms": med / n * 1e3,
                 "success": succ,
                 "outside": outside,
@@ -244,7 +245,7 @@ def unreachable_scenario(robot_name: str, rounds: int, seed: int) -> dict:
 EXAMPLE_ROBOTS = {"xarm7": "xarm_description/urdf/xarm7.urdf"}
 TRACIK_TIMEOUT = 0.005  # s, TRAC-IK's usual default
 TRACIK_EPS = 1e-5  # its convergence threshold on the Cartesian error
-LATENCY_BLOCK = 30  # poses a solver solves in a row before the next solver takes the same poses
+LATENCY_BLOCK = 1  # poses a solver solves in a row before the next solver takes the same poses (1: pose by pose)
 
 
 def example_robot_file(name: str) -> Path | None:
@@ -341,17 +342,20 @@ def rtb_from_file(robot, path: Path, end: str):
     return ets
 
 
-def latency_table(names: list[str], n: int, seed: int) -> tuple[list[str], list[str]]:
-    """One pose per call, ``n`` reachable poses per arm, the solvers interleaved by blocks of ``LATENCY_BLOCK`` poses;
-    per solver: median / p95 / max microseconds per call, calls over 2 ms, success, joints outside the limits.
-    Returns the table's lines and notes (peers left out, and why)."""
+def latency_table(names: list[str], n: int, seed: int, block: int = LATENCY_BLOCK) -> tuple[list[str], list[str]]:
+    """One pose per call, ``n`` reachable poses per arm, the solvers interleaved by blocks of ``block`` poses (1: pose
+    by pose, each call after the other libraries' calls, as in a control loop that does other work between calls);
+    then nik alone in a tight loop over the same poses. Per solver: median / p95 / p99 / max microseconds per call,
+    calls over 2 ms, success, joints outside the limits; nik's rows name the guess its results report
+    (``res.source``). Returns the table's lines and notes (peers left out, and why)."""
     from scipy.spatial.transform import Rotation
 
     torch.set_num_threads(1)
     nik.set_threads(1)
     lines = [
-        "| robot | solver | median us | p95 us | max us | calls > 2 ms | success % | joints outside limits |",
-        "|---|---|---|---|---|---|---|---|",
+        "| robot | solver | median us | p95 us | p99 us | max us | calls > 2 ms | success % | joints outside limits | "
+        "ik_LM median / this median |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     notes = []
     if not available("pytracik"):
@@ -368,23 +372,24 @@ def latency_table(names: list[str], n: int, seed: int) -> tuple[list[str], list[
         ets = rtb_from_file(robot, path, end)
         tracik = tracik_solver(robot, path, end)
         mid = ((robot.limits[:, 0] + robot.limits[:, 1]) / 2).numpy()
-        calls = {f"nik ({solver.initial_source} solver)": []}
+        calls = {"nik": []}
+        sources = set()
         if ets is not None:
             calls["rtb ik_LM"] = []
         if tracik is not None:
             calls["TRAC-IK (pytracik)"] = []
         answers = {k: [] for k in calls}
-        solver.solve(T[0], tol_pos=TOL_POS, tol_rot=TOL_ROT)  # warm-up: loads the compiled kernels
-        # interleaved by blocks of poses (each solver solves a block, then the next solver the same block):
-        # pose by pose, each call would run in caches the other library just filled (TRAC-IK's threads and
-        # timeouts left nik's next call 5x slower than its own steady state), which measures the neighbour
-        for start in range(0, n, LATENCY_BLOCK):
+        solver.solve(T[:64], tol_pos=TOL_POS, tol_rot=TOL_ROT)  # warm-up: loads every compiled kernel it uses
+        solver.solve(T[0], tol_pos=TOL_POS, tol_rot=TOL_ROT)
+        for start in range(0, n, block):
             for label in calls:
-                for i in range(start, min(start + LATENCY_BLOCK, n)):
-                    if label.startswith("nik"):
+                for i in range(start, min(start + block, n)):
+                    if label == "nik":
                         t = time.perf_counter_ns()
-                        q = solver.solve(T[i], tol_pos=TOL_POS, tol_rot=TOL_ROT).q[0]
+                        res = solver.solve(T[i], tol_pos=TOL_POS, tol_rot=TOL_ROT)
                         dt = time.perf_counter_ns() - t
+                        q = res.q[0]
+                        sources.add(res.source)
                     elif label.startswith("rtb"):
                         np.random.seed(i)
                         t = time.perf_counter_ns()
@@ -401,12 +406,23 @@ def latency_table(names: list[str], n: int, seed: int) -> tuple[list[str], list[
                         q = r[1:] if r[0] >= 0 else mid  # no solution: counts as a failure
                     calls[label].append(dt / 1e3)
                     answers[label].append(torch.as_tensor(np.asarray(q, dtype=np.float64)))
+        tight, tight_answers = [], []
+        for i in range(n):  # nik alone, call after call (warm caches)
+            t = time.perf_counter_ns()
+            res = solver.solve(T[i], tol_pos=TOL_POS, tol_rot=TOL_ROT)
+            tight.append((time.perf_counter_ns() - t) / 1e3)
+            tight_answers.append(res.q[0])
+        label_of = {"nik": f"nik (guess: {'/'.join(sorted(sources))}), interleaved"}
+        calls["nik, tight loop"] = tight
+        answers["nik, tight loop"] = tight_answers
+        rtb_median = float(np.median(calls["rtb ik_LM"])) if "rtb ik_LM" in calls else math.nan
         for label, times in calls.items():
             ts = np.asarray(times)
             succ, outside = score(robot, T, torch.stack(answers[label]))
             lines.append(
-                f"| {name} | {label} | {np.median(ts):.0f} | {np.percentile(ts, 95):.0f} | {ts.max():.0f} | "
-                f"{int((ts > 2000).sum())} | {succ:.1f} | {outside} |"
+                f"| {name} | {label_of.get(label, label)} | {np.median(ts):.0f} | {np.percentile(ts, 95):.0f} | "
+                f"{np.percentile(ts, 99):.0f} | {ts.max():.0f} | {int((ts > 2000).sum())} | {succ:.1f} | {outside} | "
+                f"{rtb_median / np.median(ts):.2f}x |"
             )
         print(f"  ({name}: latency rows done)", flush=True)
     nik.set_threads(None)
@@ -493,8 +509,9 @@ def main(argv=None) -> int:
     )
     md += [
         "",
-        f"One pose per call ({args.latency_n} reachable poses per arm, the solvers interleaved by blocks of "
-        f"{LATENCY_BLOCK} poses, one "
+        f"One pose per call ({args.latency_n} reachable poses per arm, the solvers interleaved pose by pose "
+        "(each call after the other libraries' calls, caches cold as in a control loop), then nik alone in a tight "
+        "loop over the same poses; one "
         f"thread; TRAC-IK: Speed, timeout {TRACIK_TIMEOUT * 1e3:g} ms, eps {TRACIK_EPS:g}, seeded at the middle of "
         "the limits; rtb: ik_LM, tol 1e-10, joint limits on):",
         "",

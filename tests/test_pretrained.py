@@ -38,6 +38,24 @@ def test_shipped_file_matches_its_robot_and_reproduces_its_recorded_validation_e
     assert command.startswith(f"nik train {name} ") or "train.py fit --config configs/train/" in command
 
 
+@pytest.mark.parametrize("name", available(single_pose=True))
+def test_shipped_single_pose_network_matches_its_arm_and_reproduces_its_recorded_validation_error(name):
+    from nik.nets.pair import load_pair
+    from nik.nets.registry import find_network, find_single_pose_network
+
+    meta = read_meta(name)
+    robot = nik.load_robot(meta["robot"])
+    assert meta["role"] == "single_pose" and meta["robot_hash"] == robot.definition_hash
+    assert find_single_pose_network(robot).stem == name and find_network(robot).stem == meta["robot"]
+    net = load_pair(PRETRAINED_DIR / f"{name}.safetensors", robot=robot)
+    assert net.n_params < load_pretrained(robot).n_params / 3  # a cheaper forward pass than the main network's
+    rec = meta["validation"]
+    now = validation_error(net, seed=rec["seed"], n=rec["n"])
+    for key, value in rec.items():
+        assert math.isclose(now[key], value, rel_tol=1e-4, abs_tol=1e-9), (key, now[key], value)
+    assert nik.IKSolver(robot).single_pose_net is not None
+
+
 def test_an_unknown_definition_names_the_robots_that_have_one():
     definition = nik.load_robot("ur5").to_definition()
     definition["name"] = "my_arm"
@@ -102,7 +120,6 @@ def test_solver_uses_the_shipped_network_by_default_and_not_with_checkpoint_none
 
 def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys, tmp_path, monkeypatch):
     from nik.cli import main
-    from nik.ik import lean
     from nik.poses import matrix_to_quaternion
 
     robot = nik.load_robot("panda")
@@ -110,27 +127,23 @@ def test_nik_solve_panda_uses_the_shipped_network_without_training(capsys, tmp_p
     rows = [torch.cat([t[:3, 3], matrix_to_quaternion(t[:3, :3])]).tolist() for t in T]
     csv = tmp_path / "poses.csv"
     csv.write_text("x,y,z,qw,qx,qy,qz\n" + "".join(",".join(map(repr, r)) + "\n" for r in rows))
-    # a few CPU poses take the compiled path, which starts from uniform configurations (nik.ik.lean) and says so
+    # one pose and a batch: the shipped network's guess, on the compiled backend
     assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--pose", *map(repr, rows[0])]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["results"][0]["success"] is True and doc["initial_guess"] == "multistart"
-    monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0)  # the batched torch pipeline: the shipped network's guess
+    assert doc["results"][0]["success"] is True and doc["initial_guess"] == "network"
     assert main(["solve", "--robot", "panda", "--refine", "lm", "--json", "--poses", str(csv)]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert all(r["success"] for r in doc["results"]) and doc["initial_guess"] == "network"
 
 
-def test_one_pose_on_the_cpu_skips_the_network_only_where_a_refinement_follows(monkeypatch):
-    from nik.ik import lean
-
-    monkeypatch.setattr(lean, "LEAN_MAX_BATCH", 0)  # the torch path's own choice (network_min_batch)
+def test_one_pose_on_the_cpu_uses_the_network_on_both_backends():
     robot = nik.load_robot("panda")
     T = robot.fk(robot.sample(2, generator=torch.Generator().manual_seed(6), dtype=torch.float64))
-    with_net, without = nik.IKSolver(robot), nik.IKSolver(robot, checkpoint=None)
-    one = with_net.solve(T[:1], seed=3)
-    assert one.source == "multistart" and with_net.source_for(T[:1]) == "multistart"
-    assert torch.equal(one.q, without.solve(T[:1], seed=3).q)  # exactly the path without a network
-    assert with_net.solve(T, seed=3).source == "network"
+    for backend in ("compiled", "torch"):
+        with_net = nik.IKSolver(robot, backend=backend)
+        one = with_net.solve(T[:1], seed=3)
+        assert one.source == "network" and with_net.source_for(T[:1]) == "network" and bool(one.success.all())
+        assert with_net.solve(T, seed=3).source == "network"
     raw = nik.IKSolver(robot, refine="none").solve(T[:1])
     assert raw.source == "network"  # the raw guess was asked for
     torch.testing.assert_close(raw.q, load_pretrained("panda").predict(T[:1]))

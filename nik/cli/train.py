@@ -46,6 +46,12 @@ def register(sub) -> None:
     )
     t.add_argument("--hidden", type=int, nargs="+", default=None, help="hidden layer sizes (default 256 256 256 256)")
     t.add_argument("--heads", type=int, default=8, help="hypotheses of a multi-head network (default 8)")
+    t.add_argument(
+        "--single-pose",
+        action="store_true",
+        help="a small network (default hidden 128 128 128) that the solver uses on the CPU (its compiled "
+        "backend), next to the main network of the arm (recorded role single_pose)",
+    )
     t.add_argument("--batch-size", type=int, default=1024, help="samples per step (default 1024)")
     t.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate at the start (default 1e-3, cosine)")
     t.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -70,7 +76,7 @@ def register(sub) -> None:
 
 
 def _cmd_train(args) -> int:
-    from nik.learn.recipe import DEFAULT_HIDDEN, TrainCfg, train_network
+    from nik.learn.recipe import DEFAULT_HIDDEN, SINGLE_POSE_HIDDEN, TrainCfg, train_network
 
     cfg = TrainCfg(
         robot=args.robot,
@@ -83,8 +89,9 @@ def _cmd_train(args) -> int:
         install=args.install,
         resume=args.resume,
         kind=args.kind,
-        hidden=tuple(args.hidden) if args.hidden else DEFAULT_HIDDEN,
+        hidden=tuple(args.hidden) if args.hidden else (SINGLE_POSE_HIDDEN if args.single_pose else DEFAULT_HIDDEN),
         heads=args.heads,
+        single_pose=args.single_pose,
         batch_size=args.batch_size,
         lr=args.lr,
         seed=args.seed,

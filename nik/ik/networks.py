@@ -15,7 +15,7 @@ from pathlib import Path
 
 import torch
 
-__all__ = ["checkpoint_network", "clear", "shipped_network"]
+__all__ = ["checkpoint_network", "clear", "shipped_network", "single_pose_network"]
 
 _LOADED: dict[tuple, torch.nn.Module] = {}
 
@@ -33,14 +33,15 @@ def _load_once(path: Path, robot, device, load: Callable[[], torch.nn.Module]) -
     return net
 
 
-def shipped_network(robot, device) -> Callable[[], torch.nn.Module] | None:
+def shipped_network(robot, device, *, single_pose: bool = False) -> Callable[[], torch.nn.Module] | None:
     """A loader of the network known for ``robot``'s definition hash, whatever its name (one installed in the
     user folder, else the one shipped: :func:`nik.nets.registry.find_network`), on ``device``; None when there is
     none. Finding reads the small ``.json`` files once per file; the weights load (SHA-256 checked) when the
-    loader is called, once per process."""
-    from nik.nets.registry import find_network
+    loader is called, once per process. ``single_pose=True``: the small network for single poses instead
+    (:func:`nik.nets.registry.find_single_pose_network`)."""
+    from nik.nets.registry import find_network, find_single_pose_network
 
-    path = find_network(robot)
+    path = (find_single_pose_network if single_pose else find_network)(robot)
     if path is None:
         return None
 
@@ -50,6 +51,11 @@ def shipped_network(robot, device) -> Callable[[], torch.nn.Module] | None:
         return _load_once(path, robot, device, lambda: load_pair(path, robot=robot))
 
     return load
+
+
+def single_pose_network(robot, device) -> Callable[[], torch.nn.Module] | None:
+    """A loader of ``robot``'s single-pose network (see :func:`shipped_network`), or None."""
+    return shipped_network(robot, device, single_pose=True)
 
 
 def checkpoint_network(path, robot, device) -> torch.nn.Module:

@@ -20,10 +20,11 @@ it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve
    flag and ``reachable`` (False where the reach bound proves the target out of reach;
    :meth:`IKSolver.solve` warns about those, and asks about millimetres when they lie 100 x beyond).
 
-CPU batches of up to :data:`nik.ik.lean.LEAN_MAX_BATCH` poses (:data:`~nik.ik.lean.LEAN_MAX_BATCH_CLOSED_FORM` on
-an arm with a closed form) take a compiled path instead (:mod:`nik.ik.lean`: the same checks, the closed form or
-LM from uniform starts through numba kernels, the same result contract), chosen in one place at the top of
-:meth:`IKSolver.solve`.
+The stages are written once; a backend computes them (:mod:`nik.ik.backends`, chosen per call by
+:func:`nik.ik.backends.choose`): compiled numba kernels on numpy for CPU targets with ``refine="lm"`` (any batch
+size), torch
+otherwise (the GPU, the swarms, ``refine="none"``). Both validate the input in one place (:mod:`nik.ik.targets`),
+keep the same result contract, and name the guess that served in ``IKResult.source``.
 
 Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`, refiners
 ``(robot, T, q0) -> RefineResult`` in :mod:`nik.ik.refiners`. Units are SI (metres, radians) throughout.
@@ -31,16 +32,15 @@ Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`,
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import torch
 
-from nik.ik import lean, networks, stages
+from nik.ik import backends, networks, stages
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.robots import Robot, load_robot
-from nik.robots.reach import unreachable_message, within_reach
+from nik.robots.reach import within_reach
 from nik.threads import threads_for
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
@@ -82,6 +82,9 @@ class IKSolver:
             would repeat the first pass (no network on a closed-form arm), nor with ``refine="none"``,
             nor for targets proven out of reach. The evaluation turns it off to measure what the
             network's guess alone delivers.
+        backend: ``"auto"`` (default: :func:`nik.ik.backends.choose` picks per call), ``"compiled"`` (numba
+            kernels on numpy: CPU targets, ``refine="lm"`` only) or ``"torch"`` (every device and method). The
+            answers meet the same contract on both; benchmarks and tests use it to compare them.
     """
 
     def __init__(
@@ -95,8 +98,15 @@ class IKSolver:
         analytic: bool = True,
         fallback: bool | str = "auto",
         device: str | torch.device | None = None,
+        backend: str = "auto",
     ):
         from nik.device import resolve_device
+
+        if backend not in ("auto", "compiled", "torch"):
+            raise ValueError(f"IKSolver: backend must be auto, compiled or torch, got {backend!r}")
+        if backend == "compiled" and refine != "lm":
+            raise ValueError(f"IKSolver: the compiled backend refines by LM only (refine='lm'), got refine={refine!r}")
+        self.backend = backend
 
         self.device = resolve_device(device)
         if refine not in REFINE_METHODS:
@@ -109,6 +119,7 @@ class IKSolver:
         if fallback not in ("auto", "analytic", "multistart", "none"):
             raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
         self._net, self._load_net = None, None
+        self._net_one = None
         self.closed_form = False
         if analytic:
             from nik.analytic import family
@@ -119,6 +130,9 @@ class IKSolver:
                 # loaded (SHA-256 checked: a damaged file is refused here) once per process, shared by every solver
                 load = networks.shipped_network(self.robot, self.device)
                 self._net = None if load is None else load()
+                if self._net is not None:
+                    load = networks.single_pose_network(self.robot, self.device)
+                    self._net_one = None if load is None else load()
         elif checkpoint is not None:
             self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
         if fallback == "analytic" and not self.closed_form:
@@ -150,37 +164,46 @@ class IKSolver:
             f"analytic={self.closed_form}, refine={self.refine!r})"
         )
 
-    #: Smallest batch for which :meth:`solve` uses the network's guess on the CPU when a refinement follows.
-    #: Measured (one thread, idle machine, 200 single poses, ms per call, with the network / without, mean and
-    #: median): xarm7 3.90 / 2.13 and 3.44 / 1.48; ur5 2.16 / 1.91 and 2.04 / 1.17; kuka_kr (analytic=False)
-    #: 2.28 / 1.94 and 2.16 / 1.16; panda 2.59 / 3.19 and 2.17 / 1.34 (the network avoids panda's slow tail,
-    #: p95 3.8 vs 11.8 ms, but costs the typical pose 0.8 ms); with ``q_near`` alike. The torch network's guess
-    #: for one pose costs about 1 ms of per-op overhead, more than the lean one-pose LM it would save. From two
-    #: poses on (the batched path) the network wins: 2 poses 2.8-4.9 vs 8.4-13.8 ms per target, 16 poses 0.8-1.4
-    #: vs 3.3-3.9 ms (the same four arms). Set it to 1 on an instance to use the network for single poses too (a
-    #: compiled one-pose forward pass may make that the better default: re-measure with ``benchmarks/learned.py``).
-    network_min_batch = 2
+    #: Smallest batch for which :meth:`solve` uses the network's guess when a refinement follows (1: always).
+    #: On the compiled backend the network pays from one pose on (``benchmarks/learned.py --sections pays``,
+    #: docs/learned.md); on torch the per-operation overhead of a forward pass (about a millisecond for one pose)
+    #: is paid only where torch runs at all: the GPU, the swarms, ``refine="none"``.
+    network_min_batch = 1
+
+    @property
+    def single_pose_net(self):
+        """The arm's small network for the CPU (``nik train --single-pose``, recorded role ``single_pose``), found
+        with the main one (``checkpoint="auto"``); None where there is none."""
+        return self._net_one
+
+    def network_for(self, batch: int, backend: str = "compiled"):
+        """The network that guesses a batch of ``batch`` poses on ``backend``: on the compiled backend (the CPU) the
+        single-pose network where the arm has one, whatever the batch size (measured, panda and xarm7, one thread:
+        its 3 x 128 forward pass costs a fifth of the main 4 x 256 one and its guesses need about half an LM
+        iteration more, so it is the faster guess at 16, 100 and 1,000 poses: docs/learned.md); else :attr:`net`."""
+        if self._net_one is not None and backend == "compiled":
+            return self._net_one
+        return self.net
 
     @property
     def initial_source(self) -> str:
-        """Where :meth:`solve` takes its initial guess for a batch on the torch path: ``network``, ``analytic`` or
-        ``multistart`` (for given targets see :meth:`source_for`; CPU batches the compiled path takes,
-        :mod:`nik.ik.lean`, start from the closed form or uniform configurations, and each result's ``source`` says
-        which)."""
+        """Where :meth:`solve` takes its initial guess: ``network``, ``analytic`` or ``multistart`` (for given
+        targets see :meth:`source_for`; each result's ``source`` says which served)."""
         if self.has_network:
             return "network"
         return "analytic" if self.closed_form else "multistart"
 
-    def uses_network(self, T: torch.Tensor) -> bool:
-        """Whether :meth:`solve` uses the network for targets ``T: (B, 4, 4)``: it has one, and either ``B`` is at
-        least :attr:`network_min_batch`, or ``T`` is not on the CPU, or ``refine="none"`` (the raw guess is asked)."""
+    def uses_network(self, T) -> bool:
+        """Whether :meth:`solve` uses the network for targets ``T: (B, 4, 4)`` (or a batch size ``B``): it has one,
+        and either ``B`` is at least :attr:`network_min_batch` or ``refine="none"`` (the raw guess is asked)."""
         if not self.has_network:
             return False
-        return self.refine == "none" or T.device.type != "cpu" or T.shape[0] >= self.network_min_batch
+        B = T if isinstance(T, int) else int(T.shape[0])
+        return self.refine == "none" or B >= self.network_min_batch
 
-    def source_for(self, T: torch.Tensor) -> str:
-        """Where :meth:`solve` takes the initial guess for ``T: (B, 4, 4)``: ``network``, ``analytic`` or
-        ``multistart`` (:meth:`uses_network`)."""
+    def source_for(self, T) -> str:
+        """Where :meth:`solve` takes the initial guess for ``T: (B, 4, 4)`` (or a batch size): ``network``,
+        ``analytic`` or ``multistart`` (:meth:`uses_network`)."""
         if self.uses_network(T):
             return "network"
         return "analytic" if self.closed_form else "multistart"
@@ -233,31 +256,21 @@ class IKSolver:
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
         check_tolerances(tol_pos, tol_rot)
-        if lean.applies(self):  # a few CPU poses: the compiled path, when it takes the input
-            res = lean.solve(self, T_target, tol_pos, tol_rot, seed, q_near, max_iters, representation)
-            if res is not None:
-                return res
-        T = as_poses(T_target, representation)
-        reachable = within_reach(self.robot, T)
-        msg = unreachable_message(self.robot, T, reachable)
-        if msg is not None:
-            warnings.warn(msg, UserWarning, stacklevel=2)
-        job = stages.Job(
-            T,
-            reachable,
-            as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic, limits=self.robot.limits),
-            tol_pos,
-            tol_rot,
-            seed,
-            max_iters,
-        )
-        with threads_for(T.shape[0]):
-            answers = stages.guess(self, job)
-            if self.refine != "none":
-                answers = stages.refine(self, job, answers)
-                answers = stages.near(self, job, answers)
-                answers = stages.more_hypotheses(self, job, answers)
-                answers = stages.fallback(self, job, answers)
+        be = backends.choose(self, T_target)
+        job = be.job(self, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters)
+        if be.name == "torch":
+            with threads_for(job.size):
+                return self._run(job)
+        return self._run(job)
+
+    def _run(self, job: stages.Job) -> IKResult:
+        """The stages on one job, in order."""
+        answers = stages.guess(self, job)
+        if self.refine != "none":
+            answers = stages.refine(self, job, answers)
+            answers = stages.near(self, job, answers)
+            answers = stages.more_hypotheses(self, job, answers)
+            answers = stages.fallback(self, job, answers)
         return stages.final_check(self, job, answers)
 
     def solve_all(
@@ -285,5 +298,6 @@ class IKSolver:
         if T.shape[0] != 1:
             raise ValueError(f"solve_all: expected one pose, got {T.shape[0]}")
         check_tolerances(tol_pos, tol_rot)
-        job = stages.Job(T, within_reach(self.robot, T), None, tol_pos, tol_rot, seed)
+        be = backends.torch_backend()
+        job = stages.Job(be, T, within_reach(self.robot, T), None, tol_pos, tol_rot, seed, None, T.dtype)
         return stages.all_solutions(self, job, n_starts=n_starts, dedupe_tol=dedupe_tol)

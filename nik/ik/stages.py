@@ -1,32 +1,36 @@
-"""The stages of :meth:`nik.IKSolver.solve`, one small function each, composed in this order:
+"""The stages of :meth:`nik.IKSolver.solve`, one small function each, written once for both backends:
 
-1. :func:`guess`: the initial guess (network, closed form, or none: the refiner starts from uniform
-   configurations itself) with its errors by FK;
+1. :func:`guess`: the initial guess with its errors by FK: the network's hypotheses ranked by FK (the best is the
+   guess), the closed form, or none (the refiner starts from uniform configurations itself);
 2. :func:`refine`: the targets the guess leaves outside tolerance, refined from it (never worse than it);
 3. :func:`near`: with ``q_near`` (arms without a closed form), a second refinement from ``q_near`` itself;
    per target the successful answer nearest ``q_near`` is kept;
-4. :func:`more_hypotheses`: targets still failing get LM from the other hypotheses of a multi-solution network;
-5. :func:`fallback`: targets still failing and within reach get a second chance (closed form or multistart LM);
+4. :func:`more_hypotheses`: targets still failing get LM from the network's next hypotheses, in turn;
+5. :func:`fallback`: targets still failing and within reach get a second chance (the closed form, or LM from
+   uniform starts with the restart budget);
 6. :func:`final_check`: the :class:`~nik.ik.result.IKResult`, success measured against the tolerances.
-
-:meth:`IKSolver.solve_all` reuses the same parts in :func:`all_solutions`: every closed-form solution, or
-LM from every network hypothesis and uniform starts, kept where within tolerance, de-duplicated.
 
 Every stage has the signature ``stage(solver, job, answers) -> answers``: ``solver`` is the
 :class:`~nik.ik.solver.IKSolver` whose configuration (robot, network, refine method, fallback) it reads,
-``job`` the targets and tolerances of one call (:class:`Job`), ``answers`` the best answers so far
-(:class:`Answers`, joints inside the limits with their errors measured by FK). A stage replaces an answer
-only by a better one.
+``job`` the targets and tolerances of one call (:class:`~nik.ik.backends.Job`, whose ``backend`` computes:
+:mod:`nik.ik.backends`, compiled kernels on numpy or torch), ``answers`` the best answers so far
+(:class:`Answers`, joints inside the limits with their errors measured by FK). A stage replaces an answer only
+by a better one. Arrays are the backend's (numpy or torch); the stages use only what both have (masks, indexing)
+and the backend's few helpers.
+
+:meth:`IKSolver.solve_all` uses :func:`all_solutions` (torch): every closed-form solution, or LM from every
+network hypothesis and uniform starts, kept where within tolerance, de-duplicated.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 
+from nik.ik.backends import Job, Refined
 from nik.ik.guesses import analytic_guess, dedupe, multistart_guess, network_guess
-from nik.ik.refiners import RefineResult, lm_refine, swarm_refine
 from nik.ik.result import IKResult
 from nik.poses import pose_error
 
@@ -41,69 +45,70 @@ __all__ = [
     "more_hypotheses",
     "near",
     "refine",
-    "refine_from",
+    "source",
 ]
 
 
 @dataclass
-class Job:
-    """One call of :meth:`IKSolver.solve`: B targets and what their answers must meet.
-
-    Attributes:
-        T: (B, 4, 4) target poses, metres.
-        reachable: (B,) bool, False where the reach bound proves a target out of reach.
-        q_near: (B, dof) radians or None, the configuration to stay near.
-        tol_pos: metres; tol_rot: radians (geodesic).
-        seed: seeds every random choice.
-        max_iters: iteration limit of the refinement (None: the method's config).
-    """
-
-    T: torch.Tensor
-    reachable: torch.Tensor
-    q_near: torch.Tensor | None
-    tol_pos: float
-    tol_rot: float
-    seed: int = 0
-    max_iters: int | None = None
-
-
-@dataclass
 class Answers:
-    """The best answers so far: ``q (B, dof)``, ``pos_err``, ``rot_err`` ``(B,)`` by FK, ``iterations (B,)`` long."""
+    """The best answers so far: ``q (B, dof)``, ``pos_err``, ``rot_err`` ``(B,)`` by FK, ``iterations (B,)``;
+    ``hypotheses``: the network's ranked hypotheses ``(B, K, dof)`` when it guessed (the next ones are the
+    :func:`more_hypotheses` stage's starts), else None."""
 
-    q: torch.Tensor
-    pos_err: torch.Tensor
-    rot_err: torch.Tensor
-    iterations: torch.Tensor
+    q: Any
+    pos_err: Any
+    rot_err: Any
+    iterations: Any
+    hypotheses: Any = None
+    _ok: Any = None
+    _failing: int | None = None
 
-    def ok(self, job: Job) -> torch.Tensor:
-        """``(B,)`` bool: within both tolerances."""
-        return (self.pos_err <= job.tol_pos) & (self.rot_err <= job.tol_rot)
+    def ok(self, job: Job):
+        """``(B,)`` bool: within both tolerances (computed once)."""
+        if self._ok is None:
+            self._ok = (self.pos_err <= job.tol_pos) & (self.rot_err <= job.tol_rot)
+        return self._ok
 
-    def score(self) -> torch.Tensor:
+    def failing(self, job: Job) -> int:
+        """How many targets are outside tolerance (kept up to date by :meth:`merge`)."""
+        if self._failing is None:
+            self._failing = int((~self.ok(job)).sum())
+        return self._failing
+
+    def score(self):
         """``(B,)``: the error used to compare two answers (metres + 0.1 x radians)."""
         return self.pos_err + 0.1 * self.rot_err
 
-    def take(self, idx: torch.Tensor, other: RefineResult | Answers, mask: torch.Tensor) -> Answers:
-        """A copy with target ``idx[i]`` replaced by row ``i`` of ``other`` where ``mask[i]`` (``idx, mask: (b,)``)."""
-        keep = idx[mask]
-        q, pos, rot = self.q.clone(), self.pos_err.clone(), self.rot_err.clone()
-        q[keep] = other.q[mask].to(q.dtype)
-        pos[keep] = other.pos_err[mask].to(pos.dtype)
-        rot[keep] = other.rot_err[mask].to(rot.dtype)
-        return Answers(q, pos, rot, self.iterations)
+    def merge(self, job: Job, idx, other: Refined, *, strict: bool) -> Answers:
+        """In place: target ``idx[i]`` takes row ``i`` of ``other`` where that is better (``strict``: a lower
+        :meth:`score`, else one not higher), and ``other``'s iterations are added to targets ``idx``."""
+        self._failing = job.backend.merge(self, job, idx, other, strict)
+        return self
 
-    def add_iterations(self, idx: torch.Tensor, it: torch.Tensor) -> Answers:
-        """A copy with ``it: (b,)`` added to the iterations of targets ``idx: (b,)``."""
-        iterations = self.iterations.clone()
-        iterations[idx] += it.to(torch.long)
-        return Answers(self.q, self.pos_err, self.rot_err, iterations)
+    def take(self, job: Job, idx, other: Refined, mask, it=None) -> Answers:
+        """A copy with target ``idx[i]`` replaced by row ``i`` of ``other`` where ``mask[i]`` (``idx, mask: (b,)``),
+        and the iterations ``it: (b,)`` (default ``other.iterations``) added to targets ``idx``."""
+        be = job.backend
+        keep = idx[mask]
+        q, pos, rot, iters = be.copy(self.q), be.copy(self.pos_err), be.copy(self.rot_err), be.copy(self.iterations)
+        be.put(q, keep, other.q[mask])
+        be.put(pos, keep, other.pos_err[mask])
+        be.put(rot, keep, other.rot_err[mask])
+        iters[idx] += other.iterations if it is None else it
+        return Answers(q, pos, rot, iters, self.hypotheses)
+
+
+def source(solver, job: Job) -> str:
+    """The guess that serves the call: ``network``, ``analytic`` or ``multistart`` (:meth:`IKSolver.source_for`)."""
+    if job.source is None:
+        job.source = solver.source_for(job.size)
+    return job.source
 
 
 def first_guess(solver, T: torch.Tensor, *, q_near: torch.Tensor | None, seed: int) -> torch.Tensor:
-    """``(B, dof)`` the raw initial guess for ``T: (B, 4, 4)``: the network's, the closed form's (the solution
-    nearest ``q_near``, or the one farthest inside the limits), else the best of 64 uniform configurations."""
-    if solver.uses_network(T):
+    """``(B, dof)`` the raw initial guess for ``T: (B, 4, 4)`` (torch): the network's, the closed form's (the
+    solution nearest ``q_near``, or the one farthest inside the limits), else the best of 64 uniform configurations."""
+    if solver.uses_network(T.shape[0]):
         return network_guess(solver.net, solver.robot, T)
     if solver.closed_form:
         return analytic_guess(solver.robot, T, q_near=q_near)
@@ -113,41 +118,48 @@ def first_guess(solver, T: torch.Tensor, *, q_near: torch.Tensor | None, seed: i
 def guess(solver, job: Job) -> Answers | None:
     """Stage 1: the initial guess with its FK errors; None where the refiner starts from uniform
     configurations itself (no network, no closed form, a refinement to follow)."""
-    if solver.source_for(job.T) == "multistart" and solver.refine != "none":
+    be, src = job.backend, source(solver, job)
+    hyp = None
+    if src == "network":
+        hyp, pos, rot = be.network(solver, job)
+        q = hyp[:, 0]
+        if hyp.shape[1] == 1:
+            hyp = None
+    elif src == "analytic":
+        q, pos, rot = be.closed_form(solver, job, None, job.q_near)
+    elif solver.refine == "none":
+        q = be.uniform_guess(solver, job)
+        pos, rot = pose_error(job.T, solver.robot.fk(q))
+    else:
         return None
-    q0 = first_guess(solver, job.T, q_near=job.q_near, seed=job.seed)
-    pos, rot = pose_error(job.T, solver.robot.fk(q0))
-    return Answers(q0, pos, rot, torch.zeros(q0.shape[0], dtype=torch.long, device=q0.device))
+    return Answers(q, pos, rot, be.zeros_long(job.size), hyp)
 
 
-def refine_from(solver, job: Job, idx: torch.Tensor, q0: torch.Tensor | None) -> RefineResult:
-    """The solver's refiner on targets ``idx: (b,)`` from ``q0: (b, dof)`` (None: uniform starts)."""
-    T, reachable = job.T[idx], job.reachable[idx]
-    kw = {"tol_pos": job.tol_pos, "tol_rot": job.tol_rot, "seed": job.seed, "max_iters": job.max_iters}
-    if solver.refine == "lm":
-        # LM restarts its failing targets itself when the multistart is the fallback, or without a guess
-        restarts = solver.fallback == "multistart" or q0 is None
-        return lm_refine(solver.robot, T, q0, cfg=solver.swarm_cfg, restarts=restarts, reachable=reachable, **kw)
-    return swarm_refine(solver.robot, T, q0, method=solver.refine, cfg=solver.swarm_cfg, polish=solver.polish, **kw)
+def _restarts_first(solver, answers: Answers | None) -> bool:
+    """Whether the refine stage's LM restarts its failing targets from uniform starts itself: without a guess, or
+    with the multistart fallback when no other network hypotheses come first."""
+    return answers is None or (solver.fallback == "multistart" and answers.hypotheses is None)
 
 
 def refine(solver, job: Job, answers: Answers | None) -> Answers:
     """Stage 2: refine the targets outside tolerance from their guess (all targets, from uniform starts,
     when there is no guess); the refined answer is kept unless the guess was better. Out-of-reach targets of
     the closed form keep its clamped solution (the best effort)."""
-    T = job.T
+    be = job.backend
+    restarts = _restarts_first(solver, answers)
     if answers is None:
-        res = refine_from(solver, job, torch.arange(T.shape[0], device=T.device), None)
-        return Answers(res.q.to(T.dtype), res.pos_err.to(T.dtype), res.rot_err.to(T.dtype), res.iterations.long())
-    todo = ~answers.ok(job)
-    if solver.source_for(T) == "analytic":
-        todo &= job.reachable
-    idx = todo.nonzero().squeeze(1)
-    if idx.numel() == 0:
+        res = be.refine(solver, job, None, None, restarts)
+        return Answers(res.q, res.pos_err, res.rot_err, res.iterations)
+    if answers.failing(job) == 0:
         return answers
-    res = refine_from(solver, job, idx, answers.q[idx])
-    better = (res.pos_err + 0.1 * res.rot_err) <= answers.score()[idx]
-    return answers.take(idx, res, better).add_iterations(idx, res.iterations)
+    todo = ~answers.ok(job)
+    if source(solver, job) == "analytic":
+        todo &= job.reachable
+    idx = be.nonzero(todo)
+    if idx.shape[0] == 0:
+        return answers
+    res = be.refine(solver, job, idx, be.rows(answers.q, idx), restarts)
+    return answers.merge(job, idx, res, strict=False)
 
 
 def near(solver, job: Job, answers: Answers) -> Answers:
@@ -155,75 +167,61 @@ def near(solver, job: Job, answers: Answers) -> Answers:
     successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error."""
     if job.q_near is None or solver.closed_form:
         return answers
-    idx = torch.arange(job.T.shape[0], device=job.T.device)
-    res = refine_from(solver, job, idx, job.q_near)
+    be = job.backend
+    idx = be.arange(job.size)
+    res = be.refine(solver, job, None, job.q_near, solver.fallback == "multistart")
     ok_a = answers.ok(job)
     ok_b = (res.pos_err <= job.tol_pos) & (res.rot_err <= job.tol_rot)
-    dist_a = torch.linalg.vector_norm(answers.q - job.q_near, dim=-1)
-    dist_b = torch.linalg.vector_norm(res.q - job.q_near, dim=-1)
+    dist_a = be.norm(answers.q - job.q_near)
+    dist_b = be.norm(res.q - job.q_near)
     worse_a = answers.score() > (res.pos_err + 0.1 * res.rot_err)
     take_b = (ok_b & (~ok_a | (dist_b < dist_a))) | (~ok_a & ~ok_b & worse_a)
-    return answers.take(idx, res, take_b).add_iterations(idx, res.iterations)
+    return answers.take(job, idx, res, take_b)
 
 
 def more_hypotheses(solver, job: Job, answers: Answers) -> Answers:
-    """Stage 4: targets still outside tolerance after refining the best hypothesis of a multi-solution
-    network get LM from its other ``K - 1`` hypotheses, in one batch (no uniform restarts); the answer is
-    kept where it improves on the current one."""
-    from nik.lm import lm_solve
-
-    failing = ~answers.ok(job)
-    if not solver.uses_network(job.T) or getattr(solver.net, "n_hypotheses", 1) <= 1 or not bool(failing.any()):
+    """Stage 4: targets still outside tolerance after refining the best hypothesis of a multi-solution network
+    get LM from its other ``K - 1`` hypotheses (no uniform restarts); the answer is kept where it improves on the
+    current one."""
+    if answers.hypotheses is None or answers.failing(job) == 0:
         return answers
-    robot, idx = solver.robot, failing.nonzero().squeeze(1)
-    T = job.T[idx]
-    hyp = solver.net.ranked_hypotheses(T)[0][:, 1:]  # (b, K - 1, dof): the best one was refined already
-    g = torch.Generator(device=T.device).manual_seed(int(job.seed))
-    hq, it = lm_solve(
-        robot, T, hyp, tol_pos=job.tol_pos, tol_rot=job.tol_rot, max_iters=job.max_iters, restarts=0, generator=g
-    )
-    hq = robot.clamp(hq).to(answers.q.dtype)
-    hpos, hrot = pose_error(T, robot.fk(hq))
-    res = RefineResult(hq, hpos, hrot, it)
-    better = (hpos + 0.1 * hrot) < answers.score()[idx]
-    return answers.take(idx, res, better).add_iterations(idx, it)
+    be = job.backend
+    idx = be.nonzero(~answers.ok(job))
+    if idx.shape[0] == 0:
+        return answers
+    res = be.lm_starts(solver, job, idx, be.rows(answers.hypotheses, idx)[:, 1:])
+    return answers.merge(job, idx, res, strict=True)
 
 
 def fallback(solver, job: Job, answers: Answers) -> Answers:
     """Stage 5: targets still outside tolerance and within reach get a second chance, kept where better:
     ``analytic``, the closed-form solution nearest the answer so far (or ``q_near``); ``multistart``, LM
-    from uniform starts. Skipped where it would repeat the first pass (the closed form without a network;
-    LM whose restarts are the multistart already) and with ``fallback="none"``."""
-    first_pass_is_fallback = (not solver.uses_network(job.T) and solver.closed_form) or (
-        solver.refine == "lm" and solver.fallback == "multistart"
-    )
-    todo = ~answers.ok(job) & job.reachable
-    if solver.fallback == "none" or first_pass_is_fallback or not bool(todo.any()):
+    from uniform starts with the restart budget. Skipped where it would repeat the first pass (the closed form as
+    the guess; LM that restarted from uniform starts already) and with ``fallback="none"``."""
+    if solver.fallback == "none":
         return answers
-    robot, idx = solver.robot, todo.nonzero().squeeze(1)
-    T = job.T[idx]
+    if solver.fallback == "analytic" and answers.hypotheses is None and not solver.has_network:
+        return answers  # the closed form was the guess
+    if solver.fallback == "multistart" and solver.refine == "lm" and _restarts_first(solver, answers):
+        return answers  # LM restarted from uniform starts in the refine stage
+    if answers.failing(job) == 0:
+        return answers
+    be = job.backend
+    idx = be.nonzero(~answers.ok(job) & job.reachable)
+    if idx.shape[0] == 0:
+        return answers
     if solver.fallback == "analytic":
-        start = job.q_near[idx] if job.q_near is not None else answers.q[idx]
-        fq = analytic_guess(robot, T, q_near=start)
-        fpos, frot = pose_error(T, robot.fk(fq))
-        res = RefineResult(fq, fpos, frot, torch.zeros_like(idx))
+        start = be.rows(job.q_near if job.q_near is not None else answers.q, idx)
+        q, pos, rot = be.closed_form(solver, job, idx, start)
+        res = Refined(q, pos, rot, be.zeros_long(idx.shape[0]))
     else:
-        res = lm_refine(robot, T, None, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed)
-    better = (res.pos_err + 0.1 * res.rot_err) < answers.score()[idx]
-    return answers.take(idx, res, better).add_iterations(idx, res.iterations)
+        res = be.refine(solver, job, idx, None, True)
+    return answers.merge(job, idx, res, strict=True)
 
 
 def final_check(solver, job: Job, answers: Answers) -> IKResult:
-    """Stage 6: the result, with success measured against the tolerances and reachability attached."""
-    return IKResult(
-        answers.q,
-        answers.pos_err,
-        answers.rot_err,
-        answers.ok(job),
-        answers.iterations,
-        solver.source_for(job.T),
-        reachable=job.reachable,
-    )
+    """Stage 6: the result, with success measured against the asked tolerances and reachability attached."""
+    return job.backend.result(solver, job, answers, source(solver, job))
 
 
 def all_solutions(solver, job: Job, *, n_starts: int = 256, dedupe_tol: float = 1e-3) -> torch.Tensor:

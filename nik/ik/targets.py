@@ -1,5 +1,15 @@
 """Targets as the solver takes them: poses in any accepted form brought to ``(B, 4, 4)``, ``q_near`` brought
-to ``(B, dof)``, and tolerances checked."""
+to ``(B, dof)``, and tolerances checked: the one place where the input of :meth:`nik.IKSolver.solve` is validated,
+whichever backend then computes.
+
+- :func:`as_poses` / :func:`as_q_near`: torch tensors (the torch backend), raising the one-line ``ValueError``
+  of each bad input and warning about suspected degrees;
+- :func:`pose_array` / :func:`q_near_array`: the same for the compiled backend, as float64 numpy arrays. Input
+  that passes the compiled checks (:mod:`nik.kernels.poses`: finite, orthonormal, unit quaternions within
+  :data:`QUAT_NORM_TOL`, no angle that looks like degrees) is returned at once; any other input goes through
+  :func:`as_poses` / :func:`as_q_near`, which raise (or warn) with their messages, so both backends refuse the
+  same input with the same words.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +19,8 @@ import numpy as np
 import torch
 
 from nik.poses import (
+    DEGREES_SUSPECT,
+    ORTHONORMAL_TOL,
     POSE_DIMS,
     make_pose,
     quaternion_to_matrix,
@@ -18,7 +30,7 @@ from nik.poses import (
     warn_degrees,
 )
 
-__all__ = ["QUAT_NORM_TOL", "as_poses", "as_q_near", "check_tolerances"]
+__all__ = ["QUAT_NORM_TOL", "as_poses", "as_q_near", "check_tolerances", "pose_array", "q_near_array"]
 
 #: Largest accepted deviation of a quaternion's norm from 1; nearer ones are normalised.
 QUAT_NORM_TOL = 1e-2
@@ -52,13 +64,8 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
         except (TypeError, ValueError) as err:
             raise ValueError(f"{name}: expected numbers (poses), got {type(T_target).__name__}: {err}") from err
     if representation is None:
-        if T.ndim >= 2 and T.shape[-2:] == (4, 4):
-            representation = "matrix"
-        elif T.ndim >= 1 and T.shape[-1] == POSE_DIMS["quat"]:
-            representation = "quat"
-        elif T.ndim >= 1 and T.shape[-1] == POSE_DIMS["rpy"]:
-            representation = "rpy"
-        else:
+        representation = _representation(tuple(T.shape))
+        if representation is None:
             raise ValueError(
                 f"{name}: cannot tell the pose form from shape {tuple(T.shape)}; expected (B, 4, 4), "
                 "(B, 7) xyz + quaternion (w, x, y, z) or (B, 6) xyz + roll-pitch-yaw"
@@ -99,6 +106,110 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
         warn_degrees(rot, name=name, rpy=True, stacklevel=4)
         R = rpy_to_matrix(rot)
     return validate_pose(make_pose(R, p), name=name)
+
+
+def _representation(shape: tuple) -> str | None:
+    """The pose form a shape implies (``matrix``, ``quat``, ``rpy``), or None."""
+    if len(shape) >= 2 and shape[-2:] == (4, 4):
+        return "matrix"
+    if len(shape) >= 1 and shape[-1] == POSE_DIMS["quat"]:
+        return "quat"
+    if len(shape) >= 1 and shape[-1] == POSE_DIMS["rpy"]:
+        return "rpy"
+    return None
+
+
+_FLOATS = (torch.float64, torch.float32)
+
+
+def pose_array(T_target, representation: str | None = None) -> tuple[np.ndarray, torch.dtype]:
+    """``(T: (B, 4, 4) float64 numpy, dtype of the answer)`` for CPU targets (see the module docstring).
+
+    The answer's dtype is the input's for a float32 or float64 tensor, else float64. Raises what
+    :func:`as_poses` raises. A tensor not on the CPU is refused (``ValueError``): the compiled backend does not
+    take it."""
+    if isinstance(T_target, torch.Tensor):
+        if T_target.device.type != "cpu":
+            raise ValueError(f"pose_array: targets on {T_target.device}, expected the CPU")
+        dtype = T_target.dtype if T_target.dtype in _FLOATS else torch.float64
+        a = T_target.detach().numpy() if T_target.dtype in _FLOATS else None
+    else:
+        dtype = torch.float64
+        try:
+            a = np.asarray(T_target, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = None
+    T = None if a is None else _checked_poses(a, representation)
+    if T is None:  # the torch checks word the error, or accept with a warning (degrees?)
+        T = as_poses(T_target, representation).detach().to(torch.float64).numpy()
+    return np.ascontiguousarray(T), dtype
+
+
+_KP = None
+
+
+def _pose_kernels():
+    """:mod:`nik.kernels.poses`, imported on first use (``import nik`` does not import numba)."""
+    global _KP
+    if _KP is None:
+        from nik.kernels import poses
+
+        _KP = poses
+    return _KP
+
+
+def _checked_poses(a: np.ndarray, representation: str | None) -> np.ndarray | None:
+    """``(B, 4, 4)`` float64 when ``a`` passes every check of :func:`as_poses` without a warning, else None."""
+    kp = _pose_kernels()
+
+    rep = representation if representation is not None else _representation(a.shape)
+    if rep == "matrix":
+        a = a[None] if a.ndim == 2 else a
+        if a.ndim != 3 or a.shape[1:] != (4, 4) or a.shape[0] == 0:
+            return None
+    elif rep in ("quat", "rpy"):
+        a = a[None] if a.ndim == 1 else a
+        if a.ndim != 2 or a.shape[1] != POSE_DIMS[rep] or a.shape[0] == 0:
+            return None
+        if rep == "rpy" and np.abs(a[:, 3:]).max() > DEGREES_SUSPECT:
+            return None
+    else:
+        return None
+    if a.dtype != np.float64 or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+    if rep != "matrix":
+        T = np.empty((a.shape[0], 4, 4))
+        if not (kp.quat_poses(a, QUAT_NORM_TOL, T) if rep == "quat" else kp.rpy_poses(a, T)):
+            return None
+        a = T
+    return a if kp.poses_ok(a, ORTHONORMAL_TOL) else None
+
+
+def q_near_array(q_near, B: int, robot) -> np.ndarray | None:
+    """``q_near`` as ``(B, dof)`` float64 numpy for the compiled backend (None stays None); raises and warns as
+    :func:`as_q_near`."""
+    if q_near is None:
+        return None
+    dof = robot.dof
+    a = None
+    if isinstance(q_near, torch.Tensor):
+        if q_near.device.type == "cpu" and q_near.is_floating_point():
+            a = q_near.detach().numpy()
+    else:
+        try:
+            a = np.asarray(q_near, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = None
+    if a is not None:
+        if a.ndim == 1 and a.shape[0] == dof:
+            a = np.broadcast_to(a, (B, dof))
+        if a.shape != (B, dof) or not np.isfinite(a).all() or np.abs(a).max() > DEGREES_SUSPECT:
+            a = None  # the torch checks word it (or warn about degrees)
+    if a is None:
+        probe = torch.empty(B, 4, 4, dtype=torch.float64)
+        lim = robot.limits
+        return as_q_near(q_near, probe, dof, prismatic=robot.prismatic, limits=lim).numpy().copy()
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def check_tolerances(tol_pos: float, tol_rot: float) -> None:

@@ -1,6 +1,7 @@
 """Forward pass of a multilayer perceptron, compiled: ``y = L_k(act(... act(L_1(x))))``.
 
-The weights are taken once (per solver) as one flat contiguous float64 array, layer after layer
+The weights are taken once (per solver) as one flat contiguous float64 (or float32: then every product and sum is
+float32, with the scratch ``work`` and the input in float32 too) array, layer after layer
 ``W_1 (out, in)`` row by row then ``b_1 (out,)``, ``W_2``, ``b_2``, ...; ``layout: (L, 3)`` int64
 gives each layer's ``(out, in, offset of W in flat)`` (:func:`mlp_pack` builds both). The
 activation (between layers, not after the last) is a code of :data:`ACTIVATIONS`, the same functions
@@ -83,6 +84,7 @@ def mlp_forward(flat, layout, activation, x, y, work):
     L = layout.shape[0]
     src = work[0]
     dst = work[1]
+    zero = flat[0] - flat[0]  # in the weights' dtype: float32 weights compute in float32 (twice the lanes)
     for r in range(R):
         for i in range(x.shape[1]):
             src[r * x.shape[1] + i] = x[r, i]
@@ -99,7 +101,7 @@ def mlp_forward(flat, layout, activation, x, y, work):
                 x1 = src[(r + 1) * n_in : (r + 2) * n_in]
                 x2 = src[(r + 2) * n_in : (r + 3) * n_in]
                 x3 = src[(r + 3) * n_in : (r + 4) * n_in]
-                a0 = a1 = a2 = a3 = 0.0
+                a0 = a1 = a2 = a3 = zero
                 for i in range(n_in):
                     wi = w[i]
                     a0 += wi * x0[i]
@@ -113,7 +115,7 @@ def mlp_forward(flat, layout, activation, x, y, work):
                 r += 4
             while r < R:
                 xr = src[r * n_in : (r + 1) * n_in]
-                acc = 0.0
+                acc = zero
                 for i in range(n_in):
                     acc += w[i] * xr[i]
                 _store(y, dst, r, o, n_out, acc + b, last, activation)

@@ -41,11 +41,14 @@ from nik.nets.pretrained import save
 from nik.nets.registry import install
 from nik.robots import Robot, load_robot
 
-__all__ = ["DEFAULT_HIDDEN", "Progress", "TrainCfg", "TrainResult", "choose_kind", "train_network"]
+__all__ = ["DEFAULT_HIDDEN", "SINGLE_POSE_HIDDEN", "Progress", "TrainCfg", "TrainResult", "choose_kind", "train_network"]
 
 #: The trunk of a ``nik train`` network: 4 x 256 SiLU. Chosen by measurement (``benchmarks/learned.py``):
 #: its forward pass costs about a third of a 3 x 512 one per target on a batch of 10,000, one CPU thread.
 DEFAULT_HIDDEN = (256, 256, 256, 256)
+#: Hidden layers of a single-pose network (``nik train --single-pose``): a forward pass of about a fifth of the
+#: default's multiply-adds, cheap enough for one pose on the compiled backend (docs/learned.md).
+SINGLE_POSE_HIDDEN = (128, 128, 128)
 
 
 @dataclass
@@ -64,6 +67,7 @@ class TrainCfg:
     kind: str = "auto"  # auto | branch_heads | multihead
     hidden: tuple[int, ...] = DEFAULT_HIDDEN
     heads: int = 8  # hypotheses of a multi-head net
+    single_pose: bool = False  # a small network for single poses (recorded role "single_pose", nik.nets.registry)
     batch_size: int = 1024
     lr: float = 1e-3
     pose_start: float = 0.3  # fraction of the run in joint space before the FK pose loss
@@ -248,7 +252,7 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
     }
     if model._earlier_commands:
         training["resumed_from_commands"] = list(model._earlier_commands)
-    save(net, out, training=training)
+    save(net, out, training=training, role="single_pose" if cfg.single_pose else None)
     write(f"nik train: wrote {out} and {out.with_suffix('.json')}")
     result = TrainResult(
         out=out,

@@ -135,27 +135,39 @@ class CompiledLM:
         """LM for ``T: (B, 4, 4)`` float64 from ``q0: (B, dof)`` (None: the best of :data:`FIRST_STARTS` uniform
         configurations), restarting the targets that fail (``restarts=False``: none; none either where
         ``reachable: (B,)`` is False)."""
-        from nik.kernels import lm as klm
-
+        klm = _klm()
         B, n = T.shape[0], self.joints.shape[0]
         opts, iopts = self._options(klm, tol_pos, tol_rot, max_iters, q0 is None)
         if q0 is None:
             q0 = np.zeros((B, n))
+        elif q0.dtype != np.float64 or not q0.flags.c_contiguous:
+            q0 = np.ascontiguousarray(q0, dtype=np.float64)
         budget = self.budget if restarts else 0
-        if reachable is None:
-            budget = np.full(B, budget, dtype=np.int64)
-        else:
-            budget = np.where(reachable, budget, 0)
+        budget = np.full(B, budget, dtype=np.int64) if reachable is None else np.where(reachable, budget, 0)
+        if T.dtype != np.float64 or not T.flags.c_contiguous:
+            T = np.ascontiguousarray(T, dtype=np.float64)
         run = CompiledRun(
             np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
         )
-        if T.dtype != np.float64 or not T.flags.c_contiguous:
-            T = np.ascontiguousarray(T, dtype=np.float64)
-        if q0.dtype != np.float64 or not q0.flags.c_contiguous:
-            q0 = np.ascontiguousarray(q0, dtype=np.float64)
-        klm.lm_solve(
-            self.G, self.joints, T, q0, opts, iopts, budget, klm.seed_state(seed), *astuple_run(run), self.work
+        klm.lm_solve(self.G, self.joints, T, q0, opts, iopts, budget, _seed(klm, seed), *astuple_run(run), self.work)
+        return run
+
+    def solve_starts(
+        self, T: np.ndarray, starts: np.ndarray, *, tol_pos: float, tol_rot: float, seed: int, max_iters: int | None = None
+    ) -> CompiledRun:
+        """LM for ``T: (B, 4, 4)`` float64 from each target's starts ``starts: (B, K, dof)`` in turn (the first that
+        reaches the tolerance ends it; no uniform restarts): :func:`nik.kernels.seeded.lm_starts`."""
+        from nik.kernels.seeded import lm_starts
+
+        klm = _klm()
+        B, n = T.shape[0], self.joints.shape[0]
+        opts, iopts = self._options(klm, tol_pos, tol_rot, max_iters, False)
+        run = CompiledRun(
+            np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
         )
+        T = np.ascontiguousarray(T, dtype=np.float64)
+        starts = np.ascontiguousarray(starts, dtype=np.float64)
+        lm_starts(self.G, self.joints, T, starts, opts, iopts, _seed(klm, seed), *astuple_run(run), self.work)
         return run
 
     def _options(self, klm, tol_pos, tol_rot, max_iters, multistart) -> tuple[np.ndarray, np.ndarray]:
@@ -176,3 +188,25 @@ class CompiledLM:
 
 
 _MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_KLM = None
+_SEEDS: dict[int, np.ndarray] = {}
+
+
+def _klm():
+    """:mod:`nik.kernels.lm`, imported on first use."""
+    global _KLM
+    if _KLM is None:
+        from nik.kernels import lm
+
+        _KLM = lm
+    return _KLM
+
+
+def _seed(klm, seed) -> np.ndarray:
+    """The kernel's random state of ``seed`` (kept for the seeds in use; the kernel only reads it)."""
+    state = _SEEDS.get(seed)
+    if state is None:
+        if len(_SEEDS) > 256:
+            _SEEDS.clear()
+        state = _SEEDS[seed] = klm.seed_state(seed)
+    return state

@@ -197,10 +197,13 @@ def _atomic_write(path: Path, write) -> None:
             tmp.unlink()
 
 
-def save_pair(net, path: str | Path, *, training: dict | None = None, validation: dict | None = None) -> Path:
+def save_pair(
+    net, path: str | Path, *, training: dict | None = None, validation: dict | None = None, role: str | None = None
+) -> Path:
     """Write ``net`` as ``path`` (``NAME.safetensors``, or a folder: ``<folder>/<robot name>.safetensors``)
     and the JSON beside it; returns the ``.safetensors`` path. ``validation``: the recorded error
-    (:func:`nik.nets.pretrained.validation_error`'s dict), stored as given."""
+    (:func:`nik.nets.pretrained.validation_error`'s dict), stored as given; ``role``: ``"single_pose"`` for a small
+    network made to guess single poses (:mod:`nik.nets.registry`), recorded when given."""
     from safetensors.torch import save as st_save
 
     p = Path(path)
@@ -223,6 +226,8 @@ def save_pair(net, path: str | Path, *, training: dict | None = None, validation
         "training": training or {},
         "validation": validation or {},
     }
+    if role is not None:
+        meta["role"] = role
 
     def write_weights(tmp: Path) -> None:
         tmp.write_bytes(data)

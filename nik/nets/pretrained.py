@@ -40,10 +40,23 @@ PRETRAINED_DIR = SHIPPED_DIR
 VALIDATION = {"seed": 12345, "n": 2000}
 
 
-def available(directory: str | Path | None = None) -> list[str]:
-    """Names of the robots that have a shipped network (both files present), sorted."""
+def available(directory: str | Path | None = None, *, single_pose: bool = False) -> list[str]:
+    """Names of the robots that have a shipped network (both files present), sorted; ``single_pose=True``: the
+    names of the shipped single-pose networks instead (``<robot>_one``, recorded role ``single_pose``)."""
+    import json
+
     d = Path(directory) if directory is not None else PRETRAINED_DIR
-    return sorted(p.stem for p in d.glob("*.json") if p.with_suffix(".safetensors").is_file())
+    out = []
+    for p in d.glob("*.json"):
+        if not p.with_suffix(".safetensors").is_file():
+            continue
+        try:
+            role = json.loads(p.read_text()).get("role")
+        except (OSError, ValueError, AttributeError):
+            role = None
+        if (role == "single_pose") == single_pose:
+            out.append(p.stem)
+    return sorted(out)
 
 
 def read_meta(name: str, directory: str | Path | None = None) -> dict:
@@ -78,7 +91,9 @@ def validation_error(net, *, seed: int, n: int) -> dict:
     return out
 
 
-def save(net, directory: str | Path, *, training: dict | None = None, validation: dict | None = None) -> Path:
+def save(
+    net, directory: str | Path, *, training: dict | None = None, validation: dict | None = None, role: str | None = None
+) -> Path:
     """Write ``net`` as a pair (:func:`nik.nets.pair.save_pair`): ``directory`` is a folder (the pair is named
     after the robot) or a ``NAME.safetensors`` path; returns the ``.json`` path.
 
@@ -86,7 +101,7 @@ def save(net, directory: str | Path, *, training: dict | None = None, validation
     :data:`VALIDATION`) and recorded, with the SHA-256 of the weights."""
     val = dict(VALIDATION, **(validation or {}))
     record = validation_error(net.eval(), seed=val["seed"], n=val["n"])
-    return pair_paths(save_pair(net, directory, training=training, validation=record))[1]
+    return pair_paths(save_pair(net, directory, training=training, validation=record, role=role))[1]
 
 
 def load(robot, directory: str | Path | None = None):

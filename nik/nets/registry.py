@@ -12,6 +12,10 @@ definition hash (the name does not matter: the same arm loaded from its URDF und
 same network); the user folder comes first, so an installed network replaces a shipped one for its arm.
 Within a folder a pair named after the robot wins, then the newest. The index reads only the JSON files
 (a few kB each) and is cached per file (path, size, modification time).
+
+A pair whose JSON says ``"role": "single_pose"`` is a small network made to guess one or a few poses cheaply
+(:mod:`nik.ik.networks`): :func:`find_network` never returns it; :func:`find_single_pose_network` finds it, by the
+same rules.
 """
 
 from __future__ import annotations
@@ -24,12 +28,16 @@ from pathlib import Path
 from nik.errors import CheckpointError
 from nik.nets.pair import pair_paths, read_pair_meta
 
-__all__ = ["SHIPPED_DIR", "find_network", "index", "install", "search_dirs", "user_dir"]
+__all__ = ["SHIPPED_DIR", "SINGLE_POSE", "find_network", "find_single_pose_network", "index", "install", "role_of",
+           "search_dirs", "user_dir"]
+
+#: The ``role`` of a small network for single poses.
+SINGLE_POSE = "single_pose"
 
 #: The networks shipped inside the package.
 SHIPPED_DIR = Path(__file__).resolve().parent / "weights"
 
-_CACHE: dict[Path, tuple[tuple[int, int], str | None]] = {}
+_CACHE: dict[Path, tuple[tuple[int, int], str | None, str | None]] = {}
 
 
 def user_dir() -> Path:
@@ -46,23 +54,35 @@ def search_dirs() -> list[Path]:
     return [user_dir(), SHIPPED_DIR]
 
 
-def _hash_of(js: Path) -> str | None:
-    """The ``robot_hash`` recorded in ``js`` (cached), or None where the JSON is unreadable."""
+def _facts_of(js: Path) -> tuple[str | None, str | None]:
+    """``(robot_hash, role)`` recorded in ``js`` (cached); None for what the JSON does not say or cannot be read."""
     try:
         st = js.stat()
     except OSError:
-        return None
+        return None, None
     key = (st.st_size, st.st_mtime_ns)
     hit = _CACHE.get(js)
     if hit is not None and hit[0] == key:
-        return hit[1]
+        return hit[1], hit[2]
     try:
-        value = json.loads(js.read_text()).get("robot_hash")
+        meta = json.loads(js.read_text())
+        value, role = meta.get("robot_hash"), meta.get("role")
         value = value if isinstance(value, str) else None
+        role = role if isinstance(role, str) else None
     except (OSError, ValueError, AttributeError):
-        value = None
-    _CACHE[js] = (key, value)
-    return value
+        value, role = None, None
+    _CACHE[js] = (key, value, role)
+    return value, role
+
+
+def _hash_of(js: Path) -> str | None:
+    """The ``robot_hash`` recorded in ``js`` (cached), or None where the JSON is unreadable."""
+    return _facts_of(js)[0]
+
+
+def role_of(path: Path) -> str | None:
+    """The ``role`` a pair's JSON records (``"single_pose"`` or None)."""
+    return _facts_of(Path(path).with_suffix(".json"))[1]
 
 
 def index(dirs: list[Path] | None = None) -> list[tuple[Path, str | None]]:
@@ -86,10 +106,19 @@ def find_network(robot, dirs: list[Path] | None = None) -> Path | None:
         CheckpointError: the JSON of a pair named after the robot is unreadable (a damaged file is said,
             not skipped); other unreadable JSONs are skipped.
     """
+    return _find(robot, dirs, None)
+
+
+def find_single_pose_network(robot, dirs: list[Path] | None = None) -> Path | None:
+    """The ``.safetensors`` of the single-pose network (``"role": "single_pose"``) for ``robot``, or None."""
+    return _find(robot, dirs, SINGLE_POSE)
+
+
+def _find(robot, dirs, role) -> Path | None:
     target = robot.definition_hash
     for d in search_dirs() if dirs is None else dirs:
         pairs = index([d])
-        hits = [st for st, h in pairs if h == target]
+        hits = [st for st, h in pairs if h == target and role_of(st) == role]
         for st, h in pairs:
             if h is None and st.stem == robot.name:
                 read_pair_meta(st)  # raises the one-line reason

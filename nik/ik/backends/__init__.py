@@ -1,0 +1,74 @@
+"""The two backends of the one pipeline of :mod:`nik.ik.stages`: where a stage's work is computed.
+
+A stage (guess, refine, near, more hypotheses, fallback, final check) is written once against the small interface
+below; a backend implements it:
+
+- :class:`~nik.ik.backends.compiled.CompiledBackend` (``"compiled"``): numpy arrays and the numba kernels of
+  :mod:`nik.kernels` (LM, closed forms, the network's forward pass for a few poses, FK ranking of its hypotheses);
+  a pose costs tens of microseconds, its Python around the kernels a few;
+- :class:`~nik.ik.backends.torch.TorchBackend` (``"torch"``): torch tensors on any device (the GPU), the batched
+  LM of :mod:`nik.lm`, the swarms, the batched closed form.
+
+:func:`choose` picks the backend of a call: the compiled one for CPU targets with ``refine="lm"``, whatever the batch
+size (its cost per pose does not grow with the batch, so a large batch never costs more per pose than the same
+batch in chunks); torch otherwise (targets on a GPU, the swarms, ``refine="none"``). Whatever the backend, the answers satisfy the same contract (joints
+inside the limits, errors measured by FK, honest ``success`` and ``reachable``), the same seed gives the same answer,
+and ``IKResult.source`` names the guess that served.
+
+Backend interface (``be``; arrays are numpy on the compiled backend, tensors on torch):
+
+- ``be.job(solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job``: validated
+  targets (:mod:`nik.ik.targets`), reach flags, the unreachable warning;
+- ``be.network(solver, job) -> (hyp (B, K, dof) ranked best first, pos (B,), rot (B,))``;
+- ``be.closed_form(solver, job, idx, q_near) -> (q, pos, rot)``;
+- ``be.uniform_guess(solver, job) -> q``: the best of 64 uniform configurations (a raw guess for ``refine="none"``);
+- ``be.refine(solver, job, idx, q0, restarts) -> Refined``: the solver's refiner (LM; on torch also a swarm) from
+  ``q0`` (None: uniform starts);
+- ``be.lm_starts(solver, job, idx, starts (b, K, dof)) -> Refined``: LM from several starts per target;
+- ``be.result(solver, job, answers, source) -> IKResult`` (tensors);
+- array helpers: ``nonzero``, ``arange``, ``copy``, ``put``, ``norm``, ``where``.
+"""
+
+from __future__ import annotations
+
+from nik.ik.backends.base import Job, Refined
+
+__all__ = ["Job", "Refined", "choose", "compiled_backend", "torch_backend"]
+
+_COMPILED = None
+_TORCH = None
+
+
+def compiled_backend():
+    """The compiled backend (one per process; it holds no per-call state)."""
+    global _COMPILED
+    if _COMPILED is None:
+        from nik.ik.backends.compiled import CompiledBackend
+
+        _COMPILED = CompiledBackend()
+    return _COMPILED
+
+
+def torch_backend():
+    """The torch backend (one per process)."""
+    global _TORCH
+    if _TORCH is None:
+        from nik.ik.backends.torch import TorchBackend
+
+        _TORCH = TorchBackend()
+    return _TORCH
+
+
+def choose(solver, T_target):
+    """The backend for ``solver.solve(T_target)`` (module docstring); ``solver.backend`` other than ``"auto"``
+    forces one (the compiled one refuses targets that are not on the CPU)."""
+    import torch
+
+    forced = solver.backend
+    if forced == "torch" or (forced == "auto" and solver.refine != "lm"):
+        return torch_backend()
+    if isinstance(T_target, torch.Tensor) and T_target.device.type != "cpu":
+        if forced == "compiled":
+            raise ValueError(f"IKSolver(backend='compiled'): targets on {T_target.device}, expected the CPU")
+        return torch_backend()
+    return compiled_backend()

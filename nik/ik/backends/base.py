@@ -1,0 +1,53 @@
+"""What every backend shares: :class:`Job` (one call's targets and tolerances) and :class:`Refined` (a refiner's
+answers)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["Job", "Refined"]
+
+
+@dataclass
+class Job:
+    """One call of :meth:`nik.IKSolver.solve`: B targets and what their answers must meet.
+
+    Attributes:
+        backend: the backend that computes it (:mod:`nik.ik.backends`); arrays below are of its kind.
+        T: (B, 4, 4) target poses, metres (float64 numpy on the compiled backend; the input's tensor on torch).
+        reachable: (B,) bool, False where the reach bound proves a target out of reach.
+        q_near: (B, dof) radians or None, the configuration to stay near.
+        tol_pos: metres; tol_rot: radians (geodesic): what the stages refine to (on the compiled backend, half the
+            asked tolerance for float32 targets, so that rounding the answer cannot carry it out).
+        seed: seeds every random choice; max_iters: iteration limit of the refinement (None: the method's config).
+        dtype: the answer's dtype (torch); success_pos, success_rot: the asked tolerances (the result's success).
+        source: the guess that serves the call (set by the first stage that asks, :func:`nik.ik.stages.source`).
+    """
+
+    backend: Any
+    T: Any
+    reachable: Any
+    q_near: Any
+    tol_pos: float
+    tol_rot: float
+    seed: int = 0
+    max_iters: int | None = None
+    dtype: Any = None
+    success_pos: float | None = None
+    success_rot: float | None = None
+    source: str | None = None
+
+    @property
+    def size(self) -> int:
+        return int(self.T.shape[0])
+
+
+@dataclass
+class Refined:
+    """A refiner's answers for b targets: ``q (b, dof)``, ``pos_err``, ``rot_err`` ``(b,)`` by FK, ``iterations (b,)``."""
+
+    q: Any
+    pos_err: Any
+    rot_err: Any
+    iterations: Any

@@ -1,0 +1,245 @@
+"""The compiled backend: the stages' work on float64 numpy arrays through the numba kernels of :mod:`nik.kernels`.
+
+For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here each
+piece of work is one kernel call over the whole batch:
+
+- the checks of :mod:`nik.ik.targets` (:func:`~nik.ik.targets.pose_array`) and the reach bound
+  (:func:`nik.kernels.poses.reach_flags`);
+- the network's hypotheses: for up to :data:`PACKED_MAX_BATCH` poses the packed network's compiled forward pass
+  (:mod:`nik.nets.compiled`; the arm's single-pose network when it has one: :meth:`nik.IKSolver.network_for`), for more
+  the torch forward pass (one batched float32 matmul per layer); then every hypothesis ranked by compiled FK
+  (:func:`nik.kernels.seeded.rank`);
+- Levenberg-Marquardt (:class:`nik.lm.compiled.CompiledLM`, the solver's :class:`~nik.lm.LMCfg`): from a guess,
+  from several starts in turn (:meth:`~nik.lm.compiled.CompiledLM.solve_starts`), or from uniform starts with the
+  batched LM's restart budget;
+- the closed forms (:mod:`nik.kernels.closed`: the 8 solutions of ``nik.analytic.solve``, the one chosen as
+  ``nik.ik.guesses.analytic_guess`` chooses it). An arm that fits its family only within the tolerance of
+  :mod:`nik.analytic.geometry` (URDF origins rounded to float32; ``nik.analytic.solve`` adds Newton steps there)
+  gets the ideal arm's closed form checked at :data:`APPROXIMATE_CHECK_TOL` as its guess; the refine stage's LM
+  polishes what misses the solver's tolerance.
+
+Answers come back as an :class:`~nik.ik.result.IKResult` of tensors in the targets' dtype: float32 targets are
+solved to half the tolerance in float64, rounded, clamped into the float32 limits and measured again.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import torch
+
+from nik.ik.backends.base import Job, Refined
+from nik.ik.guesses import LIMIT_ROUNDING
+from nik.ik.result import IKResult
+from nik.ik.targets import pose_array, q_near_array
+from nik.lm.batched import LMCfg
+from nik.lm.compiled import CompiledLM
+from nik.robots.reach import REACH_SLACK, reach_center, reach_radius, unreachable_message
+
+__all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend"]
+
+#: The FK check of a closed-form solution (metres, radians) by the targets' dtype: ``nik.analytic.solve``'s
+#: defaults (a float32 pose is a rotation only to about 1e-7).
+CLOSED_FORM_TOL = {torch.float64: 1e-9, torch.float32: 2e-5}
+#: The same check on an arm whose closed form is that of the ideal arm it is within tolerance of (metres,
+#: radians): the Jaco2's wrist axes miss each other by 8e-8 m, its closed-form solutions by about as much.
+APPROXIMATE_CHECK_TOL = 1e-5
+#: Most poses whose hypotheses the packed network's compiled forward pass computes; above, torch's batched
+#: forward pass (float32 matmuls) is cheaper per pose. Measured with panda's and xarm7's single-pose networks
+#: (whole solver, one thread, CPU us per target; kernel / torch): 16 poses 26 / 73, 100 poses 20 / 28,
+#: 1,000 poses 19 / 15: the crossover lies between 100 and 1,000.
+PACKED_MAX_BATCH = 256
+
+
+_KERNELS = None
+
+
+def _kernels():
+    """The kernels this backend calls, imported on first use (``import nik`` does not import numba)."""
+    global _KERNELS
+    if _KERNELS is None:
+        from types import SimpleNamespace
+
+        from nik.kernels import closed, lm, poses, seeded
+
+        _KERNELS = SimpleNamespace(
+            reach_flags=poses.reach_flags,
+            rank=seeded.rank,
+            merge=seeded.merge,
+            closed_guess=closed.guess,
+            pose_errors=lm.pose_errors,
+        )
+    return _KERNELS
+
+
+class _State:
+    """Per solver, built on its first compiled call: the robot's model arrays and facts, its LM, its networks."""
+
+    __slots__ = ("G", "joints", "lm", "center", "radius", "lo32", "hi32", "closed", "closed_check", "packed")
+
+    def __init__(self, solver):
+        from nik.analytic import family
+
+        robot = solver.robot
+        self.G, self.joints = robot.chain_arrays()
+        self.lm = CompiledLM.of(robot, solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None)
+        self.center = reach_center(robot).numpy()
+        self.radius = max(reach_radius(robot), 1e-300)
+        lo32, hi32 = robot.limits_as(torch.empty(0, dtype=torch.float32))
+        self.lo32, self.hi32 = lo32.numpy(), hi32.numpy()
+        self.closed, self.closed_check = None, None
+        if family(robot) is not None:
+            self.closed, self.closed_check = _closed_constants(robot)
+        self.packed = {}
+
+
+def _closed_constants(robot):
+    """``(constants of the compiled closed form, its FK check tolerance by dtype)`` or ``(None, None)``."""
+    from nik.analytic.solve import closed_form
+    from nik.kernels.closed import closed_form_array
+
+    k = closed_form(robot)
+    if k.get("polish"):  # within tolerance of its family: the ideal arm's closed form, then LM
+        return closed_form_array({**k, "polish": False}), dict.fromkeys(CLOSED_FORM_TOL, APPROXIMATE_CHECK_TOL)
+    return closed_form_array(k), CLOSED_FORM_TOL
+
+
+class CompiledBackend:
+    """The compiled backend (see the module docstring and :mod:`nik.ik.backends` for the interface)."""
+
+    name = "compiled"
+
+    # -- arrays ------------------------------------------------------------------
+    nonzero = staticmethod(np.flatnonzero)
+    arange = staticmethod(np.arange)
+    where = staticmethod(np.where)
+
+    @staticmethod
+    def copy(x):
+        return x.copy()
+
+    @staticmethod
+    def rows(x, idx):
+        """``x[idx]`` (``idx``: sorted indices from :meth:`nonzero`, or None for every row); no copy when they are all."""
+        return x if idx is None or idx.shape[0] == x.shape[0] else x[idx]
+
+    @staticmethod
+    def put(dst, idx, src) -> None:
+        dst[idx] = src
+
+    @staticmethod
+    def norm(x):
+        return np.sqrt((x * x).sum(-1))
+
+    @staticmethod
+    def zeros_long(n: int):
+        return np.zeros(n, dtype=np.int64)
+
+    @staticmethod
+    def merge(answers, job: Job, idx, res: Refined, strict: bool) -> int:
+        """:meth:`nik.ik.stages.Answers.merge` in one kernel call; returns how many targets still fail."""
+        return _kernels().merge(
+            answers.q, answers.pos_err, answers.rot_err, answers.iterations, answers.ok(job), idx, res.q,
+            res.pos_err, res.rot_err, res.iterations, strict, job.tol_pos, job.tol_rot,
+        )  # fmt: skip
+
+    # -- state ---------------------------------------------------------------------
+    @staticmethod
+    def state(solver) -> _State:
+        st = solver.__dict__.get("_compiled_state")
+        if st is None or st.G is not solver.robot.chain_arrays()[0]:
+            st = solver.__dict__["_compiled_state"] = _State(solver)
+        return st
+
+    # -- the job -------------------------------------------------------------------
+    def job(self, solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job:
+        reach_flags = _kernels().reach_flags
+        T, dtype = pose_array(T_target, representation)
+        st = self.state(solver)
+        B = T.shape[0]
+        reachable = np.empty(B, dtype=bool)
+        if not reach_flags(T, st.center, st.radius, REACH_SLACK, reachable):
+            msg = unreachable_message(solver.robot, torch.from_numpy(T), torch.from_numpy(reachable))
+            warnings.warn(msg, UserWarning, stacklevel=4)
+        near = q_near_array(q_near, B, solver.robot)
+        margin = 1.0 if dtype == torch.float64 else 0.5
+        return Job(
+            self, T, reachable, near, tol_pos * margin, tol_rot * margin, seed, max_iters, dtype, tol_pos, tol_rot
+        )
+
+    # -- guesses -----------------------------------------------------------------------
+    def network(self, solver, job: Job):
+        st = self.state(solver)
+        B = job.size
+        net = solver.network_for(B, self.name)
+        if B <= PACKED_MAX_BATCH:
+            packed = st.packed.get(id(net))
+            if packed is None:
+                from nik.nets.compiled import pack
+
+                packed = st.packed[id(net)] = pack(net) or False
+            if packed:
+                return packed.ranked_hypotheses(st.G, st.joints, job.T)
+        with torch.no_grad():
+            ref = net.in_mean
+            hyp = net(torch.from_numpy(job.T).to(device=ref.device, dtype=ref.dtype))
+        hyp = np.ascontiguousarray(hyp.reshape(B, -1, solver.robot.dof).cpu().numpy(), dtype=np.float64)
+        pos, rot = np.empty(B), np.empty(B)
+        _kernels().rank(st.G, st.joints, job.T, hyp, pos, rot)
+        return hyp, pos, rot
+
+    def closed_form(self, solver, job: Job, idx, q_near):
+        guess = _kernels().closed_guess
+        st = self.state(solver)
+        T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
+        B, n = T.shape[0], st.joints.shape[0]
+        q, pos, rot, ok = np.empty((B, n)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
+        use_near = q_near is not None
+        guess(
+            st.closed, st.G, st.joints, st.closed_check[job.dtype], T, q_near if use_near else q, use_near,
+            LIMIT_ROUNDING, job.tol_pos, job.tol_rot, reachable, q, pos, rot, ok,
+        )  # fmt: skip
+        return q, pos, rot
+
+    # -- refiners ----------------------------------------------------------------------
+    def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+        T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
+        run = self.state(solver).lm.solve(
+            T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters,
+            restarts=restarts, reachable=reachable,
+        )  # fmt: skip
+        return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
+
+    def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
+        T = self.rows(job.T, idx)
+        run = self.state(solver).lm.solve_starts(
+            T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters
+        )
+        return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
+
+    def uniform_guess(self, solver, job: Job):  # pragma: no cover - refine="none" runs on torch
+        raise NotImplementedError("the compiled backend serves refine='lm' only")
+
+    # -- the result ----------------------------------------------------------------------
+    def result(self, solver, job: Job, answers, source: str) -> IKResult:
+        q, pos, rot = answers.q, answers.pos_err, answers.rot_err
+        if job.dtype != torch.float64:  # the answer in the targets' dtype, inside the limits, its errors measured
+            pose_errors = _kernels().pose_errors
+            st = self.state(solver)
+            q = np.clip(q.astype(np.float32), st.lo32, st.hi32)
+            pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
+            pose_errors(st.G, st.joints, job.T, q.astype(np.float64), pos, rot)
+            ok = (pos <= job.success_pos) & (rot <= job.success_rot)
+            pos, rot = pos.astype(np.float32), rot.astype(np.float32)
+        else:  # the stages' tolerance is the asked one
+            ok = answers.ok(job)
+        return IKResult(
+            torch.from_numpy(q),
+            torch.from_numpy(pos),
+            torch.from_numpy(rot),
+            torch.from_numpy(ok),
+            torch.from_numpy(answers.iterations),
+            source,
+            reachable=torch.from_numpy(job.reachable),
+        )

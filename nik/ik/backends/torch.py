@@ -1,0 +1,141 @@
+"""The torch backend: the stages' work on tensors of the targets' dtype and device (a GPU, or CPU work the
+compiled backend does not do: the swarms, ``refine="none"``, a closed-form arm's large batches).
+
+Guesses from :mod:`nik.ik.guesses`, refiners from :mod:`nik.ik.refiners` (the batched LM of :mod:`nik.lm`, the
+swarms of :mod:`nik.swarm`), validation from :mod:`nik.ik.targets`.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import torch
+
+from nik.ik.backends.base import Job, Refined
+from nik.ik.guesses import analytic_guess, multistart_guess
+from nik.ik.refiners import lm_refine, swarm_refine
+from nik.ik.result import IKResult
+from nik.ik.targets import as_poses, as_q_near
+from nik.poses import pose_error
+from nik.robots.reach import unreachable_message, within_reach
+
+__all__ = ["TorchBackend"]
+
+
+class TorchBackend:
+    """The torch backend (see :mod:`nik.ik.backends` for the interface)."""
+
+    name = "torch"
+
+    # -- arrays ------------------------------------------------------------------
+    @staticmethod
+    def nonzero(mask):
+        return mask.nonzero().squeeze(1)
+
+    @staticmethod
+    def arange(n, like=None):
+        return torch.arange(n)
+
+    @staticmethod
+    def where(c, a, b):
+        return torch.where(c, a, b)
+
+    @staticmethod
+    def copy(x):
+        return x.clone()
+
+    @staticmethod
+    def rows(x, idx):
+        """``x[idx]`` (``idx``: indices, or None for every row)."""
+        return x if idx is None else x[idx]
+
+    @staticmethod
+    def put(dst, idx, src) -> None:
+        dst[idx] = src.to(dst.dtype)
+
+    @staticmethod
+    def norm(x):
+        return torch.linalg.vector_norm(x, dim=-1)
+
+    @staticmethod
+    def zeros_long(n: int, like=None):
+        return torch.zeros(n, dtype=torch.long, device=None if like is None else like.device)
+
+    @staticmethod
+    def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
+        """:meth:`nik.ik.stages.Answers.merge` with tensor operations (the failing count is counted again when
+        asked: None)."""
+        new = res.pos_err + 0.1 * res.rot_err
+        old = answers.score()[idx]
+        keep = idx[new < old if strict else new <= old]
+        mask = new < old if strict else new <= old
+        answers.q[keep] = res.q[mask].to(answers.q.dtype)
+        answers.pos_err[keep] = res.pos_err[mask].to(answers.pos_err.dtype)
+        answers.rot_err[keep] = res.rot_err[mask].to(answers.rot_err.dtype)
+        answers.iterations[idx] += res.iterations.to(answers.iterations.dtype)
+        answers._ok = None
+
+    # -- the job -------------------------------------------------------------------
+    def job(self, solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job:
+        robot = solver.robot
+        T = as_poses(T_target, representation)
+        reachable = within_reach(robot, T)
+        msg = unreachable_message(robot, T, reachable)
+        if msg is not None:
+            warnings.warn(msg, UserWarning, stacklevel=4)
+        near = as_q_near(q_near, T, robot.dof, prismatic=robot.prismatic, limits=robot.limits)
+        return Job(self, T, reachable, near, tol_pos, tol_rot, seed, max_iters, T.dtype, tol_pos, tol_rot)
+
+    # -- guesses -----------------------------------------------------------------------
+    def network(self, solver, job: Job):
+        net, T = solver.network_for(job.size, self.name), job.T
+        if hasattr(net, "ranked_hypotheses"):
+            hyp = net.ranked_hypotheses(T)[0]
+        else:  # a plain network: one hypothesis
+            hyp = solver.robot.clamp(net.predict(T))[:, None]
+        pos, rot = pose_error(T, solver.robot.fk(hyp[:, 0]))
+        return hyp, pos, rot
+
+    def closed_form(self, solver, job: Job, idx, q_near):
+        T = job.T if idx is None else job.T[idx]
+        q = analytic_guess(solver.robot, T, q_near=q_near)
+        pos, rot = pose_error(T, solver.robot.fk(q))
+        return q, pos, rot
+
+    def uniform_guess(self, solver, job: Job):
+        return multistart_guess(solver.robot, job.T, seed=job.seed)
+
+    # -- refiners ----------------------------------------------------------------------
+    def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+        T = job.T if idx is None else job.T[idx]
+        reachable = job.reachable if idx is None else job.reachable[idx]
+        kw = {"tol_pos": job.tol_pos, "tol_rot": job.tol_rot, "seed": job.seed, "max_iters": job.max_iters}
+        if solver.refine == "lm":
+            res = lm_refine(solver.robot, T, q0, cfg=solver.swarm_cfg, restarts=restarts, reachable=reachable, **kw)
+        else:
+            res = swarm_refine(
+                solver.robot, T, q0, method=solver.refine, cfg=solver.swarm_cfg, polish=solver.polish, **kw
+            )
+        dt = T.dtype
+        return Refined(res.q.to(dt), res.pos_err.to(dt), res.rot_err.to(dt), res.iterations.long())
+
+    def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
+        from nik.lm import lm_solve
+
+        robot = solver.robot
+        T = job.T if idx is None else job.T[idx]
+        g = torch.Generator(device=T.device).manual_seed(int(job.seed))
+        hq, it = lm_solve(
+            robot, T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, max_iters=job.max_iters, restarts=0,
+            generator=g,
+        )  # fmt: skip
+        hq = robot.clamp(hq).to(T.dtype)
+        pos, rot = pose_error(T, robot.fk(hq))
+        return Refined(hq, pos, rot, it.long())
+
+    # -- the result ----------------------------------------------------------------------
+    def result(self, solver, job: Job, answers, source: str) -> IKResult:
+        ok = (answers.pos_err <= job.success_pos) & (answers.rot_err <= job.success_rot)
+        return IKResult(
+            answers.q, answers.pos_err, answers.rot_err, ok, answers.iterations, source, reachable=job.reachable
+        )
