@@ -49,7 +49,7 @@ def register(sub) -> None:
     t.add_argument(
         "--single-pose",
         action="store_true",
-        help="a small network (default hidden 128 128 128) that the solver uses on the CPU (its compiled "
+        help="a small network (default hidden 64 64) that the solver uses on the CPU (its compiled "
         "backend), next to the main network of the arm (recorded role single_pose)",
     )
     t.add_argument("--batch-size", type=int, default=1024, help="samples per step (default 1024)")

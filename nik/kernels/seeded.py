@@ -33,8 +33,13 @@ _TWO_PI = 2.0 * math.pi
 
 @kernel
 def _decode_angle(s, c, center):
+    """``atan2(s, c)`` taken within ``center +- pi`` (one arc function; the wrap by arithmetic)."""
     d = math.atan2(s, c) - center
-    return center + math.atan2(math.sin(d), math.cos(d))
+    if d > math.pi:
+        d -= _TWO_PI
+    elif d < -math.pi:
+        d += _TWO_PI
+    return center + d
 
 
 @kernel

@@ -46,9 +46,9 @@ __all__ = ["DEFAULT_HIDDEN", "SINGLE_POSE_HIDDEN", "Progress", "TrainCfg", "Trai
 #: The trunk of a ``nik train`` network: 4 x 256 SiLU. Chosen by measurement (``benchmarks/learned.py``):
 #: its forward pass costs about a third of a 3 x 512 one per target on a batch of 10,000, one CPU thread.
 DEFAULT_HIDDEN = (256, 256, 256, 256)
-#: Hidden layers of a single-pose network (``nik train --single-pose``): a forward pass of about a fifth of the
+#: Hidden layers of a single-pose network (``nik train --single-pose``): a forward pass of about a twentieth of the
 #: default's multiply-adds, cheap enough for one pose on the compiled backend (docs/learned.md).
-SINGLE_POSE_HIDDEN = (128, 128, 128)
+SINGLE_POSE_HIDDEN = (64, 64)
 
 
 @dataclass
