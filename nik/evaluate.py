@@ -439,20 +439,22 @@ def markdown_table(report: EvalReport) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: Line styles of the cumulative plot, cycled independently of the colours so that no two of the
-#: first 40 methods look alike and a line lying on another still shows its markers.
+#: Line styles and markers of the cumulative plot. The colour cycles every 10 lines; the marker steps one further
+#: at each round of colours, so no two of the first 100 lines share colour and marker (the line style cycles on
+#: its own), and a line lying on another still shows its markers.
 _LINESTYLES = ("-", "--", "-.", ":")
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">")
 
 
 def line_style(i: int, n: int, colours: list[str]) -> dict:
-    """Matplotlib style of the ``i``-th of ``n`` lines: colour, line style and marker each cycle on their
-    own (10 colours, 4 line styles, 10 markers), markers staggered so that lines on top of each other
-    show theirs at different places."""
+    """Matplotlib style of the ``i``-th of ``n`` lines: its colour, marker and line style. Colour ``i`` and marker
+    ``i + i // len(colours)`` (each modulo its count) never repeat together for ``len(colours) * len(_MARKERS)``
+    lines (100 with matplotlib's 10 colours); markers are staggered so that lines on top of each other show
+    theirs at different places."""
     return {
         "color": colours[i % len(colours)],
         "linestyle": _LINESTYLES[i % len(_LINESTYLES)],
-        "marker": _MARKERS[i % len(_MARKERS)],
+        "marker": _MARKERS[(i + i // len(colours)) % len(_MARKERS)],
         "markevery": (0.03 + 0.15 * i / max(n, 1), 1 / 6),
         "markersize": 5,
         "linewidth": 1.4,

@@ -197,3 +197,22 @@ def test_default_pipeline_row_is_what_iksolver_robot_returns(odd_arm, odd_data):
     pos_mm, _ = report.errors["default pipeline"]
     assert_close(torch.as_tensor(pos_mm), res.pos_err * 1e3, atol=1e-9, rtol=0)
     assert any("no network shipped" in n for n in report.notes)  # auto on an arm nik ships nothing for
+
+
+def test_no_two_rows_of_errors_png_share_colour_and_marker(tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+
+    rng = np.random.default_rng(1)
+    report = EvalReport(robot="puma560", data="data/x", n=20, threads=1)
+    # 14 rows: more than the full table of an arm with a closed form and a network (12), more than 10 colours
+    report.errors = {f"row {k}": (10 ** rng.uniform(-4, 1, 20), 10 ** rng.uniform(-4, 1, 20)) for k in range(14)}
+    figures = []
+    real_close = plt.close
+    monkeypatch.setattr(plt, "close", lambda fig=None: (figures.append(fig), real_close(fig)))
+    plot_errors(report, tmp_path / "errors.png")
+    (fig,) = figures
+    for ax in fig.axes:
+        drawn = [ln for ln in ax.get_lines() if ln.get_label() in report.errors]
+        assert len(drawn) == 14
+        looks = {(ln.get_color(), ln.get_marker()) for ln in drawn}
+        assert len(looks) == 14, sorted(looks)
