@@ -84,7 +84,8 @@ def test_the_papers_page_cites_each_source_paper_in_full_and_no_page_calls_them_
 
 def test_every_example_robot_data_skip_names_the_one_extra_of_pyproject_that_installs_it():
     pyproject = (ROOT / "pyproject.toml").read_text()
-    extras = dict(re.findall(r"^([\w-]+) = \[(.*)\]$", pyproject[pyproject.index("[project.optional-dependencies]") :], re.M))
+    section = pyproject[pyproject.index("[project.optional-dependencies]") :]
+    extras = dict(re.findall(r"^([\w-]+) = \[(.*)\]$", section, re.M))
     named, lines = set(), 0
     for test in sorted((ROOT / "tests").glob("test_*.py")):
         for line in test.read_text().splitlines():
