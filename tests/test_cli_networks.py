@@ -73,3 +73,25 @@ def test_nik_networks_remove_of_a_shipped_network_is_a_one_line_error(capsys):
     assert main(["networks", "remove", "panda"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "shipped with nik" in err and "cannot be removed" in err
+
+
+def test_nik_networks_install_says_the_call_that_loads_the_arm_the_pair_was_trained_from(tmp_path, capsys):
+    import shutil
+    from pathlib import Path
+
+    from nik.nets.pair import save_pair
+
+    urdf = tmp_path / "my_franka.urdf"
+    shutil.copy(Path(__file__).resolve().parents[1] / "configs" / "robots" / "urdf" / "panda.urdf", urdf)
+    robot = nik.load_robot(urdf, end_link="panda_link8")
+    torch.manual_seed(0)
+    net = MultiHypIKNet(robot, hidden=[8], heads=2).eval()
+    command = f"nik train {urdf} --end-link panda_link8 --minutes 1"  # as nik train records it
+    pair = save_pair(net, tmp_path / "out" / "my_franka.safetensors", training={"command": command})
+    assert main(["networks", "install", str(pair)]) == 0
+    out = capsys.readouterr().out
+    assert out.rstrip().endswith(f'nik.IKSolver(nik.load_robot("{urdf.resolve()}", end_link="panda_link8"))')
+    urdf.unlink()  # the file is gone: the message falls back to the definition hash
+    assert main(["networks", "install", str(pair), "--name", "again"]) == 0
+    out = capsys.readouterr().out
+    assert robot.definition_hash in out and 'nik.load_robot(ARM, end_link="panda_link8")' in out

@@ -56,15 +56,17 @@ def _cmd_list() -> int:
 
 
 def _cmd_install(pair: str, name: str | None) -> int:
-    from nik.learn.usage import network_usage
+    from nik.learn.usage import network_usage, recorded_source
     from nik.nets.pair import read_pair_meta
     from nik.nets.registry import install
     from nik.robots import Robot
 
     installed = install(pair, name=name)  # checked in full first (load_pair)
-    robot = Robot.from_definition(read_pair_meta(installed)["robot_definition"])
+    meta = read_pair_meta(installed)
+    robot = Robot.from_definition(meta["robot_definition"])
     print(f"installed {installed} (arm {robot.name}, robot hash {robot.definition_hash})")
-    for line in network_usage(robot, installed):
+    source, end_link = recorded_source(meta)  # the arm file of the recorded nik train command, where it is here
+    for line in network_usage(robot, installed, source=source, end_link=end_link):
         print(f"  {line}")
     return 0
 

@@ -12,11 +12,12 @@ which guess served each call).
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
 from nik.robots import Robot, builtin_robots, load_robot
 
-__all__ = ["network_usage", "robot_expression"]
+__all__ = ["network_usage", "recorded_source", "robot_expression"]
 
 
 def _same_arm(expr_args: tuple, robot: Robot) -> bool:
@@ -30,24 +31,45 @@ def _same_arm(expr_args: tuple, robot: Robot) -> bool:
 def robot_expression(robot: Robot, source: str | Path | Robot | None = None, end_link: str | None = None) -> str | None:
     """Python that loads ``robot`` again, as an argument of ``nik.IKSolver(...)``: ``"NAME"`` for a built-in,
     ``"/abs/arm.yaml"`` for a YAML file, ``nik.load_robot("/abs/arm.urdf", end_link="LINK")`` for a URDF (the
-    tool link the arm really has). ``source``: how the arm was given (a name or path; a :class:`Robot` or None:
-    a built-in of the same name is tried). None when no such call gives the same definition hash."""
-    if source is None or isinstance(source, Robot):
-        name = robot.name
-        if name in builtin_robots() and _same_arm((name, None), robot):
-            return json.dumps(name)
-        return None
-    path = Path(source)
-    if not path.is_file():  # a built-in name
-        return json.dumps(str(source)) if end_link is None and _same_arm((str(source), None), robot) else None
-    path = path.resolve()
-    is_urdf = path.suffix.lower() == ".urdf"
-    link = robot.end_link if is_urdf else end_link
-    if not _same_arm((path, link), robot):
-        return None
-    if link is None:
-        return json.dumps(str(path))
-    return f"nik.load_robot({json.dumps(str(path))}, end_link={json.dumps(link)})"
+    tool link the arm really has). ``source``: how the arm was given (a name or path; a :class:`Robot` or None);
+    where it does not give the same arm, a built-in of the robot's name is tried. None when no such call gives
+    the same definition hash."""
+    if source is not None and not isinstance(source, Robot):
+        path = Path(source)
+        if not path.is_file():  # a built-in name
+            if end_link is None and _same_arm((str(source), None), robot):
+                return json.dumps(str(source))
+        else:
+            path = path.resolve()
+            link = robot.end_link if path.suffix.lower() == ".urdf" else end_link
+            if _same_arm((path, link), robot):
+                if link is None:
+                    return json.dumps(str(path))
+                return f"nik.load_robot({json.dumps(str(path))}, end_link={json.dumps(link)})"
+    if robot.name in builtin_robots() and _same_arm((robot.name, None), robot):
+        return json.dumps(robot.name)
+    return None
+
+
+def recorded_source(meta: dict) -> tuple[str | None, str | None]:
+    """``(ROBOT, END_LINK)`` of the ``nik train ROBOT [--end-link LINK]`` command recorded in a pair's JSON
+    (``meta["training"]["command"]``), or ``(None, None)`` where it records none (a path is relative to where
+    it ran: :func:`robot_expression` checks it before it is said)."""
+    command = (meta.get("training") or {}).get("command")
+    try:
+        words = shlex.split(command) if isinstance(command, str) else []
+    except ValueError:
+        return None, None
+    if len(words) < 3 or words[1] != "train" or words[2].startswith("-"):
+        return None, None
+    end_link = None
+    for k, w in enumerate(words[:-1]):
+        if w == "--end-link":
+            end_link = words[k + 1]
+    for w in words:
+        if w.startswith("--end-link="):
+            end_link = w.split("=", 1)[1]
+    return words[2], end_link
 
 
 def network_usage(
