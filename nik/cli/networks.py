@@ -15,7 +15,8 @@ def register(sub) -> None:
         help="list the installed and shipped networks (default), install an exported pair, remove an installed one",
         description="Networks live in two folders: the user folder ($NIK_HOME/networks, else "
         "~/.local/share/nik/networks) and the one shipped inside nik. IKSolver(robot) takes the first whose "
-        "recorded robot hash is the arm's definition hash (the user folder first; the name does not matter).",
+        "recorded robot hash is the arm's definition hash (the user folder first; the name does not matter); on an "
+        "arm with a closed form the closed form stays the default guess (checkpoint=PATH uses the network).",
     )
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.add_parser("list", help="the installed and shipped networks: arm, robot hash, kind, recorded error, file")
