@@ -241,7 +241,7 @@ def unreachable_scenario(robot_name: str, rounds: int, seed: int) -> dict:
 # ---------------------------------------------------------------------------
 # One pose per call: nik, Robotics Toolbox ik_LM, TRAC-IK
 # ---------------------------------------------------------------------------
-#: A 7-DOF arm without a shipped network, from example-robot-data (``pip install example-robot-data``).
+#: A 7-DOF arm from example-robot-data (``pip install example-robot-data``); the same definition as the built-in xarm7.
 EXAMPLE_ROBOTS = {"xarm7": "xarm_description/urdf/xarm7.urdf"}
 TRACIK_TIMEOUT = 0.005  # s, TRAC-IK's usual default
 TRACIK_EPS = 1e-5  # its convergence threshold on the Cartesian error

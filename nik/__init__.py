@@ -21,6 +21,7 @@ _SUBMODULES = {
     "data",
     "evaluate",
     "ik",
+    "kernels",
     "kinematics",
     "learn",
     "lm",
@@ -30,6 +31,7 @@ _SUBMODULES = {
     "robots",
     "swarm",
     "threads",
+    "tolerances",
 }
 _LAZY = {"IKSolver": "nik.ik", "IKResult": "nik.ik", "set_threads": "nik.threads"}
 

@@ -4,8 +4,8 @@
 way (FK of the returned joints against the target): the default pipeline (``IKSolver(robot)``, what
 users run), LM multistart without a network, the network alone, the network plus each refinement,
 the uniform-init swarm (no network), the closed form (PUMA-like arms) and pytorch-kinematics'
-``PseudoInverseIK`` as a peer. :func:`write_report` writes the Markdown
-table, a JSON copy and a cumulative error plot.
+``PseudoInverseIK`` as a peer. Each row is timed after a warm-up call and says the guess that really
+served it. :func:`write_report` writes the Markdown table, a JSON copy and a cumulative error plot.
 
 The evaluation room: it may import every room below it (robots, data, nets, analytic, ik, learn); only the
 cli imports it.
@@ -31,6 +31,10 @@ __all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "plot_errors",
 
 #: Refinement methods evaluated after the network, in table order.
 REFINEMENTS = ("lm", "pso", "sapso", "ipso", "ga")
+#: Targets of the warm-up call before each timed one: the same pipeline on the first of the test poses, so that no
+#: row carries one-time costs (compiled kernels loaded, caches filled, first allocations). Batches above
+#: 10,000 poses may take another path than the warm-up (the compiled one stops there: ``nik.ik.lean``).
+WARMUP_TARGETS = 16
 
 
 @dataclass
@@ -224,6 +228,8 @@ def _pk_solve(
         joint_limits=robot.limits.to(device=T.device, dtype=T.dtype),
         early_stopping_any_converged=True,
     )
+    ik.solve(pk.Transform3d(matrix=T[:WARMUP_TARGETS]))  # a warm-up call, as every row has
+    torch.manual_seed(seed)
     target = pk.Transform3d(matrix=T)
     sol, seconds = _timed(lambda: ik.solve(target), T.device)
     err = sol.err_pos + 0.1 * sol.err_rot  # (B, retries)
@@ -239,23 +245,27 @@ def _pk_solve(
 def _network_rows_solver(robot: Robot, checkpoint, report: EvalReport) -> dict | None:
     """The :class:`IKSolver` keywords of the network rows, or None (said in a note) when there is no network.
 
-    ``checkpoint``: ``"auto"``, the network shipped with nik for this robot as ``IKSolver(robot)`` picks it (by
-    name and definition hash; used here on PUMA-like arms too, where the solver's default keeps the closed form);
-    ``None`` or ``"none"``, no network; else a path.
+    ``checkpoint``: ``"auto"``, the network ``IKSolver(robot)`` finds for this robot's definition hash (one installed
+    in the user folder, else the one shipped: :func:`nik.nets.registry.find_network`; used here on arms with a
+    closed form too, where the solver's default keeps the closed form); ``None`` or ``"none"``, no network; else
+    a path.
     """
-    from nik.ik import IKSolver
+    from nik.nets.registry import SHIPPED_DIR, find_network
 
     word = checkpoint.lower() if isinstance(checkpoint, str) else None
     if checkpoint is None or word == "none":
         report.notes.append("no network (checkpoint none): the network rows are missing")
         return None
     if word == "auto":
-        if IKSolver(robot, checkpoint="auto", analytic=False).net is None:
+        path = find_network(robot)
+        if path is None:
             report.notes.append(
-                f"no network shipped with nik for {robot.name} (this definition): the network rows are missing"
+                f"no network shipped with nik or installed for {robot.name} (definition hash "
+                f"{robot.definition_hash}): the network rows are missing"
             )
             return None
-        report.network = f"shipped network for {robot.name}"
+        where = "shipped" if path.parent.resolve() == SHIPPED_DIR.resolve() else "installed"
+        report.network = f"{where} network for {robot.name}'s definition hash, {path}"
         return {"checkpoint": "auto", "analytic": False}
     report.network = str(checkpoint)
     return {"checkpoint": checkpoint}
@@ -283,10 +293,11 @@ def evaluate(
     Args:
         robot: the arm (object, built-in name or file); the dataset and checkpoint must match it.
         data: dataset directory (``nik generate``).
-        checkpoint: the network of the network rows: ``"auto"``, the one shipped with nik for this robot (as
-            ``IKSolver(robot)`` picks it); a path to a trained network; ``None`` / ``"none"``: no network rows
-            (a note says why). The rows "default pipeline" (``IKSolver(robot)``) and "LM multistart, no
-            network" are there whatever it is.
+        checkpoint: the network of the network rows: ``"auto"``, the one installed or shipped with nik for this
+            robot's definition hash (as ``IKSolver(robot)`` finds it); a path to a trained network; ``None`` /
+            ``"none"``: no network rows (a note says why). The rows "default pipeline" (``IKSolver(robot)``,
+            whatever it finds) and "LM multistart, no network" are there whatever it is; the rows that say "no
+            network" (LM multistart, uniform-init swarm, closed form) use none whatever is installed.
         n: number of test poses.
         refinements: methods run after the network (``lm``, ``pso``, ``sapso``, ``ipso``, ``ga``).
         swarm: the uniform-init swarm row's method (no network).
@@ -296,6 +307,10 @@ def evaluate(
         on_row: optional callable ``on_row(report)`` told after each row is added (the CLI writes the table
             there, so rows already computed survive a failure in a later one).
         device: where every pipeline computes (``"cpu"``, ``"cuda"``); timings synchronise the GPU.
+
+    Every row is timed after a warm-up call of the same pipeline on the first :data:`WARMUP_TARGETS` poses, and
+    its note starts with the guess that really served (``guess network | analytic | multistart``: the result's
+    ``source``, not the solver's configuration).
 
     Returns:
         :class:`EvalReport`.
@@ -329,60 +344,60 @@ def evaluate(
         if on_row is not None:
             on_row(report)
 
+    def solve_row(method: str, solver, note=None) -> None:
+        """Time ``solver.solve(T)`` after a warm-up call on the first targets; the note starts with the guess that
+        really served (``res.source``), then ``note`` (a string, or a function of the result)."""
+        kw = {"tol_pos": tol_pos, "tol_rot": tol_rot, "seed": seed}
+        solver.solve(T[: min(n, WARMUP_TARGETS)], **kw)  # one-time costs (kernels, caches, first allocations)
+        res, sec = _timed(lambda: solver.solve(T, **kw), dev)
+        extra = note(res) if callable(note) else note
+        add(method, res.q, sec, f"guess {res.source}" + (f"; {extra}" if extra else ""))
+
     say("default pipeline")
     solver = IKSolver(robot, device=dev)
-    res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
-    add(
-        "default pipeline",
-        res.q,
-        sec,
-        f"IKSolver(robot): guess {solver.initial_source}, refine lm, fallback {solver.fallback}",
-    )
+    solve_row("default pipeline", solver, f"IKSolver(robot): refine lm, fallback {solver.fallback}")
     say("LM multistart, no network")
-    solver = IKSolver(robot, checkpoint=None, analytic=False, device=dev)
-    res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
-    add(
+    solve_row(
         "LM multistart, no network",
-        res.q,
-        sec,
+        IKSolver(robot, checkpoint=None, analytic=False, device=dev),
         "IKSolver(robot, checkpoint=None, analytic=False): LM from uniform starts, restarts where it fails",
     )
     net_kw = _network_rows_solver(robot, checkpoint, report)
     if net_kw is not None:
         say("network")
-        raw = IKSolver(robot, **net_kw, device=dev, refine="none")
-        res, sec = _timed(lambda: raw.solve(T, seed=seed), dev)
-        add("network", res.q, sec)
+        solve_row("network", IKSolver(robot, **net_kw, device=dev, refine="none"), "no refinement")
         for method in refinements:
             say(f"network + {method}")
-            solver = IKSolver(robot, **net_kw, device=dev, refine=method, fallback=False)
-            res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
             polish = " + LM polish" if method != "lm" else ""
-            add(f"network + {method}", res.q, sec, f"mean {res.iterations.float().mean():.1f} iterations{polish}")
+            solve_row(
+                f"network + {method}",
+                IKSolver(robot, **net_kw, device=dev, refine=method, fallback=False),
+                lambda res, polish=polish: f"mean {res.iterations.float().mean():.1f} iterations{polish}",
+            )
         say("network + lm + LM restarts")
-        solver = IKSolver(robot, **net_kw, device=dev, refine="lm", fallback="multistart")
-        res, sec = _timed(lambda s=solver: s.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
-        add(
+        solve_row(
             "network + lm + LM restarts",
-            res.q,
-            sec,
+            IKSolver(robot, **net_kw, device=dev, refine="lm", fallback="multistart"),
             "targets LM misses from the guess restart from uniform starts; no closed form",
         )
     if swarm == "lm":
         report.notes.append("uniform-init lm is the row 'LM multistart, no network'")
     else:
         say(f"uniform-init {swarm}")
-        solver = IKSolver(robot, refine=swarm, analytic=False, fallback="none")
-        res, sec = _timed(lambda: solver.solve(T, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), dev)
-        its = float(res.iterations.float().mean())
-        add(f"uniform-init {swarm}", res.q, sec, f"no network; mean {its:.1f} iterations + LM polish")
+        solve_row(
+            f"uniform-init {swarm}",
+            IKSolver(robot, checkpoint=None, refine=swarm, analytic=False, fallback="none", device=dev),
+            lambda res: f"no network; mean {float(res.iterations.float().mean()):.1f} iterations + LM polish",
+        )
     from nik.analytic import family
 
     if family(robot) is not None:
         say("analytic")
-        solver = IKSolver(robot, refine="none")
-        res, sec = _timed(lambda: solver.solve(T), dev)
-        add("analytic (closed form)", res.q, sec, "all 8 solutions, FK-verified; the most central valid one")
+        solve_row(
+            "analytic (closed form)",
+            IKSolver(robot, checkpoint=None, refine="none", device=dev),
+            "all 8 solutions, FK-verified; the most central valid one",
+        )
     else:
         report.notes.append(
             f"{robot.name} has no closed form (no spherical wrist, no three parallel axes): no closed-form row"
@@ -439,20 +454,22 @@ def markdown_table(report: EvalReport) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: Line styles of the cumulative plot, cycled independently of the colours so that no two of the
-#: first 40 methods look alike and a line lying on another still shows its markers.
+#: Line styles and markers of the cumulative plot. The colour cycles every 10 lines; the marker steps one further
+#: at each round of colours, so no two of the first 100 lines share colour and marker (the line style cycles on
+#: its own), and a line lying on another still shows its markers.
 _LINESTYLES = ("-", "--", "-.", ":")
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">")
 
 
 def line_style(i: int, n: int, colours: list[str]) -> dict:
-    """Matplotlib style of the ``i``-th of ``n`` lines: colour, line style and marker each cycle on their
-    own (10 colours, 4 line styles, 10 markers), markers staggered so that lines on top of each other
-    show theirs at different places."""
+    """Matplotlib style of the ``i``-th of ``n`` lines: its colour, marker and line style. Colour ``i`` and marker
+    ``i + i // len(colours)`` (each modulo its count) never repeat together for ``len(colours) * len(_MARKERS)``
+    lines (100 with matplotlib's 10 colours); markers are staggered so that lines on top of each other show
+    theirs at different places."""
     return {
         "color": colours[i % len(colours)],
         "linestyle": _LINESTYLES[i % len(_LINESTYLES)],
-        "marker": _MARKERS[i % len(_MARKERS)],
+        "marker": _MARKERS[(i + i // len(colours)) % len(_MARKERS)],
         "markevery": (0.03 + 0.15 * i / max(n, 1), 1 / 6),
         "markersize": 5,
         "linewidth": 1.4,

@@ -247,7 +247,7 @@ def _erd_root() -> Path | None:
 def erd_root():
     root = _erd_root()
     if root is None:
-        pytest.skip("example-robot-data is not installed (pip install example-robot-data; the bench extra has it)")
+        pytest.skip('example-robot-data is not installed (pip install -e ".[urdf-tests]")')
     return root
 
 

@@ -197,3 +197,81 @@ def test_default_pipeline_row_is_what_iksolver_robot_returns(odd_arm, odd_data):
     pos_mm, _ = report.errors["default pipeline"]
     assert_close(torch.as_tensor(pos_mm), res.pos_err * 1e3, atol=1e-9, rtol=0)
     assert any("no network shipped" in n for n in report.notes)  # auto on an arm nik ships nothing for
+
+
+def test_no_two_rows_of_errors_png_share_colour_and_marker(tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+
+    rng = np.random.default_rng(1)
+    report = EvalReport(robot="puma560", data="data/x", n=20, threads=1)
+    # 14 rows: more than the full table of an arm with a closed form and a network (12), more than 10 colours
+    report.errors = {f"row {k}": (10 ** rng.uniform(-4, 1, 20), 10 ** rng.uniform(-4, 1, 20)) for k in range(14)}
+    figures = []
+    real_close = plt.close
+    monkeypatch.setattr(plt, "close", lambda fig=None: (figures.append(fig), real_close(fig)))
+    plot_errors(report, tmp_path / "errors.png")
+    (fig,) = figures
+    for ax in fig.axes:
+        drawn = [ln for ln in ax.get_lines() if ln.get_label() in report.errors]
+        assert len(drawn) == 14
+        looks = {(ln.get_color(), ln.get_marker()) for ln in drawn}
+        assert len(looks) == 14, sorted(looks)
+
+
+# ---- each row says the guess that served, "no network" rows use none, every row is timed after a warm-up ----------
+@pytest.fixture(scope="module")
+def panda_data(tmp_path_factory):  # panda: no closed form, a shipped network
+    from nik.data import generate_dataset
+
+    return generate_dataset("panda", 40, tmp_path_factory.mktemp("panda") / "d", seed=4, progress=False)
+
+
+def test_rows_say_the_guess_that_served_and_rows_with_different_guesses_differ(panda_data):
+    from nik.data import load_dataset
+    from nik.evaluate import evaluate
+    from nik.nets.multi import MultiHypIKNet
+    from nik.nets.pair import save_pair
+    from nik.nets.registry import install, user_dir
+
+    robot = nik.load_robot("panda")
+    torch.manual_seed(0)  # an installed network for panda (it replaces the shipped one): "no network" rows ignore it
+    tiny = MultiHypIKNet(robot, hidden=[8], heads=2).eval()
+    installed = install(save_pair(tiny, user_dir().parent / "export" / "tiny.safetensors"))
+    n = 4  # the whole test split
+    report = evaluate(
+        robot, data=panda_data, n=n, checkpoint="auto", refinements=("ipso",), swarm="ipso", include_pk=False, seed=1
+    )
+    # the same swarm from another guess: other answers (they were one row twice when the swarm picked the network up)
+    assert not np.array_equal(report.errors["network + ipso"][0], report.errors["uniform-init ipso"][0])
+    assert f"installed network for panda's definition hash, {installed}" in report.network
+    rows = {r.method: r for r in report.rows}
+    guess = {m: r.note.split(";")[0] for m, r in rows.items()}
+    T = load_dataset(panda_data).split("test").pose[:n].to(torch.float64)
+    assert guess["default pipeline"] == f"guess {nik.IKSolver(robot).solve(T, seed=1).source}"
+    assert guess["network"] == guess["network + ipso"] == "guess network"
+    for method in ("LM multistart, no network", "uniform-init ipso"):
+        assert guess[method] == "guess multistart", method
+    # the raw network row is the installed network's guess, given by path here
+    raw = nik.IKSolver(robot, checkpoint=installed, refine="none").solve(T, seed=1)
+    assert_close(torch.as_tensor(report.errors["network"][0]), raw.pos_err * 1e3, atol=1e-9, rtol=0)
+
+
+def test_every_row_is_timed_after_a_warm_up_call_of_the_same_solver(odd_arm, odd_data, monkeypatch):
+    import nik.evaluate as ev
+    from nik.ik import IKSolver
+
+    calls = []
+    real_solve = IKSolver.solve
+
+    def recording_solve(self, T, *args, **kw):
+        calls.append((id(self), int(T.shape[0])))
+        return real_solve(self, T, *args, **kw)
+
+    monkeypatch.setattr(IKSolver, "solve", recording_solve)
+    monkeypatch.setattr(ev, "WARMUP_TARGETS", 2)  # fewer than the test poses: the warm-up call is told apart
+    n = 6
+    report = ev.evaluate(odd_arm, data=odd_data, n=n, checkpoint=None, swarm="pso", include_pk=False, seed=0)
+    assert len(report.rows) == 3  # default, LM multistart, uniform-init pso
+    # each row: a warm-up call on the first 2 poses, then the timed call on all n, by the same solver
+    assert [b for _, b in calls] == [2, n] * 3
+    assert all(calls[2 * k][0] == calls[2 * k + 1][0] for k in range(3))

@@ -94,7 +94,10 @@ def test_install_makes_auto_pick_the_network_for_the_arm_under_any_name(tmp_path
     assert nik.IKSolver(arm).initial_source == "multistart"
     args = ["train", str(arm), *TINY, "--no-eval", "--install", "--runs", str(tmp_path / "runs")]
     assert main(args) == 0
-    assert "installed as" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"installed as {nik.nets.registry.user_dir() / 'test_arm.safetensors'}" in out
+    # what it says to run is true: the YAML by its absolute path (IKSolver('test_arm') is no built-in)
+    assert out.rstrip().endswith(f'nik.IKSolver("{arm.resolve()}")') and "now uses it" not in out
     other = nik.load_robot(_arm(tmp_path, "same_arm_elsewhere"))
     solver = nik.IKSolver(other)
     assert solver.initial_source == "network" and solver.net.robot.name == "same_arm_elsewhere"

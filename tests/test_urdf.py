@@ -216,7 +216,7 @@ def _is_arm(path: Path) -> bool:
 
 
 @pytest.mark.skipif(
-    not _example_robot_data(), reason='example-robot-data not installed (pip install -e ".[urdf-tests]")'
+    not _example_robot_data(), reason='example-robot-data is not installed (pip install -e ".[urdf-tests]")'
 )
 def test_every_arm_of_example_robot_data_loads_and_matches_pytorch_kinematics():
     files = [p for p in _example_robot_data() if _is_arm(p)]

@@ -113,10 +113,11 @@ def register(sub) -> None:
     e.add_argument(
         "--checkpoint",
         default="auto",
-        help="network of the network rows: 'auto' (default): the one shipped with nik for this robot, as "
-        "IKSolver(robot) picks it; 'none': no network rows; else a trained network (NAME.safetensors from "
-        "nik train / export, or a Lightning .ckpt). "
-        "The rows 'default pipeline' (IKSolver(robot)) and 'LM multistart, no network' are always there",
+        help="network of the network rows: 'auto' (default): the one installed or shipped for this arm's "
+        "definition hash, as IKSolver(robot) finds it (nik networks lists them); 'none': no network rows; else a "
+        "trained network (NAME.safetensors from nik train / export, or a Lightning .ckpt). "
+        "The rows 'default pipeline' (IKSolver(robot)) and 'LM multistart, no network' are always there; rows "
+        "marked 'no network' use none whatever is installed; each row's note names the guess that served it",
     )
     e.add_argument("--data", required=True, help="dataset directory (nik generate)")
     e.add_argument("--n", type=int, default=1000, help="number of test poses (default 1000)")

@@ -35,8 +35,9 @@ def register(sub) -> None:
     t.add_argument(
         "--install",
         action="store_true",
-        help="also copy the network to the user folder ($NIK_HOME/networks, else ~/.local/share/nik/networks): "
-        "IKSolver(robot) and nik solve then use it for this arm (matched by its definition, not its name)",
+        help="also copy the network to the user folder ($NIK_HOME/networks, else ~/.local/share/nik/networks), "
+        "where IKSolver(robot) and nik solve find it for this arm (matched by its definition, not its name; "
+        "on an arm with a closed form the closed form stays the default: the output says how to use the network)",
     )
     t.add_argument("--resume", action="store_true", help="continue RUNS/NAME/last.ckpt (the budget counts both parts)")
     t.add_argument("--name", default=None, help="run and file name (default: the robot's name)")
@@ -110,6 +111,8 @@ def _cmd_train(args) -> int:
     )
     if res.installed is not None:
         print(f"installed as {res.installed}")
+        for line in res.usage:
+            print(f"  {line}")
     if res.report is not None:
         print("evaluation (position mm, rotation deg; success within 0.1 mm / 0.1 deg; CPU, this process):")
         for line in res.report.lines():

@@ -16,7 +16,9 @@
    ``curve.png`` in ``runs/<name>/``;
 5. **export** of the pair (:mod:`nik.nets.pair`, SHA-256 recorded) to ``out`` (default
    ``runs/<name>/<name>.safetensors``) with the command that ran, the data and the counters; ``install``
-   copies it to the user folder so that ``IKSolver(robot)`` picks it for this arm (:mod:`nik.nets.registry`);
+   copies it to the user folder, where ``IKSolver(robot)`` finds it for this arm by definition hash
+   (:mod:`nik.nets.registry`), and says how to get it (:mod:`nik.learn.usage`: on an arm with a closed form
+   the closed form stays the default, and ``checkpoint=PATH`` uses the network);
 6. **evaluation** (:func:`nik.learn.report.network_report`): raw error, and network + LM against no
    network on a batch and on single poses.
 """
@@ -62,7 +64,7 @@ class TrainCfg:
     out: str | None = None  # NAME.safetensors; default runs/<name>/<name>.safetensors
     name: str | None = None  # run name (default: the robot's name)
     runs: str = "runs"  # folder of the runs
-    install: bool = False  # copy the network to the user folder (checkpoint="auto" picks it)
+    install: bool = False  # copy the network to the user folder (checkpoint="auto" finds it, closed-form arms aside)
     resume: bool = False  # continue runs/<name>/last.ckpt
     kind: str = "auto"  # auto | branch_heads | multihead
     hidden: tuple[int, ...] = DEFAULT_HIDDEN
@@ -92,6 +94,7 @@ class TrainResult:
     samples: int
     steps: int
     installed: Path | None = None
+    usage: list[str] = field(default_factory=list)  # how to solve with the installed network (nik.learn.usage)
     report: object = None
     validation: dict = field(default_factory=dict)
 
@@ -263,8 +266,13 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
         steps=int(trainer.global_step),
     )
     if cfg.install:
+        from nik.learn.usage import network_usage
+
         result.installed = install(out, name=name)
-        write(f"nik train: installed as {result.installed}: IKSolver({robot.name!r}) now uses it")
+        result.usage = network_usage(robot, result.installed, source=cfg.robot, end_link=cfg.end_link)
+        write(f"nik train: installed as {result.installed}")
+        for line in result.usage:
+            write(f"nik train: {line}")
     if cfg.evaluate:
         result.report = network_report(robot, out, n_batch=cfg.eval_batch, n_one=cfg.eval_one)
         (run_dir / "report.txt").write_text("\n".join(result.report.lines()) + "\n")

@@ -13,9 +13,13 @@ same network); the user folder comes first, so an installed network replaces a s
 Within a folder a pair named after the robot wins, then the newest. The index reads only the JSON files
 (a few kB each) and is cached per file (path, size, modification time).
 
-A pair whose JSON says ``"role": "single_pose"`` is a small network made to guess one or a few poses cheaply
-(:mod:`nik.ik.networks`): :func:`find_network` never returns it; :func:`find_single_pose_network` finds it, by the
-same rules.
+A pair whose JSON says ``"role": "single_pose"`` is a small network made to guess poses cheaply on the CPU
+(:meth:`nik.IKSolver.network_for`): :func:`find_network` never returns it; :func:`find_single_pose_network` finds it,
+by the same rules.
+
+:func:`list_networks`, :func:`install` and :func:`remove` are what ``nik networks`` calls: the pairs of both
+folders with their arm, hash, kind and recorded error; a checked copy into the user folder; the removal of an
+installed pair (never of a shipped one).
 """
 
 from __future__ import annotations
@@ -23,13 +27,26 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 from nik.errors import CheckpointError
 from nik.nets.pair import pair_paths, read_pair_meta
 
-__all__ = ["SHIPPED_DIR", "SINGLE_POSE", "find_network", "find_single_pose_network", "index", "install", "role_of",
-           "search_dirs", "user_dir"]
+__all__ = [
+    "SHIPPED_DIR",
+    "SINGLE_POSE",
+    "NetworkInfo",
+    "find_network",
+    "find_single_pose_network",
+    "index",
+    "install",
+    "list_networks",
+    "remove",
+    "role_of",
+    "search_dirs",
+    "user_dir",
+]
 
 #: The ``role`` of a small network for single poses.
 SINGLE_POSE = "single_pose"
@@ -137,9 +154,7 @@ def install(path: str | Path, *, name: str | None = None, directory: str | Path 
     st, js = pair_paths(path)
     meta = read_pair_meta(st)
     load_pair(st)  # never install a damaged file
-    name = name or meta.get("robot") or st.stem
-    if not name or Path(name).name != name:
-        raise CheckpointError(f"install: the name must be a plain file name, got {name!r}")
+    name = _plain_name(name or meta.get("robot") or st.stem, "install")
     d = Path(directory) if directory is not None else user_dir()
     d.mkdir(parents=True, exist_ok=True)
     dst_st, dst_js = d / f"{name}.safetensors", d / f"{name}.json"
@@ -148,3 +163,86 @@ def install(path: str | Path, *, name: str | None = None, directory: str | Path 
         shutil.copyfile(src, tmp)
         tmp.replace(dst)
     return dst_st
+
+
+@dataclass(frozen=True)
+class NetworkInfo:
+    """One pair of the user or the shipped folder, as :func:`list_networks` reads it from its JSON."""
+
+    name: str  # the file name without suffix: what :func:`remove` takes
+    robot: str  # the arm it was trained for (recorded name; matched by robot_hash, not by this)
+    robot_hash: str  # definition hash of that arm ("" where the JSON is unreadable)
+    kind: str  # net.kind: multihead | branch_heads | plain ...
+    pos_mm: float | None  # recorded validation error, best hypothesis, median position (mm); None: not recorded
+    rot_deg: float | None  # the same, rotation (deg)
+    path: Path  # the .safetensors file
+    where: str  # "installed" (user folder) | "shipped" (inside the package)
+    problem: str = ""  # why the JSON cannot be read (a damaged pair is listed with it, not hidden)
+
+
+def _info(st: Path, where: str) -> NetworkInfo:
+    try:
+        meta = read_pair_meta(st)
+    except (CheckpointError, OSError) as err:
+        return NetworkInfo(st.stem, "?", "", "?", None, None, st, where, problem=str(err).splitlines()[0])
+    val = meta.get("validation") or {}
+    net = meta.get("net") or {}
+
+    def number(key: str) -> float | None:
+        v = val.get(key)
+        return float(v) if isinstance(v, (int, float)) else None
+
+    return NetworkInfo(
+        name=st.stem,
+        robot=str(meta.get("robot", "?")),
+        robot_hash=str(meta["robot_hash"]),
+        kind=(str(net.get("kind", "?")) if isinstance(net, dict) else "?")
+        + (" (single pose)" if meta.get("role") == SINGLE_POSE else ""),
+        pos_mm=number("best_pos_mm_median"),
+        rot_deg=number("best_rot_deg_median"),
+        path=st,
+        where=where,
+    )
+
+
+def list_networks() -> list[NetworkInfo]:
+    """Every pair of the user folder (``installed``), then of the shipped folder (``shipped``), each sorted by
+    name: the order :func:`find_network` searches them in."""
+    return [
+        _info(st, where) for where, d in (("installed", user_dir()), ("shipped", SHIPPED_DIR)) for st, _ in index([d])
+    ]
+
+
+def _plain_name(name: str, what: str) -> str:
+    name = str(name)
+    for suffix in (".safetensors", ".json"):
+        name = name.removesuffix(suffix)
+    if not name or Path(name).name != name or name.startswith("."):
+        raise CheckpointError(f"{what}: the name must be a plain file name, got {name!r}")
+    return name
+
+
+def remove(name: str, *, directory: str | Path | None = None) -> list[Path]:
+    """Delete the installed pair ``name`` (``NAME.safetensors`` + ``NAME.json``, either suffix accepted) from the
+    user folder (or ``directory``); returns the files removed.
+
+    Raises:
+        CheckpointError: ``name`` is not a plain file name, or names a network shipped with nik (those are part of
+            the package; an installed network for the same arm replaces one).
+        FileNotFoundError: no installed pair of that name (the message lists the installed ones).
+    """
+    name = _plain_name(name, "remove")
+    d = Path(directory) if directory is not None else user_dir()
+    files = [p for p in (d / f"{name}.safetensors", d / f"{name}.json") if p.is_file()]
+    if not files:
+        if (SHIPPED_DIR / f"{name}.json").is_file():
+            raise CheckpointError(
+                f"{name!r} is shipped with nik ({SHIPPED_DIR}), not installed: a shipped network cannot be removed "
+                "(install another one for the same arm to replace it)"
+            )
+        have = sorted(st.stem for st, _ in index([d]))
+        raise FileNotFoundError(f"no installed network {name!r} in {d} (installed: {', '.join(have) or 'none'})")
+    for p in files:
+        p.unlink()
+        _CACHE.pop(p, None)
+    return files

@@ -1,0 +1,100 @@
+"""What README.md and docs/ state about nik matches nik: the robots tables, the names they use, the papers' citations,
+and the extra that the tests' skip messages tell users to install."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import nik
+from nik.analytic import family
+from nik.nets.registry import SHIPPED_DIR, find_network
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def _table_rows(text: str, header_start: str) -> dict[str, list[str]]:
+    """``{name: cells}`` of the Markdown table whose header row starts with ``header_start``; the first cell is
+    a name in backticks."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(header_start))
+    rows = {}
+    for line in lines[start + 2 :]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        rows[cells[0].strip("`")] = cells
+    return rows
+
+
+def test_the_readme_robots_table_lists_every_built_in_arm_with_its_closed_form_and_shipped_network():
+    rows = _table_rows((ROOT / "README.md").read_text(), "| name | DOF | defined by | closed form | shipped network")
+    assert sorted(rows) == sorted(nik.builtin_robots())
+    for name, (_, dof, _, closed, shipped, _) in rows.items():
+        robot = nik.load_robot(name)
+        assert int(dof) == robot.dof, name
+        assert closed.startswith("yes") == (family(robot) is not None), name
+        assert shipped.startswith("yes") == (find_network(robot, [SHIPPED_DIR]) is not None), name
+
+
+def test_the_robots_page_table_lists_every_built_in_arm():
+    rows = _table_rows((ROOT / "docs" / "robots.md").read_text(), "| name | dof | definition | source |")
+    assert sorted(rows) == sorted(nik.builtin_robots())
+    for name, cells in rows.items():
+        assert int(cells[1]) == nik.load_robot(name).dof, name
+
+
+def test_every_nik_name_the_docs_use_is_an_attribute_after_a_plain_import_nik():
+    names = sorted({m for p in PAGES for m in re.findall(r"\bnik\.([A-Za-z_]\w*)", p.read_text())})
+    assert "tolerances" in names
+    code = f"import nik\nmissing = [n for n in {names!r} if not hasattr(nik, n)]\nprint(missing)"
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "[]"
+    assert nik.tolerances.DEFAULT_TOL_POS == 1e-4
+
+
+#: The four source papers (the reference list of the project's methods specification): what identifies each.
+PAPERS = {
+    "A": ("Rui Ting", "simulated annealing particle swarm optimization", "Computer Engineering and Applications",
+          "2010, 46(3): 27-29"),
+    "B": ("Ge Xiaochuan", "Application of Double Quaternion in the Inverse Kinematics of 6R Serial Robots",
+          "Computer Systems & Applications", "doi:10.15888/j.cnki.csa.005433"),
+    "C": ("Bai Wenfeng", "improved differential evolution-neural network", "Journal of Changchun University of "
+          "Technology", "doi:10.15923/j.cnki.cn22-1382/t.2017.2.11"),
+    "D": ("Li Xichen", "improved PSO algorithm", "Journal of Hunan University of Technology",
+          "doi:10.3969/j.issn.1673-9833.2021.05.003"),
+}  # fmt: skip
+
+
+def test_the_papers_page_cites_each_source_paper_in_full_and_no_page_calls_them_unidentified():
+    text = " ".join((ROOT / "docs" / "papers.md").read_text().split())
+    for key, parts in PAPERS.items():
+        entry = text[text.index(f"**Paper {key}**:") :][:600]
+        for part in parts:
+            assert part in entry, (key, part)
+    for page in PAGES:
+        flat = " ".join(page.read_text().split()).lower()
+        for stale in ("not identified", "did not identify", "no citation", "reference is still to be added"):
+            assert stale not in flat, (page.name, stale)
+
+
+def test_every_example_robot_data_skip_names_the_one_extra_of_pyproject_that_installs_it():
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    section = pyproject[pyproject.index("[project.optional-dependencies]") :]
+    extras = dict(re.findall(r"^([\w-]+) = \[(.*)\]$", section, re.M))
+    named, lines = set(), 0
+    for test in sorted((ROOT / "tests").glob("test_*.py")):
+        for line in test.read_text().splitlines():
+            if re.search(r"example-robot-data (is )?not installed", line):
+                lines += 1
+                found = re.findall(r"\.\[([\w-]+)\]", line) + re.findall(r"the ([\w-]+) extra", line)
+                assert found, (test.name, line.strip())
+                named.update(found)
+    assert lines >= 2
+    assert len(named) == 1, named
+    (extra,) = named
+    assert '"example-robot-data' in extras[extra], (extra, extras)
