@@ -32,6 +32,7 @@ _SUBMODULES = {
     "swarm",
     "threads",
     "tolerances",
+    "view",
 }
 _LAZY = {"IKSolver": "nik.ik", "IKResult": "nik.ik", "set_threads": "nik.threads"}
 

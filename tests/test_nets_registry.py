@@ -25,10 +25,11 @@ def tiny_panda(tmp_path):
 
 
 def test_list_networks_gives_the_installed_then_the_shipped_with_arm_hash_kind_and_recorded_error(tiny_panda):
-    assert [n.name for n in list_networks()] == available()  # nothing installed yet
+    assert [n.name for n in list_networks()] == sorted(available() + available(single_pose=True))  # nothing installed
     installed = install(tiny_panda, name="my_panda")
     nets = list_networks()
-    assert [(n.name, n.where) for n in nets] == [("my_panda", "installed")] + [(s, "shipped") for s in available()]
+    shipped_names = sorted(available() + available(single_pose=True))
+    assert [(n.name, n.where) for n in nets] == [("my_panda", "installed")] + [(s, "shipped") for s in shipped_names]
     mine = nets[0]
     recorded = json.loads(tiny_panda.with_suffix(".json").read_text())["validation"]
     assert mine.path == installed and mine.robot == "panda" and mine.kind == "multihead" and not mine.problem
@@ -37,6 +38,7 @@ def test_list_networks_gives_the_installed_then_the_shipped_with_arm_hash_kind_a
     shipped = {n.name: n for n in nets[1:]}
     kuka = shipped["kuka_kr"]
     assert kuka.kind == "branch_heads" and kuka.path == PRETRAINED_DIR / "kuka_kr.safetensors"
+    assert shipped["panda_one"].kind == "multihead (single pose)"
     assert all(n.pos_mm is not None and n.pos_mm > 0 for n in nets[1:])
 
 
