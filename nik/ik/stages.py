@@ -119,9 +119,9 @@ def guess(solver, job: Job) -> Answers | None:
     """Stage 1: the initial guess with its FK errors; None where the refiner starts from uniform
     configurations itself (no network, no closed form, a refinement to follow)."""
     be, src = job.backend, source(solver, job)
-    hyp = None
+    hyp, checked = None, None
     if src == "network":
-        hyp, pos, rot = be.network(solver, job)
+        hyp, pos, rot, checked = be.network(solver, job)
         q = hyp[:, 0]
         if hyp.shape[1] == 1:
             hyp = None
@@ -132,7 +132,10 @@ def guess(solver, job: Job) -> Answers | None:
         pos, rot = pose_error(job.T, solver.robot.fk(q))
     else:
         return None
-    return Answers(q, pos, rot, be.zeros_long(job.size), hyp)
+    answers = Answers(q, pos, rot, be.zeros_long(job.size), hyp)
+    if checked is not None:
+        answers._ok, answers._failing = checked
+    return answers
 
 
 def _restarts_first(solver, answers: Answers | None) -> bool:
@@ -200,7 +203,7 @@ def fallback(solver, job: Job, answers: Answers) -> Answers:
     the guess; LM that restarted from uniform starts already) and with ``fallback="none"``."""
     if solver.fallback == "none":
         return answers
-    if solver.fallback == "analytic" and answers.hypotheses is None and not solver.has_network:
+    if solver.fallback == "analytic" and source(solver, job) == "analytic":
         return answers  # the closed form was the guess
     if solver.fallback == "multistart" and solver.refine == "lm" and _restarts_first(solver, answers):
         return answers  # LM restarted from uniform starts in the refine stage
@@ -215,7 +218,7 @@ def fallback(solver, job: Job, answers: Answers) -> Answers:
         q, pos, rot = be.closed_form(solver, job, idx, start)
         res = Refined(q, pos, rot, be.zeros_long(idx.shape[0]))
     else:
-        res = be.refine(solver, job, idx, None, True)
+        res = be.lm(solver, job, idx, None, True)
     return answers.merge(job, idx, res, strict=True)
 
 

@@ -73,9 +73,12 @@ def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, 
 
 
 @kernel
-def ranked_hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads, G, joints, T):
+def ranked_hypotheses(
+    flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads, G, joints, T, tol_pos, tol_rot
+):
     """:func:`hypotheses` then :func:`rank` in one call, scratch allocated here: returns ``(q (B, K, n) ranked,
-    pos (B,), rot (B,))`` (the best hypothesis' errors, metres and radians)."""
+    pos (B,), rot (B,), ok (B,), failing)``: the best hypothesis' errors (metres, radians), whether it is within
+    ``tol_pos, tol_rot``, and how many are not."""
     B, n = T.shape[0], out_center.shape[0]
     widest = 9
     for layer in range(layout.shape[0]):
@@ -87,7 +90,13 @@ def ranked_hypotheses(flat, layout, activation, in_mean, in_std, out_center, out
     hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, T, x, y, work, q)
     pos, rot = np.empty(B), np.empty(B)
     rank(G, joints, T, q, pos, rot)
-    return q, pos, rot
+    ok = np.empty(B, dtype=np.bool_)
+    failing = 0
+    for b in range(B):
+        ok[b] = pos[b] <= tol_pos and rot[b] <= tol_rot
+        if not ok[b]:
+            failing += 1
+    return q, pos, rot, ok, failing
 
 
 @kernel

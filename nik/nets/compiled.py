@@ -59,15 +59,16 @@ class PackedNet:
         )  # fmt: skip
         return q
 
-    def ranked_hypotheses(self, G: np.ndarray, joints: np.ndarray, T: np.ndarray):
+    def ranked_hypotheses(self, G: np.ndarray, joints: np.ndarray, T: np.ndarray, tol_pos: float, tol_rot: float):
         """Every hypothesis for ``T: (B, 4, 4)`` float64 brought inside the limits of the model ``G, joints``
         (:func:`nik.kernels.chain.chain_model`) and ranked by FK pose error, best first: ``(q (B, K, dof),
-        pos (B,), rot (B,))``, the errors (metres, radians) of the best (:func:`nik.kernels.seeded.ranked_hypotheses`)."""
+        pos (B,), rot (B,), ok (B,), failing)``: the best one's errors (metres, radians), whether it lies within
+        the tolerances and how many do not (:func:`nik.kernels.seeded.ranked_hypotheses`)."""
         from nik.kernels.seeded import ranked_hypotheses
 
         return ranked_hypotheses(
             self.flat, self.layout, self.activation, self.in_mean, self.in_std, self.out_center, self.out_half,
-            self.prismatic, self.heads, G, joints, T,
+            self.prismatic, self.heads, G, joints, T, tol_pos, tol_rot,
         )  # fmt: skip
 
 

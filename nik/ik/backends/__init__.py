@@ -19,14 +19,17 @@ Backend interface (``be``; arrays are numpy on the compiled backend, tensors on 
 
 - ``be.job(solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job``: validated
   targets (:mod:`nik.ik.targets`), reach flags, the unreachable warning;
-- ``be.network(solver, job) -> (hyp (B, K, dof) ranked best first, pos (B,), rot (B,))``;
+- ``be.network(solver, job) -> (hyp (B, K, dof) ranked best first, pos (B,), rot (B,), checked)``: ``checked`` is
+  ``(ok (B,), failing)`` where the backend measured them against the job's tolerances already, else None;
 - ``be.closed_form(solver, job, idx, q_near) -> (q, pos, rot)``;
 - ``be.uniform_guess(solver, job) -> q``: the best of 64 uniform configurations (a raw guess for ``refine="none"``);
 - ``be.refine(solver, job, idx, q0, restarts) -> Refined``: the solver's refiner (LM; on torch also a swarm) from
   ``q0`` (None: uniform starts);
-- ``be.lm_starts(solver, job, idx, starts (b, K, dof)) -> Refined``: LM from several starts per target;
+- ``be.lm(solver, job, idx, q0, restarts) -> Refined``: LM whatever the refine method (the multistart fallback);
+- ``be.lm_starts(solver, job, idx, starts (b, K, dof)) -> Refined``: LM from several starts per target in turn;
+- ``be.merge(answers, job, idx, refined, strict)``: answers take the refined rows that are better, in place;
 - ``be.result(solver, job, answers, source) -> IKResult`` (tensors);
-- array helpers: ``nonzero``, ``arange``, ``copy``, ``put``, ``norm``, ``where``.
+- array helpers: ``nonzero``, ``rows``, ``arange``, ``copy``, ``put``, ``norm``, ``zeros_long``.
 """
 
 from __future__ import annotations

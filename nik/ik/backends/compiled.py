@@ -113,7 +113,6 @@ class CompiledBackend:
     # -- arrays ------------------------------------------------------------------
     nonzero = staticmethod(np.flatnonzero)
     arange = staticmethod(np.arange)
-    where = staticmethod(np.where)
 
     @staticmethod
     def copy(x):
@@ -180,14 +179,15 @@ class CompiledBackend:
 
                 packed = st.packed[id(net)] = pack(net) or False
             if packed:
-                return packed.ranked_hypotheses(st.G, st.joints, job.T)
+                hyp, pos, rot, ok, failing = packed.ranked_hypotheses(st.G, st.joints, job.T, job.tol_pos, job.tol_rot)
+                return hyp, pos, rot, (ok, failing)
         with torch.no_grad():
             ref = net.in_mean
             hyp = net(torch.from_numpy(job.T).to(device=ref.device, dtype=ref.dtype))
         hyp = np.ascontiguousarray(hyp.reshape(B, -1, solver.robot.dof).cpu().numpy(), dtype=np.float64)
         pos, rot = np.empty(B), np.empty(B)
         _kernels().rank(st.G, st.joints, job.T, hyp, pos, rot)
-        return hyp, pos, rot
+        return hyp, pos, rot, None
 
     def closed_form(self, solver, job: Job, idx, q_near):
         guess = _kernels().closed_guess
@@ -210,6 +210,10 @@ class CompiledBackend:
             restarts=restarts, reachable=reachable,
         )  # fmt: skip
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
+
+    def lm(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+        """Levenberg-Marquardt (the solver's refiner here: ``refine="lm"``)."""
+        return self.refine(solver, job, idx, q0, restarts)
 
     def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
         T = self.rows(job.T, idx)

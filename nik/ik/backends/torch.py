@@ -33,12 +33,8 @@ class TorchBackend:
         return mask.nonzero().squeeze(1)
 
     @staticmethod
-    def arange(n, like=None):
+    def arange(n):
         return torch.arange(n)
-
-    @staticmethod
-    def where(c, a, b):
-        return torch.where(c, a, b)
 
     @staticmethod
     def copy(x):
@@ -94,7 +90,7 @@ class TorchBackend:
         else:  # a plain network: one hypothesis
             hyp = solver.robot.clamp(net.predict(T))[:, None]
         pos, rot = pose_error(T, solver.robot.fk(hyp[:, 0]))
-        return hyp, pos, rot
+        return hyp, pos, rot, None
 
     def closed_form(self, solver, job: Job, idx, q_near):
         T = job.T if idx is None else job.T[idx]
@@ -118,6 +114,15 @@ class TorchBackend:
             )
         dt = T.dtype
         return Refined(res.q.to(dt), res.pos_err.to(dt), res.rot_err.to(dt), res.iterations.long())
+
+    def lm(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+        """Levenberg-Marquardt whatever the solver's refine method (the multistart fallback)."""
+        T = self.rows(job.T, idx)
+        res = lm_refine(
+            solver.robot, T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, restarts=restarts,
+            reachable=self.rows(job.reachable, idx),
+        )  # fmt: skip
+        return Refined(res.q.to(T.dtype), res.pos_err.to(T.dtype), res.rot_err.to(T.dtype), res.iterations.long())
 
     def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
         from nik.lm import lm_solve
