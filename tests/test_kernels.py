@@ -16,7 +16,7 @@ import pytest
 import torch
 
 import nik
-from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_solve, lm_work, pose_errors, seed_state
+from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_solve, pose_errors, seed_state
 from nik.kernels.cache import choose_cache, user_cache_folder
 from nik.kernels.lm import uniform_configurations
 from nik.kernels.mlp import ACTIVATIONS, mlp_forward, mlp_pack, mlp_work
@@ -136,7 +136,7 @@ def _solve(robot, T, seed, *, q0=None, restarts=2, **kw):
     q0 = np.zeros((1, robot.dof)) if q0 is None else np.asarray(q0, dtype=np.float64).reshape(1, -1)
     restarts = np.array([restarts], dtype=np.int64)
     out = _outputs(1, robot.dof)
-    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), *out, lm_work(robot.dof))
+    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), *out)
     q, it, conv, pos, rot = out
     return q[0], int(it[0]), bool(conv[0]), pos[0], rot[0]
 
@@ -241,7 +241,7 @@ def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_
     opts, iopts = lm_options(first_starts=8)
     restarts = np.array([50, 50, 50, 0, 50], dtype=np.int64)
     out = _outputs(5, robot.dof)
-    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), *out, lm_work(6))
+    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), *out)
     q, it, conv, pos, rot = out
     assert conv[[0, 1, 2, 4]].all() and not conv[3]
     assert it[3] <= 25  # one start of at most first_iters iterations
@@ -249,7 +249,7 @@ def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_
         rows = np.repeat(T[b : b + 1], b + 1, axis=0)
         alone = _outputs(b + 1, robot.dof)
         budget = np.full(b + 1, 50, dtype=np.int64)
-        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), *alone, lm_work(6))
+        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), *alone)
         assert np.array_equal(alone[0][b], q[b])
     errors = np.empty(5), np.empty(5)
     pose_errors(G, joints, T, q, *errors)
@@ -294,6 +294,9 @@ def test_mlp_forward_matches_torch_in_float64(activation, rows):
     y = np.empty((rows, 7))
     mlp_forward(flat, layout, ACTIVATIONS[activation], x.numpy(), y, mlp_work(layout, rows))
     np.testing.assert_allclose(y, ref, atol=1e-10, rtol=1e-10)
+    own = np.empty((rows, 7))  # without a caller's scratch: the kernel allocates its own
+    mlp_forward(flat, layout, ACTIVATIONS[activation], x.numpy(), own)
+    np.testing.assert_allclose(own, ref, atol=1e-10, rtol=1e-10)
 
 
 def test_mlp_pack_refuses_layers_that_do_not_chain():

@@ -1,4 +1,9 @@
-"""The one decorator of the kernels room: ``numba.njit(cache=True)`` with the cache folder of :mod:`.cache`."""
+"""The one decorator of the kernels room: ``numba.njit(cache=True, nogil=True)`` with the cache folder of :mod:`.cache`.
+
+Every kernel releases the GIL while it runs, so threads that share a solver run their kernels side by side;
+that is safe because no kernel writes memory shared between calls: scratch is allocated inside the kernel
+(``np.empty``, tens of nanoseconds) or passed in by the caller, who owns it (one per call or per thread).
+"""
 
 from __future__ import annotations
 
@@ -41,7 +46,8 @@ def _cache_folder():
 
 
 def kernel(fn=None, *, fastmath=False):
-    """``numba.njit`` in nopython mode, cached on disk when a folder allows it (see :mod:`.cache`).
+    """``numba.njit`` in nopython mode, releasing the GIL (``nogil``), cached on disk when a folder allows it
+    (see :mod:`.cache`).
 
     ``error_model="numpy"``: a division by zero gives inf/nan as numpy does instead of raising
     (no exception checks in the inner loops). ``fastmath``: numba's flags (e.g. ``{"reassoc"}`` lets
@@ -49,4 +55,4 @@ def kernel(fn=None, *, fastmath=False):
     if fn is None:
         return lambda f: kernel(f, fastmath=fastmath)
     with _cache_folder():
-        return numba.njit(cache=CACHE.cache, error_model="numpy", fastmath=fastmath)(fn)
+        return numba.njit(cache=CACHE.cache, nogil=True, error_model="numpy", fastmath=fastmath)(fn)

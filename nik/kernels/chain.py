@@ -13,7 +13,8 @@ kernel fills (arrays the caller allocates once and passes in):
 Joint ``i`` is ``Rz(q_i + o_i)`` (revolute) or ``Tz(q_i + o_i)`` (prismatic). Only the top three rows
 of the running transform are carried; right-multiplying by ``Rz`` mixes two columns, by ``Tz(d)``
 adds ``d`` times column 2 to column 3, by ``G_i`` is a 3x4-by-4x4 product written out (36 products,
-``G_i``'s last row being ``[0, 0, 0, 1]``). Nothing is allocated inside the loops.
+``G_i``'s last row being ``[0, 0, 0, 1]``). Nothing is allocated inside the loops, and a kernel writes only
+the arrays passed to it (threads may share a model; the kernels release the GIL).
 
 The reference implementation is the torch one of :mod:`nik.kinematics`; the tests compare the two.
 """
