@@ -53,8 +53,10 @@ def main() -> None:
     parser.add_argument("--batches", type=int, default=8, help="batches of 100 poses per round (even)")
     args = parser.parse_args()
     nik.set_threads(1)
-    print(f"{os.cpu_count()} CPUs, torch intra-op threads {torch.get_num_threads()}; batches of {BATCH} poses, "
-          f"{args.batches} per round, {args.rounds} rounds (1 thread, 2 threads interleaved)\n")
+    print(
+        f"{os.cpu_count()} CPUs, torch intra-op threads {torch.get_num_threads()}; batches of {BATCH} poses, "
+        f"{args.batches} per round, {args.rounds} rounds (1 thread, 2 threads interleaved)\n"
+    )
     print("| robot | source | 1 thread (poses/s) | 2 threads (poses/s) | 2 / 1 | same answers |")
     print("|---|---|---:|---:|---:|---|")
     for name in args.robots:

@@ -351,10 +351,21 @@ def test_robot_fk_compiled_path_matches_the_torch_kernel_in_every_shape(dtype):
     q = _configurations(robot, 6, seed=10).to(dtype)
     torch_fk = FKKernel(robot.G.numpy(), robot.offsets.numpy(), prismatic=robot.prismatic.tolist())
     atol = 1e-12 if dtype == torch.float64 else 1e-5
-    for shaped in (q[0], q[:1], q, q.reshape(2, 3, robot.dof)):
+    strided = torch.stack([q, -q], dim=-1)[..., 0]  # the values of q, not contiguous
+    for shaped in (q[0], q[4], q[:1], q[2:5], q, q.reshape(2, 3, robot.dof), strided, strided[1]):
         T = robot.fk(shaped)
         assert T.dtype == dtype and T.shape == (*shaped.shape[:-1], 4, 4)
         torch.testing.assert_close(T, torch_fk(shaped.reshape(-1, robot.dof)).reshape(T.shape), atol=atol, rtol=0)
+
+
+def test_robot_fk_without_gradient_mode_takes_a_tensor_that_requires_grad():
+    robot = nik.load_robot("panda")
+    q = _configurations(robot, 3, seed=12).requires_grad_(True)
+    with torch.no_grad():
+        T = robot.fk(q[1])
+    assert not T.requires_grad
+    torch.testing.assert_close(T, robot.fk(q[1].detach().clone()), atol=0, rtol=0)
+    torch.testing.assert_close(T, robot.fk(q)[1].detach(), atol=1e-12, rtol=0)  # the torch path, with gradients
 
 
 def test_robot_fk_refuses_nan_on_the_compiled_path_and_keeps_gradients_on_the_torch_path():
