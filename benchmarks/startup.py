@@ -4,8 +4,10 @@ Each round starts, in turn, a process that only imports torch and one that runs 
 (``import nik``, ``load_robot``, ``IKSolver``, ``solve`` of one pose), the two interleaved; each is timed from
 its start to the moment it is done (torch imported; the pose solved), not to its exit. The table gives medians
 over the rounds and the difference. The solve process also reports where its time went, and the
-cost of a second ``IKSolver`` of the same robot. Caches are warm (the compiled kernels and the parsed URDF
-from an earlier run: the first round after a change is left out).
+cost of a second ``IKSolver`` of the same robot; numba's import and the import of the kernel modules are
+timed apart (the first solve would do both), and ``second solve`` is a warm call for comparison. Caches are
+warm (the compiled kernels and the parsed URDF from an earlier run: the first round after a change is left
+out).
 
     python benchmarks/startup.py                 # panda, 7 rounds
     python benchmarks/startup.py --robot ur5 --rounds 11
@@ -36,14 +38,22 @@ robot = nik.load_robot({robot!r})
 t3 = time.perf_counter()
 solver = nik.IKSolver(robot)
 t4 = time.perf_counter()
+import numba
+t5 = time.perf_counter()
+import nik.kernels.chain, nik.kernels.closed, nik.kernels.lm, nik.kernels.poses
+t6 = time.perf_counter()
 T = torch.tensor({pose!r}, dtype=torch.float64)
 res = solver.solve(T)
-t5 = time.perf_counter()
+t7 = time.perf_counter()
+done = time.time()
+solver.solve(T, seed=1)
+t8 = time.perf_counter()
 nik.IKSolver(robot)
-t6 = time.perf_counter()
+t9 = time.perf_counter()
 print(json.dumps({{"import torch": t1 - t0, "import nik": t2 - t1, "load_robot": t3 - t2, "IKSolver": t4 - t3,
-                  "first solve": t5 - t4, "second IKSolver": t6 - t5, "success": bool(res.success.all()),
-                  "source": res.source, "done": time.time() - (t6 - t5)}}))
+                  "import numba": t5 - t4, "kernel modules": t6 - t5, "first solve": t7 - t6,
+                  "second solve": t8 - t7, "second IKSolver": t9 - t8, "success": bool(res.success.all()),
+                  "source": res.source, "done": done}}))
 """
 
 
@@ -83,7 +93,8 @@ def main() -> None:
     print(f"  fresh process to first solve        {f:.3f}")
     print(f"  difference                          {f - b:.3f}")
     print("  inside the solve process:")
-    for key in ("import torch", "import nik", "load_robot", "IKSolver", "first solve", "second IKSolver"):
+    keys = ("import torch", "import nik", "load_robot", "IKSolver", "import numba", "kernel modules", "first solve")
+    for key in keys + ("second solve", "second IKSolver"):
         print(f"    {key:20s} {statistics.median(p[key] for p in parts) * 1e3:8.1f} ms")
     print(f"  success {all(p['success'] for p in parts)}, source {parts[-1]['source']}")
 
