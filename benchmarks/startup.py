@@ -7,7 +7,8 @@ over the rounds and the difference. The solve process also reports where its tim
 cost of a second ``IKSolver`` of the same robot; numba's import and the import of the kernel modules are
 timed apart (the first solve would do both), and ``second solve`` is a warm call for comparison. Caches are
 warm (the compiled kernels and the parsed URDF from an earlier run: the first round after a change is left
-out).
+out), and so is Python's bytecode: the processes run without ``PYTHONDONTWRITEBYTECODE`` (with it, each one
+compiles nik's sources again, 0.1-0.2 s, which no installed copy does).
 
     python benchmarks/startup.py                 # panda, 7 rounds
     python benchmarks/startup.py --robot ur5 --rounds 11
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -61,7 +63,8 @@ def run(code: str) -> tuple[float, str]:
     """Seconds from starting the process to the moment it reports (its last line: a wall-clock time, or JSON
     with ``done``), so that the process's exit is not counted; and its output."""
     start = time.time()
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
     last = done.stdout.strip().splitlines()[-1]
     end = json.loads(last)["done"] if last.startswith("{") else float(last)
     return end - start, done.stdout

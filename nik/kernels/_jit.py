@@ -11,6 +11,10 @@ runtime (NRT, a few milliseconds). nik's kernels therefore load their cached cod
 (:func:`_cached_loads_without_refresh`); anything that really compiles (a cache miss, a new signature) still
 goes through numba's compiler, which refreshes the target itself. Should a load fail that way, or should
 numba's private cache API differ from the one expected, numba's own load runs.
+
+Building blocks (functions whose name starts with ``_``) are compiled into the kernels that call them, whose
+cached code holds them, so they are not cached on their own: each cached function costs numba a probe of
+its cache folder when it is decorated (a temporary file) and an index to read when it is first called.
 """
 
 from __future__ import annotations
@@ -81,14 +85,15 @@ def _cached_loads_without_refresh(dispatcher):
 
 def kernel(fn=None, *, fastmath=False):
     """``numba.njit`` in nopython mode, releasing the GIL (``nogil``), cached on disk when a folder allows it
-    (see :mod:`.cache`).
+    (see :mod:`.cache`) unless ``fn`` is a building block (its name starts with ``_``: see the module docstring).
 
     ``error_model="numpy"``: a division by zero gives inf/nan as numpy does instead of raising
     (no exception checks in the inner loops). ``fastmath``: numba's flags (e.g. ``{"reassoc"}`` lets
     long sums be vectorised, changing their rounding)."""
     if fn is None:
         return lambda f: kernel(f, fastmath=fastmath)
+    cache = CACHE.cache and not fn.__name__.startswith("_")
     with _cache_folder():
         return _cached_loads_without_refresh(
-            numba.njit(cache=CACHE.cache, nogil=True, error_model="numpy", fastmath=fastmath)(fn)
+            numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath)(fn)
         )
