@@ -6,6 +6,7 @@ numba's cache to be warm.
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -340,6 +341,32 @@ def test_import_nik_does_not_import_numba_until_a_compiled_path_runs():
     done = subprocess.run([sys.executable, "-c", _LIGHT], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.split() == ["False", "False", "True"]
+
+
+_CACHED = """
+import json, sys
+import torch
+import nik
+robot = nik.load_robot("panda")
+T = robot.fk(torch.linspace(-1.0, 1.0, 7, dtype=torch.float64))  # the compiled path: the kernel from the cache
+print(json.dumps(["scipy.linalg" in sys.modules, T.tolist()]))
+"""
+
+
+def test_a_cached_kernel_loads_without_numbas_whole_compiler_context():
+    from nik.kernels import CACHE
+
+    if not CACHE.cache:
+        pytest.skip("no cache folder: every process compiles")
+    runs = [  # the first run compiles the kernel if the cache is cold; the second loads it
+        subprocess.run([sys.executable, "-c", _CACHED], cwd=ROOT, capture_output=True, text=True, timeout=300)
+        for _ in range(2)
+    ]
+    assert all(run.returncode == 0 for run in runs), runs[-1].stderr[-2000:]
+    scipy_linalg, T = json.loads(runs[-1].stdout.strip().splitlines()[-1])
+    assert not scipy_linalg  # numba's full target (which imports scipy.linalg) was not set up to load it
+    q = torch.linspace(-1.0, 1.0, 7, dtype=torch.float64).requires_grad_(True)  # the torch path, the reference
+    torch.testing.assert_close(torch.tensor(T, dtype=torch.float64), nik.load_robot("panda").fk(q).detach())
 
 
 # ---------------------------------------------------------------------------
