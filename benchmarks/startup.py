@@ -4,8 +4,11 @@ Each round starts, in turn, a process that only imports torch and one that runs 
 (``import nik``, ``load_robot``, ``IKSolver``, ``solve`` of one pose), the two interleaved; each is timed from
 its start to the moment it is done (torch imported; the pose solved), not to its exit. The table gives medians
 over the rounds and the difference. The solve process also reports where its time went, and the
-cost of a second ``IKSolver`` of the same robot. Caches are warm (the compiled kernels and the parsed URDF
-from an earlier run: the first round after a change is left out).
+cost of a second ``IKSolver`` of the same robot; numba's import and the import of the kernel modules are
+timed apart (the first solve would do both), and ``second solve`` is a warm call for comparison. Caches are
+warm (the compiled kernels and the parsed URDF from an earlier run: the first round after a change is left
+out), and so is Python's bytecode: the processes run without ``PYTHONDONTWRITEBYTECODE`` (with it, each one
+compiles nik's sources again, 0.1-0.2 s, which no installed copy does).
 
     python benchmarks/startup.py                 # panda, 7 rounds
     python benchmarks/startup.py --robot ur5 --rounds 11
@@ -15,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -36,14 +40,22 @@ robot = nik.load_robot({robot!r})
 t3 = time.perf_counter()
 solver = nik.IKSolver(robot)
 t4 = time.perf_counter()
+import numba
+t5 = time.perf_counter()
+import nik.kernels.chain, nik.kernels.closed, nik.kernels.lm, nik.kernels.poses
+t6 = time.perf_counter()
 T = torch.tensor({pose!r}, dtype=torch.float64)
 res = solver.solve(T)
-t5 = time.perf_counter()
+t7 = time.perf_counter()
+done = time.time()
+solver.solve(T, seed=1)
+t8 = time.perf_counter()
 nik.IKSolver(robot)
-t6 = time.perf_counter()
+t9 = time.perf_counter()
 print(json.dumps({{"import torch": t1 - t0, "import nik": t2 - t1, "load_robot": t3 - t2, "IKSolver": t4 - t3,
-                  "first solve": t5 - t4, "second IKSolver": t6 - t5, "success": bool(res.success.all()),
-                  "source": res.source, "done": time.time() - (t6 - t5)}}))
+                  "import numba": t5 - t4, "kernel modules": t6 - t5, "first solve": t7 - t6,
+                  "second solve": t8 - t7, "second IKSolver": t9 - t8, "success": bool(res.success.all()),
+                  "source": res.source, "done": done}}))
 """
 
 
@@ -51,7 +63,8 @@ def run(code: str) -> tuple[float, str]:
     """Seconds from starting the process to the moment it reports (its last line: a wall-clock time, or JSON
     with ``done``), so that the process's exit is not counted; and its output."""
     start = time.time()
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
     last = done.stdout.strip().splitlines()[-1]
     end = json.loads(last)["done"] if last.startswith("{") else float(last)
     return end - start, done.stdout
@@ -83,7 +96,8 @@ def main() -> None:
     print(f"  fresh process to first solve        {f:.3f}")
     print(f"  difference                          {f - b:.3f}")
     print("  inside the solve process:")
-    for key in ("import torch", "import nik", "load_robot", "IKSolver", "first solve", "second IKSolver"):
+    keys = ("import torch", "import nik", "load_robot", "IKSolver", "import numba", "kernel modules", "first solve")
+    for key in keys + ("second solve", "second IKSolver"):
         print(f"    {key:20s} {statistics.median(p[key] for p in parts) * 1e3:8.1f} ms")
     print(f"  success {all(p['success'] for p in parts)}, source {parts[-1]['source']}")
 

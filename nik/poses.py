@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import warnings
 
+import numpy as np
 import torch
 
 __all__ = [
@@ -52,7 +53,8 @@ POSE_DIMS = {"quat": 7, "rpy": 6, "rot6d": 9, "matrix": 12}
 
 def make_pose(R: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
     """Assemble ``T: (..., 4, 4)`` from ``R: (..., 3, 3)`` and ``p: (..., 3)``."""
-    batch = torch.broadcast_shapes(R.shape[:-2], p.shape[:-1])
+    # numpy's rule, not torch.broadcast_shapes: its first call imports sympy (about a second)
+    batch = np.broadcast_shapes(tuple(R.shape[:-2]), tuple(p.shape[:-1]))
     T = torch.zeros(*batch, 4, 4, dtype=R.dtype, device=R.device)
     T[..., :3, :3] = R
     T[..., :3, 3] = p

@@ -6,6 +6,7 @@ numba's cache to be warm.
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -16,7 +17,7 @@ import pytest
 import torch
 
 import nik
-from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_solve, lm_work, pose_errors, seed_state
+from nik.kernels import chain_model, fk, fk_batch, fk_jacobian, lm_options, lm_solve, pose_errors, seed_state
 from nik.kernels.cache import choose_cache, user_cache_folder
 from nik.kernels.lm import uniform_configurations
 from nik.kernels.mlp import ACTIVATIONS, mlp_forward, mlp_pack, mlp_work
@@ -136,7 +137,7 @@ def _solve(robot, T, seed, *, q0=None, restarts=2, **kw):
     q0 = np.zeros((1, robot.dof)) if q0 is None else np.asarray(q0, dtype=np.float64).reshape(1, -1)
     restarts = np.array([restarts], dtype=np.int64)
     out = _outputs(1, robot.dof)
-    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), *out, lm_work(robot.dof))
+    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), *out)
     q, it, conv, pos, rot = out
     return q[0], int(it[0]), bool(conv[0]), pos[0], rot[0]
 
@@ -241,7 +242,7 @@ def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_
     opts, iopts = lm_options(first_starts=8)
     restarts = np.array([50, 50, 50, 0, 50], dtype=np.int64)
     out = _outputs(5, robot.dof)
-    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), *out, lm_work(6))
+    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), *out)
     q, it, conv, pos, rot = out
     assert conv[[0, 1, 2, 4]].all() and not conv[3]
     assert it[3] <= 25  # one start of at most first_iters iterations
@@ -249,7 +250,7 @@ def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_
         rows = np.repeat(T[b : b + 1], b + 1, axis=0)
         alone = _outputs(b + 1, robot.dof)
         budget = np.full(b + 1, 50, dtype=np.int64)
-        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), *alone, lm_work(6))
+        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), *alone)
         assert np.array_equal(alone[0][b], q[b])
     errors = np.empty(5), np.empty(5)
     pose_errors(G, joints, T, q, *errors)
@@ -294,6 +295,9 @@ def test_mlp_forward_matches_torch_in_float64(activation, rows):
     y = np.empty((rows, 7))
     mlp_forward(flat, layout, ACTIVATIONS[activation], x.numpy(), y, mlp_work(layout, rows))
     np.testing.assert_allclose(y, ref, atol=1e-10, rtol=1e-10)
+    own = np.empty((rows, 7))  # without a caller's scratch: the kernel allocates its own
+    mlp_forward(flat, layout, ACTIVATIONS[activation], x.numpy(), own)
+    np.testing.assert_allclose(own, ref, atol=1e-10, rtol=1e-10)
 
 
 def test_mlp_pack_refuses_layers_that_do_not_chain():
@@ -339,6 +343,32 @@ def test_import_nik_does_not_import_numba_until_a_compiled_path_runs():
     assert done.stdout.split() == ["False", "False", "True"]
 
 
+_CACHED = """
+import json, sys
+import torch
+import nik
+robot = nik.load_robot("panda")
+T = robot.fk(torch.linspace(-1.0, 1.0, 7, dtype=torch.float64))  # the compiled path: the kernel from the cache
+print(json.dumps(["scipy.linalg" in sys.modules, T.tolist()]))
+"""
+
+
+def test_a_cached_kernel_loads_without_numbas_whole_compiler_context():
+    from nik.kernels import CACHE
+
+    if not CACHE.cache:
+        pytest.skip("no cache folder: every process compiles")
+    runs = [  # the first run compiles the kernel if the cache is cold; the second loads it
+        subprocess.run([sys.executable, "-c", _CACHED], cwd=ROOT, capture_output=True, text=True, timeout=300)
+        for _ in range(2)
+    ]
+    assert all(run.returncode == 0 for run in runs), runs[-1].stderr[-2000:]
+    scipy_linalg, T = json.loads(runs[-1].stdout.strip().splitlines()[-1])
+    assert not scipy_linalg  # numba's full target (which imports scipy.linalg) was not set up to load it
+    q = torch.linspace(-1.0, 1.0, 7, dtype=torch.float64).requires_grad_(True)  # the torch path, the reference
+    torch.testing.assert_close(torch.tensor(T, dtype=torch.float64), nik.load_robot("panda").fk(q).detach())
+
+
 # ---------------------------------------------------------------------------
 # Robot.fk takes the compiled path for a few CPU configurations
 # ---------------------------------------------------------------------------
@@ -348,10 +378,21 @@ def test_robot_fk_compiled_path_matches_the_torch_kernel_in_every_shape(dtype):
     q = _configurations(robot, 6, seed=10).to(dtype)
     torch_fk = FKKernel(robot.G.numpy(), robot.offsets.numpy(), prismatic=robot.prismatic.tolist())
     atol = 1e-12 if dtype == torch.float64 else 1e-5
-    for shaped in (q[0], q[:1], q, q.reshape(2, 3, robot.dof)):
+    strided = torch.stack([q, -q], dim=-1)[..., 0]  # the values of q, not contiguous
+    for shaped in (q[0], q[4], q[:1], q[2:5], q, q.reshape(2, 3, robot.dof), strided, strided[1]):
         T = robot.fk(shaped)
         assert T.dtype == dtype and T.shape == (*shaped.shape[:-1], 4, 4)
         torch.testing.assert_close(T, torch_fk(shaped.reshape(-1, robot.dof)).reshape(T.shape), atol=atol, rtol=0)
+
+
+def test_robot_fk_without_gradient_mode_takes_a_tensor_that_requires_grad():
+    robot = nik.load_robot("panda")
+    q = _configurations(robot, 3, seed=12).requires_grad_(True)
+    with torch.no_grad():
+        T = robot.fk(q[1])
+    assert not T.requires_grad
+    torch.testing.assert_close(T, robot.fk(q[1].detach().clone()), atol=0, rtol=0)
+    torch.testing.assert_close(T, robot.fk(q)[1].detach(), atol=1e-12, rtol=0)  # the torch path, with gradients
 
 
 def test_robot_fk_refuses_nan_on_the_compiled_path_and_keeps_gradients_on_the_torch_path():

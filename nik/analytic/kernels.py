@@ -211,7 +211,8 @@ def run_kernel(Tf: torch.Tensor, k: KernelConstants, lim) -> tuple[torch.Tensor,
         w, inside = _wrap(th, j, k, lim)
         qs.append(w)
         ok = ok & inside
-    shape = torch.broadcast_shapes(*(w.shape for w in qs))  # (2, 2, 2, N): wrist, elbow, shoulder, pose
+    # (2, 2, 2, N): wrist, elbow, shoulder, pose; numpy's rule (torch.broadcast_shapes' first call imports sympy)
+    shape = np.broadcast_shapes(*(tuple(w.shape) for w in qs))
     q = torch.stack([w.expand(shape) for w in qs], dim=-1).permute(3, 0, 1, 2, 4).reshape(-1, 8, 6)
     return q, ok.expand(shape).permute(3, 0, 1, 2).reshape(-1, 8), qs
 

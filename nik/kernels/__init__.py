@@ -14,9 +14,11 @@ the reference they are tested against.
 - :mod:`nik.kernels.mlp`: forward pass of an MLP whose weights are one flat float64 array;
 - :mod:`nik.kernels.cache`: where the compiled code is kept (imports no numba).
 
-Every kernel is ``numba.njit(cache=True)``: compiled on first use (seconds, once per machine), then
-loaded from the cache folder chosen by :mod:`nik.kernels.cache` (``nik/kernels/__pycache__`` when
-writable, else ``$XDG_CACHE_HOME/nik/numba``; ``NUMBA_CACHE_DIR`` overrides both).
+Every kernel is ``numba.njit(cache=True, nogil=True)``, and none writes memory shared between calls
+(scratch is allocated per call), so threads sharing a solver run their kernels in parallel. Compiled on
+first use (seconds, once per machine), then loaded from the cache folder chosen by
+:mod:`nik.kernels.cache` (``nik/kernels/__pycache__`` when writable, else ``$XDG_CACHE_HOME/nik/numba``;
+``NUMBA_CACHE_DIR`` overrides both).
 ``import nik`` does not import this room (nor numba): callers import it when the compiled path is
 first used.
 """
@@ -31,11 +33,11 @@ _NAMES = {
     "CACHE": "nik.kernels._jit",
     "chain_model": "nik.kernels.chain",
     "fk": "nik.kernels.chain",
+    "fk_at": "nik.kernels.chain",
     "fk_batch": "nik.kernels.chain",
     "fk_jacobian": "nik.kernels.chain",
     "lm_options": "nik.kernels.lm",
     "lm_solve": "nik.kernels.lm",
-    "lm_work": "nik.kernels.lm",
     "pose_errors": "nik.kernels.lm",
     "seed_state": "nik.kernels.lm",
     "uniform_configurations": "nik.kernels.lm",

@@ -1,4 +1,21 @@
-"""The one decorator of the kernels room: ``numba.njit(cache=True)`` with the cache folder of :mod:`.cache`."""
+"""The one decorator of the kernels room: ``numba.njit(cache=True, nogil=True)`` with the cache folder of :mod:`.cache`.
+
+Every kernel releases the GIL while it runs, so threads that share a solver run their kernels side by side;
+that is safe because no kernel writes memory shared between calls: scratch is allocated inside the kernel
+(``np.empty``, tens of nanoseconds) or passed in by the caller, who owns it (one per call or per thread).
+
+Loading a cached kernel: numba first "refreshes" its CPU target, i.e. imports every implementation it could
+ever compile (numpy's linear algebra and with it ``scipy.linalg``, the random generators, typed containers,
+...): 0.5-1 s in a fresh process, though a kernel loaded from the cache needs none of it, only numba's
+runtime (NRT, a few milliseconds). nik's kernels therefore load their cached code without that refresh
+(:func:`_cached_loads_without_refresh`); anything that really compiles (a cache miss, a new signature) still
+goes through numba's compiler, which refreshes the target itself. Should a load fail that way, or should
+numba's private cache API differ from the one expected, numba's own load runs.
+
+Building blocks (functions whose name starts with ``_``) are compiled into the kernels that call them, whose
+cached code holds them, so they are not cached on their own: each cached function costs numba a probe of
+its cache folder when it is decorated (a temporary file) and an index to read when it is first called.
+"""
 
 from __future__ import annotations
 
@@ -40,13 +57,43 @@ def _cache_folder():
         _numba_config.CACHE_DIR = before
 
 
+def _cached_loads_without_refresh(dispatcher):
+    """``dispatcher`` (a cached numba function) loads its cached machine code without refreshing the target
+    (see the module docstring); numba's own load where that fails. Returns ``dispatcher``."""
+    cache = getattr(dispatcher, "_cache", None)
+    if not all(
+        hasattr(cache, name) for name in ("load_overload", "_load_overload", "_guard_against_spurious_io_errors")
+    ):
+        return dispatcher  # not numba's FunctionCache as nik knows it (no cache, or another numba)
+    numba_load = cache.load_overload
+
+    def load_overload(sig, target_context):
+        found = None
+        try:
+            from numba.core.runtime import nrt
+
+            nrt.rtsys.initialize(target_context)  # what the loaded code calls (allocation, reference counts)
+            with cache._guard_against_spurious_io_errors():
+                found = cache._load_overload(sig, target_context)
+        except Exception:  # noqa: BLE001 - numba's own load below decides
+            found = None
+        return found if found is not None else numba_load(sig, target_context)
+
+    cache.load_overload = load_overload
+    return dispatcher
+
+
 def kernel(fn=None, *, fastmath=False):
-    """``numba.njit`` in nopython mode, cached on disk when a folder allows it (see :mod:`.cache`).
+    """``numba.njit`` in nopython mode, releasing the GIL (``nogil``), cached on disk when a folder allows it
+    (see :mod:`.cache`) unless ``fn`` is a building block (its name starts with ``_``: see the module docstring).
 
     ``error_model="numpy"``: a division by zero gives inf/nan as numpy does instead of raising
     (no exception checks in the inner loops). ``fastmath``: numba's flags (e.g. ``{"reassoc"}`` lets
     long sums be vectorised, changing their rounding)."""
     if fn is None:
         return lambda f: kernel(f, fastmath=fastmath)
+    cache = CACHE.cache and not fn.__name__.startswith("_")
     with _cache_folder():
-        return numba.njit(cache=CACHE.cache, error_model="numpy", fastmath=fastmath)(fn)
+        return _cached_loads_without_refresh(
+            numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath)(fn)
+        )

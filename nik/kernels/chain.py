@@ -13,7 +13,8 @@ kernel fills (arrays the caller allocates once and passes in):
 Joint ``i`` is ``Rz(q_i + o_i)`` (revolute) or ``Tz(q_i + o_i)`` (prismatic). Only the top three rows
 of the running transform are carried; right-multiplying by ``Rz`` mixes two columns, by ``Tz(d)``
 adds ``d`` times column 2 to column 3, by ``G_i`` is a 3x4-by-4x4 product written out (36 products,
-``G_i``'s last row being ``[0, 0, 0, 1]``). Nothing is allocated inside the loops.
+``G_i``'s last row being ``[0, 0, 0, 1]``). Nothing is allocated inside the loops, and a kernel writes only
+the arrays passed to it (threads may share a model; the kernels release the GIL).
 
 The reference implementation is the torch one of :mod:`nik.kinematics`; the tests compare the two.
 """
@@ -23,6 +24,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import carray, types
+from numba.extending import intrinsic
 
 from nik.kernels._jit import kernel
 
@@ -34,6 +37,7 @@ __all__ = [
     "WRAPS",
     "chain_model",
     "fk",
+    "fk_at",
     "fk_batch",
     "fk_jacobian",
 ]
@@ -174,6 +178,35 @@ def fk_batch(G, joints, q, T):
     joint value is finite."""
     finite = True
     for b in range(q.shape[0]):
+        _chain(G, joints, q[b], T[b])
+        _bottom_row(T[b])
+        finite = finite and _finite(q[b])
+    return finite
+
+
+@intrinsic
+def _float64_at(typingctx, address):
+    """The ``float64*`` at an integer ``address``."""
+    if not isinstance(address, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+
+    return types.CPointer(types.float64)(address), codegen
+
+
+@kernel
+def fk_at(G, joints, address, T):
+    """FK of the ``B = T.shape[0]`` configurations ``(B, n)`` stored contiguously as float64 at ``address`` ->
+    ``T: (B, 4, 4)`` (written in place). Returns True when every joint value is finite.
+
+    ``address`` is the ``data_ptr()`` of a contiguous float64 CPU tensor of ``B * n`` values, which the caller
+    has checked and keeps alive during the call: one configuration goes from tensor to pose without the
+    microseconds of ``Tensor.numpy()`` (:meth:`nik.Robot.fk`'s fast path)."""
+    q = carray(_float64_at(address), (T.shape[0], joints.shape[0]))
+    finite = True
+    for b in range(T.shape[0]):
         _chain(G, joints, q[b], T[b])
         _bottom_row(T[b])
         finite = finite and _finite(q[b])

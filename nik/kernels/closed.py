@@ -12,6 +12,8 @@ after the closed form in ``nik.analytic.solve``) are not handled here (:func:`cl
 :func:`pick` then chooses one solution per target as ``nik.ik.guesses.analytic_guess`` does: the valid one
 nearest ``q_near`` (each angle moved by whole turns, within the limits, as near ``q_near`` as it goes), or the
 one whose worst joint is farthest inside its range; with none valid, the clamped solution nearest the target.
+
+Scratch is allocated inside each kernel, per call: threads may share the constants and the model arrays.
 """
 
 from __future__ import annotations

@@ -46,7 +46,8 @@ def mlp_pack(layers) -> tuple[np.ndarray, np.ndarray]:
 
 
 def mlp_work(layout: np.ndarray, rows: int) -> np.ndarray:
-    """Scratch for :func:`mlp_forward`: ``(2, rows * widest layer)`` float64."""
+    """Scratch for :func:`mlp_forward`: ``(2, rows * widest layer)`` float64 (optional: without it the kernel
+    allocates its own per call; one kept by the caller must not be shared by two threads at once)."""
     return np.empty((2, rows * int(max(layout[:, 0].max(), layout[:, 1].max()))))
 
 
@@ -75,15 +76,23 @@ def _store(y, dst, r, o, n_out, v, last, activation):
 
 
 @kernel(fastmath={"reassoc", "contract"})
-def mlp_forward(flat, layout, activation, x, y, work):
+def mlp_forward(flat, layout, activation, x, y, work=None):
     """``x: (R, in)`` -> ``y: (R, out)`` (written in place) through the layers of ``flat, layout``.
 
-    ``activation``: a code of :data:`ACTIVATIONS`; ``work``: :func:`mlp_work`.
+    ``activation``: a code of :data:`ACTIVATIONS`; ``work``: :func:`mlp_work`, or None (default): scratch
+    allocated per call, so that threads may share one network.
     """
     R = x.shape[0]
     L = layout.shape[0]
-    src = work[0]
-    dst = work[1]
+    if work is None:
+        widest = x.shape[1]
+        for layer in range(L):
+            widest = max(widest, layout[layer, 0], layout[layer, 1])
+        scratch = np.empty((2, R * widest), dtype=flat.dtype)
+    else:
+        scratch = work
+    src = scratch[0]
+    dst = scratch[1]
     zero = flat[0] - flat[0]  # in the weights' dtype: float32 weights compute in float32 (twice the lanes)
     for r in range(R):
         for i in range(x.shape[1]):

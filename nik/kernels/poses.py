@@ -2,7 +2,8 @@
 conversions of ``nik.poses.quaternion_to_matrix`` / ``rpy_to_matrix``, on ``(B, ...)`` float64 arrays.
 
 A few small numpy calls cost microseconds each (``np.linalg.det`` alone about ten); these loops cost
-nanoseconds per pose. They answer yes or no: the torch code stays the one that explains what is wrong.
+nanoseconds per pose. They answer yes or no: the torch code stays the one that explains what is wrong. They
+write only their output arguments and release the GIL.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import _chain
-from nik.kernels.lm import _bounds, _copy, _lm_one, _residual
+from nik.kernels.lm import _bounds, _copy, _lm_one, _residual, _work_size
 from nik.kernels.mlp import mlp_forward
 
 __all__ = ["hypotheses", "lm_starts", "merge", "rank", "ranked_hypotheses"]
@@ -130,7 +130,7 @@ def rank(G, joints, Tt, starts, pos, rot):
 
 
 @kernel
-def lm_starts(G, joints, Tt, starts, opts, iopts, seed, q, iterations, converged, pos, rot, work):
+def lm_starts(G, joints, Tt, starts, opts, iopts, seed, q, iterations, converged, pos, rot):
     """LM towards each target ``Tt[b]`` from ``starts[b, 0]``, then ``starts[b, 1]``, ... (no uniform restarts;
     ``iopts`` must not ask for first uniform starts), stopping at the first start that reaches the tolerance of
     ``opts``. Outputs as :func:`nik.kernels.lm.lm_solve`: ``q`` the first answer within tolerance, else the one
@@ -139,6 +139,7 @@ def lm_starts(G, joints, Tt, starts, opts, iopts, seed, q, iterations, converged
     rng[0] = seed[0]
     n = starts.shape[2]
     cand = np.empty(n)
+    work = np.empty(_work_size(n))  # per call: threads never share it
     for b in range(Tt.shape[0]):
         best = math.inf
         total = 0

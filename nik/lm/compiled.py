@@ -77,7 +77,9 @@ class CompiledLM:
         G, joints: the model arrays (:meth:`nik.Robot.chain_arrays`).
         opts, iopts: the kernel's options from the config (tolerances and iteration limit set per call).
         budget: restarts a target within reach may draw (:func:`restart_budget`).
-        work: the kernel's scratch.
+
+    Nothing here is written by :meth:`solve` but the small cache of per-call options (Python dicts, safe under
+    threads); the kernel allocates its scratch per call and releases the GIL, so threads may share one model.
     """
 
     G: np.ndarray
@@ -85,7 +87,6 @@ class CompiledLM:
     opts: np.ndarray
     iopts: np.ndarray
     budget: int
-    work: np.ndarray
     _per_call: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -96,7 +97,7 @@ class CompiledLM:
         model = per_robot.get(key)
         if model is None:
             cfg = cfg or LMCfg()
-            from nik.kernels.lm import lm_options, lm_work
+            from nik.kernels.lm import lm_options
 
             opts, iopts = lm_options(
                 rot_weight=cfg.rot_weight,
@@ -116,7 +117,7 @@ class CompiledLM:
                 tail_stall_iters=math.ceil(TAIL_STALL_FACTOR * cfg.stall_iters),
             )
             G, joints = robot.chain_arrays()
-            model = cls(G, joints, opts, iopts, restart_budget(cfg), lm_work(robot.dof))
+            model = cls(G, joints, opts, iopts, restart_budget(cfg))
             per_robot[key] = model
         return model
 
@@ -149,7 +150,7 @@ class CompiledLM:
         run = CompiledRun(
             np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
         )
-        klm.lm_solve(self.G, self.joints, T, q0, opts, iopts, budget, _seed(klm, seed), *astuple_run(run), self.work)
+        klm.lm_solve(self.G, self.joints, T, q0, opts, iopts, budget, _seed(klm, seed), *astuple_run(run))
         return run
 
     def solve_starts(
@@ -167,7 +168,7 @@ class CompiledLM:
         )
         T = np.ascontiguousarray(T, dtype=np.float64)
         starts = np.ascontiguousarray(starts, dtype=np.float64)
-        lm_starts(self.G, self.joints, T, starts, opts, iopts, _seed(klm, seed), *astuple_run(run), self.work)
+        lm_starts(self.G, self.joints, T, starts, opts, iopts, _seed(klm, seed), *astuple_run(run))
         return run
 
     def _options(self, klm, tol_pos, tol_rot, max_iters, multistart) -> tuple[np.ndarray, np.ndarray]:

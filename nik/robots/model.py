@@ -165,8 +165,9 @@ def poe_chain(axes, points, home: np.ndarray, *, prismatic=None) -> np.ndarray:
 #: 512 and 1.0-1.2x at 2,048.
 FK_COMPILED_MAX = 512
 
-_COMPILED_DTYPES = (torch.float64, torch.float32)
 _chain_module = None
+_Tensor, _F64, _F32 = torch.Tensor, torch.float64, torch.float32
+_grad_enabled, _from_numpy = torch.is_grad_enabled, torch.from_numpy
 
 
 def _chain_kernels():
@@ -181,19 +182,6 @@ def _chain_kernels():
             warnings.warn(f"compiled kernels unavailable ({err}); using the torch path", RuntimeWarning, stacklevel=3)
             _chain_module = False
     return _chain_module or None
-
-
-def _compiled_fk_applies(q, dof: int) -> bool:
-    """True when ``q`` is a few float CPU configurations ``(..., dof)`` and no gradient is wanted."""
-    return (
-        isinstance(q, torch.Tensor)
-        and q.ndim >= 1
-        and q.shape[-1] == dof
-        and 0 < q.numel() <= dof * FK_COMPILED_MAX
-        and q.dtype in _COMPILED_DTYPES
-        and q.device.type == "cpu"
-        and not (q.requires_grad and torch.is_grad_enabled())
-    )
 
 
 # ---------------------------------------------------------------------------
@@ -350,7 +338,9 @@ class Robot:
         wanted, run through the compiled kernel of :mod:`nik.kernels.chain` (microseconds instead of the
         fraction of a millisecond torch's per-op overhead costs; float64 inside, cast to q's dtype).
         """
-        if not compiled and _compiled_fk_applies(q, self.dof):
+        # a CPU tensor and no gradient wanted (shape and dtype: _fk_compiled), by the cheapest checks torch offers
+        # (under 0.1 us each; q.device.type alone costs 0.5 us)
+        if not compiled and isinstance(q, _Tensor) and q.is_cpu and not (q.requires_grad and _grad_enabled()):
             T = self._fk_compiled(q, check)
             if T is not None:
                 return T
@@ -372,23 +362,35 @@ class Robot:
         return self._arrays
 
     def _fk_compiled(self, q: torch.Tensor, check: bool) -> torch.Tensor | None:
-        """FK of a few CPU configurations through the compiled kernel; None when the kernels are unavailable."""
-        chain = _chain_kernels()
+        """FK of a few float32/float64 CPU configurations ``(..., dof)`` through the compiled kernel; None when
+        ``q`` is not that (or the kernels are unavailable): the torch path then answers or raises.
+
+        A contiguous float64 ``q`` is read in place (:func:`nik.kernels.chain.fk_at`: its address, not
+        ``q.numpy()``, 0.7 us), and the result is the one tensor made per call (``torch.from_numpy``, 0.5 us;
+        ``torch.empty`` costs 1.5 us): measured on panda, ``benchmarks/fk.py --pinocchio-only``."""
+        shape = q.shape
+        dof = self.dof
+        if not shape or shape[-1] != dof:
+            return None
+        B = q.numel() // dof
+        if not 0 < B <= FK_COMPILED_MAX:
+            return None
+        chain = _chain_module or _chain_kernels()
         if chain is None:
             return None
-        a = q.detach().numpy()
-        if a.dtype != np.float64 or not a.flags.c_contiguous:
-            a = np.ascontiguousarray(a, dtype=np.float64)
-        G, joints = self.chain_arrays()
-        out = np.empty(a.shape[:-1] + (4, 4))
-        if a.ndim == 1:
-            finite = chain.fk(G, joints, a, out)
+        G, joints = self._arrays or self.chain_arrays()
+        dtype = q.dtype
+        out = np.empty((B, 4, 4))
+        if dtype is _F64 and q.is_contiguous():
+            finite = chain.fk_at(G, joints, q.data_ptr(), out)
+        elif dtype is _F64 or dtype is _F32:
+            finite = chain.fk_batch(G, joints, q.detach().numpy().reshape(B, dof).astype(np.float64), out)
         else:
-            finite = chain.fk_batch(G, joints, a.reshape(-1, self.dof), out.reshape(-1, 4, 4))
+            return None
         if check and not finite:
-            validate_joints(q, self.dof)  # raises the usual message
-        T = torch.from_numpy(out)
-        return T if q.dtype == torch.float64 else T.to(q.dtype)
+            validate_joints(q, dof)  # raises the usual message
+        T = _from_numpy(out[0] if len(shape) == 1 else out.reshape(*shape[:-1], 4, 4))
+        return T if dtype is _F64 else T.to(dtype)
 
     def fk_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """FK and geometric Jacobian in the base frame.
