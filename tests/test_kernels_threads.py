@@ -12,7 +12,7 @@ import pytest
 import torch
 
 import nik
-from nik.ik import stages
+from nik.ik import backends
 from nik.kernels import chain
 
 
@@ -77,7 +77,7 @@ def test_a_kernel_lets_other_python_threads_run_while_it_computes():
     assert max(runs) > 0, "this thread never ran while the kernel computed: it holds the GIL"
 
 
-@pytest.mark.parametrize("name", ["panda", "kuka_kr"])  # LM from uniform starts; the closed form, then LM
+@pytest.mark.parametrize("name", ["panda", "kuka_kr"])  # the network's hypotheses, then LM; the closed form, then LM
 def test_four_threads_sharing_one_solver_get_the_answers_of_the_same_calls_made_alone(name, monkeypatch):
     robot = nik.load_robot(name)
     solver = nik.IKSolver(robot)
@@ -89,10 +89,9 @@ def test_four_threads_sharing_one_solver_get_the_answers_of_the_same_calls_made_
     alone = [solver.solve(**kw) for kw in calls]
 
     def refuse(*args, **kwargs):
-        raise AssertionError("the torch stages ran: not the compiled path")
+        raise AssertionError("the torch backend ran: not the compiled one")
 
-    monkeypatch.setattr(stages, "guess", refuse)
-    monkeypatch.setattr(stages, "refine", refuse)
+    monkeypatch.setattr(backends, "torch_backend", refuse)
     jobs = [lambda kw=kw: [solver.solve(**kw) for _ in range(3)] for kw in calls]
     for ref, answers in zip(alone, _run_in_threads(jobs), strict=True):
         for res in answers:
