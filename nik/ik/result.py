@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 import torch
+
+if TYPE_CHECKING:
+    from nik.ik.paths import PathReport
 
 __all__ = ["IKResult"]
 
@@ -22,6 +26,8 @@ class IKResult:
         source: where the initial guess came from: ``network``, ``analytic`` or ``multistart``.
         reachable: (B,) bool, False where no configuration can reach the target (provable reach
             bound, :func:`nik.robots.reach.within_reach`); such targets get ``success=False`` and a best effort.
+        path: for :meth:`IKSolver.solve_path`, how the trajectory follows its path (:class:`nik.ik.paths.PathReport`:
+            every step, the largest and where, reconfigurations, why a waypoint failed); None otherwise.
     """
 
     q: torch.Tensor
@@ -31,6 +37,7 @@ class IKResult:
     iterations: torch.Tensor
     source: str = ""
     reachable: torch.Tensor | None = None
+    path: PathReport | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
