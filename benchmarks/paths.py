@@ -231,7 +231,9 @@ def bench_arm(name: str, n_paths: int) -> dict:
         if redundant:
             rows["feasible"] += 1
             for label, q in out.items():
-                ok, step = quality(robot, T, q, q0 if "q_start" in label or "q_near" in label or "rtb" in label else None)
+                ok, step = quality(
+                    robot, T, q, q0 if "q_start" in label or "q_near" in label or "rtb" in label else None
+                )
                 rows["meets"].setdefault(label, 0)
                 rows["meets"][label] += ok and step <= STEP_GOAL
         else:
@@ -252,8 +254,10 @@ def main(argv=None) -> int:
     parser.add_argument("--arms", default=",".join(ARMS), help="comma-separated arms")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    print("| arm | paths | goal met: solve_path | goal met: hand-made chain | goal met: rtb ik_LM (seeded) |"
-          " us/waypoint: solve_path (q_start) / no q_start | chain | rtb | vs rtb | vs chain |")
+    print(
+        "| arm | paths | goal met: solve_path | goal met: hand-made chain | goal met: rtb ik_LM (seeded) |"
+        " us/waypoint: solve_path (q_start) / no q_start | chain | rtb | vs rtb | vs chain |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name in args.arms.split(","):
         rows = bench_arm(name, args.paths)
@@ -267,11 +271,17 @@ def main(argv=None) -> int:
             met = (f"{m['solve_path']} / {f}", f"{m['chain']} / {f}", "n/a")
             paths = f"{rows['paths']} ({f} feasible)"
         else:
-            met = (f"{m['solve_path (q_start)']} / {f}", f"{m['chain (q_near)']} / {f}",
-                   f"{m.get('rtb ik_LM (seeded)', 0)} / {f}" if "rtb ik_LM (seeded)" in med else "n/a")
+            met = (
+                f"{m['solve_path (q_start)']} / {f}",
+                f"{m['chain (q_near)']} / {f}",
+                f"{m.get('rtb ik_LM (seeded)', 0)} / {f}" if "rtb ik_LM (seeded)" in med else "n/a",
+            )
             paths = str(rows["paths"])
-        print(f"| {name} | {paths} | {met[0]} | {met[1]} | {met[2]} | {sp:.1f}{free} | {chain:.1f} | {rtb:.1f} |"
-              f" {rtb / sp:.1f}x | {chain / sp:.1f}x |", flush=True)
+        print(
+            f"| {name} | {paths} | {met[0]} | {met[1]} | {met[2]} | {sp:.1f}{free} | {chain:.1f} | {rtb:.1f} |"
+            f" {rtb / sp:.1f}x | {chain / sp:.1f}x |",
+            flush=True,
+        )
     return 0
 
 

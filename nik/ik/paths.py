@@ -342,7 +342,9 @@ def _closed_form_reason(lm, Ti, cand_i, reachable_i, tol_pos, tol_rot) -> str:
     if not reachable_i:
         return "out of reach"
     pos, rot = _errors(lm, np.repeat(Ti[None], 8, axis=0), cand_i)  # the branches' joints before the limits
-    return "beyond a joint limit on every branch" if bool(((pos <= tol_pos) & (rot <= tol_rot)).any()) else "out of reach"
+    return (
+        "beyond a joint limit on every branch" if bool(((pos <= tol_pos) & (rot <= tol_rot)).any()) else "out of reach"
+    )
 
 
 def _unwrap(q, have, wraps, q0, lo, hi) -> np.ndarray:
@@ -464,8 +466,11 @@ def _report(robot, q, q0, reasons, max_step) -> PathReport:
         unit = 1e3 if bool(robot.prismatic[joints[i]]) else 180.0 / math.pi
         shown = "mm" if unit == 1e3 else "deg"
         if reasons[i]:
-            what = f"waypoint {i} of {len(reasons)} is {reasons[i]}" if reasons[i] != "not reached" else (
-                f"waypoint {i} of {len(reasons)} was not reached")
+            what = (
+                f"waypoint {i} of {len(reasons)} is {reasons[i]}"
+                if reasons[i] != "not reached"
+                else (f"waypoint {i} of {len(reasons)} was not reached")
+            )
         else:
             src = "q_start" if i == 0 else f"waypoint {i - 1}"
             what = (
