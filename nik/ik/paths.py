@@ -254,7 +254,7 @@ def _q_start(robot, q_start) -> np.ndarray | None:
         f, unit = (1e3, "mm") if prismatic else (180.0 / math.pi, "deg")
         raise ValueError(
             f"q_start: joint {j} ({robot.joint_names[j]}) = {q[j] * f:.6g} {unit} lies outside its limits "
-            f"[{lo[j] * f:.6g}, {hi[j] * f:.6g}] {unit} (q_start is in radians{', metres' if prismatic else ''})"
+            f"[{lo[j] * f:.6g}, {hi[j] * f:.6g}] {unit}"
         )
     return q
 
@@ -323,7 +323,7 @@ def _closed_form_path(robot, lm, facts, Tn, q0, reachable, tol_pos, tol_rot, see
     reasons = [""] * N
     if not have.any():  # no waypoint has a valid branch: LM along the path from q_start or a multistart
         first = _first_answer(lm, Tn, q0, reachable, tol_pos, tol_rot, seed)
-        q, its, _ = _chains(lm, Tn, first[None], reachable, tol_pos, tol_rot, seed, pull=0.0)
+        q, its, _ = _chains(lm, Tn, first[None], reachable, tol_pos, tol_rot, seed, pull=0.0, restarts=0)
         q, its = q[0], its[0]
     else:
         q = cand[np.arange(N), np.maximum(choice, 0)]
