@@ -328,7 +328,9 @@ def _closed_form_path(robot, lm, facts, Tn, q0, reachable, tol_pos, tol_rot, see
     else:
         q = cand[np.arange(N), np.maximum(choice, 0)]
         if wraps.any():
-            q = _unwrap(q, have, wraps, q0, facts["lo"], facts["hi"])
+            q, fits = _unwrap(q, have, wraps, q0, facts["lo"], facts["hi"])
+            if not fits:  # some run cannot stay inside its limits: choose the whole turns with the branches
+                q = _with_turns(cand, valid, have, wraps, q0, facts["lo"], facts["hi"])
         its = np.zeros(N, dtype=np.int64)
         if not have.all():
             q, its = _fill_gaps(lm, Tn, q, have, reachable, tol_pos, tol_rot, seed)
@@ -347,10 +349,12 @@ def _closed_form_reason(lm, Ti, cand_i, reachable_i, tol_pos, tol_rot) -> str:
     )
 
 
-def _unwrap(q, have, wraps, q0, lo, hi) -> np.ndarray:
+def _unwrap(q, have, wraps, q0, lo, hi) -> tuple[np.ndarray, bool]:
     """Joints of ``q: (N, dof)`` that may turn past +-pi made continuous along the path (whole turns added), the
-    whole run then shifted by whole turns to fit the limits, starting nearest ``q0`` when given."""
+    whole run then shifted by whole turns to fit the limits, starting nearest ``q0`` when given. Also returns
+    whether every run fits (False: some joint would have to turn back, see :func:`_with_turns`)."""
     q = q.copy()
+    fits = True
     idx = np.nonzero(have)[0]
     for j in np.nonzero(wraps)[0]:
         x = q[idx, j]
@@ -364,10 +368,31 @@ def _unwrap(q, have, wraps, q0, lo, hi) -> np.ndarray:
             if y.min() >= lo[j] - 1e-12 and y.max() <= hi[j] + 1e-12:
                 x = y
                 break
-        else:  # no shift fits: the run must turn back somewhere; wrap where it leaves (a reported jump)
-            x = np.where(x > hi[j], x - 2 * math.pi, np.where(x < lo[j], x + 2 * math.pi, x))
+        else:
+            fits = False
         q[idx, j] = x
-    return q
+    return q, fits
+
+
+def _with_turns(cand, valid, have, wraps, q0, lo, hi) -> np.ndarray:
+    """The choice over the whole path when the whole turns matter: every branch of every waypoint with each of
+    its turning joints at every value inside the limits (``+-2 pi`` copies), and real (not modulo 2 pi) motion
+    between them. ``cand: (N, 8, dof)``; returns ``q: (N, dof)``."""
+    from itertools import product
+
+    from nik.ik.path_kernels import path_dp
+
+    N, K, n = cand.shape
+    turns = np.zeros((3 ** int(wraps.sum()), n))
+    turns[:, wraps] = 2 * math.pi * np.array(list(product((0.0, -1.0, 1.0), repeat=int(wraps.sum()))))
+    big = (cand[:, :, None, :] + turns[None, None]).reshape(N, -1, n)  # (N, 8 x 3^w, dof)
+    ok = np.repeat(valid, turns.shape[0], axis=1) & ((big >= lo) & (big <= hi)).all(axis=-1)
+    order = np.argsort(~ok, axis=1, kind="stable")[:, : max(int(ok.sum(axis=1).max()), 1)]  # the valid ones first
+    big = np.ascontiguousarray(np.take_along_axis(big, order[..., None], axis=1))
+    ok = np.ascontiguousarray(np.take_along_axis(ok, order, axis=1))
+    choice = np.empty(N, dtype=np.int64)
+    path_dp(big, ok, np.zeros(n, dtype=bool), np.zeros(n) if q0 is None else q0, q0 is not None, 1e-9, choice)
+    return big[np.arange(N), np.maximum(choice, 0)]
 
 
 def _fill_gaps(lm, Tn, q, have, reachable, tol_pos, tol_rot, seed):
