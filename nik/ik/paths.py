@@ -35,17 +35,16 @@ from __future__ import annotations
 import math
 import warnings
 import weakref
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from nik.ik.result import IKResult
+from nik.ik.result import IKResult, PathReport
 from nik.ik.targets import as_poses, check_tolerances
 from nik.poses import ORTHONORMAL_TOL
 from nik.robots.reach import MM_HINT_FACTOR, REACH_SLACK, reach_center, reach_radius
 
-__all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "PathReport", "solve_path"]
+__all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
 
 #: Default threshold of a reconfiguration: a step (largest joint motion between two waypoints) above it is
 #: reported and warned about, radians (10 degrees).
@@ -64,41 +63,6 @@ PATH_STARTS = 8
 PATH_DEDUPE = 1e-2
 #: A joint may turn continuously past +-pi when its range exceeds a full turn by this much (radians).
 WRAP_MARGIN = 1e-6
-
-
-@dataclass
-class PathReport:
-    """How a joint trajectory follows its path (:meth:`nik.IKSolver.solve_path`; ``res.path``).
-
-    Attributes:
-        steps: (N,) largest joint motion into each waypoint (radians; metres on prismatic joints); entry 0 is the
-            motion from ``q_start`` (0 without it).
-        step_joints: (N,) long, the joint that moves most in each step.
-        largest_step: the largest of ``steps``; largest_step_at: the waypoint it leads into;
-            largest_step_joint: the joint that makes it.
-        total_motion: sum over steps and joints of ``|dq|`` (radians / metres), from ``q_start`` when given.
-        max_step: the threshold of a reconfiguration, radians (:data:`PATH_MAX_STEP` unless given).
-        reconfigurations: (N,) bool, ``steps > max_step``.
-        reasons: per waypoint, ``""`` when reached, else why not (``"out of reach"``, ``"beyond a joint limit on
-            every branch"``, ``"not reached"``).
-        warning: one line naming the first waypoint that failed or forced a reconfiguration (None when none did).
-    """
-
-    steps: torch.Tensor
-    step_joints: torch.Tensor
-    largest_step: float
-    largest_step_at: int
-    largest_step_joint: int
-    total_motion: float
-    max_step: float
-    reconfigurations: torch.Tensor
-    reasons: list[str]
-    warning: str | None = None
-
-    @property
-    def continuous(self) -> bool:
-        """True when no step exceeds ``max_step``."""
-        return not bool(self.reconfigurations.any())
 
 
 def solve_path(
