@@ -94,6 +94,20 @@ def test_q_start_makes_the_trajectory_start_nearest_it(ur5):
     assert _largest_step(res.q) < math.radians(3.0)
 
 
+def test_a_joint_with_more_than_a_full_turn_crosses_180_degrees_continuously():
+    """kuka_kr's joint 6 (range +-350 deg) turns from 60 to 260 deg: the closed form's answers lie in [-180, 180),
+    the trajectory must not jump by a full turn where the joint passes 180 deg."""
+    solver = nik.IKSolver("kuka_kr")
+    q = torch.tensor([0.3, -0.8, 0.6, 0.4, 0.9, math.radians(60.0)], dtype=torch.float64)
+    Q = q.expand(101, 6).clone()
+    Q[:, 5] = torch.linspace(math.radians(60.0), math.radians(260.0), 101, dtype=torch.float64)
+    T = solver.robot.fk(Q)
+    res = solver.solve_path(T, q_start=q)
+    assert bool(_reached(solver.robot, T, res.q).all())
+    torch.testing.assert_close(res.q, Q, atol=1e-6, rtol=0)  # the arm's own motion, 2 deg per waypoint
+    assert _largest_step(res.q) < math.radians(2.5)
+
+
 def test_redundant_arm_follows_a_line_continuously_from_q_start(panda):
     lo, hi = panda.robot.limits.double().T
     q0 = lo + (hi - lo) * torch.tensor([0.45, 0.6, 0.5, 0.55, 0.4, 0.5, 0.6], dtype=torch.float64)
