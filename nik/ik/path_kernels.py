@@ -72,6 +72,8 @@ def path_dp(cand, valid, wraps, q_start, use_start, slack, choice):
     inf = math.inf
     V = np.full((N, K), inf)
     S = np.full((N, K), inf)
+    M = np.full((N, K, K), inf)  # M[i, a, k]: the step from candidate a of the previous layer to k of layer i
+    C = np.full((N, K, K), inf)  # its cost in pass 2: step^2 + _TIE x motion
     parent = np.full((N, K), -1, dtype=np.int64)
     prev = -1
     for i in range(N):  # pass 1: the bottleneck value of the best sequence ending at each candidate
@@ -81,14 +83,17 @@ def path_dp(cand, valid, wraps, q_start, use_start, slack, choice):
                 continue
             seen = True
             if prev < 0:
-                V[i, k] = _step(q_start, cand[i, k], wraps)[0] if use_start else 0.0
+                m, s = _step(q_start, cand[i, k], wraps)
+                V[i, k] = m if use_start else 0.0
+                M[i, 0, k], C[i, 0, k] = (m, m * m + _TIE * s) if use_start else (0.0, 0.0)
                 continue
             best = inf
             for a in range(K):
                 if valid[prev, a]:
-                    m = max(V[prev, a], _step(cand[prev, a], cand[i, k], wraps)[0])
-                    if m < best:
-                        best = m
+                    m, s = _step(cand[prev, a], cand[i, k], wraps)
+                    M[i, a, k], C[i, a, k] = m, m * m + _TIE * s
+                    if max(V[prev, a], m) < best:
+                        best = max(V[prev, a], m)
             V[i, k] = best
         if seen:
             prev = i
@@ -103,26 +108,19 @@ def path_dp(cand, valid, wraps, q_start, use_start, slack, choice):
     best_max = bound
     bound += slack
     prev = -1
-    for i in range(N):  # pass 2: the least total motion over sequences whose steps stay within the bound
+    for i in range(N):  # pass 2: the least cost over sequences whose steps stay within the bound
         seen = False
         for k in range(K):
             if not valid[i, k]:
                 continue
             seen = True
             if prev < 0:
-                if use_start:
-                    m, s = _step(q_start, cand[i, k], wraps)
-                    S[i, k] = m * m + _TIE * s if m <= bound else inf
-                else:
-                    S[i, k] = 0.0
+                S[i, k] = C[i, 0, k] if M[i, 0, k] <= bound else inf
                 continue
             best, arg = inf, -1
             for a in range(K):
-                if valid[prev, a] and S[prev, a] < inf:
-                    m, s = _step(cand[prev, a], cand[i, k], wraps)
-                    c = S[prev, a] + m * m + _TIE * s
-                    if m <= bound and c < best:
-                        best, arg = c, a
+                if M[i, a, k] <= bound and S[prev, a] + C[i, a, k] < best:
+                    best, arg = S[prev, a] + C[i, a, k], a
             S[i, k] = best
             parent[i, k] = arg
         if seen:

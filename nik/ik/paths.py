@@ -112,7 +112,7 @@ def solve_path(
             f"({facts['radius'] * 1e3:.0f} mm); were the positions given in millimetres? nik expects metres"
         )
     reachable = ratio <= 1.0 + REACH_SLACK
-    q0 = _q_start(robot, q_start)
+    q0 = _q_start(robot, facts, q_start)
     from nik.lm.compiled import CompiledLM
 
     lm = CompiledLM.of(robot)
@@ -128,7 +128,7 @@ def solve_path(
     for i in np.nonzero(~success)[0]:
         why = "" if found is None else found[i]
         reasons[i] = why or ("out of reach" if not reachable[i] else "not reached")
-    report = _report(robot, q, q0, reasons, max_step)
+    report = _report(robot, q, q0, success, reasons, max_step)
     if report.warning is not None:
         warnings.warn(report.warning, UserWarning, stacklevel=3)
     like = dict(dtype=dtype, device=device)
@@ -196,7 +196,7 @@ def _facts(robot) -> dict:
 _ROBOTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _q_start(robot, q_start) -> np.ndarray | None:
+def _q_start(robot, facts, q_start) -> np.ndarray | None:
     """``q_start`` as ``(dof,)`` float64, checked: length, finite, inside the limits (ValueError naming the joint)."""
     if q_start is None:
         return None
@@ -210,7 +210,7 @@ def _q_start(robot, q_start) -> np.ndarray | None:
         raise ValueError(f"q_start: expected shape ({robot.dof},) for {robot.name}, got {q.shape}")
     if not np.isfinite(q).all():
         raise ValueError(f"q_start: joint {int(np.argmin(np.isfinite(q)))} is NaN or inf")
-    lo, hi = robot.limits.double().numpy().T
+    lo, hi = facts["lo"], facts["hi"]
     out = np.nonzero((q < lo - 1e-9) | (q > hi + 1e-9))[0]
     if out.size:
         j = int(out[0])
@@ -439,14 +439,14 @@ def _start_postures(solver, lm, Tn, reachable, tol_pos, tol_rot, seed) -> tuple[
 # ---------------------------------------------------------------------------
 # the report
 # ---------------------------------------------------------------------------
-def _report(robot, q, q0, reasons, max_step) -> PathReport:
+def _report(robot, q, q0, success, reasons, max_step) -> PathReport:
     """Steps, the largest one and where, reconfigurations, and the warning about the first problem."""
     prev = np.concatenate([(q[:1] if q0 is None else q0[None]), q[:-1]])
     dq = np.abs(q - prev)
     steps, joints = dq.max(axis=1), dq.argmax(axis=1)
     at = int(steps.argmax())
     reconf = steps > max_step
-    failed = np.array([bool(r) for r in reasons])
+    failed = ~success
     problems = np.nonzero(failed | reconf)[0]
     warning = None
     if problems.size:
