@@ -92,6 +92,19 @@ def test_q_start_makes_the_trajectory_start_nearest_it(ur5):
     torch.testing.assert_close(res.q[0], q0, atol=1e-6, rtol=0)  # FK(q0) is the first waypoint: q0's own branch
     assert float(res.path.steps[0]) == pytest.approx(float((res.q[0] - q0).abs().max()))
     assert _largest_step(res.q) < math.radians(3.0)
+    assert res.source == "q_start"  # the LM chain from q_start follows the whole path: no look-ahead needed
+
+
+def test_q_start_on_a_trapped_branch_is_not_followed_into_the_limit(ur5):
+    """From the trapped branch's own configuration the LM chain would turn joint 0 by a full turn at the limit;
+    solve_path falls back to the closed form's branches and reports the one unavoidable large step, nothing more."""
+    T = _branch_trap(ur5)
+    q_start = ur5.solve(T[0]).q[0]
+    with pytest.warns(UserWarning, match="forces a reconfiguration"):
+        res = ur5.solve_path(T, q_start=q_start)
+    assert res.source == "analytic"
+    assert bool(res.success.all())
+    assert int(res.path.reconfigurations.sum()) == 1
 
 
 def test_a_joint_with_more_than_a_full_turn_crosses_180_degrees_continuously():

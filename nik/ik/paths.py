@@ -56,6 +56,11 @@ PATH_PULL = 0.02
 PATH_PULL_CAP = math.radians(0.25)
 #: Uniform restarts a waypoint that LM does not reach from its predecessor may draw (within reach only).
 PATH_RESTARTS = 16
+#: Closed-form arms with ``q_start``: the LM chain from ``q_start`` (each waypoint seeded by the previous answer) is
+#: the answer when it reaches every waypoint inside the limits with no step above this (radians, 2 degrees) nor
+#: above ``max_step``: its branch then never meets a limit, and there is nothing for the look-ahead to avoid. Else
+#: the closed form's branches and the dynamic programming decide.
+PATH_FOLLOW_STEP = math.radians(2.0)
 #: Uniform starts at the first waypoint on an arm without a closed form and without ``q_start`` (beside the
 #: network's hypotheses); distinct postures found become parallel chains.
 PATH_STARTS = 8
@@ -116,7 +121,12 @@ def solve_path(
     from nik.lm.compiled import CompiledLM
 
     lm = CompiledLM.of(robot)
-    if solver.closed_form:
+    follows = None
+    if solver.closed_form and q0 is not None:  # the quick answer: LM from q_start along the path, if it follows
+        follows = _follows_from_start(lm, facts, Tn, q0, reachable, tol_pos, tol_rot, seed, max_step)
+    if follows is not None:
+        q, its, found, source = *follows, None, "q_start"
+    elif solver.closed_form:
         q, its, found, source = _closed_form_path(robot, lm, facts, Tn, q0, reachable, tol_pos, tol_rot, seed)
     else:
         q, its, source = _chain_path(solver, lm, Tn, q0, reachable, tol_pos, tol_rot, seed)
@@ -258,6 +268,18 @@ def _chains(lm, Tn, starts, reachable, tol_pos, tol_rot, seed, *, pull: float, r
         seed_state(seed), pull, PATH_PULL_CAP if pull > 0 else 0.0, q, its, ok, pos, rot, lm_work(n),
     )  # fmt: skip
     return q, its, ok
+
+
+def _follows_from_start(lm, facts, Tn, q0, reachable, tol_pos, tol_rot, seed, max_step):
+    """``(q (N, dof), iterations (N,))`` of the LM chain from ``q0`` when it follows the whole path smoothly
+    (:data:`PATH_FOLLOW_STEP`), else None."""
+    q, its, ok = _chains(lm, Tn, q0[None], reachable, tol_pos, tol_rot, seed, pull=0.0, restarts=0)
+    q, its = q[0], its[0]
+    if not ok.all():
+        return None
+    steps = np.abs(np.diff(np.concatenate([q0[None], q]), axis=0)).max()
+    inside = ((q >= facts["lo"] - 1e-9) & (q <= facts["hi"] + 1e-9)).all()
+    return (q, its) if inside and steps <= min(PATH_FOLLOW_STEP, max_step) else None
 
 
 # ---------------------------------------------------------------------------
