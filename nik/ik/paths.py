@@ -11,9 +11,11 @@ answer, however exact each pose is. :func:`solve_path` therefore looks at the wh
    (several chains side by side, each the continuation of a different posture).
 2. **the choice over the whole path**: by dynamic programming over the branches (:func:`nik.ik.path_kernels.path_dp`),
    the sequence whose largest step is the smallest, and among those the one with the least sum of squared steps
-   (then the least total joint motion);
-   with ``q_start`` the step from it to the first waypoint counts too, so the trajectory starts nearest it.
-   Among chains, the one with the fewest failed waypoints, then the smallest largest step, then the least motion.
+   (then the least total joint motion); with ``q_start`` the step from it to the first waypoint counts too, so the
+   trajectory starts nearest it. Among chains, the one with the fewest failed waypoints, then the smallest largest
+   step, then the least motion. With ``q_start`` on a closed-form arm the LM chain from ``q_start`` is tried first
+   and kept when it follows every waypoint in steps of at most :data:`PATH_FOLLOW_STEP` (its branch meets no
+   limit: nothing to look ahead for).
 3. **polish**: a waypoint left without a valid candidate (closed-form arms) gets LM seeded by its predecessor's
    answer (its best effort, flagged); the chains are that already.
 4. **redundant arms**: the extra freedom is resolved along the path by seeding each waypoint with its

@@ -20,7 +20,8 @@ class IKResult:
         rot_err: (B,) geodesic rotation error of ``q``, radians.
         success: (B,) bool, ``pos_err <= tol_pos`` and ``rot_err <= tol_rot``.
         iterations: (B,) long, refinement iterations spent (0 where the guess was already within tolerance).
-        source: where the initial guess came from: ``network``, ``analytic`` or ``multistart``.
+        source: where the initial guess came from: ``network``, ``analytic`` or ``multistart``
+            (:meth:`IKSolver.solve_path` also ``q_start``: the LM chain from the given start).
         reachable: (B,) bool, False where no configuration can reach the target (provable reach
             bound, :func:`nik.robots.reach.within_reach`); such targets get ``success=False`` and a best effort.
         path: for :meth:`IKSolver.solve_path`, how the trajectory follows its path (:class:`PathReport`:

@@ -313,7 +313,7 @@ class IKSolver:
 
         Returns:
             :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,
-            ``success`` per waypoint re-checked by FK, and ``path`` (:class:`nik.ik.paths.PathReport`).
+            ``success`` per waypoint re-checked by FK, and ``path`` (:class:`nik.ik.PathReport`).
 
         Warns:
             UserWarning: naming the first waypoint out of reach, beyond a joint limit on every branch, not reached,
