@@ -68,6 +68,8 @@ PATH_FOLLOW_STEP = math.radians(2.0)
 PATH_STARTS = 8
 #: Two first-waypoint answers closer than this (largest joint difference, radians) are one chain.
 PATH_DEDUPE = 1e-2
+#: Tensor dtypes the compiled input check takes as they are (others go through :func:`nik.ik.targets.as_poses`).
+_DTYPES = (torch.float32, torch.float64)
 #: A joint may turn continuously past +-pi when its range exceeds a full turn by this much (radians).
 WRAP_MARGIN = 1e-6
 
@@ -165,7 +167,7 @@ def _poses(T_path, representation) -> tuple[np.ndarray, torch.dtype, torch.devic
     refusal's message, by :func:`~nik.ik.targets.as_poses` itself)."""
     if representation in (None, "matrix"):
         a = None
-        if isinstance(T_path, torch.Tensor) and T_path.is_floating_point() and T_path.device.type == "cpu":
+        if isinstance(T_path, torch.Tensor) and T_path.dtype in _DTYPES and T_path.device.type == "cpu":
             a, dtype, device = T_path.detach().numpy(), T_path.dtype, T_path.device
         elif isinstance(T_path, np.ndarray) and T_path.dtype == np.float64:
             a, dtype, device = T_path, torch.float64, torch.device("cpu")
