@@ -455,10 +455,9 @@ def _start_postures(solver, lm, Tn, reachable, tol_pos, tol_rot, seed) -> tuple[
     T0 = np.repeat(Tn[:1], seeds.shape[0], axis=0)
     run = lm.solve(T0, seeds, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, restarts=False)
     order = np.argsort(~run.converged, kind="stable")  # reached ones first, network before uniform
-    kept: list[int] = []
-    for i in order:
-        if all(np.abs(run.q[i] - run.q[k]).max() > PATH_DEDUPE for k in kept):
-            kept.append(int(i))
+    q = run.q[order]
+    close = np.abs(q[:, None] - q[None]).max(axis=-1) <= PATH_DEDUPE  # (K, K)
+    kept = order[~np.triu(close, k=1).any(axis=0)]  # drop each answer close to an earlier one
     return run.q[kept], [sources[i] for i in kept]
 
 
