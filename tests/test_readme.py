@@ -32,6 +32,7 @@ DOC_ORDER = [
     "training.md",
     "learned.md",
     "solving.md",
+    "paths.md",
     "view.md",
     "swarm.md",
     "evaluation.md",

@@ -14,7 +14,7 @@ import importlib
 import sys
 
 #: Submodules that add subcommands, in the order they appear in ``nik --help``.
-COMMAND_MODULES = ["nik.cli.data", "nik.cli.solve", "nik.cli.train", "nik.cli.networks", "nik.cli.view"]
+COMMAND_MODULES = ["nik.cli.data", "nik.cli.solve", "nik.cli.path", "nik.cli.train", "nik.cli.networks", "nik.cli.view"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -13,7 +13,7 @@ import it.
 
 from nik.ik.guesses import dedupe, nearest_solution
 from nik.ik.refiners import RefineResult, lm_refine, swarm_refine
-from nik.ik.result import IKResult
+from nik.ik.result import IKResult, PathReport
 from nik.ik.solver import REFINE_METHODS, IKSolver
 from nik.ik.targets import QUAT_NORM_TOL, as_poses, check_tolerances
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
@@ -25,6 +25,7 @@ __all__ = [
     "REFINE_METHODS",
     "IKResult",
     "IKSolver",
+    "PathReport",
     "RefineResult",
     "as_poses",
     "check_tolerances",

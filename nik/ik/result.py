@@ -1,4 +1,5 @@
-"""``IKResult``: what :meth:`nik.IKSolver.solve` returns for B targets."""
+"""``IKResult``: what :meth:`nik.IKSolver.solve` returns for B targets; ``PathReport``: what
+:meth:`nik.IKSolver.solve_path` adds about the path."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from dataclasses import dataclass, fields
 
 import torch
 
-__all__ = ["IKResult"]
+__all__ = ["IKResult", "PathReport"]
 
 
 @dataclass
@@ -19,9 +20,12 @@ class IKResult:
         rot_err: (B,) geodesic rotation error of ``q``, radians.
         success: (B,) bool, ``pos_err <= tol_pos`` and ``rot_err <= tol_rot``.
         iterations: (B,) long, refinement iterations spent (0 where the guess was already within tolerance).
-        source: where the initial guess came from: ``network``, ``analytic`` or ``multistart``.
+        source: where the initial guess came from: ``network``, ``analytic`` or ``multistart``
+            (:meth:`IKSolver.solve_path` also ``q_start``: the LM chain from the given start).
         reachable: (B,) bool, False where no configuration can reach the target (provable reach
             bound, :func:`nik.robots.reach.within_reach`); such targets get ``success=False`` and a best effort.
+        path: for :meth:`IKSolver.solve_path`, how the trajectory follows its path (:class:`PathReport`:
+            every step, the largest and where, reconfigurations, why a waypoint failed); None otherwise.
     """
 
     q: torch.Tensor
@@ -31,6 +35,7 @@ class IKResult:
     iterations: torch.Tensor
     source: str = ""
     reachable: torch.Tensor | None = None
+    path: PathReport | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -40,3 +45,38 @@ class IKResult:
         moved = {f.name: getattr(self, f.name) for f in fields(self)}
         moved = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in moved.items()}
         return IKResult(**moved)
+
+
+@dataclass
+class PathReport:
+    """How a joint trajectory follows its path (:meth:`nik.IKSolver.solve_path`; ``res.path``).
+
+    Attributes:
+        steps: (N,) largest joint motion into each waypoint (radians; metres on prismatic joints); entry 0 is the
+            motion from ``q_start`` (0 without it).
+        step_joints: (N,) long, the joint that moves most in each step.
+        largest_step: the largest of ``steps``; largest_step_at: the waypoint it leads into;
+            largest_step_joint: the joint that makes it.
+        total_motion: sum over steps and joints of ``|dq|`` (radians / metres), from ``q_start`` when given.
+        max_step: the threshold of a reconfiguration, radians (:data:`nik.ik.paths.PATH_MAX_STEP` unless given).
+        reconfigurations: (N,) bool, ``steps > max_step``.
+        reasons: per waypoint, ``""`` when reached, else why not (``"out of reach"``, ``"beyond a joint limit on
+            every branch"``, ``"not reached"``).
+        warning: one line naming the first waypoint that failed or forced a reconfiguration (None when none did).
+    """
+
+    steps: torch.Tensor
+    step_joints: torch.Tensor
+    largest_step: float
+    largest_step_at: int
+    largest_step_joint: int
+    total_motion: float
+    max_step: float
+    reconfigurations: torch.Tensor
+    reasons: list[str]
+    warning: str | None = None
+
+    @property
+    def continuous(self) -> bool:
+        """True when no step exceeds ``max_step``."""
+        return not bool(self.reconfigurations.any())

@@ -301,3 +301,42 @@ class IKSolver:
         be = backends.torch_backend()
         job = stages.Job(be, T, within_reach(self.robot, T), None, tol_pos, tol_rot, seed, None, T.dtype)
         return stages.all_solutions(self, job, n_starts=n_starts, dedupe_tol=dedupe_tol)
+
+    def solve_path(
+        self,
+        T_path,
+        q_start=None,
+        *,
+        tol_pos: float = DEFAULT_TOL_POS,
+        tol_rot: float = DEFAULT_TOL_ROT,
+        seed: int = 0,
+        representation: str | None = None,
+        max_step: float | None = None,
+    ) -> IKResult:
+        """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.ik.paths`).
+
+        Args:
+            T_path: ``(N, 4, 4)``, ``(N, 7)`` or ``(N, 6)`` waypoints in order, metres/radians, N >= 2.
+            q_start: ``(dof,)`` the joints before the path, radians: the trajectory starts nearest them. None:
+                the start (IK branch, posture) that keeps the whole path continuous with the least joint motion.
+            tol_pos, tol_rot: success tolerances, metres and radians (as :meth:`solve`).
+            seed: seeds every random choice.
+            representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
+            max_step: a step (largest joint motion between waypoints) above it is a reconfiguration, reported and
+                warned about; radians, default :data:`nik.ik.paths.PATH_MAX_STEP` (10 degrees).
+
+        Returns:
+            :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,
+            ``success`` per waypoint re-checked by FK, and ``path`` (:class:`nik.ik.PathReport`).
+
+        Warns:
+            UserWarning: naming the first waypoint out of reach, beyond a joint limit on every branch, not reached,
+            or forcing a reconfiguration.
+        """
+        from nik.ik import paths
+
+        step = paths.PATH_MAX_STEP if max_step is None else max_step
+        return paths.solve_path(
+            self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
+            max_step=step,
+        )  # fmt: skip

@@ -1,0 +1,293 @@
+"""Cartesian paths: ``IKSolver.solve_path`` against the hand-made chain and Robotics Toolbox, on the same paths.
+
+Paths (seeded): straight lines (60 waypoints, fixed orientation) and circles (60 waypoints, radius 0.05 m, fixed
+orientation, a random plane) that start at the FK pose of a random configuration inside the limits, so the first
+waypoint is reachable. On the redundant arms the lines are 0.15 m long and start from configurations inside the
+central 60 % of each joint range (the issue's goal); on the closed-form arms they are 0.2 m long.
+
+Per path, in one process, the solvers interleaved (the order rotates from path to path):
+
+- ``solve_path``: ``IKSolver(robot).solve_path(T)`` (the start chosen by the solver) and, for the speed column,
+  ``solve_path(T, q_start=q0)`` from the configuration the path was made from;
+- ``chain``: the hand-made chain ``solve(T[0])`` (or ``q_near=q0``), then ``solve(T[i], q_near=q[i-1])``;
+- ``rtb``: Robotics Toolbox ``ik_LM`` seeded with the previous waypoint's answer (from ``q0``), joint limits on,
+  ``tol=1e-10`` as in ``benchmarks/peers.py``; its model is built from nik's own normal form (the same FK).
+
+Closed-form arms (ur5, kuka_kr): the exhaustive check takes all 8 branches of every waypoint (the torch closed
+form, ``nik.analytic.solve``, not the compiled one solve_path uses) and finds the smallest largest step any branch
+sequence achieves (a threshold search over the layered graph, independent of solve_path's dynamic programming; real
+joint motion: a joint whose range exceeds a full turn enters at each of its values inside the limits). "Feasible"
+paths: every waypoint has a valid branch and that best is <= 3 deg. A solver "meets" a feasible path when every
+waypoint is reached (0.1 mm / 0.1 deg by nik's FK, inside the limits) and its largest step, measured on its own
+joints, is <= best + 0.5 deg. Redundant arms (panda, xarm7), from q0: "feasible" paths are those whose every
+waypoint the per-pose solver (``solve(T)``, no continuity asked) reaches; the goal is every waypoint within 0.1 mm
+/ 0.1 deg and every step (the first from q0 included) <= 3 deg.
+
+Speed: median time per waypoint over the paths (each path timed once per solver); ratios are the peer's median
+over solve_path's (from q0).
+
+    python benchmarks/paths.py                 # 40 lines + 40 circles per arm (a few minutes)
+    python benchmarks/paths.py --paths 5       # a smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import itertools
+import math
+import statistics
+import sys
+import time
+import warnings
+from contextlib import redirect_stdout
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import nik  # noqa: E402
+from nik.analytic import solve as closed_form_solutions  # noqa: E402
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # noqa: E402
+
+ARMS = ("ur5", "kuka_kr", "panda", "xarm7")
+N_WAYPOINTS = 60
+STEP_GOAL = math.radians(3.0)  # rad
+SLACK_GOAL = math.radians(0.5)  # rad
+PATH_SEED = 7_000_003  # the paths' own random stream (not the solvers' seed 0)
+
+
+# ---------------------------------------------------------------------------
+# paths
+# ---------------------------------------------------------------------------
+def start_configuration(robot, gen: torch.Generator, central: float | None) -> torch.Tensor:
+    """A random configuration inside the limits (inside the central fraction ``central`` of each range if given)."""
+    lo, hi = robot.limits.double().T
+    u = torch.rand(robot.dof, generator=gen, dtype=torch.float64)
+    if central is not None:
+        u = 0.5 - central / 2 + central * u
+    return lo + u * (hi - lo)
+
+
+def line(robot, q0, gen, length: float) -> torch.Tensor:
+    """``(N, 4, 4)``: a straight line of ``length`` m from FK(q0) in a random direction, orientation fixed."""
+    T0 = robot.fk(q0[None])[0]
+    d = torch.randn(3, generator=gen, dtype=torch.float64)
+    s = torch.linspace(0.0, 1.0, N_WAYPOINTS, dtype=torch.float64)
+    T = T0.expand(N_WAYPOINTS, 4, 4).clone()
+    T[:, :3, 3] = T0[:3, 3] + s[:, None] * length * d / d.norm()
+    return T
+
+
+def circle(robot, q0, gen, radius: float = 0.05) -> torch.Tensor:
+    """``(N, 4, 4)``: a full circle through FK(q0) in a random plane, orientation fixed."""
+    T0 = robot.fk(q0[None])[0]
+    u, v = torch.linalg.qr(torch.randn(3, 2, generator=gen, dtype=torch.float64))[0].T
+    a = torch.linspace(0.0, 2 * math.pi, N_WAYPOINTS, dtype=torch.float64)
+    centre = T0[:3, 3] + radius * u
+    T = T0.expand(N_WAYPOINTS, 4, 4).clone()
+    T[:, :3, 3] = centre - radius * (torch.cos(a)[:, None] * u + torch.sin(a)[:, None] * v)
+    return T
+
+
+# ---------------------------------------------------------------------------
+# the exhaustive check (closed-form arms)
+# ---------------------------------------------------------------------------
+def with_turns(robot, q: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every branch with each joint whose range exceeds a full turn at each of its values inside the limits
+    (``+-2 pi`` copies): ``(N, 8 x 3^w, dof)`` and the validity ``(N, 8 x 3^w)``."""
+    lo, hi = robot.limits.double().numpy().T
+    w = (hi - lo) > 2 * math.pi + 1e-6
+    turns = np.zeros((3 ** int(w.sum()), robot.dof))
+    turns[:, w] = 2 * math.pi * np.array(list(itertools.product((0.0, -1.0, 1.0), repeat=int(w.sum()))))
+    big = (q[:, :, None, :] + turns[None, None]).reshape(q.shape[0], -1, robot.dof)
+    ok = np.repeat(valid, turns.shape[0], axis=1) & ((big >= lo) & (big <= hi)).all(axis=-1)
+    return big, ok
+
+
+def best_largest_step(robot, T: torch.Tensor) -> float:
+    """The smallest largest step (rad) over all branch sequences if it is <= STEP_GOAL, else inf (also when some
+    waypoint has no valid branch). Real joint motion: a joint that turns past +-pi is taken at each of its values
+    inside the limits, so a sequence that would leave a limit is not counted."""
+    q, valid = closed_form_solutions(robot, T, tol_pos=DEFAULT_TOL_POS, tol_rot=DEFAULT_TOL_ROT)
+    q, valid = with_turns(robot, q.numpy(), valid.numpy())
+    if not valid.any(axis=1).all():
+        return math.inf
+    D = np.stack([np.abs(q[i + 1][:, None] - q[i][None]).max(axis=-1) for i in range(q.shape[0] - 1)])
+    D[~np.broadcast_to(valid[1:, :, None] & valid[:-1, None, :], D.shape)] = math.inf  # (N-1, next, previous)
+
+    def feasible(theta: float) -> bool:
+        reach = valid[0].copy()
+        for i in range(D.shape[0]):
+            reach = ((D[i] <= theta) & reach[None, :]).any(axis=1)
+            if not reach.any():
+                return False
+        return True
+
+    if not feasible(STEP_GOAL):
+        return math.inf
+    values = np.unique(D[D <= STEP_GOAL])
+    lo_i, hi_i = 0, len(values) - 1
+    while lo_i < hi_i:  # the smallest edge value that still connects the first layer to the last
+        mid = (lo_i + hi_i) // 2
+        if feasible(values[mid]):
+            hi_i = mid
+        else:
+            lo_i = mid + 1
+    return float(values[lo_i])
+
+
+# ---------------------------------------------------------------------------
+# solvers
+# ---------------------------------------------------------------------------
+def ets_of(robot):
+    """A Robotics Toolbox ETS with nik's normal form (G_0 Rz(q_1 + o_1) G_1 ...), None without rtb."""
+    try:
+        import roboticstoolbox as rtb
+    except ImportError:
+        return None
+    with redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        G, off, lim = robot.G.double().numpy(), robot.offsets.double().numpy(), robot.limits.double().numpy()
+        e = rtb.ET.SE3(G[0])
+        for i in range(robot.dof):
+            if off[i] != 0.0:
+                e = e * rtb.ET.Rz(off[i])
+            e = e * rtb.ET.Rz(qlim=lim[i]) * rtb.ET.SE3(G[i + 1])
+    q = robot.sample(16, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    gap = max(float(np.abs(e.eval(a) - b).max()) for a, b in zip(q.numpy(), robot.fk(q).numpy(), strict=True))
+    if gap > 1e-9:
+        raise RuntimeError(f"rtb model of {robot.name} disagrees with nik's FK by {gap:.2e} m")
+    return e
+
+
+def run_solve_path(solver, T, q0):
+    t = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = solver.solve_path(T, q_start=q0)
+    return res.q.numpy(), time.perf_counter() - t
+
+
+def run_chain(solver, T, q0):
+    t = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        q = [solver.solve(T[0], q_near=q0).q[0]]
+        for i in range(1, T.shape[0]):
+            q.append(solver.solve(T[i], q_near=q[-1]).q[0])
+    return torch.stack(q).numpy(), time.perf_counter() - t
+
+
+def run_rtb(ets, T, q0):
+    Tn = T.numpy()
+    np.random.seed(0)  # ik_LM draws its restarts from numpy's global generator
+    q = np.empty((Tn.shape[0], ets.n))
+    prev = q0.numpy()
+    t = time.perf_counter()
+    for i in range(Tn.shape[0]):
+        prev = q[i] = ets.ik_LM(Tn[i], q0=prev, tol=1e-10, joint_limits=True).q
+    return q, time.perf_counter() - t
+
+
+def quality(robot, T, q, q0=None) -> tuple[bool, float]:
+    """``(every waypoint reached within 0.1 mm / 0.1 deg and inside the limits, largest step rad)``."""
+    qt = torch.from_numpy(np.ascontiguousarray(q))
+    pe, re = nik.pose_error(T, robot.fk(qt))
+    lo, hi = robot.limits.double().T
+    inside = ((qt >= lo - 1e-9) & (qt <= hi + 1e-9)).all()
+    ok = bool(((pe <= DEFAULT_TOL_POS) & (re <= DEFAULT_TOL_ROT)).all() and inside)
+    full = q if q0 is None else np.concatenate([q0.numpy()[None], q])
+    return ok, float(np.abs(np.diff(full, axis=0)).max())
+
+
+# ---------------------------------------------------------------------------
+# the table
+# ---------------------------------------------------------------------------
+def bench_arm(name: str, n_paths: int) -> dict:
+    """Per kind of path (``line``, ``circle``): paths, feasible ones, goals met per solver, times per waypoint."""
+    solver = nik.IKSolver(name)
+    robot = solver.robot
+    ets = ets_of(robot)
+    redundant = not solver.closed_form
+    gen = torch.Generator().manual_seed(PATH_SEED + sum(map(ord, name)))
+    rows = {kind: {"feasible": 0, "paths": 0, "meets": {}, "times": {}} for kind in ("line", "circle")}
+    for k in range(2 * n_paths):
+        kind = "line" if k % 2 == 0 else "circle"
+        row = rows[kind]
+        q0 = start_configuration(robot, gen, 0.6 if redundant else None)
+        T = line(robot, q0, gen, 0.15 if redundant else 0.2) if kind == "line" else circle(robot, q0, gen)
+        row["paths"] += 1
+        runs = {
+            "solve_path (q_start)": lambda T=T, q0=q0: run_solve_path(solver, T, q0),
+            "chain (q_near)": lambda T=T, q0=q0: run_chain(solver, T, q0),
+        }
+        if not redundant:
+            runs["solve_path"] = lambda T=T: run_solve_path(solver, T, None)
+            runs["chain"] = lambda T=T: run_chain(solver, T, None)
+        if ets is not None:
+            runs["rtb"] = lambda T=T, q0=q0: run_rtb(ets, T, q0)
+        labels = list(runs)
+        shift = k % len(labels)
+        out = {}
+        for label in labels[shift:] + labels[:shift]:  # interleaved: the order rotates from path to path
+            q, dt = runs[label]()
+            out[label] = q
+            row["times"].setdefault(label, []).append(dt / T.shape[0])
+        if redundant:  # feasible: the per-pose solver reaches every waypoint (continuity aside)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                if not bool(solver.solve(T).success.all()):
+                    continue
+            row["feasible"] += 1
+            for label in ("solve_path (q_start)", "chain (q_near)", "rtb"):
+                if label in out:
+                    ok, step = quality(robot, T, out[label], q0)
+                    row["meets"][label] = row["meets"].get(label, 0) + (ok and step <= STEP_GOAL)
+        else:
+            best = best_largest_step(robot, T)
+            if best > STEP_GOAL:
+                continue
+            row["feasible"] += 1
+            for label in ("solve_path", "chain"):
+                ok, step = quality(robot, T, out[label])
+                row["meets"][label] = row["meets"].get(label, 0) + (ok and step <= best + SLACK_GOAL)
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--paths", type=int, default=40, help="lines and as many circles per arm (default 40)")
+    parser.add_argument("--arms", default=",".join(ARMS), help="comma-separated arms")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    print(
+        "| arm | paths | feasible | goal met: solve_path | hand-made chain | rtb ik_LM | "
+        "us/waypoint: solve_path from q_start (no q_start) | chain | rtb | rtb / solve_path | chain / solve_path |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for name in args.arms.split(","):
+        for kind, row in bench_arm(name, args.paths).items():
+            med = {k: statistics.median(v) * 1e6 for k, v in row["times"].items()}
+            m, f = row["meets"], row["feasible"]
+            sp, chain = med["solve_path (q_start)"], med["chain (q_near)"]
+            rtb = med.get("rtb", float("nan"))
+            free = f" ({med['solve_path']:.1f})" if "solve_path" in med else ""
+            if "solve_path" in med:  # closed-form arms: the goal against the exhaustive check's best
+                met = (m.get("solve_path", 0), m.get("chain", 0), "n/a")
+            else:
+                met = (m.get("solve_path (q_start)", 0), m.get("chain (q_near)", 0), m.get("rtb", "n/a"))
+            met = [f"{v} / {f}" if isinstance(v, int) else v for v in met]
+            print(
+                f"| {name} {kind}s | {row['paths']} | {f} | {met[0]} | {met[1]} | {met[2]} | {sp:.1f}{free} | "
+                f"{chain:.1f} | {rtb:.1f} | {rtb / sp:.1f}x | {chain / sp:.1f}x |",
+                flush=True,
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

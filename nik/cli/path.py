@@ -1,0 +1,204 @@
+"""``nik path``: a CSV of waypoints in, a joint trajectory CSV (and a picture) out; the work is
+:meth:`nik.IKSolver.solve_path`."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import sys
+import warnings
+from pathlib import Path
+
+from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+from nik.cli.solve import _units, read_poses_csv
+from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
+
+__all__ = ["plot_trajectory", "register", "write_trajectory_csv"]
+
+#: Default of ``--max-step-deg`` (the reconfiguration threshold of :data:`nik.ik.paths.PATH_MAX_STEP`).
+MAX_STEP_DEG = 10.0
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "path",
+        help="one continuous joint trajectory through a CSV of waypoints (a Cartesian path)",
+        description="Joint angles for every waypoint of a Cartesian path, in order, moving the arm continuously: "
+        "the IK branch (or posture) of the whole path is chosen at once, so that no step jumps to another "
+        "configuration half-way. Writes the trajectory as CSV (degrees, a column per joint; prismatic joints in mm) "
+        "and prints the largest step and where it is. Exit status: 0 when every waypoint was reached within "
+        "tolerance, 1 when some was not, 2 on an error.",
+    )
+    add_robot_arguments(p)
+    p.add_argument("--poses", required=True, metavar="FILE.csv", help="waypoints in order, header x,y,z,qw,qx,qy,qz")
+    p.add_argument("--unit", choices=["m", "mm"], default="m", help="unit of the input positions (default m)")
+    p.add_argument(
+        "--q-start",
+        nargs="+",
+        type=float,
+        metavar="DEG",
+        help="the joints before the path, degrees (prismatic joints: mm): the trajectory starts nearest them; "
+        "default: the start that keeps the whole path continuous with the least joint motion",
+    )
+    p.add_argument("--out", metavar="FILE.csv", help="write the trajectory as CSV (header included)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the joints against the waypoint index (needs matplotlib)")
+    p.add_argument("--tol-mm", type=float, default=DEFAULT_TOL_POS_MM, help="position tolerance, mm (default 0.1)")
+    p.add_argument("--tol-deg", type=float, default=DEFAULT_TOL_ROT_DEG, help="rotation tolerance, deg (default 0.1)")
+    p.add_argument(
+        "--max-step-deg",
+        type=float,
+        default=MAX_STEP_DEG,
+        help=f"a step above this joint motion is reported as a reconfiguration (default {MAX_STEP_DEG:g} deg)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.set_defaults(func=_cmd_path)
+
+
+def _cmd_path(args) -> int:
+    import torch
+
+    from nik.ik import IKSolver
+
+    robot = robot_from_args(args)
+    poses = read_poses_csv(args.poses)
+    if args.unit == "mm":
+        poses[:, :3] *= 1e-3
+    if not (args.tol_mm > 0 and args.tol_deg > 0 and args.max_step_deg > 0):
+        raise ValueError(
+            f"--tol-mm, --tol-deg and --max-step-deg must be > 0, got {args.tol_mm}, {args.tol_deg}, "
+            f"{args.max_step_deg}"
+        )
+    _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
+    q_start = None
+    if args.q_start is not None:
+        if len(args.q_start) != robot.dof:
+            raise ValueError(f"--q-start: {robot.name} has {robot.dof} joints, got {len(args.q_start)} values")
+        q_start = torch.tensor([v / f for v, f in zip(args.q_start, factor, strict=True)], dtype=torch.float64)
+    solver = IKSolver(robot)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        res = solver.solve_path(
+            poses,
+            q_start,
+            tol_pos=args.tol_mm * 1e-3,
+            tol_rot=math.radians(args.tol_deg),
+            seed=args.seed,
+            representation="quat",
+            max_step=math.radians(args.max_step_deg),
+        )
+    for w in caught:
+        if issubclass(w.category, UserWarning):
+            print(f"nik path: warning: {w.message}", file=sys.stderr)
+    if args.out:
+        write_trajectory_csv(args.out, robot, res)
+    if args.plot:
+        plot_trajectory(args.plot, robot, res)
+    rep = res.path
+    j = rep.largest_step_joint
+    ok = int(res.success.sum())
+    wrote = ", ".join(str(x) for x in (args.out, args.plot) if x)
+    print(
+        f"reached {ok} of {len(res)} waypoints within {describe(args.tol_mm * 1e-3, math.radians(args.tol_deg))} "
+        f"({robot.name}{tool_link_text(robot)}, start: {res.source}); largest step {rep.largest_step * factor[j]:.3g} "
+        f"{shown[j]} (joint {j}, {robot.joint_names[j]}) into waypoint {rep.largest_step_at}; "
+        f"{int(rep.reconfigurations.sum())} step(s) above {args.max_step_deg:g} deg"
+        + (f"; wrote {wrote}" if wrote else "")
+    )
+    if not args.out:
+        names = [f"{n}_{u}" for n, u in zip(robot.joint_names, shown, strict=True)]
+        print(",".join(["index", *names, "success"]))
+        for i in range(len(res)):
+            row = [f"{v * f:.4f}" for v, f in zip(res.q[i].tolist(), factor, strict=True)]
+            print(",".join([str(i), *row, str(int(bool(res.success[i])))]))
+    return 0 if ok == len(res) else 1
+
+
+def write_trajectory_csv(path: str | Path, robot, res) -> None:
+    """One row per waypoint: ``index``, the joints in degrees (``<name>_deg``; prismatic: ``<name>_mm``), the
+    position error (mm), rotation error (deg), ``success``, ``step_deg`` (the largest joint motion into that
+    waypoint, degrees; prismatic joints' motion counted in mm) and ``reason`` (why a waypoint failed, else empty).
+    Written to a temporary name, then renamed."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
+    rep = res.path
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    try:
+        with tmp.open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(
+                [
+                    "index",
+                    *[f"{n}_{u}" for n, u in zip(robot.joint_names, shown, strict=True)],
+                    "pos_err_mm",
+                    "rot_err_deg",
+                    "success",
+                    "step_deg",
+                    "reason",
+                ]
+            )
+            for i in range(len(res)):
+                jj = int(rep.step_joints[i])
+                w.writerow(
+                    [
+                        i,
+                        *[f"{v * f:.10g}" for v, f in zip(res.q[i].tolist(), factor, strict=True)],
+                        f"{float(res.pos_err[i]) * 1e3:.6g}",
+                        f"{math.degrees(float(res.rot_err[i])):.6g}",
+                        int(bool(res.success[i])),
+                        f"{float(rep.steps[i]) * factor[jj]:.6g}",
+                        rep.reasons[i],
+                    ]
+                )
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def plot_trajectory(path: str | Path, robot, res) -> None:
+    """A PNG: each joint (degrees; prismatic: mm) against the waypoint index, its limits dashed, failed waypoints
+    crossed and the largest step marked. Matplotlib is imported here (``pip install matplotlib``)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as err:
+        raise ValueError("--plot needs matplotlib (pip install matplotlib)") from err
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
+    rep = res.path
+    q = res.q.detach().cpu().double().numpy()
+    idx = list(range(q.shape[0]))
+    fig, axes = plt.subplots(robot.dof, 1, figsize=(8, 1.3 * robot.dof + 1), sharex=True, squeeze=False)
+    at, jbig = rep.largest_step_at, rep.largest_step_joint
+    fail = [i for i in idx if not bool(res.success[i])]
+    for j, ax in enumerate(axes[:, 0]):
+        f = factor[j]
+        ax.plot(idx, q[:, j] * f, color=f"C{j % 10}", lw=1.4)
+        lo, hi = (float(v) * f for v in robot.limits[j])
+        ax.axhline(lo, color="0.4", ls="--", lw=0.8)
+        ax.axhline(hi, color="0.4", ls="--", lw=0.8)
+        if fail:
+            ax.plot(fail, q[fail, j] * f, "x", color="k", ms=4)
+        if at > 0:
+            ax.axvspan(at - 1, at, color="red", alpha=0.15 if j != jbig else 0.35, lw=0)
+        ax.set_ylabel(f"{robot.joint_names[j]}\n({shown[j]})", fontsize=7)
+        ax.tick_params(labelsize=7)
+    big = rep.largest_step * factor[jbig]
+    axes[0, 0].set_title(
+        f"{robot.name}: joints along the path (limits dashed); largest step {big:.3g} {shown[jbig]} "
+        f"(joint {jbig}) into waypoint {at}" + (f"; {len(fail)} waypoint(s) not reached (x)" if fail else ""),
+        fontsize=8,
+    )
+    axes[-1, 0].set_xlabel("waypoint index")
+    fig.tight_layout()
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
+    try:
+        fig.savefig(tmp, dpi=110)
+        tmp.replace(path)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)

@@ -1,0 +1,192 @@
+"""The compiled loops of :mod:`nik.ik.paths`: the whole-path choice over candidates, and LM chains along a path.
+
+Both loops run over waypoints, one after the other (each waypoint's answer depends on the one before), so they
+are compiled: a Python loop would spend more time in its own overhead than in the arithmetic (one LM solve
+seeded by the previous waypoint costs one or two microseconds here).
+
+- :func:`path_dp`: among ``K`` candidates per waypoint, the sequence whose largest step is the smallest, and
+  among those the one with the least sum of squared steps, then the least total joint motion (dynamic
+  programming, two passes: the bottleneck value, then the cheapest sequence whose steps all stay within it).
+  Squared steps rather than plain motion: where one large step is unavoidable (a joint limit ahead), a plain
+  sum would accept more medium-sized jumps elsewhere under that bound; squares keep every other step small.
+- :func:`path_chains`: ``K`` chains of Levenberg-Marquardt (:mod:`nik.kernels.lm`) along the path, each waypoint
+  seeded by the chain's answer at the previous one, moved slightly towards the middle of the joint ranges.
+
+The step between two configurations is the largest joint motion, ``max_j |a_j - b_j|``; on joints that may turn
+freely past a full turn (``wraps``: their range exceeds 2 pi) the motion is taken modulo 2 pi, shortest way.
+Imported only when a path is solved (it imports numba through :mod:`nik.kernels`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nik.kernels._jit import kernel
+from nik.kernels.chain import LOWER, UPPER
+from nik.kernels.lm import _STREAM, _lm_one, _work_size
+
+__all__ = ["path_chains", "path_dp"]
+
+_TWO_PI = 2.0 * math.pi
+#: Weight of the total joint motion (radians) beside the sum of squared steps (radians^2) in the second pass:
+#: a tie-break among sequences whose steps are alike.
+_TIE = 1e-6
+
+
+@kernel
+def _step(a, b, wraps):
+    """``(largest joint motion, total joint motion)`` from ``a (n,)`` to ``b (n,)``."""
+    m = 0.0
+    s = 0.0
+    for j in range(a.shape[0]):
+        d = abs(a[j] - b[j])
+        if wraps[j]:
+            d = d % _TWO_PI
+            if d > math.pi:
+                d = _TWO_PI - d
+        if d > m:
+            m = d
+        s += d
+    return m, s
+
+
+@kernel
+def path_dp(cand, valid, wraps, q_start, use_start, slack, choice):
+    """The candidate chosen at each waypoint: the sequence with the smallest largest step, then the least sum of
+    squared steps (ties: the least total motion).
+
+    Args:
+        cand: (N, K, n) candidates per waypoint.
+        valid: (N, K) bool; a waypoint without a valid candidate is skipped (the step is taken across it).
+        wraps: (n,) bool, joints whose motion counts modulo 2 pi.
+        q_start: (n,) the configuration before the path (used when ``use_start``: the first step starts there).
+        slack: how far above the smallest largest step a step of the second pass may go (rounding).
+        choice: (N,) int64 out: the candidate chosen at each waypoint, -1 where none is valid.
+
+    Returns:
+        the smallest achievable largest step (inf when no waypoint has a valid candidate).
+    """
+    N, K = valid.shape
+    inf = math.inf
+    V = np.full((N, K), inf)
+    S = np.full((N, K), inf)
+    M = np.full((N, K, K), inf)  # M[i, a, k]: the step from candidate a of the previous layer to k of layer i
+    C = np.full((N, K, K), inf)  # its cost in pass 2: step^2 + _TIE x motion
+    parent = np.full((N, K), -1, dtype=np.int64)
+    prev = -1
+    for i in range(N):  # pass 1: the bottleneck value of the best sequence ending at each candidate
+        seen = False
+        for k in range(K):
+            if not valid[i, k]:
+                continue
+            seen = True
+            if prev < 0:
+                m, s = _step(q_start, cand[i, k], wraps)
+                V[i, k] = m if use_start else 0.0
+                M[i, 0, k], C[i, 0, k] = (m, m * m + _TIE * s) if use_start else (0.0, 0.0)
+                continue
+            best = inf
+            for a in range(K):
+                if valid[prev, a]:
+                    m, s = _step(cand[prev, a], cand[i, k], wraps)
+                    M[i, a, k], C[i, a, k] = m, m * m + _TIE * s
+                    if max(V[prev, a], m) < best:
+                        best = max(V[prev, a], m)
+            V[i, k] = best
+        if seen:
+            prev = i
+    if prev < 0:
+        choice[:] = -1
+        return inf
+    last = prev
+    bound = inf
+    for k in range(K):
+        if V[last, k] < bound:
+            bound = V[last, k]
+    best_max = bound
+    bound += slack
+    prev = -1
+    for i in range(N):  # pass 2: the least cost over sequences whose steps stay within the bound
+        seen = False
+        for k in range(K):
+            if not valid[i, k]:
+                continue
+            seen = True
+            if prev < 0:
+                S[i, k] = C[i, 0, k] if M[i, 0, k] <= bound else inf
+                continue
+            best, arg = inf, -1
+            for a in range(K):
+                if M[i, a, k] <= bound and S[prev, a] + C[i, a, k] < best:
+                    best, arg = S[prev, a] + C[i, a, k], a
+            S[i, k] = best
+            parent[i, k] = arg
+        if seen:
+            prev = i
+    k = 0
+    for a in range(K):
+        if S[last, a] < S[last, k]:
+            k = a
+    for i in range(N - 1, -1, -1):
+        if i > last:
+            choice[i] = -1
+            continue
+        seen = False
+        for a in range(K):
+            if valid[i, a]:
+                seen = True
+                break
+        if not seen:
+            choice[i] = -1
+            continue
+        choice[i] = k
+        k = parent[i, k]
+    return best_max
+
+
+@kernel
+def path_chains(G, joints, T, starts, opts, iopts, restarts, seed, pull, pull_cap, q, iterations, ok, pos, rot):
+    """``K`` chains of LM along the path ``T: (N, 4, 4)``, one from each start ``starts: (K, n)``.
+
+    Waypoint 0 of chain ``c`` is solved from ``starts[c]``; waypoint ``i`` from the chain's answer at ``i - 1``
+    moved towards the middle of each joint's range by ``pull`` times its distance from there (at most
+    ``pull_cap`` radians or metres). On a redundant arm the LM step from that seed undoes the part of the move
+    that would shift the tool, so what remains is self-motion away from the limits. A waypoint not reached
+    from that seed is tried from the previous answer itself, then from up to ``restarts[i]`` uniform starts.
+
+    Args:
+        G, joints: the model (:func:`nik.kernels.chain.chain_model`); opts, iopts: :func:`nik.kernels.lm.lm_options`
+            (first starts 0: the seed is the first start).
+        restarts: (N,) int64, uniform restarts a waypoint may draw (0 where it is out of reach).
+        seed: (1,) uint64 (:func:`nik.kernels.lm.seed_state`): waypoint ``i`` of chain ``c`` draws from its stream.
+        q: (K, N, n) out, the answers; iterations: (K, N) int64 out; ok: (K, N) bool out, within both tolerances;
+        pos, rot: (K, N) out, metres and radians (the LM scratch is allocated here: threads never share it).
+    """
+    K, n = starts.shape
+    N = T.shape[0]
+    x = np.empty(n)
+    work = np.empty(_work_size(n))
+    rng = np.empty(1, dtype=np.uint64)
+    for c in range(K):
+        for i in range(N):
+            rng[0] = seed[0] ^ (np.uint64(c * N + i + 1) * _STREAM)
+            if i == 0:
+                for j in range(n):
+                    x[j] = starts[c, j]
+            else:
+                for j in range(n):
+                    lo, hi = joints[j, LOWER], joints[j, UPPER]
+                    d = -pull * (q[c, i - 1, j] - 0.5 * (lo + hi))
+                    x[j] = q[c, i - 1, j] + min(max(d, -pull_cap), pull_cap)
+            it, good, p, r = _lm_one(G, joints, T[i], x, opts, iopts, 0, rng, q[c, i], work)
+            if not good and i > 0:
+                total = it
+                it, good, p, r = _lm_one(G, joints, T[i], q[c, i - 1], opts, iopts, restarts[i], rng, q[c, i], work)
+                it += total
+            elif not good and restarts[i] > 0:
+                total = it
+                it, good, p, r = _lm_one(G, joints, T[i], x, opts, iopts, restarts[i], rng, q[c, i], work)
+                it += total
+            iterations[c, i], ok[c, i], pos[c, i], rot[c, i] = it, good, p, r

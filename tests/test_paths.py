@@ -1,0 +1,315 @@
+"""``IKSolver.solve_path`` and ``nik path``: continuity over a whole path, redundant arms, honest reports, bad input."""
+
+from __future__ import annotations
+
+import csv
+import math
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.cli import main
+from nik.poses import matrix_to_quaternion
+from nik.robots.reach import reach_center, reach_radius
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+
+
+def _rz(a: float) -> torch.Tensor:
+    T = torch.eye(4, dtype=torch.float64)
+    T[0, 0], T[0, 1], T[1, 0], T[1, 1] = math.cos(a), -math.sin(a), math.sin(a), math.cos(a)
+    return T
+
+
+def _line(robot, q0: torch.Tensor, direction, length: float, n: int) -> torch.Tensor:
+    """``(n, 4, 4)``: FK(q0) moved along ``direction`` by up to ``length`` metres, orientation fixed."""
+    T0 = robot.fk(q0[None])[0]
+    d = torch.as_tensor(direction, dtype=torch.float64)
+    s = torch.linspace(0.0, 1.0, n, dtype=torch.float64)
+    T = T0.expand(n, 4, 4).clone()
+    T[:, :3, 3] = T0[:3, 3] + s[:, None] * length * d / d.norm()
+    return T
+
+
+def _reached(robot, T, q) -> torch.Tensor:
+    """The independent check: FK of ``q`` within 0.1 mm / 0.1 deg of ``T`` and every joint inside its limits."""
+    pe, re = nik.pose_error(T, robot.fk(q.double()))
+    lo, hi = robot.limits.double().T
+    inside = ((q >= lo - 1e-9) & (q <= hi + 1e-9)).all(dim=-1)
+    return (pe <= DEFAULT_TOL_POS) & (re <= DEFAULT_TOL_ROT) & inside
+
+
+def _largest_step(q: torch.Tensor) -> float:
+    return float((q[1:] - q[:-1]).abs().max())
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    return nik.IKSolver("ur5")
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return nik.IKSolver("panda")
+
+
+def _branch_trap(solver):
+    """A ur5 path whose default first branch (``solve(T[0])``) runs into the shoulder joint's +180 deg limit: the
+    whole pose turns about the base axis, which moves that branch's joint 0 from 115 deg beyond 180 deg."""
+    q = torch.tensor([2.0, -1.0, 1.2, -1.5, -1.4, 0.3], dtype=torch.float64)
+    T0 = solver.robot.fk(q[None])[0]
+    a = float(solver.solve(T0).q[0, 0])
+    sweep = (math.pi - abs(a)) + 0.6
+    angles = torch.linspace(0.0, math.copysign(sweep, a), int(math.degrees(sweep) / 2) + 1, dtype=torch.float64)
+    return torch.stack([_rz(float(t)) @ T0 for t in angles])
+
+
+def test_branch_trap_is_solved_without_a_jump(ur5):
+    T = _branch_trap(ur5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        chain = [ur5.solve(T[0]).q[0]]
+        for i in range(1, T.shape[0]):
+            chain.append(ur5.solve(T[i], q_near=chain[-1]).q[0])
+    assert _largest_step(torch.stack(chain)) > math.radians(90.0)  # the trap is real: the hand-made chain jumps
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no reconfiguration warning either
+        res = ur5.solve_path(T)
+    assert bool(_reached(ur5.robot, T, res.q).all())
+    assert bool(res.success.all())
+    assert _largest_step(res.q) < math.radians(3.0)
+    assert res.path.largest_step == pytest.approx(_largest_step(res.q))
+    assert res.source == "analytic"
+
+
+def test_q_start_makes_the_trajectory_start_nearest_it(ur5):
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(ur5.robot, q0, [0.0, 1.0, 0.0], 0.1, 30)
+    res = ur5.solve_path(T, q_start=q0)
+    assert bool(_reached(ur5.robot, T, res.q).all())
+    torch.testing.assert_close(res.q[0], q0, atol=1e-6, rtol=0)  # FK(q0) is the first waypoint: q0's own branch
+    assert float(res.path.steps[0]) == pytest.approx(float((res.q[0] - q0).abs().max()))
+    assert _largest_step(res.q) < math.radians(3.0)
+    assert res.source == "q_start"  # the LM chain from q_start follows the whole path: no look-ahead needed
+
+
+def test_q_start_on_a_trapped_branch_is_not_followed_into_the_limit(ur5):
+    """From the trapped branch's own configuration the LM chain would turn joint 0 by a full turn at the limit;
+    solve_path falls back to the closed form's branches and reports the one unavoidable large step, nothing more."""
+    T = _branch_trap(ur5)
+    q_start = ur5.solve(T[0]).q[0]
+    with pytest.warns(UserWarning, match="forces a reconfiguration"):
+        res = ur5.solve_path(T, q_start=q_start)
+    assert res.source == "analytic"
+    assert bool(res.success.all())
+    assert int(res.path.reconfigurations.sum()) == 1
+
+
+def test_a_joint_with_more_than_a_full_turn_crosses_180_degrees_continuously():
+    """kuka_kr's joint 6 (range +-350 deg) turns from 60 to 260 deg: the closed form's answers lie in [-180, 180),
+    the trajectory must not jump by a full turn where the joint passes 180 deg."""
+    solver = nik.IKSolver("kuka_kr")
+    q = torch.tensor([0.3, -0.8, 0.6, 0.4, 0.9, math.radians(60.0)], dtype=torch.float64)
+    Q = q.expand(101, 6).clone()
+    Q[:, 5] = torch.linspace(math.radians(60.0), math.radians(260.0), 101, dtype=torch.float64)
+    T = solver.robot.fk(Q)
+    res = solver.solve_path(T, q_start=q)
+    assert bool(_reached(solver.robot, T, res.q).all())
+    torch.testing.assert_close(res.q, Q, atol=1e-6, rtol=0)  # the arm's own motion, 2 deg per waypoint
+    assert _largest_step(res.q) < math.radians(2.5)
+
+
+def test_redundant_arm_follows_a_line_continuously_from_q_start(panda):
+    lo, hi = panda.robot.limits.double().T
+    q0 = lo + (hi - lo) * torch.tensor([0.45, 0.6, 0.5, 0.55, 0.4, 0.5, 0.6], dtype=torch.float64)
+    T = _line(panda.robot, q0, [-1.0, 0.3, 0.2], 0.15, 60)
+    res = panda.solve_path(T, q_start=q0)
+    assert bool(_reached(panda.robot, T, res.q).all())
+    assert bool(res.success.all())
+    full = torch.cat([q0[None], res.q])
+    assert _largest_step(full) < math.radians(3.0)
+    assert res.path.continuous
+
+
+def test_redundant_arm_without_q_start_keeps_one_posture(panda):
+    q0 = torch.tensor([0.2, 0.3, -0.2, -1.8, 0.1, 2.0, 0.5], dtype=torch.float64)
+    T = _line(panda.robot, q0, [0.0, 0.0, 1.0], 0.12, 40)
+    res = panda.solve_path(T)
+    assert bool(_reached(panda.robot, T, res.q).all())
+    assert _largest_step(res.q) < math.radians(3.0)
+    assert res.source in ("network", "multistart")
+
+
+def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
+    """Back and forth six times along a line whose far end the arm cannot reach in that orientation: without the
+    secondary objective (joint-limit centring) the posture drifts into a limit and then jumps; with it, neither."""
+    import nik.ik.paths as paths
+
+    lo, hi = panda.robot.limits.double().T
+    q0 = lo + (hi - lo) * torch.tensor([0.5, 0.55, 0.5, 0.5, 0.5, 0.45, 0.5], dtype=torch.float64)
+    go = _line(panda.robot, q0, [1.0, 0.5, 0.0], 0.15, 30)
+    T = torch.cat([go, go.flip(0)] * 6)
+
+    def run():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = panda.solve_path(T, q_start=q0)
+        margin = torch.minimum(res.q - lo, hi - res.q) / (hi - lo)  # (N, dof) fraction of each range left
+        return res, float(margin.min())
+
+    res, margin = run()
+    assert margin > 0.1
+    assert res.path.largest_step < math.radians(10.0)
+    assert torch.equal(res.success, _reached(panda.robot, T, res.q))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert int(res.success.sum()) == int(panda.solve(T).success.sum())  # every waypoint any solve reaches
+    monkeypatch.setattr(paths, "PATH_PULL", 0.0)
+    plain, plain_margin = run()  # the check can fail: nearest-to-the-predecessor alone drifts and jumps
+    assert plain_margin < 0.05 and plain.path.largest_step > math.radians(90.0)
+
+
+def test_flags_are_honest_when_the_path_leaves_the_reach(ur5):
+    robot = ur5.robot
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    p0 = robot.fk(q0[None])[0, :3, 3]
+    outward = p0 - reach_center(robot)
+    outward[2] = 0.0
+    T = _line(robot, q0, outward, reach_radius(robot), 40)  # ends far beyond the reach
+    with pytest.warns(UserWarning) as caught:
+        res = ur5.solve_path(T)
+    truth = _reached(robot, T, res.q)
+    assert bool(truth[0]) and not bool(truth[-1])
+    assert torch.equal(res.success, truth)
+    steps = (res.q[1:] - res.q[:-1]).abs().amax(dim=-1)
+    problem = ~truth
+    problem[1:] |= steps > res.path.max_step
+    first = int(problem.nonzero()[0])  # the first waypoint not reached or reached by a reconfiguration
+    assert f"waypoint {first} of 40" in str(caught[0].message)
+    assert [bool(r) for r in res.path.reasons] == (~truth).tolist()
+    assert res.path.reasons[-1] == "out of reach"
+    torch.testing.assert_close(res.path.steps[1:], (res.q[1:] - res.q[:-1]).abs().amax(dim=-1), atol=1e-12, rtol=0)
+
+
+def test_a_step_above_max_step_is_warned_about_as_a_reconfiguration(ur5):
+    T = _branch_trap(ur5)
+    limit = math.radians(1.0)
+    with pytest.warns(UserWarning, match="forces a reconfiguration") as caught:
+        res = ur5.solve_path(T, max_step=limit)
+    above = ((res.q[1:] - res.q[:-1]).abs().amax(dim=-1) > limit).nonzero()
+    assert above.numel() > 0
+    assert f"waypoint {int(above[0]) + 1} of" in str(caught[0].message)
+    assert res.path.reconfigurations.sum() == above.numel()
+
+
+def test_solve_path_takes_quaternion_waypoints(ur5):
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(ur5.robot, q0, [1.0, 0.0, 0.0], 0.05, 10)
+    v = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
+    res = ur5.solve_path(v)
+    assert bool(_reached(ur5.robot, T, res.q).all())
+
+
+def _bad_path(kind: str, robot) -> tuple:
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(robot, q0, [0.0, 1.0, 0.0], 0.1, 10)
+    q_start = None
+    if kind == "nan":
+        T[4, 0, 3] = float("nan")
+    elif kind == "one pose":
+        T = T[:1]
+    elif kind == "millimetres":
+        T[:, :3, 3] *= 1e3
+    elif kind == "not orthonormal":
+        T[2, :3, :3] *= 1.3
+    elif kind == "q_start outside the limits":
+        q_start = q0.clone()
+        q_start[5] = 4.0
+    elif kind == "q_start of the wrong length":
+        q_start = q0[:5]
+    return T, q_start
+
+
+@pytest.mark.parametrize(
+    ("kind", "match"),
+    [
+        ("nan", "NaN"),
+        ("one pose", "at least 2 waypoints"),
+        ("millimetres", "millimetres"),
+        ("not orthonormal", "orthonormal"),
+        ("q_start outside the limits", "joint 5 .* outside its limits"),
+        ("q_start of the wrong length", r"q_start: expected shape \(6,\)"),
+    ],
+)
+def test_bad_input_is_one_line_value_error(ur5, kind, match):
+    T, q_start = _bad_path(kind, ur5.robot)
+    with pytest.raises(ValueError, match=match) as err:
+        ur5.solve_path(T, q_start=q_start)
+    assert "\n" not in str(err.value)
+
+
+def _write_poses(path, T) -> None:
+    quat = matrix_to_quaternion(T[:, :3, :3])
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["x", "y", "z", "qw", "qx", "qy", "qz"])
+        for p, qq in zip(T[:, :3, 3].tolist(), quat.tolist(), strict=True):
+            w.writerow([f"{v:.12g}" for v in p + qq])
+
+
+def test_cli_round_trip_csv_to_csv(tmp_path, capsys):
+    robot = nik.load_robot("ur5")
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(robot, q0, [0.0, 1.0, 0.5], 0.1, 25)
+    poses, out = tmp_path / "path.csv", tmp_path / "traj.csv"
+    _write_poses(poses, T)
+    start = [f"{math.degrees(v):.9f}" for v in q0.tolist()]
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--q-start", *start, "--out", str(out)]) == 0
+    assert "reached 25 of 25 waypoints" in capsys.readouterr().out
+    with out.open() as fh:
+        rows = list(csv.DictReader(fh))
+    names = [f"{n}_deg" for n in robot.joint_names]
+    q = torch.tensor([[math.radians(float(r[n])) for n in names] for r in rows], dtype=torch.float64)
+    assert q.shape == (25, 6)
+    assert bool(_reached(robot, T, q).all())
+    assert all(r["success"] == "1" for r in rows)
+    assert _largest_step(torch.cat([q0[None], q])) < math.radians(3.0)
+    steps = np.array([float(r["step_deg"]) for r in rows[1:]])
+    np.testing.assert_allclose(steps, np.degrees((q[1:] - q[:-1]).abs().amax(dim=-1).numpy()), atol=1e-6)
+
+
+def test_cli_exit_1_when_a_waypoint_fails(tmp_path, capsys):
+    robot = nik.load_robot("ur5")
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    outward = robot.fk(q0[None])[0, :3, 3] - reach_center(robot)
+    outward[2] = 0.0
+    poses = tmp_path / "path.csv"
+    _write_poses(poses, _line(robot, q0, outward, reach_radius(robot), 20))
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--out", str(tmp_path / "t.csv")]) == 1
+    assert "warning: solve_path on ur5: waypoint" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["--unit", "mm"], ["--q-start", "1", "2", "3"], ["--q-start", *["0"] * 5, "200"]])
+def test_cli_bad_input_exit_2_one_line(tmp_path, capsys, args):
+    robot = nik.load_robot("ur5")
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 5)
+    if args[:2] == ["--unit", "mm"]:
+        T[:, :3, 3] *= 1e6  # kilometres given as millimetres: still far beyond the reach in metres
+    poses = tmp_path / "path.csv"
+    _write_poses(poses, T)
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("nik path: error:") and "\n" not in err
+
+
+def test_cli_plot_writes_a_png(tmp_path):
+    pytest.importorskip("matplotlib")
+    robot = nik.load_robot("ur5")
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    poses, png = tmp_path / "path.csv", tmp_path / "traj.png"
+    _write_poses(poses, _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 10))
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--plot", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
