@@ -109,7 +109,8 @@ def main(argv=None) -> int:
         f"`python benchmarks/closed_default.py {' '.join(argv or [])}`".replace(" `", "`"),
         "",
         f"Every 6R arm of example-robot-data; one pose: {args.n_one} calls interleaved pose by pose, us median / p95 "
-        f"(CPU time of this thread); batch: {args.n_batch} poses, us per pose, median of {args.rounds} interleaved runs. "
+        f"(CPU time of this thread); batch: {args.n_batch} poses, us per pose, median of {args.rounds} interleaved "
+        "runs. "
         "Success within 0.1 mm / 0.1 deg (default / analytic=False). Ratio: analytic=False over the default "
         "(>= 0.90: the default is at most 10 % slower).",
         "",

@@ -276,11 +276,12 @@ def pays_rows(name: str, label: str, kw: dict, args) -> list[str]:
             return float(torch.quantile(x.double(), p))
 
         rows.append(
-            f"| {name} | {label} | {case} | {'/'.join(sorted(srca))} | {100 * sa:.2f} % | median {q(wa, .5) / 1e3:.4f} / "
-            f"{q(ca, .5) / 1e3:.4f}, p99 {q(wa, .99) / 1e3:.4f} / {q(ca, .99) / 1e3:.4f} | | {'/'.join(sorted(srcb))} | "
-            f"{100 * sb:.2f} % | median {q(wb, .5) / 1e3:.4f} / {q(cb, .5) / 1e3:.4f}, p99 {q(wb, .99) / 1e3:.4f} / "
-            f"{q(cb, .99) / 1e3:.4f} | | median {q(wb, .5) / q(wa, .5):.2f}x / {q(cb, .5) / q(ca, .5):.2f}x, p99 "
-            f"{q(wb, .99) / q(wa, .99):.2f}x / {q(cb, .99) / q(ca, .99):.2f}x |"
+            f"| {name} | {label} | {case} | {'/'.join(sorted(srca))} | {100 * sa:.2f} % | "
+            f"median {q(wa, 0.5) / 1e3:.4f} / {q(ca, 0.5) / 1e3:.4f}, p99 {q(wa, 0.99) / 1e3:.4f} / "
+            f"{q(ca, 0.99) / 1e3:.4f} | | {'/'.join(sorted(srcb))} | "
+            f"{100 * sb:.2f} % | median {q(wb, 0.5) / 1e3:.4f} / {q(cb, 0.5) / 1e3:.4f}, p99 {q(wb, 0.99) / 1e3:.4f} / "
+            f"{q(cb, 0.99) / 1e3:.4f} | | median {q(wb, 0.5) / q(wa, 0.5):.2f}x / {q(cb, 0.5) / q(ca, 0.5):.2f}x, p99 "
+            f"{q(wb, 0.99) / q(wa, 0.99):.2f}x / {q(cb, 0.99) / q(ca, 0.99):.2f}x |"
         )
         print(rows[-1], flush=True)
     return rows

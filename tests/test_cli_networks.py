@@ -33,7 +33,8 @@ def test_nik_networks_lists_installs_and_removes(pair, capsys):
     assert main(["networks"]) == 0
     out = capsys.readouterr().out
     rows = _rows(out)
-    assert sorted(rows) == sorted(available() + available(single_pose=True)) and all(r[5] == "shipped" for r in rows.values())
+    assert sorted(rows) == sorted(available() + available(single_pose=True))
+    assert all(r[5] == "shipped" for r in rows.values())
     assert str(user_dir()) in out
     panda = rows["panda"]
     assert panda[1] == "panda" and panda[2] == nik.load_robot("panda").definition_hash and panda[3] == "multihead"

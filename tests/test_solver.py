@@ -262,7 +262,8 @@ def test_multistart_fallback_rescues_a_poor_network_on_an_arm_without_closed_for
     path = save_checkpoint(IKNet(robot, hidden=[4]).fit_normalisation(T, q), tmp_path / "poor.ckpt")  # untrained
     without = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback=False).solve(T, max_iters=3)
     assert not bool(without.success.all())
-    rescued = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback="multistart").solve(T, tol_pos=1e-4, tol_rot=1e-3, max_iters=3)
+    rescued = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback="multistart")
+    rescued = rescued.solve(T, tol_pos=1e-4, tol_rot=1e-3, max_iters=3)
     _check_round_trip(robot, rescued, T, 1e-4, 1e-3)
 
 

@@ -43,7 +43,15 @@ from nik.nets.pretrained import save
 from nik.nets.registry import install
 from nik.robots import Robot, load_robot
 
-__all__ = ["DEFAULT_HIDDEN", "SINGLE_POSE_HIDDEN", "Progress", "TrainCfg", "TrainResult", "choose_kind", "train_network"]
+__all__ = [
+    "DEFAULT_HIDDEN",
+    "SINGLE_POSE_HIDDEN",
+    "Progress",
+    "TrainCfg",
+    "TrainResult",
+    "choose_kind",
+    "train_network",
+]
 
 #: The trunk of a ``nik train`` network: 4 x 256 SiLU. Chosen by measurement (``benchmarks/learned.py``):
 #: its forward pass costs about a third of a 3 x 512 one per target on a batch of 10,000, one CPU thread.

@@ -154,7 +154,14 @@ class CompiledLM:
         return run
 
     def solve_starts(
-        self, T: np.ndarray, starts: np.ndarray, *, tol_pos: float, tol_rot: float, seed: int, max_iters: int | None = None
+        self,
+        T: np.ndarray,
+        starts: np.ndarray,
+        *,
+        tol_pos: float,
+        tol_rot: float,
+        seed: int,
+        max_iters: int | None = None,
     ) -> CompiledRun:
         """LM for ``T: (B, 4, 4)`` float64 from each target's starts ``starts: (B, K, dof)`` in turn (the first that
         reaches the tolerance ends it; no uniform restarts): :func:`nik.kernels.seeded.lm_starts`."""

@@ -11,7 +11,8 @@ below; a backend implements it:
 
 :func:`choose` picks the backend of a call: the compiled one for CPU targets with ``refine="lm"``, whatever the batch
 size (its cost per pose does not grow with the batch, so a large batch never costs more per pose than the same
-batch in chunks); torch otherwise (targets on a GPU, the swarms, ``refine="none"``). Whatever the backend, the answers satisfy the same contract (joints
+batch in chunks); torch otherwise (targets on a GPU, the swarms, ``refine="none"``). Whatever the backend, the
+answers satisfy the same contract (joints
 inside the limits, errors measured by FK, honest ``success`` and ``reachable``), the same seed gives the same answer,
 and ``IKResult.source`` names the guess that served.
 

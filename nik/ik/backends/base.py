@@ -45,7 +45,8 @@ class Job:
 
 @dataclass
 class Refined:
-    """A refiner's answers for b targets: ``q (b, dof)``, ``pos_err``, ``rot_err`` ``(b,)`` by FK, ``iterations (b,)``."""
+    """A refiner's answers for b targets: ``q (b, dof)``, ``pos_err``, ``rot_err`` ``(b,)`` by FK,
+    ``iterations (b,)``."""
 
     q: Any
     pos_err: Any

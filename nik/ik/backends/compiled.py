@@ -120,7 +120,8 @@ class CompiledBackend:
 
     @staticmethod
     def rows(x, idx):
-        """``x[idx]`` (``idx``: sorted indices from :meth:`nonzero`, or None for every row); no copy when they are all."""
+        """``x[idx]`` (``idx``: sorted indices from :meth:`nonzero`, or None for every row); no copy when they are
+        all the rows."""
         return x if idx is None or idx.shape[0] == x.shape[0] else x[idx]
 
     @staticmethod
