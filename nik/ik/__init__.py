@@ -1,11 +1,17 @@
 """ik: the inverse-kinematics pipeline, guess -> refine -> more hypotheses -> fallback -> final check.
 
 - :mod:`nik.ik.solver`: :class:`IKSolver`, which holds one robot's configuration and composes the stages;
-- :mod:`nik.ik.stages`: the stages, one small function each, ``stage(solver, job, answers) -> answers``;
+- :mod:`nik.ik.stages`: the stages, one small function each, ``stage(solver, job, answers) -> answers``, written
+  once for both backends;
+- :mod:`nik.ik.backends`: where a stage's work is computed: compiled numba kernels on numpy (CPU) or torch (GPU,
+  the swarms);
 - :mod:`nik.ik.guesses`: guess providers ``(robot, T, ...) -> q`` (network, closed form, multistart) and
   the choice among several solutions (``q_near``, de-duplication);
 - :mod:`nik.ik.refiners`: refiners ``(robot, T, q0) -> RefineResult`` (LM, the swarms);
-- :mod:`nik.ik.targets`: target poses in any accepted form -> ``(B, 4, 4)``; :mod:`nik.ik.result`: :class:`IKResult`.
+- :mod:`nik.ik.targets`: target poses in any accepted form -> ``(B, 4, 4)``, the input checks of both backends;
+  :mod:`nik.ik.result`: :class:`IKResult`;
+- :mod:`nik.ik.paths` (and its kernels, :mod:`nik.ik.path_kernels`): :meth:`IKSolver.solve_path`, one continuous
+  joint trajectory for a Cartesian path.
 
 The room composes the rooms below it (robots, nets, analytic, lm, swarm); only learn, evaluation and cli
 import it.
