@@ -422,7 +422,7 @@ def latency_table(names: list[str], n: int, seed: int, block: int = LATENCY_BLOC
             lines.append(
                 f"| {name} | {label_of.get(label, label)} | {np.median(ts):.0f} | {np.percentile(ts, 95):.0f} | "
                 f"{np.percentile(ts, 99):.0f} | {ts.max():.0f} | {int((ts > 2000).sum())} | {succ:.1f} | {outside} | "
-                f"{rtb_median / np.median(ts):.2f}x |"
+                f"{times_rtb(rtb_median / np.median(ts))} |"
             )
         print(f"  ({name}: latency rows done)", flush=True)
     nik.set_threads(None)
