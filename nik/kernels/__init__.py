@@ -11,7 +11,9 @@ the reference they are tested against.
 - :mod:`nik.kernels.closed`: the closed forms of 6R arms (spherical wrist, three parallel axes) and the
   choice among their solutions;
 - :mod:`nik.kernels.poses`: the checks and conversions of target poses, the reach bound;
-- :mod:`nik.kernels.mlp`: forward pass of an MLP whose weights are one flat float64 array;
+- :mod:`nik.kernels.mlp`: forward pass of an MLP whose weights are one flat float64 (or float32) array;
+- :mod:`nik.kernels.seeded`: a network's hypotheses as LM seeds: forward pass and decoding, ranking by FK, LM from
+  several starts in turn, merging refined answers;
 - :mod:`nik.kernels.cache`: where the compiled code is kept (imports no numba).
 
 Every kernel is ``numba.njit(cache=True, nogil=True)``, and none writes memory shared between calls

@@ -7,8 +7,8 @@ piece of work is one kernel call over the whole batch:
   (:func:`nik.kernels.poses.reach_flags`);
 - the network's hypotheses: for up to :data:`PACKED_MAX_BATCH` poses the packed network's compiled forward pass
   (:mod:`nik.nets.compiled`; the arm's single-pose network when it has one: :meth:`nik.IKSolver.network_for`), for more
-  the torch forward pass (one batched float32 matmul per layer); then every hypothesis ranked by compiled FK
-  (:func:`nik.kernels.seeded.rank`);
+  the torch forward pass (one batched float32 matmul per layer); every hypothesis ranked by compiled FK, the forward
+  pass, the ranking and the tolerance check in one kernel call (:func:`nik.kernels.seeded.ranked_hypotheses`);
 - Levenberg-Marquardt (:class:`nik.lm.compiled.CompiledLM`, the solver's :class:`~nik.lm.LMCfg`): from a guess,
   from several starts in turn (:meth:`~nik.lm.compiled.CompiledLM.solve_starts`), or from uniform starts with the
   batched LM's restart budget;
