@@ -132,7 +132,7 @@ def guess(solver, job: Job) -> Answers | None:
         pos, rot = pose_error(job.T, solver.robot.fk(q))
     else:
         return None
-    answers = Answers(q, pos, rot, be.zeros_long(job.size), hyp)
+    answers = Answers(q, pos, rot, be.zeros_long(job.size, job.T), hyp)
     if checked is not None:
         answers._ok, answers._failing = checked
     return answers
@@ -171,7 +171,7 @@ def near(solver, job: Job, answers: Answers) -> Answers:
     if job.q_near is None or solver.closed_form:
         return answers
     be = job.backend
-    idx = be.arange(job.size)
+    idx = be.arange(job.size, job.T)
     res = be.refine(solver, job, None, job.q_near, solver.fallback == "multistart")
     ok_a = answers.ok(job)
     ok_b = (res.pos_err <= job.tol_pos) & (res.rot_err <= job.tol_rot)
@@ -216,7 +216,7 @@ def fallback(solver, job: Job, answers: Answers) -> Answers:
     if solver.fallback == "analytic":
         start = be.rows(job.q_near if job.q_near is not None else answers.q, idx)
         q, pos, rot = be.closed_form(solver, job, idx, start)
-        res = Refined(q, pos, rot, be.zeros_long(idx.shape[0]))
+        res = Refined(q, pos, rot, be.zeros_long(idx.shape[0], job.T))
     else:
         res = be.lm(solver, job, idx, None, True)
     return answers.merge(job, idx, res, strict=True)

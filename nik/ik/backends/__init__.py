@@ -30,7 +30,8 @@ Backend interface (``be``; arrays are numpy on the compiled backend, tensors on 
 - ``be.lm_starts(solver, job, idx, starts (b, K, dof)) -> Refined``: LM from several starts per target in turn;
 - ``be.merge(answers, job, idx, refined, strict)``: answers take the refined rows that are better, in place;
 - ``be.result(solver, job, answers, source) -> IKResult`` (tensors);
-- array helpers: ``nonzero``, ``rows``, ``arange``, ``copy``, ``put``, ``norm``, ``zeros_long``.
+- array helpers: ``nonzero``, ``rows``, ``arange(n, like)``, ``copy``, ``put``, ``norm``, ``zeros_long(n, like)``
+  (``like``: an array whose device the result takes).
 """
 
 from __future__ import annotations

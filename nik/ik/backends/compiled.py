@@ -112,7 +112,10 @@ class CompiledBackend:
 
     # -- arrays ------------------------------------------------------------------
     nonzero = staticmethod(np.flatnonzero)
-    arange = staticmethod(np.arange)
+
+    @staticmethod
+    def arange(n: int, like=None):
+        return np.arange(n)
 
     @staticmethod
     def copy(x):
@@ -133,7 +136,7 @@ class CompiledBackend:
         return np.sqrt((x * x).sum(-1))
 
     @staticmethod
-    def zeros_long(n: int):
+    def zeros_long(n: int, like=None):
         return np.zeros(n, dtype=np.int64)
 
     @staticmethod

@@ -33,8 +33,9 @@ class TorchBackend:
         return mask.nonzero().squeeze(1)
 
     @staticmethod
-    def arange(n):
-        return torch.arange(n)
+    def arange(n: int, like=None):
+        """``(n,)`` long indices on the device of ``like``."""
+        return torch.arange(n, device=None if like is None else like.device)
 
     @staticmethod
     def copy(x):
