@@ -42,8 +42,7 @@ import numpy as np
 import torch
 
 from nik.ik.result import IKResult, PathReport
-from nik.ik.targets import as_poses, check_tolerances
-from nik.poses import ORTHONORMAL_TOL
+from nik.ik.targets import check_tolerances, pose_array
 from nik.robots.reach import MM_HINT_FACTOR, REACH_SLACK, reach_center, reach_radius
 
 __all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
@@ -68,8 +67,6 @@ PATH_FOLLOW_STEP = math.radians(2.0)
 PATH_STARTS = 8
 #: Two first-waypoint answers closer than this (largest joint difference, radians) are one chain.
 PATH_DEDUPE = 1e-2
-#: Tensor dtypes the compiled input check takes as they are (others go through :func:`nik.ik.targets.as_poses`).
-_DTYPES = (torch.float32, torch.float64)
 #: A joint may turn continuously past +-pi when its range exceeds a full turn by this much (radians).
 WRAP_MARGIN = 1e-6
 
@@ -162,23 +159,17 @@ def solve_path(
 # input
 # ---------------------------------------------------------------------------
 def _poses(T_path, representation) -> tuple[np.ndarray, torch.dtype, torch.device]:
-    """``(T: (N, 4, 4) float64 C-contiguous, dtype, device)`` of the waypoints, checked as
-    :func:`nik.ik.targets.as_poses` checks them (4x4 float64 input by the compiled check, the rest, and every
-    refusal's message, by :func:`~nik.ik.targets.as_poses` itself)."""
-    if representation in (None, "matrix"):
-        a = None
-        if isinstance(T_path, torch.Tensor) and T_path.dtype in _DTYPES and T_path.device.type == "cpu":
-            a, dtype, device = T_path.detach().numpy(), T_path.dtype, T_path.device
-        elif isinstance(T_path, np.ndarray) and T_path.dtype == np.float64:
-            a, dtype, device = T_path, torch.float64, torch.device("cpu")
-        if a is not None and a.ndim == 3 and a.shape[1:] == (4, 4):
-            from nik.kernels.poses import poses_ok
-
-            a = np.ascontiguousarray(a, dtype=np.float64)
-            if poses_ok(a, ORTHONORMAL_TOL):
-                return a, dtype, device
-    T = as_poses(T_path, representation, name="T_path")
-    return np.ascontiguousarray(T.detach().to(device="cpu", dtype=torch.float64).numpy()), T.dtype, T.device
+    """``(T: (N, 4, 4) float64 C-contiguous, dtype, device)`` of the waypoints, checked by
+    :func:`nik.ik.targets.pose_array` (the compiled check, every refusal worded by :func:`~nik.ik.targets.as_poses`).
+    Waypoints on a GPU are checked and solved on the CPU; the answer goes back to their device and dtype."""
+    device = torch.device("cpu")
+    dtype = None
+    if isinstance(T_path, torch.Tensor):
+        device = T_path.device
+        dtype = T_path.dtype if T_path.is_floating_point() else None
+        T_path = T_path.detach().cpu()
+    Tn, checked_dtype = pose_array(T_path, representation, name="T_path")
+    return Tn, dtype or checked_dtype, device
 
 
 def _facts(robot) -> dict:

@@ -122,12 +122,14 @@ def _representation(shape: tuple) -> str | None:
 _FLOATS = (torch.float64, torch.float32)
 
 
-def pose_array(T_target, representation: str | None = None) -> tuple[np.ndarray, torch.dtype]:
+def pose_array(
+    T_target, representation: str | None = None, *, name: str = "T_target"
+) -> tuple[np.ndarray, torch.dtype]:
     """``(T: (B, 4, 4) float64 numpy, dtype of the answer)`` for CPU targets (see the module docstring).
 
     The answer's dtype is the input's for a float32 or float64 tensor, else float64. Raises what
-    :func:`as_poses` raises. A tensor not on the CPU is refused (``ValueError``): the compiled backend does not
-    take it."""
+    :func:`as_poses` raises (``name`` in its messages). A tensor not on the CPU is refused (``ValueError``): the
+    compiled backend does not take it."""
     if isinstance(T_target, torch.Tensor):
         if T_target.device.type != "cpu":
             raise ValueError(f"pose_array: targets on {T_target.device}, expected the CPU")
@@ -141,7 +143,7 @@ def pose_array(T_target, representation: str | None = None) -> tuple[np.ndarray,
             a = None
     T = None if a is None else _checked_poses(a, representation)
     if T is None:  # the torch checks word the error, or accept with a warning (degrees?)
-        T = as_poses(T_target, representation).detach().to(torch.float64).numpy()
+        T = as_poses(T_target, representation, name=name).detach().to(torch.float64).numpy()
     return np.ascontiguousarray(T), dtype
 
 
