@@ -43,13 +43,13 @@ def _decode_angle(s, c, center):
 
 
 @kernel
-def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, T, x, y, work, q):
+def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, T, x, y, q):
     """Every hypothesis ``q: (B, K, n)`` of the network ``flat, layout, activation`` for ``T: (B, 4, 4)``.
 
     ``in_mean, in_std: (9,)`` standardise the ``rot6d`` input; ``out_center, out_half: (n,)`` and
-    ``prismatic: (n,)`` bool decode each head; scratch ``x: (B, 9)``, ``y: (B, K * head_dim)``,
-    ``work``: :func:`nik.kernels.mlp.mlp_work`, all in the dtype of ``flat`` (float32 or float64). Unclamped (as
-    ``forward`` of ``nik.nets.multi``).
+    ``prismatic: (n,)`` bool decode each head; scratch ``x: (B, 9)``, ``y: (B, K * head_dim)`` in the dtype of
+    ``flat`` (float32 or float64; the MLP's own scratch is allocated by :func:`nik.kernels.mlp.mlp_forward`).
+    Unclamped (as ``forward`` of ``nik.nets.multi``).
     """
     B = T.shape[0]
     for b in range(B):
@@ -57,7 +57,7 @@ def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, 
             x[b, r] = (T[b, r, 3] - in_mean[r]) / in_std[r]
             x[b, 3 + r] = (T[b, r, 0] - in_mean[3 + r]) / in_std[3 + r]
             x[b, 6 + r] = (T[b, r, 1] - in_mean[6 + r]) / in_std[6 + r]
-    mlp_forward(flat, layout, activation, x, y, work)
+    mlp_forward(flat, layout, activation, x, y, None)
     K, n = q.shape[1], q.shape[2]
     head_dim = y.shape[1] // K
     for b in range(B):
@@ -80,14 +80,10 @@ def ranked_hypotheses(
     pos (B,), rot (B,), ok (B,), failing)``: the best hypothesis' errors (metres, radians), whether it is within
     ``tol_pos, tol_rot``, and how many are not."""
     B, n = T.shape[0], out_center.shape[0]
-    widest = 9
-    for layer in range(layout.shape[0]):
-        widest = max(widest, layout[layer, 0], layout[layer, 1])
     x = np.empty((B, 9), dtype=flat.dtype)
     y = np.empty((B, layout[layout.shape[0] - 1, 0]), dtype=flat.dtype)
-    work = np.empty((2, B * widest), dtype=flat.dtype)
     q = np.empty((B, heads, n))
-    hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, T, x, y, work, q)
+    hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, T, x, y, q)
     pos, rot = np.empty(B), np.empty(B)
     rank(G, joints, T, q, pos, rot)
     ok = np.empty(B, dtype=np.bool_)

@@ -3,11 +3,11 @@
 :func:`pack` takes a :class:`~nik.nets.multi.MultiHypIKNet` or :class:`~nik.nets.multi.BranchHeadsIKNet` with
 the ``rot6d`` input (the kinds ``nik train`` makes) and returns a :class:`PackedNet`: its weights as one flat
 float32 array (:func:`nik.kernels.mlp.mlp_pack`; float32 as in torch, and twice the SIMD lanes of float64) and the
-buffers of its input standardisation and output decoding. :meth:`PackedNet.hypotheses` then gives what
-``net.forward`` gives (``(B, K, dof)``, unclamped, within float32 rounding of torch's answer) through
-:func:`nik.kernels.seeded.hypotheses`, without torch's per-operation overhead: for one pose of a 4 x 256 network
-tens of microseconds instead of about 200 (``benchmarks/learned.py``). Other kinds (a plain ``IKNet``, the legacy
-``branch`` kind) are not packed: :func:`pack` returns None and the caller runs torch.
+buffers of its input standardisation and output decoding. :meth:`PackedNet.ranked_hypotheses` then gives what
+``net.ranked_hypotheses`` gives (``(B, K, dof)`` inside the limits, best first by FK; within float32 rounding of
+torch's answer) through :func:`nik.kernels.seeded.ranked_hypotheses`, without torch's per-operation overhead: for
+one pose of a 4 x 256 network tens of microseconds instead of about 200 (``benchmarks/learned.py``). Other kinds (a
+plain ``IKNet``, the legacy ``branch`` kind) are not packed: :func:`pack` returns None and the caller runs torch.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ __all__ = ["PackedNet", "pack"]
 
 @dataclass(frozen=True)
 class PackedNet:
-    """The arrays of :func:`nik.kernels.seeded.hypotheses` for one network.
+    """The arrays of :func:`nik.kernels.seeded.ranked_hypotheses` for one network.
 
     Attributes:
         flat, layout: the MLP (:func:`nik.kernels.mlp.mlp_pack`, float32); activation: its code.
@@ -39,25 +39,6 @@ class PackedNet:
     prismatic: np.ndarray
     heads: int
     n_params: int
-
-    @property
-    def widest(self) -> int:
-        return int(max(self.layout[:, 0].max(), self.layout[:, 1].max()))
-
-    def hypotheses(self, T: np.ndarray) -> np.ndarray:
-        """``T: (B, 4, 4)`` float64 -> every hypothesis ``(B, K, dof)`` float64, unclamped."""
-        from nik.kernels.seeded import hypotheses
-
-        B = T.shape[0]
-        q = np.empty((B, self.heads, self.out_center.shape[0]))
-        x = np.empty((B, 9), dtype=np.float32)
-        y = np.empty((B, int(self.layout[-1, 0])), dtype=np.float32)
-        work = np.empty((2, B * self.widest), dtype=np.float32)
-        hypotheses(
-            self.flat, self.layout, self.activation, self.in_mean, self.in_std, self.out_center, self.out_half,
-            self.prismatic, T, x, y, work, q,
-        )  # fmt: skip
-        return q
 
     def ranked_hypotheses(self, G: np.ndarray, joints: np.ndarray, T: np.ndarray, tol_pos: float, tol_rot: float):
         """Every hypothesis for ``T: (B, 4, 4)`` float64 brought inside the limits of the model ``G, joints``
