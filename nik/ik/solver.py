@@ -22,9 +22,8 @@ it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve
 
 The stages are written once; a backend computes them (:mod:`nik.ik.backends`, chosen per call by
 :func:`nik.ik.backends.choose`): compiled numba kernels on numpy for CPU targets with ``refine="lm"`` (any batch
-size), torch
-otherwise (the GPU, the swarms, ``refine="none"``). Both validate the input in one place (:mod:`nik.ik.targets`),
-keep the same result contract, and name the guess that served in ``IKResult.source``.
+size), torch otherwise (the GPU, the swarms, ``refine="none"``). Both validate the input in one place
+(:mod:`nik.ik.targets`), keep the same result contract, and name the guess that served in ``IKResult.source``.
 
 Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`, refiners
 ``(robot, T, q0) -> RefineResult`` in :mod:`nik.ik.refiners`. Units are SI (metres, radians) throughout.
@@ -179,8 +178,9 @@ class IKSolver:
     def network_for(self, batch: int, backend: str = "compiled"):
         """The network that guesses a batch of ``batch`` poses on ``backend``: on the compiled backend (the CPU) the
         single-pose network where the arm has one, whatever the batch size (measured, panda and xarm7, one thread:
-        its 3 x 128 forward pass costs a fifth of the main 4 x 256 one and its guesses need about half an LM
-        iteration more, so it is the faster guess at 16, 100 and 1,000 poses: docs/learned.md); else :attr:`net`."""
+        its 2 x 64 forward pass costs about a twentieth of the main 4 x 256 one's multiply-adds and its guesses
+        cost LM about one iteration more, so it is the faster guess at one pose and at 100 and 1,000 poses:
+        docs/learned.md); else :attr:`net`."""
         if self._net_one is not None and backend == "compiled":
             return self._net_one
         return self.net

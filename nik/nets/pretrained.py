@@ -19,7 +19,7 @@ import torch
 from nik.errors import CheckpointError
 from nik.nets.multi import hypothesis_pose_error
 from nik.nets.pair import load_pair, pair_paths, read_pair_meta, save_pair
-from nik.nets.registry import SHIPPED_DIR, find_network, index
+from nik.nets.registry import SHIPPED_DIR, SINGLE_POSE, find_network, index, role_of
 from nik.robots import Robot, load_robot
 
 __all__ = [
@@ -43,20 +43,8 @@ VALIDATION = {"seed": 12345, "n": 2000}
 def available(directory: str | Path | None = None, *, single_pose: bool = False) -> list[str]:
     """Names of the robots that have a shipped network (both files present), sorted; ``single_pose=True``: the
     names of the shipped single-pose networks instead (``<robot>_one``, recorded role ``single_pose``)."""
-    import json
-
     d = Path(directory) if directory is not None else PRETRAINED_DIR
-    out = []
-    for p in d.glob("*.json"):
-        if not p.with_suffix(".safetensors").is_file():
-            continue
-        try:
-            role = json.loads(p.read_text()).get("role")
-        except (OSError, ValueError, AttributeError):
-            role = None
-        if (role == "single_pose") == single_pose:
-            out.append(p.stem)
-    return sorted(out)
+    return sorted(st.stem for st, _ in index([d]) if (role_of(st) == SINGLE_POSE) == single_pose)
 
 
 def read_meta(name: str, directory: str | Path | None = None) -> dict:

@@ -62,10 +62,9 @@ class TorchBackend:
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
         """:meth:`nik.ik.stages.Answers.merge` with tensor operations (the failing count is counted again when
         asked: None)."""
-        new = res.pos_err + 0.1 * res.rot_err
-        old = answers.score()[idx]
-        keep = idx[new < old if strict else new <= old]
+        new, old = res.pos_err + 0.1 * res.rot_err, answers.score()[idx]
         mask = new < old if strict else new <= old
+        keep = idx[mask]
         answers.q[keep] = res.q[mask].to(answers.q.dtype)
         answers.pos_err[keep] = res.pos_err[mask].to(answers.pos_err.dtype)
         answers.rot_err[keep] = res.rot_err[mask].to(answers.rot_err.dtype)
