@@ -168,12 +168,13 @@ class CompiledBackend:
         near = q_near_array(q_near, B, solver.robot)
         margin = 1.0 if dtype == torch.float64 else 0.5
         return Job(
-            self, T, reachable, near, tol_pos * margin, tol_rot * margin, seed, max_iters, dtype, tol_pos, tol_rot
-        )
+            self, T, reachable, near, tol_pos * margin, tol_rot * margin, seed, max_iters, dtype, tol_pos, tol_rot,
+            state=st,
+        )  # fmt: skip
 
     # -- guesses -----------------------------------------------------------------------
     def network(self, solver, job: Job):
-        st = self.state(solver)
+        st = job.state
         B = job.size
         net = solver.network_for(B, self.name)
         if B <= PACKED_MAX_BATCH:
@@ -195,7 +196,7 @@ class CompiledBackend:
 
     def closed_form(self, solver, job: Job, idx, q_near):
         guess = _kernels().closed_guess
-        st = self.state(solver)
+        st = job.state
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
         B, n = T.shape[0], st.joints.shape[0]
         q, pos, rot, ok = np.empty((B, n)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
@@ -209,7 +210,7 @@ class CompiledBackend:
     # -- refiners ----------------------------------------------------------------------
     def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
-        run = self.state(solver).lm.solve(
+        run = job.state.lm.solve(
             T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters,
             restarts=restarts, reachable=reachable,
         )  # fmt: skip
@@ -221,7 +222,7 @@ class CompiledBackend:
 
     def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
         T = self.rows(job.T, idx)
-        run = self.state(solver).lm.solve_starts(
+        run = job.state.lm.solve_starts(
             T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters
         )
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
@@ -234,7 +235,7 @@ class CompiledBackend:
         q, pos, rot = answers.q, answers.pos_err, answers.rot_err
         if job.dtype != torch.float64:  # the answer in the targets' dtype, inside the limits, its errors measured
             pose_errors = _kernels().pose_errors
-            st = self.state(solver)
+            st = job.state
             q = np.clip(q.astype(np.float32), st.lo32, st.hi32)
             pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
             pose_errors(st.G, st.joints, job.T, q.astype(np.float64), pos, rot)
