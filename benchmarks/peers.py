@@ -78,8 +78,7 @@ def run_nik(robot, T, *, solver=None):
         t = time.perf_counter()
         res = solver.solve(T, tol_pos=TOL_POS, tol_rot=TOL_ROT, seed=0)
         dt = time.perf_counter() - t
-    run_nik.source = res.source  # the guess that served (the row's label)
-    return res.q, dt
+    return res.q, dt, res.source  # the guess that served: the row's label
 
 
 def available(module: str) -> bool:
@@ -197,7 +196,7 @@ def compare(
                 "robot": robot_name,
                 "n": n,
                 "threads": threads,
-                "solver": name + (f" (guess: {run_nik.source})" if name == "nik" else ""),
+                "solver": name + (f" (guess: {last['nik'][2]})" if name == "nik" else ""),
                 "ms": med / n * 1e3,
                 "success": succ,
                 "outside": outside,
@@ -231,7 +230,7 @@ def unreachable_scenario(robot_name: str, rounds: int, seed: int) -> dict:
     t_reach, t_mixed = [], []
     for _ in range(rounds):
         t_reach.append(run_nik(robot, T[100:], solver=solver)[1])
-        q, dt = run_nik(robot, mixed, solver=solver)
+        q, dt, _ = run_nik(robot, mixed, solver=solver)
         t_mixed.append(dt)
     succ, _ = score(robot, mixed[:900], q[:900])
     a, b = statistics.median(t_reach), statistics.median(t_mixed)
