@@ -65,8 +65,8 @@ class IKSolver:
             and ``analytic=True`` the closed form stays the guess and no network is loaded. A given or installed
             network serves on every backend before a shipped one (the precedence: :mod:`nik.ik.plan`).
             A path: an exported network (``NAME.safetensors`` with its ``NAME.json``, e.g. from ``nik train``; its
-            SHA-256 is checked) or a Lightning ``.ckpt`` from ``train.py`` (or :func:`nik.models.save_checkpoint`), loaded
-            safely by :func:`nik.nets.load_network`; one made for another robot definition is refused, a
+            SHA-256 is checked) or a Lightning ``.ckpt`` from ``train.py`` (or :func:`nik.models.save_checkpoint`),
+            loaded safely by :func:`nik.nets.load_network`; one made for another robot definition is refused, a
             damaged file raises :class:`nik.CheckpointError` (a framed robot also takes one made for its bare arm).
             ``None``: no network. A multi-solution network
             (:mod:`nik.nets.multi`) guesses its best hypothesis by FK; targets the refinement leaves outside
