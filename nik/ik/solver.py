@@ -280,6 +280,9 @@ class IKSolver:
         (two solutions are the same when no joint differs by more than ``dedupe_tol`` radians,
         modulo 2 pi). For a redundant arm (7 joints) the solutions form a continuum; K is then
         simply how many distinct samples of it the starts found.
+        Cost: on the CPU the LM runs compiled from each start; panda and xarm7 with 256 starts take 50-100 ms a
+        pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the
+        path of targets on a GPU).
         """
         T = as_poses(T_target, representation)
         if T.shape[0] != 1:
