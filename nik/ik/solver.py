@@ -258,7 +258,7 @@ class IKSolver:
         if be.name == "torch":
             with threads_for(job.size):
                 return stages.run(plan, job)
-        return stages.run(plan, job)
+        return be.run(plan, job)
 
     def solve_all(
         self,
