@@ -137,13 +137,17 @@ class CompiledBackend:
         )  # fmt: skip
 
     # -- the job -------------------------------------------------------------------
-    def job(self, robot, plan, T_target, q_near, representation) -> Job:
+    def job(self, robot, plan, T_target, q_near, representation, *, reach: bool = True, stacklevel: int = 2) -> Job:
+        """The validated targets of one call; ``reach=False`` leaves the reach flags to the driver (:meth:`solve`)."""
         T, dtype = pose_array(T_target, representation)
         model = model_of(robot, plan.lm_cfg)
-        reachable, every = model.reach(T)
-        if not every:
-            warnings.warn(model.unreachable_message(T, reachable), UserWarning, stacklevel=4)
-        near = q_near_array(q_near, T.shape[0], robot)
+        if reach:
+            reachable, every = model.reach(T)
+            if not every:
+                warnings.warn(model.unreachable_message(T, reachable), UserWarning, stacklevel=stacklevel)
+        else:
+            reachable = np.empty(T.shape[0], dtype=bool)
+        near = None if q_near is None else q_near_array(q_near, T.shape[0], robot)
         tol_pos, tol_rot = plan.stage_tolerances(dtype == torch.float32)
         return Job(
             self, robot, T, reachable, near, tol_pos, tol_rot, dtype, plan.tol_pos, plan.tol_rot, model,
@@ -151,18 +155,27 @@ class CompiledBackend:
         )  # fmt: skip
 
     # -- the whole plan in one kernel call -------------------------------------------------------------------------
-    def run(self, plan, job: Job) -> IKResult:
-        """The plan on ``job`` in one call of :func:`nik.kernels.driver.solve` (the same stages on the same kernels as
-        :func:`nik.ik.stages.run`, the same answers); the staged path where the driver does not apply (a network the
-        kernels do not pack, or more than :data:`PACKED_MAX_BATCH` poses with a network)."""
-        from nik.ik import stages
-
-        model, B, n = job.model, job.size, job.model.dof
+    def solve(self, robot, plan, T_target, q_near, representation) -> IKResult:
+        """The plan on the targets: validated (:meth:`job`), then every stage in one call of
+        :func:`nik.kernels.driver.solve` (the same stages on the same kernels as :func:`nik.ik.stages.run`, the same
+        answers, reach flags included); the staged path where the driver does not apply (a network the kernels do
+        not pack, or more than :data:`PACKED_MAX_BATCH` poses with a network)."""
+        job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        model = job.model
         packed = None
         if plan.source == "network":
-            packed = model.packed(plan.net) if B <= PACKED_MAX_BATCH else None
+            packed = model.packed(plan.net) if job.size <= PACKED_MAX_BATCH else None
             if packed is None:
+                from nik.ik import stages
+
+                job.reachable, every = model.reach(job.T)
+                if not every:
+                    warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=3)
                 return stages.run(plan, job)
+        return self._driver(plan, job, packed)
+
+    def _driver(self, plan, job: Job, packed) -> IKResult:
+        model, B, n = job.model, job.size, job.model.dof
         k = _kernels()
         lm = model.lm
         opts, iopts = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, False)
@@ -174,13 +187,15 @@ class CompiledBackend:
         use_near = job.q_near is not None
         q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
         ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
-        k.solve(
+        every = k.solve(
             model.G, model.joints, job.T, model.center, model.radius, _REACH_SLACK, _SOURCE[plan.source], p.flat,
             p.layout, p.activation, p.in_mean, p.in_std, p.out_center, p.out_half, p.prismatic, p.heads, Tin, closed,
             check, LIMIT_ROUNDING, job.q_near if use_near else q, use_near, opts, iopts, iopts_multi, lm.budget,
             k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses, plan.near, _FALLBACK[plan.fallback], job.tol_pos,
             job.tol_rot, q, pos, rot, ok, iters, job.reachable,
         )  # fmt: skip
+        if not every:
+            warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=4)
         from nik.ik.stages import Answers
 
         answers = Answers(q, pos, rot, iters)
