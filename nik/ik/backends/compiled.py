@@ -1,7 +1,11 @@
 """The compiled backend: the stages' work on float64 numpy arrays through the numba kernels of :mod:`nik.kernels`.
 
-For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here each
-piece of work is one kernel call over the whole batch. Every per-robot fact (chain arrays, limits, reach bound,
+For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here a call
+is validated (:func:`~nik.ik.targets.pose_array`) and then runs every stage of its plan in one kernel call
+(:func:`nik.kernels.driver.solve`, :meth:`CompiledBackend.solve`), which calls the stage kernels below in the order
+of :func:`nik.ik.stages.run`; those stages, run one by one over the same kernels, remain the staged path (a network
+the kernels do not pack, more than :data:`PACKED_MAX_BATCH` poses with a network) and the reference the driver is
+tested against. Every per-robot fact (chain arrays, limits, reach bound,
 closed-form constants, the compiled LM, packed networks) comes from the robot's model (:mod:`nik.ik.model`),
 looked up once per call:
 
