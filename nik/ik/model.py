@@ -77,6 +77,8 @@ class Model:
     base_inv: np.ndarray | None = None
     tool_inv: np.ndarray | None = None
     _packed: Any = field(default_factory=weakref.WeakKeyDictionary, repr=False)
+    #: the compiled backend's driver arguments per (plan, dtype), gathered once per plan (plans are immutable)
+    driver_args: dict = field(default_factory=dict, repr=False)
 
     @property
     def robot(self):

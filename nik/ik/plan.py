@@ -36,9 +36,10 @@ __all__ = ["FLOAT32_MARGIN", "Plan", "choose_network", "in_arm_frame"]
 FLOAT32_MARGIN = 0.5
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Plan:
-    """How one call is solved (module docstring).
+    """How one call is solved (module docstring). Immutable; compared and hashed by identity (a backend keeps what
+    it derives from a plan per plan).
 
     Attributes:
         source: the guess that serves: ``network``, ``analytic`` or ``multistart``.

@@ -181,22 +181,33 @@ class CompiledBackend:
     def _driver(self, plan, job: Job, packed) -> IKResult:
         model, B, n = job.model, job.size, job.model.dof
         k = _kernels()
-        lm = model.lm
-        opts, iopts = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, False)
-        _, iopts_multi = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, True)
-        p = packed or _NO_NET
+        key = (plan, job.dtype)
+        static = model.driver_args.get(key)
+        if static is None:  # what the driver takes from the plan and the model, gathered once per plan
+            lm = model.lm
+            opts, iopts = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, False)
+            _, iopts_multi = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, True)
+            p = packed or _NO_NET
+            closed = model.closed if model.closed is not None else _NO_CLOSED
+            check = model.closed_check[job.dtype] if model.closed_check is not None else 0.0
+            static = (
+                (model.G, model.joints),
+                (model.center, model.radius, _REACH_SLACK, _SOURCE[plan.source], p.flat, p.layout, p.activation,
+                 p.in_mean, p.in_std, p.out_center, p.out_half, p.prismatic, p.heads),
+                (closed, check, LIMIT_ROUNDING),
+                (opts, iopts, iopts_multi, lm.budget, k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses,
+                 plan.near, _FALLBACK[plan.fallback], job.tol_pos, job.tol_rot),
+            )  # fmt: skip
+            if len(model.driver_args) > 64:
+                model.driver_args.clear()
+            model.driver_args[key] = static
         Tin = model.arm_targets(job.T) if packed is not None and plan.net_in_arm_frame else job.T
-        closed = model.closed if model.closed is not None else _NO_CLOSED
-        check = model.closed_check[job.dtype] if model.closed_check is not None else 0.0
         use_near = job.q_near is not None
         q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
         ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
         every = k.solve(
-            model.G, model.joints, job.T, model.center, model.radius, _REACH_SLACK, _SOURCE[plan.source], p.flat,
-            p.layout, p.activation, p.in_mean, p.in_std, p.out_center, p.out_half, p.prismatic, p.heads, Tin, closed,
-            check, LIMIT_ROUNDING, job.q_near if use_near else q, use_near, opts, iopts, iopts_multi, lm.budget,
-            k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses, plan.near, _FALLBACK[plan.fallback], job.tol_pos,
-            job.tol_rot, q, pos, rot, ok, iters, job.reachable,
+            *static[0], job.T, *static[1], Tin, *static[2], job.q_near if use_near else q, use_near, *static[3],
+            q, pos, rot, ok, iters, job.reachable,
         )  # fmt: skip
         if not every:
             warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=4)
