@@ -115,6 +115,8 @@ def test_a_network_set_on_the_solver_serves_on_the_cpu_before_the_shipped_single
     assert raw.source == "network"
     torch.testing.assert_close(raw.q, mine.ranked_hypotheses(T)[0][:, 0], atol=1e-4, rtol=0)
     assert bool(solver.solve(T).success.all())
+    solver.net = None  # no network at all, the shipped single-pose one included
+    assert solver.plan(backend=backend).net is None and solver.solve(T).source == "multistart"
 
 
 def test_an_installed_network_serves_on_the_cpu_before_the_shipped_single_pose_one(tmp_path, monkeypatch, panda):

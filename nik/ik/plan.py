@@ -87,7 +87,7 @@ def choose_network(main, single_pose, given: bool, backend: str):
     """The network that guesses (module docstring, "Which guess serves"): ``main`` (the solver's network) unless it
     is the shipped one (``given`` False) and the call runs on the compiled backend, where the arm's ``single_pose``
     network serves when it has one."""
-    if not given and single_pose is not None and backend == "compiled":
+    if main is not None and not given and single_pose is not None and backend == "compiled":
         return single_pose
     return main
 
