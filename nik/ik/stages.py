@@ -16,10 +16,12 @@ Every stage has the signature ``stage(plan, job, answers) -> answers``: ``plan``
 :mod:`nik.ik.backends`, compiled kernels on numpy or torch), ``answers`` the best answers so far
 (:class:`Answers`, joints inside the limits with their errors measured by FK). A stage replaces an answer only
 by a better one. Arrays are the backend's (numpy or torch); the stages use only what both have (masks, indexing)
-and the backend's few helpers.
+and the backend's few helpers. :func:`run` is the torch backend's interpreter of a plan (a Python loop over the
+stages); the compiled backend runs the same stages in one kernel call (:mod:`nik.kernels.driver`), tested to give
+the answers of these stages run one by one over its kernels.
 
-:meth:`IKSolver.solve_all` uses :func:`all_solutions` (torch): every closed-form solution, or LM from every
-network hypothesis and uniform starts, kept where within tolerance, de-duplicated.
+:meth:`IKSolver.solve_all` uses :func:`all_solutions`: every closed-form solution, or LM (compiled on the CPU) from
+every network hypothesis and uniform starts, kept where within tolerance, de-duplicated.
 """
 
 from __future__ import annotations
