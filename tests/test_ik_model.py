@@ -12,7 +12,7 @@ import torch
 import nik
 from nik.ik.model import APPROXIMATE_CHECK_TOL, model_of
 from nik.lm import LMCfg
-from nik.robots.reach import REACH_SLACK, within_reach
+from nik.robots.reach import within_reach
 
 
 def _poses(robot, n, seed):
@@ -43,7 +43,6 @@ def test_model_limits_reach_and_wraps_match_the_robot():
     T[::3, :3, 3] *= 3.0  # some out of reach
     flags, every = m.reach(T)
     assert np.array_equal(flags, within_reach(robot, torch.from_numpy(T)).numpy()) and not every and flags.any()
-    assert REACH_SLACK == 1e-9  # the model's copy of it
     assert "beyond the reach of xarm7" in m.unreachable_message(T, flags)
     assert m.unreachable_message(T[flags], flags[flags]) is None
 

@@ -43,6 +43,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from nik.robots.reach import REACH_SLACK
+
 __all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "WRAP_MARGIN", "Model", "model_of"]
 
 #: The FK check of a closed-form solution (metres, radians) by the targets' dtype: ``nik.analytic.solve``'s
@@ -109,7 +111,7 @@ class Model:
         """``(flags (B,) bool, every)``: :meth:`reach_flags` and whether every target is within reach, in one
         kernel call (:func:`nik.kernels.poses.reach_flags`)."""
         flags = np.empty(T.shape[0], dtype=bool)
-        return flags, bool(_k().reach_flags(T, self.center, self.radius, _REACH_SLACK, flags))
+        return flags, bool(_k().reach_flags(T, self.center, self.radius, REACH_SLACK, flags))
 
     def unreachable_message(self, T: np.ndarray, flags: np.ndarray, *, unit_hint: str = "") -> str | None:
         """The one line about the targets ``flags`` marks out of reach (:func:`nik.robots.reach.unreachable_message`:
@@ -168,7 +170,6 @@ class Model:
         return found or None
 
 
-_REACH_SLACK = 1e-9  # nik.robots.reach.REACH_SLACK (checked equal by the tests)
 _K = None
 
 

@@ -41,6 +41,7 @@ from nik.ik.guesses import LIMIT_ROUNDING
 from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, model_of
 from nik.ik.result import IKResult
 from nik.ik.targets import pose_array, q_near_array
+from nik.robots.reach import REACH_SLACK
 
 __all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend"]
 #: Most poses whose hypotheses the packed network's compiled forward pass computes; above, torch's batched
@@ -76,7 +77,6 @@ def _kernels():
 
 _SOURCE = {"network": 0, "analytic": 1, "multistart": 2}  # nik.kernels.driver.SOURCE_*
 _FALLBACK = {"none": 0, "analytic": 1, "multistart": 2}  # nik.kernels.driver.FALLBACK_*
-_REACH_SLACK = 1e-9  # nik.robots.reach.REACH_SLACK
 
 
 @dataclass(frozen=True)
@@ -192,7 +192,7 @@ class CompiledBackend:
             check = model.closed_check[job.dtype] if model.closed_check is not None else 0.0
             static = (
                 (model.G, model.joints),
-                (model.center, model.radius, _REACH_SLACK, _SOURCE[plan.source], p.flat, p.layout, p.activation,
+                (model.center, model.radius, REACH_SLACK, _SOURCE[plan.source], p.flat, p.layout, p.activation,
                  p.in_mean, p.in_std, p.out_center, p.out_half, p.prismatic, p.heads),
                 (closed, check, LIMIT_ROUNDING),
                 (opts, iopts, iopts_multi, lm.budget, k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses,
