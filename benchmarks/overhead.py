@@ -43,7 +43,7 @@ def _wrap(holder, attr, bucket, acc):
 def measure(name: str, n: int, seed: int) -> dict:
     from nik.ik import targets
     from nik.ik.backends import compiled as cb
-    from nik.kernels import closed, lm, poses, seeded
+    from nik.kernels import closed, driver, lm, poses, seeded
 
     robot = nik.load_robot(name)
     solver = nik.IKSolver(robot)
@@ -60,7 +60,7 @@ def measure(name: str, n: int, seed: int) -> dict:
     acc = {"kernels": 0.0, "validation": 0.0, "result": 0.0}
     kernel_names = [
         (poses, "reach_flags"), (lm, "lm_solve"), (lm, "pose_errors"), (seeded, "ranked_hypotheses"),
-        (seeded, "rank"), (seeded, "lm_starts"), (seeded, "merge"), (closed, "guess"),
+        (seeded, "rank"), (seeded, "lm_starts"), (seeded, "merge"), (closed, "guess"), (driver, "solve"),
     ]  # fmt: skip
     originals = []
     cb._KERNELS = None  # the backend takes the wrapped kernels

@@ -196,17 +196,18 @@ def test_a_failing_best_hypothesis_is_followed_by_the_next_ones_then_uniform_res
     robot = nik.load_robot("panda")
     _, T = _targets(robot, 16, seed=34)
     solver = nik.IKSolver(robot, backend="compiled")
-    job = backends.compiled_backend().job(solver, T, None, None, DEFAULT_TOL_POS, DEFAULT_TOL_ROT, 0, 2)
-    answers = stages.guess(solver, job)
+    plan = solver.plan(tol_pos=DEFAULT_TOL_POS, tol_rot=DEFAULT_TOL_ROT, seed=0, max_iters=2)
+    job = backends.compiled_backend().job(robot, plan, T, None, None)
+    answers = stages.guess(plan, job)
     assert answers.hypotheses.shape == (16, 8, 7)
     scores = [nik.pose_error(T, robot.fk(torch.from_numpy(answers.hypotheses[:, k].copy()))) for k in range(8)]
     score = torch.stack([p + 0.1 * r for p, r in scores], dim=1)
     assert bool((score[:, 1:] >= score[:, :-1] - 1e-12).all())  # ranked best first by FK
-    answers = stages.refine(solver, job, answers)  # 2 LM iterations from the best hypothesis: many still fail
+    answers = stages.refine(plan, job, answers)  # 2 LM iterations from the best hypothesis: many still fail
     failing = int((~answers.ok(job)).sum())
-    more = stages.more_hypotheses(solver, job, answers)
+    more = stages.more_hypotheses(plan, job, answers)
     assert failing > 0 and int((~more.ok(job)).sum()) <= failing
-    done = stages.fallback(solver, job, more)
+    done = stages.fallback(plan, job, more)
     assert bool(done.ok(job).all()) and bool((done.iterations >= more.iterations).all())
 
 
@@ -216,8 +217,9 @@ def test_numpy_targets_and_lists_are_accepted_as_float64(no_torch):
     solver = nik.IKSolver(robot, analytic=False)
     for form in (T.numpy(), T.numpy().tolist(), T[0].numpy()):
         res = solver.solve(form)
-        assert res.q.dtype == torch.float64 and bool(res.success.all())
-    assert isinstance(np.asarray(res.q), np.ndarray)
+        numpy_in = isinstance(form, np.ndarray)  # numpy in, numpy out (interface.md round 5); lists: tensors
+        assert res.q.dtype == (np.float64 if numpy_in else torch.float64) and bool(res.success.all())
+        assert isinstance(res.q, np.ndarray) == numpy_in and isinstance(res.success, np.ndarray) == numpy_in
 
 
 @pytest.mark.parametrize("name", ["kuka_kr", "puma560", "ur5"])
@@ -294,3 +296,39 @@ def test_a_batch_above_ten_thousand_poses_stays_on_the_compiled_backend(no_torch
     res = nik.IKSolver(robot).solve(T)
     assert res.source == "analytic" and res.q.shape == (10_001, 6)
     assert float(res.success.double().mean()) == 1.0 and bool(robot.within_limits(res.q).all())
+
+
+URDF_PANDA = "configs/robots/urdf/panda.urdf"
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "kuka_kr", "xarm7", URDF_PANDA])
+def test_the_one_call_compiled_solve_meets_the_staged_torch_answers_and_equals_the_staged_compiled_ones(name):
+    """nik.kernels.driver runs the whole plan in one kernel call: the same answers as the staged compiled stages
+    (bit for bit), and the contract of the staged torch backend (success, limits, reach flags, messages)."""
+    import warnings
+    from pathlib import Path
+
+    robot = nik.load_robot(Path(__file__).resolve().parents[1] / name if name.endswith(".urdf") else name)
+    q, T = _targets(robot, 10, seed=41)
+    T = _out_of_reach(robot, T)
+    for near in (None, robot.clamp(q + 0.2)):
+        out, said = {}, {}
+        for backend in BACKENDS:
+            solver = nik.IKSolver(robot, backend=backend)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                out[backend] = solver.solve(T, seed=4, q_near=near)
+            said[backend] = [str(w.message) for w in caught]
+        one, slow = out["compiled"], out["torch"]
+        assert said["compiled"] == said["torch"] and len(said["torch"]) == 1 and "beyond the reach" in said["torch"][0]
+        assert torch.equal(one.success, slow.success) and torch.equal(one.reachable, slow.reachable)
+        assert one.success[:-1].all() and not one.success[-1] and one.source == slow.source
+        assert bool(robot.within_limits(one.q).all()) and bool(robot.within_limits(slow.q).all())
+        solver = nik.IKSolver(robot, backend="compiled")
+        plan = solver.plan(seed=4)
+        be = backends.compiled_backend()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            staged = stages.run(plan, be.job(robot, plan, T, near, None))
+        assert torch.equal(one.q, staged.q) and torch.equal(one.iterations, staged.iterations)
+        assert torch.equal(one.success, staged.success)

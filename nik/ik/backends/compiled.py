@@ -1,50 +1,49 @@
 """The compiled backend: the stages' work on float64 numpy arrays through the numba kernels of :mod:`nik.kernels`.
 
-For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here each
-piece of work is one kernel call over the whole batch:
+For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here a call
+is validated (:func:`~nik.ik.targets.pose_array`) and then runs every stage of its plan in one kernel call
+(:func:`nik.kernels.driver.solve`, :meth:`CompiledBackend.solve`), which calls the stage kernels below in the order
+of :func:`nik.ik.stages.run`; those stages, run one by one over the same kernels, remain the staged path (a network
+the kernels do not pack, more than :data:`PACKED_MAX_BATCH` poses with a network) and the reference the driver is
+tested against. Every per-robot fact (chain arrays, limits, reach bound,
+closed-form constants, the compiled LM, packed networks) comes from the robot's model (:mod:`nik.ik.model`),
+looked up once per call:
 
 - the checks of :mod:`nik.ik.targets` (:func:`~nik.ik.targets.pose_array`) and the reach bound
   (:func:`nik.kernels.poses.reach_flags`);
 - the network's hypotheses: for up to :data:`PACKED_MAX_BATCH` poses the packed network's compiled forward pass
-  (:mod:`nik.nets.compiled`; the arm's single-pose network when it has one: :meth:`nik.IKSolver.network_for`), for more
+  (:mod:`nik.nets.compiled`; the plan's network: :mod:`nik.ik.plan`), for more
   the torch forward pass (one batched float32 matmul per layer); every hypothesis ranked by compiled FK, the forward
   pass, the ranking and the tolerance check in one kernel call (:func:`nik.kernels.seeded.ranked_hypotheses`);
 - Levenberg-Marquardt (:class:`nik.lm.compiled.CompiledLM`, the solver's :class:`~nik.lm.LMCfg`): from a guess,
   from several starts in turn (:meth:`~nik.lm.compiled.CompiledLM.solve_starts`), or from uniform starts with the
   batched LM's restart budget;
 - the closed forms (:mod:`nik.kernels.closed`: the 8 solutions of ``nik.analytic.solve``, the one chosen as
-  ``nik.ik.guesses.analytic_guess`` chooses it). An arm that fits its family only within the tolerance of
-  :mod:`nik.analytic.geometry` (URDF origins rounded to float32; ``nik.analytic.solve`` adds Newton steps there)
-  gets the ideal arm's closed form checked at :data:`APPROXIMATE_CHECK_TOL` as its guess; the refine stage's LM
-  polishes what misses the solver's tolerance.
+  ``nik.ik.guesses.analytic_guess`` chooses it); an arm that fits its family only within a tolerance gets the
+  ideal arm's closed form checked at :data:`~nik.ik.model.APPROXIMATE_CHECK_TOL`, polished by LM where it misses
+  the solver's tolerance (the one policy of :mod:`nik.ik.model`).
 
-Answers come back as an :class:`~nik.ik.result.IKResult` of tensors in the targets' dtype: float32 targets are
-solved to half the tolerance in float64, rounded, clamped into the float32 limits and measured again.
+Answers come back as an :class:`~nik.ik.result.IKResult` in the targets' dtype: float32 targets are solved in
+float64 to the plan's float32 tolerance (:meth:`nik.ik.plan.Plan.stage_tolerances`), rounded, clamped into the
+float32 limits and measured again.
 """
 
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
 from nik.ik.backends.base import Job, Refined
 from nik.ik.guesses import LIMIT_ROUNDING
+from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, model_of
 from nik.ik.result import IKResult
 from nik.ik.targets import pose_array, q_near_array
-from nik.lm.batched import LMCfg
-from nik.lm.compiled import CompiledLM
-from nik.robots.reach import REACH_SLACK, reach_center, reach_radius, unreachable_message
+from nik.robots.reach import REACH_SLACK
 
 __all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend"]
-
-#: The FK check of a closed-form solution (metres, radians) by the targets' dtype: ``nik.analytic.solve``'s
-#: defaults (a float32 pose is a rotation only to about 1e-7).
-CLOSED_FORM_TOL = {torch.float64: 1e-9, torch.float32: 2e-5}
-#: The same check on an arm whose closed form is that of the ideal arm it is within tolerance of (metres,
-#: radians): the Jaco2's wrist axes miss each other by 8e-8 m, its closed-form solutions by about as much.
-APPROXIMATE_CHECK_TOL = 1e-5
 #: Most poses whose hypotheses the packed network's compiled forward pass computes; above, torch's batched
 #: forward pass (float32 matmuls) is cheaper per pose. Measured with panda's and xarm7's single-pose networks
 #: (whole solver, one thread, CPU us per target; kernel / torch): 16 poses 26 / 73, 100 poses 20 / 28,
@@ -61,10 +60,13 @@ def _kernels():
     if _KERNELS is None:
         from types import SimpleNamespace
 
-        from nik.kernels import closed, lm, poses, seeded
+        from nik.kernels import closed, driver, lm, seeded
+        from nik.lm.compiled import _seed
 
         _KERNELS = SimpleNamespace(
-            reach_flags=poses.reach_flags,
+            solve=driver.solve,
+            klm=lm,
+            seed=_seed,
             rank=seeded.rank,
             merge=seeded.merge,
             closed_guess=closed.guess,
@@ -73,36 +75,27 @@ def _kernels():
     return _KERNELS
 
 
-class _State:
-    """Per solver, built on its first compiled call: the robot's model arrays and facts, its LM, its networks."""
-
-    __slots__ = ("G", "joints", "lm", "center", "radius", "lo32", "hi32", "closed", "closed_check", "packed")
-
-    def __init__(self, solver):
-        from nik.analytic import family
-
-        robot = solver.robot
-        self.G, self.joints = robot.chain_arrays()
-        self.lm = CompiledLM.of(robot, solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None)
-        self.center = reach_center(robot).numpy()
-        self.radius = max(reach_radius(robot), 1e-300)
-        lo32, hi32 = robot.limits_as(torch.empty(0, dtype=torch.float32))
-        self.lo32, self.hi32 = lo32.numpy(), hi32.numpy()
-        self.closed, self.closed_check = None, None
-        if family(robot) is not None:
-            self.closed, self.closed_check = _closed_constants(robot)
-        self.packed = {}
+_SOURCE = {"network": 0, "analytic": 1, "multistart": 2}  # nik.kernels.driver.SOURCE_*
+_FALLBACK = {"none": 0, "analytic": 1, "multistart": 2}  # nik.kernels.driver.FALLBACK_*
 
 
-def _closed_constants(robot):
-    """``(constants of the compiled closed form, its FK check tolerance by dtype)`` or ``(None, None)``."""
-    from nik.analytic.solve import closed_form
-    from nik.kernels.closed import closed_form_array
+@dataclass(frozen=True)
+class _Absent:
+    """The arrays of a packed network where there is none (the driver reads none of them)."""
 
-    k = closed_form(robot)
-    if k.get("polish"):  # within tolerance of its family: the ideal arm's closed form, then LM
-        return closed_form_array({**k, "polish": False}), dict.fromkeys(CLOSED_FORM_TOL, APPROXIMATE_CHECK_TOL)
-    return closed_form_array(k), CLOSED_FORM_TOL
+    flat: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float32))
+    layout: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
+    activation: int = 0
+    in_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    in_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    out_center: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    out_half: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prismatic: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
+    heads: int = 0
+
+
+_NO_NET = _Absent()
+_NO_CLOSED = np.zeros(0)
 
 
 class CompiledBackend:
@@ -147,102 +140,153 @@ class CompiledBackend:
             res.pos_err, res.rot_err, res.iterations, strict, job.tol_pos, job.tol_rot,
         )  # fmt: skip
 
-    # -- state ---------------------------------------------------------------------
-    @staticmethod
-    def state(solver) -> _State:
-        st = solver.__dict__.get("_compiled_state")
-        if st is None or st.G is not solver.robot.chain_arrays()[0]:
-            st = solver.__dict__["_compiled_state"] = _State(solver)
-        return st
-
     # -- the job -------------------------------------------------------------------
-    def job(self, solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job:
-        reach_flags = _kernels().reach_flags
+    def job(self, robot, plan, T_target, q_near, representation, *, reach: bool = True, stacklevel: int = 2) -> Job:
+        """The validated targets of one call; ``reach=False`` leaves the reach flags to the driver (:meth:`solve`)."""
         T, dtype = pose_array(T_target, representation)
-        st = self.state(solver)
-        B = T.shape[0]
-        reachable = np.empty(B, dtype=bool)
-        if not reach_flags(T, st.center, st.radius, REACH_SLACK, reachable):
-            msg = unreachable_message(solver.robot, torch.from_numpy(T), torch.from_numpy(reachable))
-            warnings.warn(msg, UserWarning, stacklevel=4)
-        near = q_near_array(q_near, B, solver.robot)
-        margin = 1.0 if dtype == torch.float64 else 0.5
+        model = model_of(robot, plan.lm_cfg)
+        if reach:
+            reachable, every = model.reach(T)
+            if not every:
+                warnings.warn(model.unreachable_message(T, reachable), UserWarning, stacklevel=stacklevel)
+        else:
+            reachable = np.empty(T.shape[0], dtype=bool)
+        near = None if q_near is None else q_near_array(q_near, T.shape[0], robot)
+        tol_pos, tol_rot = plan.stage_tolerances(dtype == torch.float32)
         return Job(
-            self, T, reachable, near, tol_pos * margin, tol_rot * margin, seed, max_iters, dtype, tol_pos, tol_rot,
-            state=st,
+            self, robot, T, reachable, near, tol_pos, tol_rot, dtype, plan.tol_pos, plan.tol_rot, model,
+            numpy_out=isinstance(T_target, np.ndarray),
         )  # fmt: skip
 
-    # -- guesses -----------------------------------------------------------------------
-    def network(self, solver, job: Job):
-        st = job.state
-        B = job.size
-        net = solver.network_for(B, self.name)
-        if B <= PACKED_MAX_BATCH:
-            packed = st.packed.get(id(net))
+    # -- the whole plan in one kernel call -------------------------------------------------------------------------
+    def solve(self, robot, plan, T_target, q_near, representation) -> IKResult:
+        """The plan on the targets: validated (:meth:`job`), then every stage in one call of
+        :func:`nik.kernels.driver.solve` (the same stages on the same kernels as :func:`nik.ik.stages.run`, the same
+        answers, reach flags included); the staged path where the driver does not apply (a network the kernels do
+        not pack, or more than :data:`PACKED_MAX_BATCH` poses with a network)."""
+        job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        model = job.model
+        packed = None
+        if plan.source == "network":
+            packed = model.packed(plan.net) if job.size <= PACKED_MAX_BATCH else None
             if packed is None:
-                from nik.nets.compiled import pack
+                from nik.ik import stages
 
-                packed = st.packed[id(net)] = pack(net) or False
-            if packed:
-                hyp, pos, rot, ok, failing = packed.ranked_hypotheses(st.G, st.joints, job.T, job.tol_pos, job.tol_rot)
+                job.reachable, every = model.reach(job.T)
+                if not every:
+                    warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=3)
+                return stages.run(plan, job)
+        return self._driver(plan, job, packed)
+
+    def _driver(self, plan, job: Job, packed) -> IKResult:
+        model, B, n = job.model, job.size, job.model.dof
+        k = _kernels()
+        key = (plan, job.dtype)
+        static = model.driver_args.get(key)
+        if static is None:  # what the driver takes from the plan and the model, gathered once per plan
+            lm = model.lm
+            opts, iopts = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, False)
+            _, iopts_multi = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, True)
+            p = packed or _NO_NET
+            closed = model.closed if model.closed is not None else _NO_CLOSED
+            check = model.closed_check[job.dtype] if model.closed_check is not None else 0.0
+            static = (
+                (model.G, model.joints),
+                (model.center, model.radius, REACH_SLACK, _SOURCE[plan.source], p.flat, p.layout, p.activation,
+                 p.in_mean, p.in_std, p.out_center, p.out_half, p.prismatic, p.heads),
+                (closed, check, LIMIT_ROUNDING),
+                (opts, iopts, iopts_multi, lm.budget, k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses,
+                 plan.near, _FALLBACK[plan.fallback], job.tol_pos, job.tol_rot),
+            )  # fmt: skip
+            if len(model.driver_args) > 64:
+                model.driver_args.clear()
+            model.driver_args[key] = static
+        Tin = model.arm_targets(job.T) if packed is not None and plan.net_in_arm_frame else job.T
+        use_near = job.q_near is not None
+        q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
+        ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
+        every = k.solve(
+            *static[0], job.T, *static[1], Tin, *static[2], job.q_near if use_near else q, use_near, *static[3],
+            q, pos, rot, ok, iters, job.reachable,
+        )  # fmt: skip
+        if not every:
+            warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=4)
+        from nik.ik.stages import Answers
+
+        answers = Answers(q, pos, rot, iters)
+        answers._ok = ok
+        return self.result(job, answers, plan.source)
+
+    # -- guesses -----------------------------------------------------------------------
+    def network(self, plan, job: Job):
+        model, net, B = job.model, plan.net, job.size
+        Tin = model.arm_targets(job.T) if plan.net_in_arm_frame else job.T
+        if B <= PACKED_MAX_BATCH:
+            packed = model.packed(net)
+            if packed is not None:
+                hyp, pos, rot, ok, failing = packed.ranked_hypotheses(
+                    model.G, model.joints, job.T, job.tol_pos, job.tol_rot, Tin=Tin
+                )
                 return hyp, pos, rot, (ok, failing)
         with torch.no_grad():
             ref = net.in_mean
-            hyp = net(torch.from_numpy(job.T).to(device=ref.device, dtype=ref.dtype))
-        hyp = np.ascontiguousarray(hyp.reshape(B, -1, solver.robot.dof).cpu().numpy(), dtype=np.float64)
+            hyp = net(torch.from_numpy(Tin).to(device=ref.device, dtype=ref.dtype))
+        hyp = np.ascontiguousarray(hyp.reshape(B, -1, model.dof).cpu().numpy(), dtype=np.float64)
         pos, rot = np.empty(B), np.empty(B)
-        _kernels().rank(st.G, st.joints, job.T, hyp, pos, rot)
+        _kernels().rank(model.G, model.joints, job.T, hyp, pos, rot)
         return hyp, pos, rot, None
 
-    def closed_form(self, solver, job: Job, idx, q_near):
+    def closed_form(self, plan, job: Job, idx, q_near):
         guess = _kernels().closed_guess
-        st = job.state
+        model = job.model
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
-        B, n = T.shape[0], st.joints.shape[0]
+        B, n = T.shape[0], model.dof
         q, pos, rot, ok = np.empty((B, n)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
         use_near = q_near is not None
         guess(
-            st.closed, st.G, st.joints, st.closed_check[job.dtype], T, q_near if use_near else q, use_near,
+            model.closed, model.G, model.joints, model.closed_check[job.dtype], T, q_near if use_near else q, use_near,
             LIMIT_ROUNDING, job.tol_pos, job.tol_rot, reachable, q, pos, rot, ok,
         )  # fmt: skip
         return q, pos, rot
 
     # -- refiners ----------------------------------------------------------------------
-    def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+    def refine(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
-        run = job.state.lm.solve(
-            T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters,
+        run = job.model.lm.solve(
+            T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters,
             restarts=restarts, reachable=reachable,
         )  # fmt: skip
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
 
-    def lm(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+    def lm(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
         """Levenberg-Marquardt (the solver's refiner here: ``refine="lm"``)."""
-        return self.refine(solver, job, idx, q0, restarts)
+        return self.refine(plan, job, idx, q0, restarts)
 
-    def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
+    def lm_starts(self, plan, job: Job, idx, starts) -> Refined:
         T = self.rows(job.T, idx)
-        run = job.state.lm.solve_starts(
-            T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters
+        run = job.model.lm.solve_starts(
+            T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters
         )
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
 
-    def uniform_guess(self, solver, job: Job):  # pragma: no cover - refine="none" runs on torch
+    def uniform_guess(self, plan, job: Job):  # pragma: no cover - refine="none" runs on torch
         raise NotImplementedError("the compiled backend serves refine='lm' only")
 
     # -- the result ----------------------------------------------------------------------
-    def result(self, solver, job: Job, answers, source: str) -> IKResult:
+    def result(self, job: Job, answers, source: str) -> IKResult:
         q, pos, rot = answers.q, answers.pos_err, answers.rot_err
         if job.dtype != torch.float64:  # the answer in the targets' dtype, inside the limits, its errors measured
             pose_errors = _kernels().pose_errors
-            st = job.state
-            q = np.clip(q.astype(np.float32), st.lo32, st.hi32)
+            model = job.model
+            q = np.clip(q.astype(np.float32), model.lo32, model.hi32)
             pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
-            pose_errors(st.G, st.joints, job.T, q.astype(np.float64), pos, rot)
+            pose_errors(model.G, model.joints, job.T, q.astype(np.float64), pos, rot)
             ok = (pos <= job.success_pos) & (rot <= job.success_rot)
             pos, rot = pos.astype(np.float32), rot.astype(np.float32)
         else:  # the stages' tolerance is the asked one
             ok = answers.ok(job)
+        if job.numpy_out:
+            return IKResult(q, pos, rot, ok, answers.iterations, source, reachable=job.reachable)
         return IKResult(
             torch.from_numpy(q),
             torch.from_numpy(pos),
