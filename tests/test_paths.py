@@ -237,7 +237,6 @@ def _bad_path(kind: str, robot) -> tuple:
     [
         ("nan", "NaN"),
         ("one pose", "at least 2 waypoints"),
-        ("millimetres", "millimetres"),
         ("not orthonormal", "orthonormal"),
         ("q_start outside the limits", "joint 5 .* outside its limits"),
         ("q_start of the wrong length", r"q_start: expected shape \(6,\)"),
@@ -291,13 +290,36 @@ def test_cli_exit_1_when_a_waypoint_fails(tmp_path, capsys):
     assert "warning: solve_path on ur5: waypoint" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("args", [["--unit", "mm"], ["--q-start", "1", "2", "3"], ["--q-start", *["0"] * 5, "200"]])
+def test_a_path_in_millimetres_is_warned_about_and_flagged_as_solve_does_it(ur5):
+    """One behaviour for targets beyond the reach, solve and solve_path alike: a warning (one line, the millimetre
+    question where they lie 100 x beyond), ``reachable`` False, no success; no exception."""
+    T, _ = _bad_path("millimetres", ur5.robot)
+    with pytest.warns(UserWarning, match="millimetres") as caught:
+        res = ur5.solve_path(T)
+    assert "\n" not in str(caught[0].message)
+    with pytest.warns(UserWarning, match="were the positions given in millimetres"):
+        one = ur5.solve(T)
+    assert torch.equal(res.reachable, one.reachable) and not bool(res.reachable.any())
+    assert not bool(res.success.any())
+    assert res.path.reasons == ["out of reach"] * T.shape[0]
+
+
+def test_cli_path_given_in_the_wrong_unit_exits_1_with_the_millimetre_question(tmp_path, capsys):
+    robot = nik.load_robot("ur5")
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 5)
+    T[:, :3, 3] *= 1e6  # kilometres given as millimetres: still far beyond the reach in metres
+    poses = tmp_path / "path.csv"
+    _write_poses(poses, T)
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--unit", "mm"]) == 1
+    assert "millimetres" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["--q-start", "1", "2", "3"], ["--q-start", *["0"] * 5, "200"]])
 def test_cli_bad_input_exit_2_one_line(tmp_path, capsys, args):
     robot = nik.load_robot("ur5")
     q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
     T = _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 5)
-    if args[:2] == ["--unit", "mm"]:
-        T[:, :3, 3] *= 1e6  # kilometres given as millimetres: still far beyond the reach in metres
     poses = tmp_path / "path.csv"
     _write_poses(poses, T)
     assert main(["path", "--robot", "ur5", "--poses", str(poses), *args]) == 2
