@@ -103,6 +103,7 @@ def with_frames(robot, *, base=None, tool=None):
     )
     out.base = _compose(B, robot.base, left=True)
     out.tool = _compose(X, robot.tool, left=False)
+    out._arm = robot.arm  # the exact bare arm (its hash matches its networks: Robot.arm_hash)
     return out
 
 

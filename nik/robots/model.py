@@ -245,6 +245,7 @@ class Robot:
         self._cache: dict[tuple[torch.dtype, torch.device], tuple[torch.Tensor, torch.Tensor]] = {}
         self._kernel: FKKernel | None = None
         self._arrays: tuple[np.ndarray, np.ndarray] | None = None
+        self._arm: Robot | None = None  # the arm without base/tool frames (set by nik.robots.frames.with_frames)
 
     # -- identity -------------------------------------------------------
     @property
@@ -310,6 +311,32 @@ class Robot:
         if self.has_prismatic:
             h.update(b"prismatic:" + self.prismatic.numpy().astype("u1").tobytes())
         return h.hexdigest()[:16]
+
+    @property
+    def arm(self) -> Robot:
+        """This robot without its base and tool frames (itself when it has none): the bare arm, in whose frame a
+        network trained for the arm guesses (``base^-1 @ T @ tool^-1``)."""
+        if self.base is None and self.tool is None:
+            return self
+        if self._arm is None:  # rebuilt from a definition: undo the recorded frames
+            G = self.G.numpy().copy()
+            if self.base is not None:
+                G[0] = np.linalg.inv(self.base.numpy()) @ G[0]
+            if self.tool is not None:
+                G[-1] = G[-1] @ np.linalg.inv(self.tool.numpy())
+            snapped = np.round(G, 12) + 0.0  # undo the inversion's rounding (and -0.0) where it is only that
+            G = np.where(np.abs(G - snapped) < 1e-14, snapped, G)
+            self._arm = Robot(
+                self.name, G, self.offsets, self.limits, self.joint_names, end_link=self.end_link,
+                source=self.source, prismatic=self.prismatic,
+            )  # fmt: skip
+        return self._arm
+
+    @property
+    def arm_hash(self) -> str:
+        """The :attr:`definition_hash` of :attr:`arm` (the frames left out): networks are matched by it, so a base
+        or tool frame keeps the arm's network."""
+        return self.arm.definition_hash
 
     def __repr__(self) -> str:
         return f"Robot(name={self.name!r}, dof={self.dof}, hash={self.definition_hash})"

@@ -23,8 +23,8 @@ class Job:
         seed: seeds every random choice; max_iters: iteration limit of the refinement (None: the method's config).
         dtype: the answer's dtype (torch); success_pos, success_rot: the asked tolerances (the result's success).
         source: the guess that serves the call (set by the first stage that asks, :func:`nik.ik.stages.source`).
-        state: what the backend keeps per solver for its work (the compiled backend: the model arrays, LM and
-            packed networks), looked up once per call; None on torch.
+        model: the robot's compiled model (:mod:`nik.ik.model`: chain arrays, limits, reach, closed form, LM,
+            packed networks) on the compiled backend, looked up once per call; None on torch.
     """
 
     backend: Any
@@ -39,7 +39,7 @@ class Job:
     success_pos: float | None = None
     success_rot: float | None = None
     source: str | None = None
-    state: Any = None
+    model: Any = None
 
     @property
     def size(self) -> int:

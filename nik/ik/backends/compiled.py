@@ -1,7 +1,9 @@
 """The compiled backend: the stages' work on float64 numpy arrays through the numba kernels of :mod:`nik.kernels`.
 
 For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here each
-piece of work is one kernel call over the whole batch:
+piece of work is one kernel call over the whole batch. Every per-robot fact (chain arrays, limits, reach bound,
+closed-form constants, the compiled LM, packed networks) comes from the robot's model (:mod:`nik.ik.model`),
+looked up once per call:
 
 - the checks of :mod:`nik.ik.targets` (:func:`~nik.ik.targets.pose_array`) and the reach bound
   (:func:`nik.kernels.poses.reach_flags`);
@@ -13,10 +15,9 @@ piece of work is one kernel call over the whole batch:
   from several starts in turn (:meth:`~nik.lm.compiled.CompiledLM.solve_starts`), or from uniform starts with the
   batched LM's restart budget;
 - the closed forms (:mod:`nik.kernels.closed`: the 8 solutions of ``nik.analytic.solve``, the one chosen as
-  ``nik.ik.guesses.analytic_guess`` chooses it). An arm that fits its family only within the tolerance of
-  :mod:`nik.analytic.geometry` (URDF origins rounded to float32; ``nik.analytic.solve`` adds Newton steps there)
-  gets the ideal arm's closed form checked at :data:`APPROXIMATE_CHECK_TOL` as its guess; the refine stage's LM
-  polishes what misses the solver's tolerance.
+  ``nik.ik.guesses.analytic_guess`` chooses it); an arm that fits its family only within a tolerance gets the
+  ideal arm's closed form checked at :data:`~nik.ik.model.APPROXIMATE_CHECK_TOL`, polished by LM where it misses
+  the solver's tolerance (the one policy of :mod:`nik.ik.model`).
 
 Answers come back as an :class:`~nik.ik.result.IKResult` of tensors in the targets' dtype: float32 targets are
 solved to half the tolerance in float64, rounded, clamped into the float32 limits and measured again.
@@ -31,20 +32,12 @@ import torch
 
 from nik.ik.backends.base import Job, Refined
 from nik.ik.guesses import LIMIT_ROUNDING
+from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, Model, model_of
 from nik.ik.result import IKResult
 from nik.ik.targets import pose_array, q_near_array
 from nik.lm.batched import LMCfg
-from nik.lm.compiled import CompiledLM
-from nik.robots.reach import REACH_SLACK, reach_center, reach_radius, unreachable_message
 
 __all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend"]
-
-#: The FK check of a closed-form solution (metres, radians) by the targets' dtype: ``nik.analytic.solve``'s
-#: defaults (a float32 pose is a rotation only to about 1e-7).
-CLOSED_FORM_TOL = {torch.float64: 1e-9, torch.float32: 2e-5}
-#: The same check on an arm whose closed form is that of the ideal arm it is within tolerance of (metres,
-#: radians): the Jaco2's wrist axes miss each other by 8e-8 m, its closed-form solutions by about as much.
-APPROXIMATE_CHECK_TOL = 1e-5
 #: Most poses whose hypotheses the packed network's compiled forward pass computes; above, torch's batched
 #: forward pass (float32 matmuls) is cheaper per pose. Measured with panda's and xarm7's single-pose networks
 #: (whole solver, one thread, CPU us per target; kernel / torch): 16 poses 26 / 73, 100 poses 20 / 28,
@@ -61,48 +54,15 @@ def _kernels():
     if _KERNELS is None:
         from types import SimpleNamespace
 
-        from nik.kernels import closed, lm, poses, seeded
+        from nik.kernels import closed, lm, seeded
 
         _KERNELS = SimpleNamespace(
-            reach_flags=poses.reach_flags,
             rank=seeded.rank,
             merge=seeded.merge,
             closed_guess=closed.guess,
             pose_errors=lm.pose_errors,
         )
     return _KERNELS
-
-
-class _State:
-    """Per solver, built on its first compiled call: the robot's model arrays and facts, its LM, its networks."""
-
-    __slots__ = ("G", "joints", "lm", "center", "radius", "lo32", "hi32", "closed", "closed_check", "packed")
-
-    def __init__(self, solver):
-        from nik.analytic import family
-
-        robot = solver.robot
-        self.G, self.joints = robot.chain_arrays()
-        self.lm = CompiledLM.of(robot, solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None)
-        self.center = reach_center(robot).numpy()
-        self.radius = max(reach_radius(robot), 1e-300)
-        lo32, hi32 = robot.limits_as(torch.empty(0, dtype=torch.float32))
-        self.lo32, self.hi32 = lo32.numpy(), hi32.numpy()
-        self.closed, self.closed_check = None, None
-        if family(robot) is not None:
-            self.closed, self.closed_check = _closed_constants(robot)
-        self.packed = {}
-
-
-def _closed_constants(robot):
-    """``(constants of the compiled closed form, its FK check tolerance by dtype)`` or ``(None, None)``."""
-    from nik.analytic.solve import closed_form
-    from nik.kernels.closed import closed_form_array
-
-    k = closed_form(robot)
-    if k.get("polish"):  # within tolerance of its family: the ideal arm's closed form, then LM
-        return closed_form_array({**k, "polish": False}), dict.fromkeys(CLOSED_FORM_TOL, APPROXIMATE_CHECK_TOL)
-    return closed_form_array(k), CLOSED_FORM_TOL
 
 
 class CompiledBackend:
@@ -147,43 +107,35 @@ class CompiledBackend:
             res.pos_err, res.rot_err, res.iterations, strict, job.tol_pos, job.tol_rot,
         )  # fmt: skip
 
-    # -- state ---------------------------------------------------------------------
+    # -- the model ---------------------------------------------------------------------
     @staticmethod
-    def state(solver) -> _State:
-        st = solver.__dict__.get("_compiled_state")
-        if st is None or st.G is not solver.robot.chain_arrays()[0]:
-            st = solver.__dict__["_compiled_state"] = _State(solver)
-        return st
+    def model(solver) -> Model:
+        """The robot's compiled model (:func:`nik.ik.model.model_of`) with the solver's LM config."""
+        return model_of(solver.robot, solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None)
 
     # -- the job -------------------------------------------------------------------
     def job(self, solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job:
-        reach_flags = _kernels().reach_flags
         T, dtype = pose_array(T_target, representation)
-        st = self.state(solver)
+        st = self.model(solver)
         B = T.shape[0]
-        reachable = np.empty(B, dtype=bool)
-        if not reach_flags(T, st.center, st.radius, REACH_SLACK, reachable):
-            msg = unreachable_message(solver.robot, torch.from_numpy(T), torch.from_numpy(reachable))
-            warnings.warn(msg, UserWarning, stacklevel=4)
+        reachable, every = st.reach(T)
+        if not every:
+            warnings.warn(st.unreachable_message(T, reachable), UserWarning, stacklevel=4)
         near = q_near_array(q_near, B, solver.robot)
         margin = 1.0 if dtype == torch.float64 else 0.5
         return Job(
             self, T, reachable, near, tol_pos * margin, tol_rot * margin, seed, max_iters, dtype, tol_pos, tol_rot,
-            state=st,
+            model=st,
         )  # fmt: skip
 
     # -- guesses -----------------------------------------------------------------------
     def network(self, solver, job: Job):
-        st = job.state
+        st = job.model
         B = job.size
         net = solver.network_for(B, self.name)
         if B <= PACKED_MAX_BATCH:
-            packed = st.packed.get(id(net))
-            if packed is None:
-                from nik.nets.compiled import pack
-
-                packed = st.packed[id(net)] = pack(net) or False
-            if packed:
+            packed = st.packed(net)
+            if packed is not None:
                 hyp, pos, rot, ok, failing = packed.ranked_hypotheses(st.G, st.joints, job.T, job.tol_pos, job.tol_rot)
                 return hyp, pos, rot, (ok, failing)
         with torch.no_grad():
@@ -196,7 +148,7 @@ class CompiledBackend:
 
     def closed_form(self, solver, job: Job, idx, q_near):
         guess = _kernels().closed_guess
-        st = job.state
+        st = job.model
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
         B, n = T.shape[0], st.joints.shape[0]
         q, pos, rot, ok = np.empty((B, n)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
@@ -210,7 +162,7 @@ class CompiledBackend:
     # -- refiners ----------------------------------------------------------------------
     def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
-        run = job.state.lm.solve(
+        run = job.model.lm.solve(
             T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters,
             restarts=restarts, reachable=reachable,
         )  # fmt: skip
@@ -222,7 +174,7 @@ class CompiledBackend:
 
     def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
         T = self.rows(job.T, idx)
-        run = job.state.lm.solve_starts(
+        run = job.model.lm.solve_starts(
             T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters
         )
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
@@ -235,7 +187,7 @@ class CompiledBackend:
         q, pos, rot = answers.q, answers.pos_err, answers.rot_err
         if job.dtype != torch.float64:  # the answer in the targets' dtype, inside the limits, its errors measured
             pose_errors = _kernels().pose_errors
-            st = job.state
+            st = job.model
             q = np.clip(q.astype(np.float32), st.lo32, st.hi32)
             pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
             pose_errors(st.G, st.joints, job.T, q.astype(np.float64), pos, rot)
