@@ -177,12 +177,12 @@ class _Settings:
     """What a path takes from its solver: ``lm_cfg`` (the LM config, :class:`nik.lm.LMCfg`, or None: the default),
     ``refine`` (False: ``refine="none"``, the closed form's branches as they are), ``restarts`` (uniform restarts a
     waypoint the chain does not reach may draw: :data:`PATH_RESTARTS` with ``fallback="multistart"``, else 0),
-    ``network`` (the network whose hypotheses start the chains of an arm without a closed form, or None)."""
+    ``network`` (whether the solver's network starts the chains of an arm without a closed form)."""
 
     lm_cfg: Any
     refine: bool
     restarts: int
-    network: Any
+    network: bool
 
 
 def _settings(solver) -> _Settings:
@@ -201,8 +201,7 @@ def _settings(solver) -> _Settings:
         )
     cfg = solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None
     restarts = PATH_RESTARTS if solver.fallback == "multistart" else 0
-    network = solver.network_for(1, "compiled") if solver.has_network else None
-    return _Settings(cfg, solver.refine != "none", restarts, network)
+    return _Settings(cfg, solver.refine != "none", restarts, solver.has_network)
 
 
 @dataclass
@@ -512,16 +511,15 @@ def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
 
 def _hypotheses(run: _Run) -> np.ndarray | None:
     """``(K, dof)`` the network's hypotheses for the first waypoint, ranked by FK: the compiled backend's guess
-    stage (the packed network), or None without a network."""
-    net = run.how.network
-    if net is None:
+    stage (the network :meth:`nik.IKSolver.network_for` names, packed), or None without a network."""
+    if not run.how.network:
         return None
-    packed = run.model.packed(net)
-    if packed is not None:
-        hyp = packed.ranked_hypotheses(run.model.G, run.model.joints, run.T[:1], run.tol_pos, run.tol_rot)[0]
-        return np.ascontiguousarray(hyp[0])
-    with torch.no_grad():
-        return net.hypotheses(torch.from_numpy(run.T[:1]))[0].double().cpu().numpy()
+    from nik.ik.backends import Job, compiled_backend
+
+    be = compiled_backend()
+    T0 = run.T[:1]
+    job = Job(be, T0, run.reachable[:1], None, run.tol_pos, run.tol_rot, run.seed, None, torch.float64, model=run.model)
+    return np.ascontiguousarray(be.network(run.solver, job)[0][0])
 
 
 # ---------------------------------------------------------------------------
