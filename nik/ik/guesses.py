@@ -19,6 +19,7 @@ import math
 import torch
 
 from nik.poses import pose_error
+from nik.tolerances import score
 
 __all__ = ["LIMIT_ROUNDING", "analytic_guess", "dedupe", "multistart_guess", "nearest_solution", "network_guess"]
 
@@ -38,7 +39,7 @@ def multistart_guess(robot, T: torch.Tensor, *, seed: int = 0, n_starts: int = 6
     B = T.shape[0]
     q = robot.sample(B * n_starts, generator=g, dtype=T.dtype, device=T.device).reshape(B, n_starts, -1)
     pos, rot = pose_error(T[:, None], robot.fk(q))
-    idx = (pos + 0.1 * rot).argmin(-1)
+    idx = score(pos, rot).argmin(-1)
     return torch.gather(q, 1, idx[:, None, None].expand(-1, 1, q.shape[-1])).squeeze(1)
 
 
@@ -56,7 +57,7 @@ def analytic_guess(robot, T: torch.Tensor, *, q_near: torch.Tensor | None = None
     if bool(none.any()):  # unreachable or outside the limits: the clamped solution that comes closest
         clamped = robot.clamp(sols[none])
         pos, rot = pose_error(T[none, None], robot.fk(clamped))
-        idx = (pos + 0.1 * rot).argmin(-1)
+        idx = score(pos, rot).argmin(-1)
         q = q.clone()
         q[none] = torch.gather(clamped, 1, idx[:, None, None].expand(-1, 1, clamped.shape[-1])).squeeze(1)
     return robot.clamp(q)

@@ -25,6 +25,7 @@ import numpy as np
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, _chain
 from nik.kernels.lm import _residual
+from nik.tolerances import SCORE_ROT_WEIGHT
 
 __all__ = ["FIELDS", "closed_form_array", "guess", "pick", "solutions"]
 
@@ -352,7 +353,7 @@ def _pick_one(q, valid, G, joints, P, q_near, use_near, limit_rounding, out, Tq,
                 cand[j] = min(max(q[s, j], joints[j, LOWER]), joints[j, UPPER])
             _chain(G, joints, cand, Tq)
             _, pos, rot = _residual(P, Tq, 1.0, e)
-            if pos + 0.1 * rot < best_score:
-                best, best_score = s, pos + 0.1 * rot
+            if pos + SCORE_ROT_WEIGHT * rot < best_score:
+                best, best_score = s, pos + SCORE_ROT_WEIGHT * rot
                 for j in range(n):
                     out[j] = cand[j]

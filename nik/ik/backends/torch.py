@@ -18,6 +18,7 @@ from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near
 from nik.poses import pose_error
 from nik.robots.reach import unreachable_message, within_reach
+from nik.tolerances import score
 
 __all__ = ["TorchBackend"]
 
@@ -62,7 +63,7 @@ class TorchBackend:
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
         """:meth:`nik.ik.stages.Answers.merge` with tensor operations (the failing count is counted again when
         asked: None)."""
-        new, old = res.pos_err + 0.1 * res.rot_err, answers.score()[idx]
+        new, old = score(res.pos_err, res.rot_err), answers.score()[idx]
         mask = new < old if strict else new <= old
         keep = idx[mask]
         answers.q[keep] = res.q[mask].to(answers.q.dtype)
