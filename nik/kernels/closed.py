@@ -9,9 +9,10 @@ Slot ``k`` is ``shoulder + 2 elbow + 4 wrist``, as there. The constants come in 
 imports nothing from nik. Arms that fit their family only within a tolerance (``polish``: three Newton steps
 after the closed form in ``nik.analytic.solve``) are not handled here (:func:`closed_form_array` says so).
 
-:func:`pick` then chooses one solution per target as ``nik.ik.guesses.analytic_guess`` does: the valid one
-nearest ``q_near`` (each angle moved by whole turns, within the limits, as near ``q_near`` as it goes), or the
-one whose worst joint is farthest inside its range; with none valid, the clamped solution nearest the target.
+:func:`pick` then chooses one solution per target (the one rule: ``nik.ik.guesses.analytic_guess`` calls it
+too): the valid one nearest ``q_near`` (each angle moved by whole turns, within the limits, as near ``q_near`` as
+it goes), or the one whose worst joint is farthest inside its range; with none valid, the clamped solution nearest
+the target.
 
 Scratch is allocated inside each kernel, per call: threads may share the constants and the model arrays.
 """
