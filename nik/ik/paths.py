@@ -2,34 +2,52 @@
 
 A path is more than N independent poses: the arm has to move from each answer to the next, so a solution
 that jumps to another IK branch half-way (a joint turning 180 degrees between two waypoints 3 mm apart) is no
-answer, however exact each pose is. :func:`solve_path` therefore looks at the whole path before it commits:
+answer, however exact each pose is. :func:`solve_path` therefore looks at the whole path before it commits. Its
+stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the robot's one compiled model
+(:func:`nik.ik.model.model_of`: limits, wraps, reach, closed form, LM), plus one: the choice over the whole path.
 
-1. **candidates** at each waypoint. On an arm with a closed form (:func:`nik.analytic.family`): all 8 branches
-   of every waypoint, in one compiled call. On other arms (redundant 7-joint arms among them): chains of
-   Levenberg-Marquardt, each waypoint seeded by the chain's answer at the previous one, started from
-   ``q_start``, or, without it, from the network's hypotheses and from uniform starts at the first waypoint
-   (several chains side by side, each the continuation of a different posture).
-2. **the choice over the whole path**: by dynamic programming over the branches (:func:`nik.ik.path_kernels.path_dp`),
-   the sequence whose largest step is the smallest, and among those the one with the least sum of squared steps
-   (then the least total joint motion); with ``q_start`` the step from it to the first waypoint counts too, so the
-   trajectory starts nearest it. Among chains, the one with the fewest failed waypoints, then the smallest largest
-   step, then the least motion. With ``q_start`` on a closed-form arm the LM chain from ``q_start`` is tried first
-   and kept when it follows every waypoint in steps of at most :data:`PATH_FOLLOW_STEP` (its branch meets no
-   limit: nothing to look ahead for).
-3. **polish**: a waypoint left without a valid candidate (closed-form arms) gets LM seeded by its predecessor's
-   answer (its best effort, flagged); the chains are that already.
-4. **redundant arms**: the extra freedom is resolved along the path by seeding each waypoint with its
+1. **the reach bound** (the model's compiled flags): waypoints provably out of reach are flagged (``reachable``)
+   and get no restarts; the warning carries the words of :func:`nik.robots.reach.unreachable_message`, with the
+   millimetre question 100 x beyond the reach, as :meth:`~nik.IKSolver.solve` warns (neither raises).
+2. **guess: candidates** at each waypoint. On an arm with a closed form (:func:`nik.analytic.family`): all 8
+   branches of every waypoint, in one compiled call (the model's closed form; an arm that fits its family only
+   within a tolerance gets the ideal arm's closed form checked at the model's tolerance, the one policy of
+   :mod:`nik.ik.model`). On other arms (redundant 7-joint arms among them): chains of Levenberg-Marquardt, each
+   waypoint seeded by the chain's answer at the previous one, started from ``q_start``, or, without it, from the
+   network's hypotheses (the compiled backend's guess stage: the packed network) and from uniform starts at the
+   first waypoint (several chains side by side, each the continuation of a different posture).
+3. **the choice over the whole path**: by dynamic programming over the candidates
+   (:func:`nik.ik.path_kernels.path_dp`; the branches, or every chain's answer at every waypoint), the sequence
+   whose largest step is the smallest, and among those the one with the least sum of squared steps (then the least
+   total joint motion); with ``q_start`` the step from it to the first waypoint counts too, so the trajectory starts
+   nearest it. With ``q_start`` on a closed-form arm the LM chain from ``q_start`` is tried first and kept when it
+   follows every waypoint in steps of at most :data:`PATH_FOLLOW_STEP` (its branch meets no limit: nothing to look
+   ahead for).
+4. **refine**: a chosen branch that misses the tolerance (an approximate closed form) gets LM from it; a waypoint
+   left without a valid branch gets LM seeded by its neighbour's answer (its best effort, flagged); the chains are
+   that already.
+5. **redundant arms**: the extra freedom is resolved along the path by seeding each waypoint with its
    predecessor's answer moved :data:`PATH_PULL` of the way towards the middle of the joint ranges (at most
    :data:`PATH_PULL_CAP` per joint and waypoint): LM from that seed removes whatever would move the tool, the
    rest is self-motion away from the limits, so the arm does not drift into a limit and then jump.
-5. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
+6. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
    on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
+
+**Settings**: the solver's, as :meth:`~nik.IKSolver.solve` reads them. The LM config (``swarm_cfg`` an
+:class:`nik.lm.LMCfg`) is the chains' and polishes' LM; ``fallback="multistart"`` (the default without a closed
+form) lets a waypoint the chain does not reach draw up to :data:`PATH_RESTARTS` uniform restarts (within reach),
+``"none"`` or ``"analytic"`` none (on a closed-form arm a restart could only jump to another branch);
+``refine="none"`` keeps the closed form's branches as they are (no LM; refused on an arm without a closed form,
+which has no other way along the path); the swarm methods are local along a path, where each waypoint is seeded by
+the one before: their LM polish is the chains' LM. ``backend="torch"`` is refused (the chains run in the compiled
+kernels); ``checkpoint=None`` (no network) leaves the uniform starts alone.
 
 The step between two configurations is the largest joint motion ``max_j |q_i,j - q_i-1,j|`` (radians; metres on
 prismatic joints), measured on the returned joints: a joint whose range is wider than a full turn may cross
 pi, one limited to [-pi, pi] may not. Paths are solved on the CPU in float64 (the work is sequential by nature);
-the result comes back in the dtype and on the device of the input poses.
+the result comes back in the dtype and on the device of the input poses. ``q_start`` is checked as ``q_near`` is
+(:func:`nik.ik.targets.q_near_array`), and must lie inside the limits.
 """
 
 from __future__ import annotations
