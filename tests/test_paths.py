@@ -404,3 +404,11 @@ def test_a_solver_forced_onto_torch_is_refused_in_one_line(ur5):
     with pytest.raises(ValueError, match="backend='torch'") as err:
         nik.IKSolver(ur5.robot, backend="torch").solve_path(T)
     assert "\n" not in str(err.value)
+
+
+def test_a_solver_without_a_network_starts_its_chains_from_uniform_starts_only(panda):
+    q0 = torch.tensor([0.2, 0.3, -0.2, -1.8, 0.1, 2.0, 0.5], dtype=torch.float64)
+    T = _line(panda.robot, q0, [0.0, 0.0, 1.0], 0.12, 20)
+    bare = nik.IKSolver(panda.robot, checkpoint=None).solve_path(T)
+    assert bare.source == "multistart"
+    assert bool(_reached(panda.robot, T, bare.q).all()) and _largest_step(bare.q) < math.radians(3.0)
