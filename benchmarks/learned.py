@@ -185,7 +185,7 @@ def cost_row(name: str, args) -> str:
     net = load_pretrained(robot)
     _, T = _targets(robot, args.n_cost, args.seed + 10)
     solver = nik.IKSolver(robot, analytic=False)
-    assert solver.uses_network(T)
+    assert solver.plan(backend="torch").source == "network"
     hyp = net.hypotheses(T)
     with torch.no_grad():
         runs = {

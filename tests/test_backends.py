@@ -196,17 +196,18 @@ def test_a_failing_best_hypothesis_is_followed_by_the_next_ones_then_uniform_res
     robot = nik.load_robot("panda")
     _, T = _targets(robot, 16, seed=34)
     solver = nik.IKSolver(robot, backend="compiled")
-    job = backends.compiled_backend().job(solver, T, None, None, DEFAULT_TOL_POS, DEFAULT_TOL_ROT, 0, 2)
-    answers = stages.guess(solver, job)
+    plan = solver.plan(tol_pos=DEFAULT_TOL_POS, tol_rot=DEFAULT_TOL_ROT, seed=0, max_iters=2)
+    job = backends.compiled_backend().job(robot, plan, T, None, None)
+    answers = stages.guess(plan, job)
     assert answers.hypotheses.shape == (16, 8, 7)
     scores = [nik.pose_error(T, robot.fk(torch.from_numpy(answers.hypotheses[:, k].copy()))) for k in range(8)]
     score = torch.stack([p + 0.1 * r for p, r in scores], dim=1)
     assert bool((score[:, 1:] >= score[:, :-1] - 1e-12).all())  # ranked best first by FK
-    answers = stages.refine(solver, job, answers)  # 2 LM iterations from the best hypothesis: many still fail
+    answers = stages.refine(plan, job, answers)  # 2 LM iterations from the best hypothesis: many still fail
     failing = int((~answers.ok(job)).sum())
-    more = stages.more_hypotheses(solver, job, answers)
+    more = stages.more_hypotheses(plan, job, answers)
     assert failing > 0 and int((~more.ok(job)).sum()) <= failing
-    done = stages.fallback(solver, job, more)
+    done = stages.fallback(plan, job, more)
     assert bool(done.ok(job).all()) and bool((done.iterations >= more.iterations).all())
 
 
@@ -216,8 +217,9 @@ def test_numpy_targets_and_lists_are_accepted_as_float64(no_torch):
     solver = nik.IKSolver(robot, analytic=False)
     for form in (T.numpy(), T.numpy().tolist(), T[0].numpy()):
         res = solver.solve(form)
-        assert res.q.dtype == torch.float64 and bool(res.success.all())
-    assert isinstance(np.asarray(res.q), np.ndarray)
+        numpy_in = isinstance(form, np.ndarray)  # numpy in, numpy out (interface.md round 5); lists: tensors
+        assert res.q.dtype == (np.float64 if numpy_in else torch.float64) and bool(res.success.all())
+        assert isinstance(res.q, np.ndarray) == numpy_in and isinstance(res.success, np.ndarray) == numpy_in
 
 
 @pytest.mark.parametrize("name", ["kuka_kr", "puma560", "ur5"])

@@ -142,7 +142,7 @@ def test_one_pose_on_the_cpu_uses_the_network_on_both_backends():
     for backend in ("compiled", "torch"):
         with_net = nik.IKSolver(robot, backend=backend)
         one = with_net.solve(T[:1], seed=3)
-        assert one.source == "network" and with_net.source_for(T[:1]) == "network" and bool(one.success.all())
+        assert one.source == "network" and with_net.plan().source == "network" and bool(one.success.all())
         assert with_net.solve(T, seed=3).source == "network"
     raw = nik.IKSolver(robot, refine="none").solve(T[:1])
     assert raw.source == "network"  # the raw guess was asked for

@@ -84,7 +84,7 @@ def test_every_input_form_gives_the_same_answer():
     ]
     for value, rep in forms:
         res = solver.solve(value, representation=rep)
-        torch.testing.assert_close(res.q, ref, atol=1e-9, rtol=0)
+        torch.testing.assert_close(torch.as_tensor(res.q), ref, atol=1e-9, rtol=0)
         assert bool(res.success.all())
     # a single pose in each form counts as B = 1
     for single in (T[0], quat[0], rpy[0]):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+import numpy as np
 import torch
 
 __all__ = ["IKResult", "PathReport"]
@@ -13,6 +14,11 @@ __all__ = ["IKResult", "PathReport"]
 @dataclass
 class IKResult:
     """Result of :meth:`IKSolver.solve` for B targets.
+
+    The arrays are of the input's kind: torch tensors (on the targets' device) for a tensor input, numpy arrays for a
+    numpy input (no torch on the way on the CPU's compiled path), torch tensors for other input (lists). The dtype of
+    ``q``, ``pos_err`` and ``rot_err`` is the targets' (float64 for non-tensor input); ``success`` and ``reachable``
+    are bool, ``iterations`` int64.
 
     Attributes:
         q: (B, dof) joint angles, radians, inside the joint limits.
@@ -28,22 +34,29 @@ class IKResult:
             every step, the largest and where, reconfigurations, why a waypoint failed); None otherwise.
     """
 
-    q: torch.Tensor
-    pos_err: torch.Tensor
-    rot_err: torch.Tensor
-    success: torch.Tensor
-    iterations: torch.Tensor
+    q: torch.Tensor | np.ndarray
+    pos_err: torch.Tensor | np.ndarray
+    rot_err: torch.Tensor | np.ndarray
+    success: torch.Tensor | np.ndarray
+    iterations: torch.Tensor | np.ndarray
     source: str = ""
-    reachable: torch.Tensor | None = None
+    reachable: torch.Tensor | np.ndarray | None = None
     path: PathReport | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
 
     def to(self, device: str | torch.device) -> IKResult:
-        """The same result with every tensor on ``device``."""
+        """The same result with every array as a tensor on ``device``."""
         moved = {f.name: getattr(self, f.name) for f in fields(self)}
-        moved = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in moved.items()}
+        moved = {k: torch.as_tensor(v).to(device) if isinstance(v, torch.Tensor | np.ndarray) else v
+                 for k, v in moved.items()}  # fmt: skip
+        return IKResult(**moved)
+
+    def numpy(self) -> IKResult:
+        """The same result with every array as a numpy array (CPU)."""
+        moved = {f.name: getattr(self, f.name) for f in fields(self)}
+        moved = {k: v.detach().cpu().numpy() if isinstance(v, torch.Tensor) else v for k, v in moved.items()}
         return IKResult(**moved)
 
 

@@ -1,7 +1,9 @@
 """``IKSolver``: initial guess (network, closed form or multi-start) -> refinement -> result.
 
-The solver holds the configuration of one robot's pipeline and composes the stages of :mod:`nik.ik.stages`;
-it computes nothing itself. For a batch of B target poses, :meth:`IKSolver.solve` runs:
+The solver holds the configuration of one robot's pipeline; it computes nothing itself. Each call resolves its
+:class:`~nik.ik.plan.Plan` once (:meth:`IKSolver.plan`: guess source and network, LM settings and caps, restarts,
+fallback, tolerances) and hands it to a backend, which runs the stages of :mod:`nik.ik.stages` as the plan says.
+For a batch of B target poses, :meth:`IKSolver.solve` runs:
 
 1. **guess**: the trained network's prediction when it has one; else, for an arm with a closed form
    (:func:`nik.analytic.family`: a spherical wrist or three parallel axes), the closed-form solution (the
@@ -36,8 +38,10 @@ from pathlib import Path
 import torch
 
 from nik.ik import backends, networks, stages
+from nik.ik.plan import Plan, choose_network
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
+from nik.lm.batched import LMCfg
 from nik.robots import Robot, load_robot
 from nik.robots.reach import within_reach
 from nik.threads import threads_for
@@ -54,14 +58,17 @@ class IKSolver:
 
     Args:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
-        checkpoint: ``"auto"`` (default): the network for this robot's definition hash, whatever its name:
-            one installed in the user folder (``nik train --install``, :mod:`nik.nets.registry`), else the
-            one shipped with nik (:func:`nik.models.load_pretrained`), else none; on an arm with a closed form
-            and ``analytic=True`` the closed form stays the guess and no network is loaded. A path: an exported
-            network (``NAME.safetensors`` with its ``NAME.json``, e.g. from ``nik train``; its SHA-256 is
-            checked) or a Lightning ``.ckpt`` from ``train.py`` (or :func:`nik.models.save_checkpoint`), loaded
-            safely by :func:`nik.nets.load_network`; one made for another robot definition is refused, a
-            damaged file raises :class:`nik.CheckpointError`. ``None``: no network. A multi-solution network
+        checkpoint: ``"auto"`` (default): the network for this arm's definition hash without its base/tool frames
+            (:attr:`nik.Robot.arm_hash`), whatever its name: one installed in the user folder (``nik train
+            --install``, :mod:`nik.nets.registry`), else the one shipped with nik (:func:`nik.models.load_pretrained`;
+            on the CPU its small single-pose network where it has one), else none; on an arm with a closed form
+            and ``analytic=True`` the closed form stays the guess and no network is loaded. A given or installed
+            network serves on every backend before a shipped one (the precedence: :mod:`nik.ik.plan`).
+            A path: an exported network (``NAME.safetensors`` with its ``NAME.json``, e.g. from ``nik train``; its
+            SHA-256 is checked) or a Lightning ``.ckpt`` from ``train.py`` (or :func:`nik.models.save_checkpoint`),
+            loaded safely by :func:`nik.nets.load_network`; one made for another robot definition is refused, a
+            damaged file raises :class:`nik.CheckpointError` (a framed robot also takes one made for its bare arm).
+            ``None``: no network. A multi-solution network
             (:mod:`nik.nets.multi`) guesses its best hypothesis by FK; targets the refinement leaves outside
             tolerance then get LM from each of its other hypotheses (before any ``fallback``);
             :meth:`solve_all` starts LM from all of them.
@@ -117,21 +124,16 @@ class IKSolver:
         fallback = {True: "auto", False: "none"}.get(fallback, fallback)
         if fallback not in ("auto", "analytic", "multistart", "none"):
             raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
-        self._net, self._load_net = None, None
-        self._net_one = None
-        self.closed_form = False
-        if analytic:
-            from nik.analytic import family
+        self._net, self._net_one, self._given = None, None, checkpoint is not None and checkpoint != "auto"
+        from nik.analytic import family
 
-            self.closed_form = family(self.robot) is not None
+        self.closed_form = bool(analytic) and family(self.robot) is not None
         if isinstance(checkpoint, str) and checkpoint == "auto":
             if not self.closed_form:
                 # loaded (SHA-256 checked: a damaged file is refused here) once per process, shared by every solver
-                load = networks.shipped_network(self.robot, self.device)
-                self._net = None if load is None else load()
+                self._net, self._given = networks.known_network(self.robot, self.device)
                 if self._net is not None:
-                    load = networks.single_pose_network(self.robot, self.device)
-                    self._net_one = None if load is None else load()
+                    self._net_one = networks.known_network(self.robot, self.device, single_pose=True)[0]
         elif checkpoint is not None:
             self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
         if fallback == "analytic" and not self.closed_form:
@@ -139,85 +141,74 @@ class IKSolver:
         if fallback == "auto":
             fallback = "analytic" if self.closed_form else "multistart"
         self.fallback = fallback
+        self._arm_frame = (None, False)
 
     @property
     def net(self):
-        """The network (None without one). A known network is loaded once per process and shared by every solver of
-        the same robot (:mod:`nik.ik.networks`); the solver only reads it."""
-        if self._load_net is not None:
-            self._net, self._load_net = self._load_net(), None
+        """The network (None without one): one given (``checkpoint=PATH``, or set here) or installed serves on every
+        backend; the shipped one gives way on the CPU to the arm's single-pose network (:mod:`nik.ik.plan`)."""
         return self._net
 
     @net.setter
     def net(self, value) -> None:
-        self._net, self._load_net = value, None
+        self._net, self._given = value, value is not None
 
     @property
     def has_network(self) -> bool:
-        """True when the solver has a network (without loading it)."""
-        return self._net is not None or self._load_net is not None
-
-    def __repr__(self) -> str:
-        return (
-            f"IKSolver(robot={self.robot.name!r}, network={self.has_network}, "
-            f"analytic={self.closed_form}, refine={self.refine!r})"
-        )
-
-    #: Smallest batch for which :meth:`solve` uses the network's guess when a refinement follows (1: always).
-    #: On the compiled backend the network pays from one pose on (``benchmarks/learned.py --sections pays``,
-    #: docs/learned.md); on torch the per-operation overhead of a forward pass (about a millisecond for one pose)
-    #: is paid only where torch runs at all: the GPU, the swarms, ``refine="none"``.
-    network_min_batch = 1
+        """True when the solver has a network."""
+        return self._net is not None
 
     @property
     def single_pose_net(self):
-        """The arm's small network for the CPU (``nik train --single-pose``, recorded role ``single_pose``), found
-        with the main one (``checkpoint="auto"``); None where there is none."""
+        """The arm's small shipped network for the CPU (``nik train --single-pose``, recorded role ``single_pose``),
+        found with the main one (``checkpoint="auto"``); None where there is none."""
         return self._net_one
 
-    def network_for(self, batch: int, backend: str = "compiled"):
-        """The network that guesses a batch of ``batch`` poses on ``backend``: on the compiled backend (the CPU) the
-        single-pose network where the arm has one, whatever the batch size (measured, panda and xarm7, one thread:
-        its 2 x 64 forward pass costs about a twentieth of the main 4 x 256 one's multiply-adds and its guesses
-        cost LM about one iteration more, so it is the faster guess at one pose and at 100 and 1,000 poses:
-        docs/learned.md); else :attr:`net`."""
-        if self._net_one is not None and backend == "compiled":
-            return self._net_one
-        return self.net
+    def __repr__(self) -> str:
+        net, closed = self.has_network, self.closed_form
+        return f"IKSolver(robot={self.robot.name!r}, network={net}, analytic={closed}, refine={self.refine!r})"
 
     @property
     def initial_source(self) -> str:
-        """Where :meth:`solve` takes its initial guess: ``network``, ``analytic`` or ``multistart`` (for given
-        targets see :meth:`source_for`; each result's ``source`` says which served)."""
-        if self.has_network:
-            return "network"
-        return "analytic" if self.closed_form else "multistart"
+        """Where :meth:`solve` takes its initial guess: ``network``, ``analytic`` or ``multistart`` (the plan's
+        ``source``; each result's ``source`` says which served)."""
+        return self.plan().source
 
-    def uses_network(self, T) -> bool:
-        """Whether :meth:`solve` uses the network for targets ``T: (B, 4, 4)`` (or a batch size ``B``): it has one,
-        and either ``B`` is at least :attr:`network_min_batch` or ``refine="none"`` (the raw guess is asked)."""
-        if not self.has_network:
-            return False
-        B = T if isinstance(T, int) else int(T.shape[0])
-        return self.refine == "none" or B >= self.network_min_batch
+    def plan(
+        self,
+        *,
+        backend: str = "compiled",
+        tol_pos: float = DEFAULT_TOL_POS,
+        tol_rot: float = DEFAULT_TOL_ROT,
+        seed: int = 0,
+        max_iters: int | None = None,
+    ) -> Plan:
+        """The :class:`~nik.ik.plan.Plan` of a call on ``backend`` (``"compiled"`` | ``"torch"``) with these
+        tolerances, seed and iteration cap: resolved here, once, from the solver's settings (:mod:`nik.ik.plan`)."""
+        net = choose_network(self._net, self._net_one, self._given, backend)
+        src = "network" if net is not None else "analytic" if self.closed_form else "multistart"
+        lm_cfg = self.swarm_cfg if isinstance(self.swarm_cfg, LMCfg) else None
+        return Plan(
+            src, net, self._in_arm_frame(net), self.refine, lm_cfg, max_iters,
+            restarts=src == "multistart" or self.fallback == "multistart", near=not self.closed_form,
+            fallback=self.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
+            swarm_cfg=self.swarm_cfg, polish=self.polish,
+        )  # fmt: skip
 
-    def source_for(self, T) -> str:
-        """Where :meth:`solve` takes the initial guess for ``T: (B, 4, 4)`` (or a batch size): ``network``,
-        ``analytic`` or ``multistart`` (:meth:`uses_network`)."""
-        if self.uses_network(T):
-            return "network"
-        return "analytic" if self.closed_form else "multistart"
+    def _in_arm_frame(self, net) -> bool:
+        """Whether ``net`` was made for the bare arm of a robot with frames (kept per network)."""
+        if self._arm_frame[0] is not net:
+            robot, made_for = self.robot, getattr(net, "robot", None)
+            framed = net is not None and made_for is not None and robot.arm is not robot
+            self._arm_frame = (net, framed and made_for.definition_hash == robot.arm_hash != robot.definition_hash)
+        return self._arm_frame[1]
 
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
         """The raw initial guess ``(B, dof)`` (network, analytic or best-of-64 uniform), inside the limits."""
         T = as_poses(T_target, representation)
-        return stages.first_guess(
-            self,
-            T,
-            q_near=as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic, limits=self.robot.limits),
-            seed=seed,
-        )
+        near = as_q_near(q_near, T, self.robot.dof, prismatic=self.robot.prismatic, limits=self.robot.limits)
+        return stages.first_guess(self.plan(backend="torch", seed=seed), self.robot, T, q_near=near)
 
     def solve(
         self,
@@ -228,6 +219,7 @@ class IKSolver:
         q_near=None,
         max_iters: int | None = None,
         representation: str | None = None,
+        plan: Plan | None = None,
     ) -> IKResult:
         """Joint angles that reach the target poses.
 
@@ -245,9 +237,12 @@ class IKSolver:
                 also run from ``q_near`` itself and the successful answer nearest ``q_near`` is kept.
             max_iters: iteration limit of the refinement (default: the method's config).
             representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
+            plan: a plan of :meth:`plan` (changed with ``dataclasses.replace``) to run instead of the solver's
+                own; its tolerances, seed and iteration cap then replace the arguments.
 
         Returns:
-            :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``.
+            :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``
+            (numpy arrays for numpy input, tensors for tensor input: :class:`IKResult`).
 
         Raises:
             ValueError: bad poses, a negative or NaN tolerance, a malformed ``q_near``.
@@ -257,21 +252,13 @@ class IKSolver:
         """
         check_tolerances(tol_pos, tol_rot)
         be = backends.choose(self, T_target)
-        job = be.job(self, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters)
+        if plan is None:
+            plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
+        job = be.job(self.robot, plan, T_target, q_near, representation)
         if be.name == "torch":
             with threads_for(job.size):
-                return self._run(job)
-        return self._run(job)
-
-    def _run(self, job: stages.Job) -> IKResult:
-        """The stages on one job, in order."""
-        answers = stages.guess(self, job)
-        if self.refine != "none":
-            answers = stages.refine(self, job, answers)
-            answers = stages.near(self, job, answers)
-            answers = stages.more_hypotheses(self, job, answers)
-            answers = stages.fallback(self, job, answers)
-        return stages.final_check(self, job, answers)
+                return stages.run(plan, job)
+        return stages.run(plan, job)
 
     def solve_all(
         self,
@@ -298,9 +285,10 @@ class IKSolver:
         if T.shape[0] != 1:
             raise ValueError(f"solve_all: expected one pose, got {T.shape[0]}")
         check_tolerances(tol_pos, tol_rot)
-        be = backends.torch_backend()
-        job = stages.Job(be, T, within_reach(self.robot, T), None, tol_pos, tol_rot, seed, None, T.dtype)
-        return stages.all_solutions(self, job, n_starts=n_starts, dedupe_tol=dedupe_tol)
+        plan = self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
+        job = stages.Job(backends.torch_backend(), self.robot, T, within_reach(self.robot, T), None, plan.tol_pos,
+                         plan.tol_rot, T.dtype, plan.tol_pos, plan.tol_rot)  # fmt: skip
+        return stages.all_solutions(plan, job, closed_form=self.closed_form, n_starts=n_starts, dedupe_tol=dedupe_tol)
 
     def solve_path(
         self,

@@ -10,9 +10,9 @@
    uniform starts with the restart budget);
 6. :func:`final_check`: the :class:`~nik.ik.result.IKResult`, success measured against the tolerances.
 
-Every stage has the signature ``stage(solver, job, answers) -> answers``: ``solver`` is the
-:class:`~nik.ik.solver.IKSolver` whose configuration (robot, network, refine method, fallback) it reads,
-``job`` the targets and tolerances of one call (:class:`~nik.ik.backends.Job`, whose ``backend`` computes:
+Every stage has the signature ``stage(plan, job, answers) -> answers``: ``plan`` says how the call is solved
+(:class:`~nik.ik.plan.Plan`: guess source and network, LM settings and caps, restarts, fallback, tolerances, seed),
+``job`` the robot, targets and tolerances of one call (:class:`~nik.ik.backends.Job`, whose ``backend`` computes:
 :mod:`nik.ik.backends`, compiled kernels on numpy or torch), ``answers`` the best answers so far
 (:class:`Answers`, joints inside the limits with their errors measured by FK). A stage replaces an answer only
 by a better one. Arrays are the backend's (numpy or torch); the stages use only what both have (masks, indexing)
@@ -31,6 +31,7 @@ import torch
 
 from nik.ik.backends import Job, Refined
 from nik.ik.guesses import analytic_guess, dedupe, multistart_guess, network_guess
+from nik.ik.plan import Plan
 from nik.ik.result import IKResult
 from nik.poses import pose_error
 from nik.tolerances import score
@@ -46,7 +47,7 @@ __all__ = [
     "more_hypotheses",
     "near",
     "refine",
-    "source",
+    "run",
 ]
 
 
@@ -99,38 +100,52 @@ class Answers:
         return Answers(q, pos, rot, iters, self.hypotheses)
 
 
-def source(solver, job: Job) -> str:
-    """The guess that serves the call: ``network``, ``analytic`` or ``multistart`` (:meth:`IKSolver.source_for`)."""
-    if job.source is None:
-        job.source = solver.source_for(job.size)
-    return job.source
+def run(plan: Plan, job: Job) -> IKResult:
+    """The stages on one job, in order, as ``plan`` says (the torch backend's interpreter of the plan; the compiled
+    backend runs the same stages over its kernels)."""
+    answers = guess(plan, job)
+    if plan.refine != "none":
+        answers = refine(plan, job, answers)
+        answers = near(plan, job, answers)
+        answers = more_hypotheses(plan, job, answers)
+        answers = fallback(plan, job, answers)
+    return final_check(plan, job, answers)
 
 
-def first_guess(solver, T: torch.Tensor, *, q_near: torch.Tensor | None, seed: int) -> torch.Tensor:
+def first_guess(plan: Plan, robot, T: torch.Tensor, *, q_near: torch.Tensor | None) -> torch.Tensor:
     """``(B, dof)`` the raw initial guess for ``T: (B, 4, 4)`` (torch): the network's, the closed form's (the
     solution nearest ``q_near``, or the one farthest inside the limits), else the best of 64 uniform configurations."""
-    if solver.uses_network(T.shape[0]):
-        return network_guess(solver.net, solver.robot, T)
-    if solver.closed_form:
-        return analytic_guess(solver.robot, T, q_near=q_near)
-    return multistart_guess(solver.robot, T, seed=seed)
+    if plan.source == "network":
+        return network_guess(plan.net, robot, _arm_targets(robot, T) if plan.net_in_arm_frame else T)
+    if plan.source == "analytic":
+        return analytic_guess(robot, T, q_near=q_near)
+    return multistart_guess(robot, T, seed=plan.seed)
 
 
-def guess(solver, job: Job) -> Answers | None:
+def _arm_targets(robot, T: torch.Tensor) -> torch.Tensor:
+    """``T: (B, 4, 4)`` in the bare arm's frame, ``base^-1 @ T @ tool^-1`` (:attr:`nik.Robot.arm`)."""
+    if robot.base is not None:
+        T = torch.linalg.inv(robot.base.to(T)) @ T
+    if robot.tool is not None:
+        T = T @ torch.linalg.inv(robot.tool.to(T))
+    return T
+
+
+def guess(plan: Plan, job: Job) -> Answers | None:
     """Stage 1: the initial guess with its FK errors; None where the refiner starts from uniform
     configurations itself (no network, no closed form, a refinement to follow)."""
-    be, src = job.backend, source(solver, job)
+    be, src = job.backend, plan.source
     hyp, checked = None, None
     if src == "network":
-        hyp, pos, rot, checked = be.network(solver, job)
+        hyp, pos, rot, checked = be.network(plan, job)
         q = hyp[:, 0]
-        if hyp.shape[1] == 1:
+        if hyp.shape[1] == 1 or not plan.hypotheses:
             hyp = None
     elif src == "analytic":
-        q, pos, rot = be.closed_form(solver, job, None, job.q_near)
-    elif solver.refine == "none":
-        q = be.uniform_guess(solver, job)
-        pos, rot = pose_error(job.T, solver.robot.fk(q))
+        q, pos, rot = be.closed_form(plan, job, None, job.q_near)
+    elif plan.refine == "none":
+        q = be.uniform_guess(plan, job)
+        pos, rot = pose_error(job.T, job.robot.fk(q))
     else:
         return None
     answers = Answers(q, pos, rot, be.zeros_long(job.size, job.T), hyp)
@@ -139,41 +154,41 @@ def guess(solver, job: Job) -> Answers | None:
     return answers
 
 
-def _restarts_first(solver, answers: Answers | None) -> bool:
-    """Whether the refine stage's LM restarts its failing targets from uniform starts itself: without a guess, or
-    with the multistart fallback when no other network hypotheses come first."""
-    return answers is None or (solver.fallback == "multistart" and answers.hypotheses is None)
+def _restarts_first(plan: Plan, answers: Answers | None) -> bool:
+    """Whether the refine stage's LM restarts its failing targets from uniform starts itself: the plan allows
+    restarts and no other network hypotheses come first."""
+    return plan.restarts and (answers is None or answers.hypotheses is None)
 
 
-def refine(solver, job: Job, answers: Answers | None) -> Answers:
+def refine(plan: Plan, job: Job, answers: Answers | None) -> Answers:
     """Stage 2: refine the targets outside tolerance from their guess (all targets, from uniform starts,
     when there is no guess); the refined answer is kept unless the guess was better. Out-of-reach targets of
     the closed form keep its clamped solution (the best effort)."""
     be = job.backend
-    restarts = _restarts_first(solver, answers)
+    restarts = _restarts_first(plan, answers)
     if answers is None:
-        res = be.refine(solver, job, None, None, restarts)
+        res = be.refine(plan, job, None, None, restarts)
         return Answers(res.q, res.pos_err, res.rot_err, res.iterations)
     if answers.failing(job) == 0:
         return answers
     todo = ~answers.ok(job)
-    if source(solver, job) == "analytic":
+    if plan.source == "analytic":
         todo &= job.reachable
     idx = be.nonzero(todo)
     if idx.shape[0] == 0:
         return answers
-    res = be.refine(solver, job, idx, be.rows(answers.q, idx), restarts)
+    res = be.refine(plan, job, idx, be.rows(answers.q, idx), restarts)
     return answers.merge(job, idx, res, strict=False)
 
 
-def near(solver, job: Job, answers: Answers) -> Answers:
-    """Stage 3 (``q_near`` given, no closed form): refine every target from ``q_near`` too; per target a
-    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error."""
-    if job.q_near is None or solver.closed_form:
+def near(plan: Plan, job: Job, answers: Answers) -> Answers:
+    """Stage 3 (``q_near`` given, ``plan.near``: no closed form): refine every target from ``q_near`` too; per
+    target a successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error."""
+    if job.q_near is None or not plan.near:
         return answers
     be = job.backend
     idx = be.arange(job.size, job.T)
-    res = be.refine(solver, job, None, job.q_near, solver.fallback == "multistart")
+    res = be.refine(plan, job, None, job.q_near, plan.restarts and plan.fallback != "none")
     ok_a = answers.ok(job)
     ok_b = (res.pos_err <= job.tol_pos) & (res.rot_err <= job.tol_rot)
     dist_a = be.norm(answers.q - job.q_near)
@@ -183,7 +198,7 @@ def near(solver, job: Job, answers: Answers) -> Answers:
     return answers.take(job, idx, res, take_b)
 
 
-def more_hypotheses(solver, job: Job, answers: Answers) -> Answers:
+def more_hypotheses(plan: Plan, job: Job, answers: Answers) -> Answers:
     """Stage 4: targets still outside tolerance after refining the best hypothesis of a multi-solution network
     get LM from its other ``K - 1`` hypotheses (no uniform restarts); the answer is kept where it improves on the
     current one."""
@@ -193,20 +208,20 @@ def more_hypotheses(solver, job: Job, answers: Answers) -> Answers:
     idx = be.nonzero(~answers.ok(job))
     if idx.shape[0] == 0:
         return answers
-    res = be.lm_starts(solver, job, idx, be.rows(answers.hypotheses, idx)[:, 1:])
+    res = be.lm_starts(plan, job, idx, be.rows(answers.hypotheses, idx)[:, 1:])
     return answers.merge(job, idx, res, strict=True)
 
 
-def fallback(solver, job: Job, answers: Answers) -> Answers:
+def fallback(plan: Plan, job: Job, answers: Answers) -> Answers:
     """Stage 5: targets still outside tolerance and within reach get a second chance, kept where better:
     ``analytic``, the closed-form solution nearest the answer so far (or ``q_near``); ``multistart``, LM
     from uniform starts with the restart budget. Skipped where it would repeat the first pass (the closed form as
     the guess; LM that restarted from uniform starts already) and with ``fallback="none"``."""
-    if solver.fallback == "none":
+    if plan.fallback == "none":
         return answers
-    if solver.fallback == "analytic" and source(solver, job) == "analytic":
+    if plan.fallback == "analytic" and plan.source == "analytic":
         return answers  # the closed form was the guess
-    if solver.fallback == "multistart" and solver.refine == "lm" and _restarts_first(solver, answers):
+    if plan.fallback == "multistart" and plan.refine == "lm" and _restarts_first(plan, answers):
         return answers  # LM restarted from uniform starts in the refine stage
     if answers.failing(job) == 0:
         return answers
@@ -214,37 +229,40 @@ def fallback(solver, job: Job, answers: Answers) -> Answers:
     idx = be.nonzero(~answers.ok(job) & job.reachable)
     if idx.shape[0] == 0:
         return answers
-    if solver.fallback == "analytic":
+    if plan.fallback == "analytic":
         start = be.rows(job.q_near if job.q_near is not None else answers.q, idx)
-        q, pos, rot = be.closed_form(solver, job, idx, start)
+        q, pos, rot = be.closed_form(plan, job, idx, start)
         res = Refined(q, pos, rot, be.zeros_long(idx.shape[0], job.T))
     else:
-        res = be.lm(solver, job, idx, None, True)
+        res = be.lm(plan, job, idx, None, True)
     return answers.merge(job, idx, res, strict=True)
 
 
-def final_check(solver, job: Job, answers: Answers) -> IKResult:
+def final_check(plan: Plan, job: Job, answers: Answers) -> IKResult:
     """Stage 6: the result, with success measured against the asked tolerances and reachability attached."""
-    return job.backend.result(solver, job, answers, source(solver, job))
+    return job.backend.result(job, answers, plan.source)
 
 
-def all_solutions(solver, job: Job, *, n_starts: int = 256, dedupe_tol: float = 1e-3) -> torch.Tensor:
+def all_solutions(
+    plan: Plan, job: Job, *, closed_form: bool, n_starts: int = 256, dedupe_tol: float = 1e-3
+) -> torch.Tensor:
     """``(K, dof)`` every distinct solution found for the one pose of ``job`` (see :meth:`IKSolver.solve_all`):
     the valid closed-form solutions, or LM (100 iterations, no restarts) from every hypothesis of the network
     and ``n_starts`` uniform starts, kept where within tolerance, polished to rounding level (:func:`_polish`),
     best first, de-duplicated at ``dedupe_tol``."""
     from nik.lm import lm_solve
 
-    robot, T = solver.robot, job.T
-    if solver.closed_form:
+    robot, T = job.robot, job.T
+    if closed_form:
         from nik.analytic import solve
 
         sols, valid = solve(robot, T[0])
         return dedupe(sols[valid], tol=dedupe_tol)
-    g = torch.Generator(device=T.device).manual_seed(int(job.seed))
+    g = torch.Generator(device=T.device).manual_seed(int(plan.seed))
     starts = robot.sample(n_starts, generator=g, dtype=T.dtype, device=T.device)
-    if solver.net is not None:  # every hypothesis of the network first (one for a plain IKNet)
-        hyp = solver.net.hypotheses(T)[0] if hasattr(solver.net, "hypotheses") else solver.net.predict(T)
+    if plan.net is not None:  # every hypothesis of the network first (one for a plain IKNet)
+        Tn = _arm_targets(robot, T) if plan.net_in_arm_frame else T
+        hyp = plan.net.hypotheses(Tn)[0] if hasattr(plan.net, "hypotheses") else plan.net.predict(Tn)
         starts = torch.cat([robot.clamp(hyp), starts])
     Tk = T.expand(starts.shape[0], 4, 4)
     q, it = lm_solve(robot, Tk, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, max_iters=100, restarts=0)

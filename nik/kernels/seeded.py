@@ -75,16 +75,32 @@ def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, 
 
 @kernel
 def ranked_hypotheses(
-    flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads, G, joints, T, tol_pos, tol_rot
+    flat,
+    layout,
+    activation,
+    in_mean,
+    in_std,
+    out_center,
+    out_half,
+    prismatic,
+    heads,
+    G,
+    joints,
+    Tin,
+    T,
+    tol_pos,
+    tol_rot,
 ):
-    """:func:`hypotheses` then :func:`rank` in one call, scratch allocated here: returns ``(q (B, K, n) ranked,
-    pos (B,), rot (B,), ok (B,), failing)``: the best hypothesis' errors (metres, radians), whether it is within
-    ``tol_pos, tol_rot``, and how many are not."""
+    """:func:`hypotheses` of the network's input poses ``Tin: (B, 4, 4)`` then :func:`rank` against the targets
+    ``T: (B, 4, 4)`` by the FK of ``G, joints`` in one call (``Tin`` is ``T`` unless the network was made for the arm
+    without the robot's base/tool frames: then ``base^-1 @ T @ tool^-1``), scratch allocated here: returns
+    ``(q (B, K, n) ranked, pos (B,), rot (B,), ok (B,), failing)``: the best hypothesis' errors (metres, radians),
+    whether it is within ``tol_pos, tol_rot``, and how many are not."""
     B, n = T.shape[0], out_center.shape[0]
     x = np.empty((B, 9), dtype=flat.dtype)
     y = np.empty((B, layout[layout.shape[0] - 1, 0]), dtype=flat.dtype)
     q = np.empty((B, heads, n))
-    hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, T, x, y, q)
+    hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, Tin, x, y, q)
     pos, rot = np.empty(B), np.empty(B)
     rank(G, joints, T, q, pos, rot)
     ok = np.empty(B, dtype=np.bool_)

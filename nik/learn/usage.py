@@ -5,8 +5,7 @@
 URDF with the same tool link. :func:`robot_expression` writes that call and checks it (it loads the arm and
 compares the hash) before saying it. On an arm with a closed form (:func:`nik.analytic.family`) the closed form
 stays the default first guess and the auto-found network is not loaded; ``checkpoint=PATH`` makes the solver use
-the network (for batches of :attr:`nik.IKSolver.network_min_batch` poses or more on the CPU; ``res.source`` says
-which guess served each call).
+the network on every call (``res.source`` says which guess served each call).
 """
 
 from __future__ import annotations
@@ -79,7 +78,6 @@ def network_usage(
     text, each ending with the Python to run. ``source``, ``end_link``: how the arm was given
     (:func:`robot_expression`; a :class:`Robot` that is no built-in is called ``robot``)."""
     from nik.analytic import family
-    from nik.ik import IKSolver
 
     h = robot.definition_hash
     expr = robot_expression(robot, source, end_link)
@@ -94,10 +92,8 @@ def network_usage(
     fam = family(robot)
     if fam is None:
         return [f"nik.IKSolver finds it for {which}, by definition, not by name: nik.IKSolver({arm})"]
-    few = IKSolver.network_min_batch
-    when = f" (batches of {few} poses or more; a single CPU pose keeps the closed form)" if few > 1 else ""
     return [
         f"{robot.name} has a closed form ({fam}), which stays the default first guess for {which}: "
         f"nik.IKSolver({arm}) does not use the network",
-        f"to solve with the network{when}: nik.IKSolver({arm}, checkpoint={json.dumps(str(Path(installed)))})",
+        f"to solve with the network: nik.IKSolver({arm}, checkpoint={json.dumps(str(Path(installed)))})",
     ]

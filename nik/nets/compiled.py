@@ -40,16 +40,20 @@ class PackedNet:
     heads: int
     n_params: int
 
-    def ranked_hypotheses(self, G: np.ndarray, joints: np.ndarray, T: np.ndarray, tol_pos: float, tol_rot: float):
+    def ranked_hypotheses(
+        self, G: np.ndarray, joints: np.ndarray, T: np.ndarray, tol_pos: float, tol_rot: float, *, Tin=None
+    ):
         """Every hypothesis for ``T: (B, 4, 4)`` float64 brought inside the limits of the model ``G, joints``
         (:func:`nik.kernels.chain.chain_model`) and ranked by FK pose error, best first: ``(q (B, K, dof),
         pos (B,), rot (B,), ok (B,), failing)``: the best one's errors (metres, radians), whether it lies within
-        the tolerances and how many do not (:func:`nik.kernels.seeded.ranked_hypotheses`)."""
+        the tolerances and how many do not (:func:`nik.kernels.seeded.ranked_hypotheses`). ``Tin: (B, 4, 4)``: the
+        poses the network is given when they differ from ``T`` (a network made for the arm without the robot's
+        base/tool frames: :meth:`nik.ik.model.Model.arm_targets`); the ranking is always against ``T``."""
         from nik.kernels.seeded import ranked_hypotheses
 
         return ranked_hypotheses(
             self.flat, self.layout, self.activation, self.in_mean, self.in_std, self.out_center, self.out_half,
-            self.prismatic, self.heads, G, joints, T, tol_pos, tol_rot,
+            self.prismatic, self.heads, G, joints, T if Tin is None else Tin, T, tol_pos, tol_rot,
         )  # fmt: skip
 
 

@@ -14,7 +14,7 @@ Within a folder a pair named after the robot wins, then the newest. The index re
 (a few kB each) and is cached per file (path, size, modification time).
 
 A pair whose JSON says ``"role": "single_pose"`` is a small network made to guess poses cheaply on the CPU
-(:meth:`nik.IKSolver.network_for`): :func:`find_network` never returns it; :func:`find_single_pose_network` finds it,
+(:mod:`nik.ik.plan`): :func:`find_network` never returns it; :func:`find_single_pose_network` finds it,
 by the same rules.
 
 :func:`list_networks`, :func:`install` and :func:`remove` are what ``nik networks`` calls: the pairs of both

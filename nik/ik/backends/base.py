@@ -11,35 +11,35 @@ __all__ = ["Job", "Refined"]
 
 @dataclass
 class Job:
-    """One call of :meth:`nik.IKSolver.solve`: B targets and what their answers must meet.
+    """One call of :meth:`nik.IKSolver.solve`: B targets and what their answers must meet (how to solve them is the
+    call's :class:`~nik.ik.plan.Plan`).
 
     Attributes:
         backend: the backend that computes it (:mod:`nik.ik.backends`); arrays below are of its kind.
+        robot: the robot.
         T: (B, 4, 4) target poses, metres (float64 numpy on the compiled backend; the input's tensor on torch).
         reachable: (B,) bool, False where the reach bound proves a target out of reach.
         q_near: (B, dof) radians or None, the configuration to stay near.
-        tol_pos: metres; tol_rot: radians (geodesic): what the stages refine to (on the compiled backend, half the
-            asked tolerance for float32 targets, so that rounding the answer cannot carry it out).
-        seed: seeds every random choice; max_iters: iteration limit of the refinement (None: the method's config).
+        tol_pos: metres; tol_rot: radians (geodesic): what the stages refine to
+            (:meth:`nik.ik.plan.Plan.stage_tolerances`: for float32 targets a fraction of the asked one, both backends).
         dtype: the answer's dtype (torch); success_pos, success_rot: the asked tolerances (the result's success).
-        source: the guess that serves the call (set by the first stage that asks, :func:`nik.ik.stages.source`).
         model: the robot's compiled model (:mod:`nik.ik.model`: chain arrays, limits, reach, closed form, LM,
             packed networks) on the compiled backend, looked up once per call; None on torch.
+        numpy_out: the answer's arrays are numpy (the input was not a tensor), else tensors.
     """
 
     backend: Any
+    robot: Any
     T: Any
     reachable: Any
     q_near: Any
     tol_pos: float
     tol_rot: float
-    seed: int = 0
-    max_iters: int | None = None
     dtype: Any = None
     success_pos: float | None = None
     success_rot: float | None = None
-    source: str | None = None
     model: Any = None
+    numpy_out: bool = False
 
     @property
     def size(self) -> int:

@@ -8,7 +8,7 @@ looked up once per call:
 - the checks of :mod:`nik.ik.targets` (:func:`~nik.ik.targets.pose_array`) and the reach bound
   (:func:`nik.kernels.poses.reach_flags`);
 - the network's hypotheses: for up to :data:`PACKED_MAX_BATCH` poses the packed network's compiled forward pass
-  (:mod:`nik.nets.compiled`; the arm's single-pose network when it has one: :meth:`nik.IKSolver.network_for`), for more
+  (:mod:`nik.nets.compiled`; the plan's network: :mod:`nik.ik.plan`), for more
   the torch forward pass (one batched float32 matmul per layer); every hypothesis ranked by compiled FK, the forward
   pass, the ranking and the tolerance check in one kernel call (:func:`nik.kernels.seeded.ranked_hypotheses`);
 - Levenberg-Marquardt (:class:`nik.lm.compiled.CompiledLM`, the solver's :class:`~nik.lm.LMCfg`): from a guess,
@@ -19,8 +19,9 @@ looked up once per call:
   ideal arm's closed form checked at :data:`~nik.ik.model.APPROXIMATE_CHECK_TOL`, polished by LM where it misses
   the solver's tolerance (the one policy of :mod:`nik.ik.model`).
 
-Answers come back as an :class:`~nik.ik.result.IKResult` of tensors in the targets' dtype: float32 targets are
-solved to half the tolerance in float64, rounded, clamped into the float32 limits and measured again.
+Answers come back as an :class:`~nik.ik.result.IKResult` in the targets' dtype: float32 targets are solved in
+float64 to the plan's float32 tolerance (:meth:`nik.ik.plan.Plan.stage_tolerances`), rounded, clamped into the
+float32 limits and measured again.
 """
 
 from __future__ import annotations
@@ -32,10 +33,9 @@ import torch
 
 from nik.ik.backends.base import Job, Refined
 from nik.ik.guesses import LIMIT_ROUNDING
-from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, Model, model_of
+from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, model_of
 from nik.ik.result import IKResult
 from nik.ik.targets import pose_array, q_near_array
-from nik.lm.batched import LMCfg
 
 __all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend"]
 #: Most poses whose hypotheses the packed network's compiled forward pass computes; above, torch's batched
@@ -107,94 +107,90 @@ class CompiledBackend:
             res.pos_err, res.rot_err, res.iterations, strict, job.tol_pos, job.tol_rot,
         )  # fmt: skip
 
-    # -- the model ---------------------------------------------------------------------
-    @staticmethod
-    def model(solver) -> Model:
-        """The robot's compiled model (:func:`nik.ik.model.model_of`) with the solver's LM config."""
-        return model_of(solver.robot, solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None)
-
     # -- the job -------------------------------------------------------------------
-    def job(self, solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job:
+    def job(self, robot, plan, T_target, q_near, representation) -> Job:
         T, dtype = pose_array(T_target, representation)
-        st = self.model(solver)
-        B = T.shape[0]
-        reachable, every = st.reach(T)
+        model = model_of(robot, plan.lm_cfg)
+        reachable, every = model.reach(T)
         if not every:
-            warnings.warn(st.unreachable_message(T, reachable), UserWarning, stacklevel=4)
-        near = q_near_array(q_near, B, solver.robot)
-        margin = 1.0 if dtype == torch.float64 else 0.5
+            warnings.warn(model.unreachable_message(T, reachable), UserWarning, stacklevel=4)
+        near = q_near_array(q_near, T.shape[0], robot)
+        tol_pos, tol_rot = plan.stage_tolerances(dtype == torch.float32)
         return Job(
-            self, T, reachable, near, tol_pos * margin, tol_rot * margin, seed, max_iters, dtype, tol_pos, tol_rot,
-            model=st,
+            self, robot, T, reachable, near, tol_pos, tol_rot, dtype, plan.tol_pos, plan.tol_rot, model,
+            numpy_out=isinstance(T_target, np.ndarray),
         )  # fmt: skip
 
     # -- guesses -----------------------------------------------------------------------
-    def network(self, solver, job: Job):
-        st = job.model
-        B = job.size
-        net = solver.network_for(B, self.name)
+    def network(self, plan, job: Job):
+        model, net, B = job.model, plan.net, job.size
+        Tin = model.arm_targets(job.T) if plan.net_in_arm_frame else job.T
         if B <= PACKED_MAX_BATCH:
-            packed = st.packed(net)
+            packed = model.packed(net)
             if packed is not None:
-                hyp, pos, rot, ok, failing = packed.ranked_hypotheses(st.G, st.joints, job.T, job.tol_pos, job.tol_rot)
+                hyp, pos, rot, ok, failing = packed.ranked_hypotheses(
+                    model.G, model.joints, job.T, job.tol_pos, job.tol_rot, Tin=Tin
+                )
                 return hyp, pos, rot, (ok, failing)
         with torch.no_grad():
             ref = net.in_mean
-            hyp = net(torch.from_numpy(job.T).to(device=ref.device, dtype=ref.dtype))
-        hyp = np.ascontiguousarray(hyp.reshape(B, -1, solver.robot.dof).cpu().numpy(), dtype=np.float64)
+            hyp = net(torch.from_numpy(Tin).to(device=ref.device, dtype=ref.dtype))
+        hyp = np.ascontiguousarray(hyp.reshape(B, -1, model.dof).cpu().numpy(), dtype=np.float64)
         pos, rot = np.empty(B), np.empty(B)
-        _kernels().rank(st.G, st.joints, job.T, hyp, pos, rot)
+        _kernels().rank(model.G, model.joints, job.T, hyp, pos, rot)
         return hyp, pos, rot, None
 
-    def closed_form(self, solver, job: Job, idx, q_near):
+    def closed_form(self, plan, job: Job, idx, q_near):
         guess = _kernels().closed_guess
-        st = job.model
+        model = job.model
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
-        B, n = T.shape[0], st.joints.shape[0]
+        B, n = T.shape[0], model.dof
         q, pos, rot, ok = np.empty((B, n)), np.empty(B), np.empty(B), np.empty(B, dtype=bool)
         use_near = q_near is not None
         guess(
-            st.closed, st.G, st.joints, st.closed_check[job.dtype], T, q_near if use_near else q, use_near,
+            model.closed, model.G, model.joints, model.closed_check[job.dtype], T, q_near if use_near else q, use_near,
             LIMIT_ROUNDING, job.tol_pos, job.tol_rot, reachable, q, pos, rot, ok,
         )  # fmt: skip
         return q, pos, rot
 
     # -- refiners ----------------------------------------------------------------------
-    def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+    def refine(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
         run = job.model.lm.solve(
-            T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters,
+            T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters,
             restarts=restarts, reachable=reachable,
         )  # fmt: skip
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
 
-    def lm(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
+    def lm(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
         """Levenberg-Marquardt (the solver's refiner here: ``refine="lm"``)."""
-        return self.refine(solver, job, idx, q0, restarts)
+        return self.refine(plan, job, idx, q0, restarts)
 
-    def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
+    def lm_starts(self, plan, job: Job, idx, starts) -> Refined:
         T = self.rows(job.T, idx)
         run = job.model.lm.solve_starts(
-            T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, max_iters=job.max_iters
+            T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters
         )
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
 
-    def uniform_guess(self, solver, job: Job):  # pragma: no cover - refine="none" runs on torch
+    def uniform_guess(self, plan, job: Job):  # pragma: no cover - refine="none" runs on torch
         raise NotImplementedError("the compiled backend serves refine='lm' only")
 
     # -- the result ----------------------------------------------------------------------
-    def result(self, solver, job: Job, answers, source: str) -> IKResult:
+    def result(self, job: Job, answers, source: str) -> IKResult:
         q, pos, rot = answers.q, answers.pos_err, answers.rot_err
         if job.dtype != torch.float64:  # the answer in the targets' dtype, inside the limits, its errors measured
             pose_errors = _kernels().pose_errors
-            st = job.model
-            q = np.clip(q.astype(np.float32), st.lo32, st.hi32)
+            model = job.model
+            q = np.clip(q.astype(np.float32), model.lo32, model.hi32)
             pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
-            pose_errors(st.G, st.joints, job.T, q.astype(np.float64), pos, rot)
+            pose_errors(model.G, model.joints, job.T, q.astype(np.float64), pos, rot)
             ok = (pos <= job.success_pos) & (rot <= job.success_rot)
             pos, rot = pos.astype(np.float32), rot.astype(np.float32)
         else:  # the stages' tolerance is the asked one
             ok = answers.ok(job)
+        if job.numpy_out:
+            return IKResult(q, pos, rot, ok, answers.iterations, source, reachable=job.reachable)
         return IKResult(
             torch.from_numpy(q),
             torch.from_numpy(pos),

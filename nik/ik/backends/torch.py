@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
 import torch
 
 from nik.ik.backends.base import Job, Refined
@@ -73,75 +74,87 @@ class TorchBackend:
         answers._ok = None
 
     # -- the job -------------------------------------------------------------------
-    def job(self, solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job:
-        robot = solver.robot
+    def job(self, robot, plan, T_target, q_near, representation) -> Job:
         T = as_poses(T_target, representation)
         reachable = within_reach(robot, T)
         msg = unreachable_message(robot, T, reachable)
         if msg is not None:
             warnings.warn(msg, UserWarning, stacklevel=4)
         near = as_q_near(q_near, T, robot.dof, prismatic=robot.prismatic, limits=robot.limits)
-        return Job(self, T, reachable, near, tol_pos, tol_rot, seed, max_iters, T.dtype, tol_pos, tol_rot)
+        tol_pos, tol_rot = plan.stage_tolerances(T.dtype == torch.float32)
+        numpy_out = isinstance(T_target, np.ndarray)
+        return Job(
+            self, robot, T, reachable, near, tol_pos, tol_rot, T.dtype, plan.tol_pos, plan.tol_rot, None, numpy_out
+        )
 
     # -- guesses -----------------------------------------------------------------------
-    def network(self, solver, job: Job):
-        net, T = solver.network_for(job.size, self.name), job.T
-        if hasattr(net, "ranked_hypotheses"):
+    def network(self, plan, job: Job):
+        net, T, robot = plan.net, job.T, job.robot
+        if plan.net_in_arm_frame:  # the network's arm without the frames: its input in that frame, ranked here
+            from nik.ik.stages import _arm_targets
+            from nik.nets.multi import hypothesis_pose_error
+
+            Ta = _arm_targets(robot, T)
+            hyp = net.hypotheses(Ta) if hasattr(net, "hypotheses") else robot.clamp(net.predict(Ta))[:, None]
+            pos, rot = hypothesis_pose_error(robot, T, hyp)
+            order = (pos + 0.1 * rot).argsort(dim=-1)
+            hyp = torch.gather(hyp, 1, order[..., None].expand(-1, -1, hyp.shape[-1]))
+        elif hasattr(net, "ranked_hypotheses"):
             hyp = net.ranked_hypotheses(T)[0]
         else:  # a plain network: one hypothesis
-            hyp = solver.robot.clamp(net.predict(T))[:, None]
-        pos, rot = pose_error(T, solver.robot.fk(hyp[:, 0]))
+            hyp = robot.clamp(net.predict(T))[:, None]
+        pos, rot = pose_error(T, robot.fk(hyp[:, 0]))
         return hyp, pos, rot, None
 
-    def closed_form(self, solver, job: Job, idx, q_near):
+    def closed_form(self, plan, job: Job, idx, q_near):
         T = job.T if idx is None else job.T[idx]
-        q = analytic_guess(solver.robot, T, q_near=q_near)
-        pos, rot = pose_error(T, solver.robot.fk(q))
+        q = analytic_guess(job.robot, T, q_near=q_near)
+        pos, rot = pose_error(T, job.robot.fk(q))
         return q, pos, rot
 
-    def uniform_guess(self, solver, job: Job):
-        return multistart_guess(solver.robot, job.T, seed=job.seed)
+    def uniform_guess(self, plan, job: Job):
+        return multistart_guess(job.robot, job.T, seed=plan.seed)
 
     # -- refiners ----------------------------------------------------------------------
-    def refine(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
-        T = job.T if idx is None else job.T[idx]
-        reachable = job.reachable if idx is None else job.reachable[idx]
-        kw = {"tol_pos": job.tol_pos, "tol_rot": job.tol_rot, "seed": job.seed, "max_iters": job.max_iters}
-        if solver.refine == "lm":
-            res = lm_refine(solver.robot, T, q0, cfg=solver.swarm_cfg, restarts=restarts, reachable=reachable, **kw)
-        else:
-            res = swarm_refine(
-                solver.robot, T, q0, method=solver.refine, cfg=solver.swarm_cfg, polish=solver.polish, **kw
-            )
+    def refine(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
+        if plan.refine == "lm":
+            return self.lm(plan, job, idx, q0, restarts)
+        T = self.rows(job.T, idx)
+        res = swarm_refine(
+            job.robot, T, q0, method=plan.refine, cfg=plan.swarm_cfg, polish=plan.polish, tol_pos=job.tol_pos,
+            tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters,
+        )  # fmt: skip
         dt = T.dtype
         return Refined(res.q.to(dt), res.pos_err.to(dt), res.rot_err.to(dt), res.iterations.long())
 
-    def lm(self, solver, job: Job, idx, q0, restarts: bool) -> Refined:
-        """Levenberg-Marquardt whatever the solver's refine method (the multistart fallback)."""
+    def lm(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
+        """Levenberg-Marquardt with the plan's settings and cap, whatever the refine method (the multistart
+        fallback)."""
         T = self.rows(job.T, idx)
         res = lm_refine(
-            solver.robot, T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=job.seed, restarts=restarts,
-            reachable=self.rows(job.reachable, idx),
+            job.robot, T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters,
+            cfg=plan.lm_cfg, restarts=restarts, reachable=self.rows(job.reachable, idx),
         )  # fmt: skip
         return Refined(res.q.to(T.dtype), res.pos_err.to(T.dtype), res.rot_err.to(T.dtype), res.iterations.long())
 
-    def lm_starts(self, solver, job: Job, idx, starts) -> Refined:
+    def lm_starts(self, plan, job: Job, idx, starts) -> Refined:
         from nik.lm import lm_solve
 
-        robot = solver.robot
-        T = job.T if idx is None else job.T[idx]
-        g = torch.Generator(device=T.device).manual_seed(int(job.seed))
+        robot = job.robot
+        T = self.rows(job.T, idx)
+        g = torch.Generator(device=T.device).manual_seed(int(plan.seed))
         hq, it = lm_solve(
-            robot, T, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, max_iters=job.max_iters, restarts=0,
-            generator=g,
+            robot, T, starts, cfg=plan.lm_cfg, tol_pos=job.tol_pos, tol_rot=job.tol_rot, max_iters=plan.max_iters,
+            restarts=0, generator=g,
         )  # fmt: skip
         hq = robot.clamp(hq).to(T.dtype)
         pos, rot = pose_error(T, robot.fk(hq))
         return Refined(hq, pos, rot, it.long())
 
     # -- the result ----------------------------------------------------------------------
-    def result(self, solver, job: Job, answers, source: str) -> IKResult:
+    def result(self, job: Job, answers, source: str) -> IKResult:
         ok = (answers.pos_err <= job.success_pos) & (answers.rot_err <= job.success_rot)
-        return IKResult(
+        res = IKResult(
             answers.q, answers.pos_err, answers.rot_err, ok, answers.iterations, source, reachable=job.reachable
         )
+        return res.numpy() if job.numpy_out else res

@@ -1,0 +1,90 @@
+"""One plan per call: everything a backend needs to know about *how* to solve, resolved once from the solver and the
+call (:meth:`nik.IKSolver.plan`) and handed to the backend (never the solver itself).
+
+A :class:`Plan` is data. The torch backend interprets it with a Python loop over the stages of
+:mod:`nik.ik.stages`; the compiled backend with the same stages over its kernels. Both honour every field
+(``tests/test_solver.py`` changes each one and sees the answer change on both). A plan may be changed with
+:func:`dataclasses.replace` and passed back to :meth:`nik.IKSolver.solve` (``plan=``).
+
+**Which guess serves** (:func:`choose_network`, written only here):
+
+1. a network *given* to the solver (``checkpoint=PATH``, or ``solver.net = net``) or *installed* by the user
+   (``nik networks install`` / ``nik train --install``: the user folder, :mod:`nik.nets.registry`) serves on every
+   backend;
+2. else, with ``checkpoint="auto"``, the network shipped with nik for the arm: on the compiled backend (the CPU) its
+   small single-pose network where it has one (about a twentieth of the main network's multiply-adds for about one
+   more LM iteration: docs/learned.md), on torch the main one;
+3. an arm with a closed form and ``analytic=True`` keeps the closed form as its guess unless a network was given
+   (``checkpoint="auto"`` loads none for it); else the refiner starts from uniform configurations (``multistart``).
+
+**Tolerances.** ``tol_pos, tol_rot`` are the asked ones (success is measured against them). Float32 targets are
+refined to :data:`FLOAT32_MARGIN` times them on *both* backends (compiled: in float64, then rounded to float32; torch:
+in float32), so that rounding the answer cannot carry it out of tolerance; float64 targets to the asked tolerance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from nik.lm.batched import LMCfg
+
+__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network"]
+
+#: Float32 targets are refined to this fraction of the asked tolerance (both backends; module docstring).
+FLOAT32_MARGIN = 0.5
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How one call is solved (module docstring).
+
+    Attributes:
+        source: the guess that serves: ``network``, ``analytic`` or ``multistart``.
+        net: the network that guesses (``source == "network"``), else None; ``net_in_arm_frame``: the network was
+            trained for the arm without the robot's base/tool frames (:attr:`nik.Robot.arm_hash`): it is given the
+            targets mapped into the arm's frame, ``base^-1 @ T @ tool^-1``, and its hypotheses are ranked by the
+            robot's own FK.
+        refine: ``lm`` | ``none`` | ``pso`` | ``sapso`` | ``ipso`` | ``ga``; swarm_cfg, polish: a swarm's config and
+            its LM polish (torch only).
+        lm_cfg: the LM settings (:class:`nik.lm.LMCfg`): iterations, damping, restart budget.
+        max_iters: iteration cap of the refinement from the guess (None: ``lm_cfg.iters`` or the swarm's).
+        restarts: LM restarts failing targets within reach from uniform starts (the budget of ``lm_cfg``).
+        hypotheses: targets still failing get LM from the network's other hypotheses, in turn.
+        near: with ``q_near`` (no closed form), a second refinement from ``q_near`` itself.
+        fallback: ``analytic`` | ``multistart`` | ``none``: the second chance for targets still failing.
+        tol_pos, tol_rot: the asked tolerances, metres and radians; float32_margin: float32 targets are refined
+            to this fraction of them.
+        seed: seeds every random choice.
+    """
+
+    source: str
+    net: Any = None
+    net_in_arm_frame: bool = False
+    refine: str = "lm"
+    lm_cfg: LMCfg | None = None
+    max_iters: int | None = None
+    restarts: bool = True
+    hypotheses: bool = True
+    near: bool = True
+    fallback: str = "none"
+    tol_pos: float = 1e-4
+    tol_rot: float = 1.745e-3
+    float32_margin: float = FLOAT32_MARGIN
+    seed: int = 0
+    swarm_cfg: Any = None
+    polish: bool = True
+
+    def stage_tolerances(self, float32: bool) -> tuple[float, float]:
+        """``(tol_pos, tol_rot)`` the stages refine to: the asked ones, times :attr:`float32_margin` for float32."""
+        m = self.float32_margin if float32 else 1.0
+        return self.tol_pos * m, self.tol_rot * m
+
+
+def choose_network(main, single_pose, given: bool, backend: str):
+    """The network that guesses (module docstring, "Which guess serves"): ``main`` (the solver's network) unless it
+    is the shipped one (``given`` False) and the call runs on the compiled backend, where the arm's ``single_pose``
+    network serves when it has one."""
+    if not given and single_pose is not None and backend == "compiled":
+        return single_pose
+    return main
