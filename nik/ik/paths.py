@@ -134,14 +134,14 @@ def solve_path(
     if not (isinstance(max_step, int | float) and math.isfinite(max_step) and max_step > 0):
         raise ValueError(f"max_step: expected a number > 0 (radians), got {max_step!r}")
     robot = solver.robot
-    how = _settings(solver)
-    model = model_of(robot, how.lm_cfg)
+    plan = _plan(solver, tol_pos, tol_rot, seed)
+    model = model_of(robot, plan.lm_cfg)
     reachable, every = model.reach(Tn)
     reach_note = None if every else model.unreachable_message(Tn, reachable)
     q0 = _q_start(robot, model, q_start)
-    run = _Run(solver, model, how, Tn, q0, reachable, tol_pos, tol_rot, seed)
+    run = _Run(plan, model, Tn, q0, reachable)
     follows = None
-    if solver.closed_form and q0 is not None and how.refine:  # the quick answer: LM from q_start, if it follows
+    if solver.closed_form and q0 is not None and run.refine:  # the quick answer: LM from q_start, if it follows
         follows = _follows_from_start(run, max_step)
     if follows is not None:
         q, its, found, source = *follows, None, "q_start"
@@ -190,23 +190,9 @@ def _poses(T_path, representation) -> tuple[np.ndarray, torch.dtype, torch.devic
     return Tn, dtype or checked_dtype, device
 
 
-@dataclass(frozen=True)
-class _Settings:
-    """What a path takes from its solver: ``lm_cfg`` (the LM config, :class:`nik.lm.LMCfg`, or None: the default),
-    ``refine`` (False: ``refine="none"``, the closed form's branches as they are), ``restarts`` (uniform restarts a
-    waypoint the chain does not reach may draw: :data:`PATH_RESTARTS` with ``fallback="multistart"``, else 0),
-    ``network`` (whether the solver's network starts the chains of an arm without a closed form)."""
-
-    lm_cfg: Any
-    refine: bool
-    restarts: int
-    network: bool
-
-
-def _settings(solver) -> _Settings:
-    """The solver's settings as a path follows them (module docstring, "settings"); ValueError where it cannot."""
-    from nik.lm.batched import LMCfg
-
+def _plan(solver, tol_pos: float, tol_rot: float, seed: int):
+    """The solver's :class:`~nik.ik.plan.Plan` of a compiled call (:meth:`nik.IKSolver.plan`: the network that
+    guesses, the LM config, refine, fallback), refused in one line where a path cannot follow it."""
     if solver.backend == "torch":
         raise ValueError(
             "solve_path: the path's chains run on the compiled kernels (each waypoint seeded by the one before); "
@@ -217,25 +203,42 @@ def _settings(solver) -> _Settings:
             f"solve_path: refine='none' leaves {solver.robot.name} (no closed form) without a way to follow the path; "
             "use refine='lm'"
         )
-    cfg = solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None
-    restarts = PATH_RESTARTS if solver.fallback == "multistart" else 0
-    return _Settings(cfg, solver.refine != "none", restarts, solver.has_network)
+    return solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
 
 
 @dataclass
 class _Run:
-    """One call: the solver, the robot's model, its settings, the waypoints ``T (N, 4, 4)``, ``q0 (dof,)`` or None,
-    ``reachable (N,)`` and the tolerances."""
+    """One call: its plan (:mod:`nik.ik.plan`), the robot's model, the waypoints ``T (N, 4, 4)``, ``q0 (dof,)`` or
+    None and ``reachable (N,)``."""
 
-    solver: Any
+    plan: Any
     model: Any
-    how: _Settings
     T: np.ndarray
     q0: np.ndarray | None
     reachable: np.ndarray
-    tol_pos: float
-    tol_rot: float
-    seed: int
+
+    @property
+    def tol_pos(self) -> float:
+        return self.plan.tol_pos
+
+    @property
+    def tol_rot(self) -> float:
+        return self.plan.tol_rot
+
+    @property
+    def seed(self) -> int:
+        return self.plan.seed
+
+    @property
+    def refine(self) -> bool:
+        """False with ``refine="none"``: the closed form's branches as they are, no LM."""
+        return self.plan.refine != "none"
+
+    @property
+    def restarts(self) -> int:
+        """Uniform restarts a waypoint the chain does not reach may draw: :data:`PATH_RESTARTS` with
+        ``fallback="multistart"``, else none."""
+        return PATH_RESTARTS if self.plan.fallback == "multistart" else 0
 
     def chains(self, T, starts, reachable, *, pull: float, restarts: int, seed: int | None = None):
         """:func:`nik.ik.path_kernels.path_chains` along ``T`` from ``starts: (K, dof)``: ``q (K, N, dof)``,
@@ -323,7 +326,7 @@ def _closed_form_path(run: _Run):
     path_dp(cand, valid, wraps, start, q0 is not None, 1e-9, choice)
     have = choice >= 0
     its = np.zeros(N, dtype=np.int64)
-    if not have.any() and run.how.refine:  # no waypoint has a valid branch: LM along the path from q_start or a start
+    if not have.any() and run.refine:  # no waypoint has a valid branch: LM along the path from q_start or a start
         first = _first_answer(run)
         q, its, _ = run.chains(Tn, first[None], run.reachable, pull=0.0, restarts=0)
         q, its = q[0], its[0]
@@ -335,7 +338,7 @@ def _closed_form_path(run: _Run):
             q, fits = _unwrap(q, have, wraps, q0, model.lo, model.hi)
             if not fits:  # some run cannot stay inside its limits: choose the whole turns with the branches
                 q = _with_turns(cand, valid, have, wraps, q0, model.lo, model.hi)
-        if run.how.refine:
+        if run.refine:
             q, its = _polish(run, q, have)
             if not have.all():
                 q, its = _fill_gaps(run, q, its, have)
@@ -441,7 +444,7 @@ def _fill_gaps(run: _Run, q: np.ndarray, its: np.ndarray, have: np.ndarray):
     (the closed form found no solution there: a restart could only jump). Their best effort, flagged by the final
     check."""
     N, Tn, reachable = q.shape[0], run.T, run.reachable
-    kw = {"pull": 0.0, "restarts": run.how.restarts}
+    kw = {"pull": 0.0, "restarts": run.restarts}
     its = its.copy()
     first = int(np.argmax(have))
     for i in range(first - 1, -1, -1):  # a leading gap, walking back from the first solved waypoint
@@ -481,7 +484,7 @@ def _chain_path(run: _Run):
     from nik.ik.path_kernels import path_dp
 
     pull = PATH_PULL if run.model.dof > 6 else 0.0
-    kw = {"pull": pull, "restarts": run.how.restarts}
+    kw = {"pull": pull, "restarts": run.restarts}
     if run.q0 is not None:
         q, its, _ = run.chains(run.T, run.q0[None], run.reachable, **kw)
         return q[0], its[0], "q_start"
@@ -528,16 +531,16 @@ def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
 
 
 def _hypotheses(run: _Run) -> np.ndarray | None:
-    """``(K, dof)`` the network's hypotheses for the first waypoint, ranked by FK: the compiled backend's guess
-    stage (the network :meth:`nik.IKSolver.network_for` names, packed), or None without a network."""
-    if not run.how.network:
+    """``(K, dof)`` the plan's network's hypotheses for the first waypoint, ranked by FK: the compiled backend's
+    guess stage (the packed network, targets in the arm's frame where the network was made for the bare arm), or
+    None where the plan has no network."""
+    if run.plan.net is None:
         return None
     from nik.ik.backends import Job, compiled_backend
 
-    be = compiled_backend()
-    T0 = run.T[:1]
-    job = Job(be, T0, run.reachable[:1], None, run.tol_pos, run.tol_rot, run.seed, None, torch.float64, model=run.model)
-    return np.ascontiguousarray(be.network(run.solver, job)[0][0])
+    be, m, T0 = compiled_backend(), run.model, run.T[:1]
+    job = Job(be, m.robot, T0, run.reachable[:1], None, run.tol_pos, run.tol_rot, torch.float64, model=m)
+    return np.ascontiguousarray(be.network(run.plan, job)[0][0])
 
 
 # ---------------------------------------------------------------------------

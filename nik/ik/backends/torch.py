@@ -97,7 +97,7 @@ class TorchBackend:
             Ta = _arm_targets(robot, T)
             hyp = net.hypotheses(Ta) if hasattr(net, "hypotheses") else robot.clamp(net.predict(Ta))[:, None]
             pos, rot = hypothesis_pose_error(robot, T, hyp)
-            order = (pos + 0.1 * rot).argsort(dim=-1)
+            order = score(pos, rot).argsort(dim=-1)
             hyp = torch.gather(hyp, 1, order[..., None].expand(-1, -1, hyp.shape[-1]))
         elif hasattr(net, "ranked_hypotheses"):
             hyp = net.ranked_hypotheses(T)[0]
