@@ -2,9 +2,11 @@
 
 Prints one line, ``arm:guess:median:p99`` per arm, so that two checkouts can be compared in alternating processes
 (``PYTHONPATH=<checkout> python benchmarks/tight_loop.py panda xarm7 ur5 kuka_kr``, old, new, old, new, ...).
-2,000 reachable poses per arm (seeded), after a warm-up; one torch thread.
+2,000 reachable poses per arm (seeded), after a warm-up; one torch thread. ``NIK_TIGHT_NUMPY=1``: the poses as numpy
+arrays (numpy out, no torch on the way, where the checkout supports it).
 """
 
+import os
 import statistics
 import sys
 import time
@@ -19,7 +21,8 @@ for name in sys.argv[1:] or ["panda", "xarm7", "ur5", "kuka_kr"]:
     robot = nik.load_robot(name)
     solver = nik.IKSolver(robot)
     T = robot.fk(robot.sample(2000, generator=torch.Generator().manual_seed(7), dtype=torch.float64))
-    poses = [T[i] for i in range(2000)]
+    numpy_in = os.environ.get("NIK_TIGHT_NUMPY") == "1"
+    poses = [T[i].numpy().copy() if numpy_in else T[i] for i in range(2000)]
     solver.solve(T[:64])
     for t in poses[:50]:
         solver.solve(t)

@@ -12,6 +12,7 @@ anyway. So, unless :func:`set_threads` was called, nik runs a call on fewer than
 from __future__ import annotations
 
 import contextlib
+import threading
 
 import torch
 
@@ -42,16 +43,34 @@ def get_threads() -> int | None:
     return _threads
 
 
+_lock = threading.Lock()
+_open = 0  # calls inside threads_for, in every thread
+_restore: int | None = None  # the count to put back when the last of them leaves (None: nothing was changed)
+
+
 @contextlib.contextmanager
 def threads_for(batch: int):
-    """Context in which a call on ``batch`` targets runs with the thread count of the policy above."""
+    """Context in which a call on ``batch`` targets runs with the thread count of the policy above.
+
+    torch's thread count is process-wide, so calls that overlap (threads sharing a solver) share one setting: the
+    first to enter sets it, the last to leave puts back what was there before, and none changes it while another
+    runs (per call it was set and restored by each, and one thread's restore changed the count under another's
+    work)."""
+    global _open, _restore
     want = _threads if _threads is not None else (1 if batch < SMALL_BATCH else None)
-    before = torch.get_num_threads()
-    if want is None or want == before:
-        yield
-        return
-    torch.set_num_threads(want)
+    with _lock:
+        if _open == 0:
+            before = torch.get_num_threads()
+            _restore = None
+            if want is not None and want != before:
+                torch.set_num_threads(want)
+                _restore = before
+        _open += 1
     try:
         yield
     finally:
-        torch.set_num_threads(before)
+        with _lock:
+            _open -= 1
+            if _open == 0 and _restore is not None:
+                torch.set_num_threads(_restore)
+                _restore = None

@@ -296,3 +296,39 @@ def test_a_batch_above_ten_thousand_poses_stays_on_the_compiled_backend(no_torch
     res = nik.IKSolver(robot).solve(T)
     assert res.source == "analytic" and res.q.shape == (10_001, 6)
     assert float(res.success.double().mean()) == 1.0 and bool(robot.within_limits(res.q).all())
+
+
+URDF_PANDA = "configs/robots/urdf/panda.urdf"
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "kuka_kr", "xarm7", URDF_PANDA])
+def test_the_one_call_compiled_solve_meets_the_staged_torch_answers_and_equals_the_staged_compiled_ones(name):
+    """nik.kernels.driver runs the whole plan in one kernel call: the same answers as the staged compiled stages
+    (bit for bit), and the contract of the staged torch backend (success, limits, reach flags, messages)."""
+    import warnings
+    from pathlib import Path
+
+    robot = nik.load_robot(Path(__file__).resolve().parents[1] / name if name.endswith(".urdf") else name)
+    q, T = _targets(robot, 10, seed=41)
+    T = _out_of_reach(robot, T)
+    for near in (None, robot.clamp(q + 0.2)):
+        out, said = {}, {}
+        for backend in BACKENDS:
+            solver = nik.IKSolver(robot, backend=backend)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                out[backend] = solver.solve(T, seed=4, q_near=near)
+            said[backend] = [str(w.message) for w in caught]
+        one, slow = out["compiled"], out["torch"]
+        assert said["compiled"] == said["torch"] and len(said["torch"]) == 1 and "beyond the reach" in said["torch"][0]
+        assert torch.equal(one.success, slow.success) and torch.equal(one.reachable, slow.reachable)
+        assert one.success[:-1].all() and not one.success[-1] and one.source == slow.source
+        assert bool(robot.within_limits(one.q).all()) and bool(robot.within_limits(slow.q).all())
+        solver = nik.IKSolver(robot, backend="compiled")
+        plan = solver.plan(seed=4)
+        be = backends.compiled_backend()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            staged = stages.run(plan, be.job(robot, plan, T, near, None))
+        assert torch.equal(one.q, staged.q) and torch.equal(one.iterations, staged.iterations)
+        assert torch.equal(one.success, staged.success)

@@ -159,6 +159,11 @@ def test_a_base_or_tool_frame_keeps_the_arms_network(backend, frames):
     if "base" in frames:  # the same hypotheses, ranked alike (a base frame changes no error)
         torch.testing.assert_close(raw.q, bare_raw.q, atol=1e-4, rtol=0)
     assert float(raw.pos_err.median()) < 2 * float(bare_raw.pos_err.median()) + 1e-3
+    # the same network given as a file made for the bare arm
+    from nik.nets.registry import find_network
+
+    given = nik.IKSolver(robot, checkpoint=find_network(bare), backend=backend)
+    assert given.plan(backend=backend).net_in_arm_frame and given.solve(T).success.all()
 
 
 def test_numpy_in_gives_numpy_out_and_torch_in_gives_torch_out(panda, monkeypatch):

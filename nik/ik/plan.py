@@ -24,12 +24,13 @@ in float32), so that rounding the answer cannot carry it out of tolerance; float
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
 from nik.lm.batched import LMCfg
 
-__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network"]
+__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network", "in_arm_frame"]
 
 #: Float32 targets are refined to this fraction of the asked tolerance (both backends; module docstring).
 FLOAT32_MARGIN = 0.5
@@ -88,3 +89,22 @@ def choose_network(main, single_pose, given: bool, backend: str):
     if not given and single_pose is not None and backend == "compiled":
         return single_pose
     return main
+
+
+_ARM_FRAME: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def in_arm_frame(robot, net) -> bool:
+    """Whether ``net`` was made for the bare arm of ``robot`` (:attr:`nik.Robot.arm`: the robot without its base/tool
+    frames), so that it guesses in the arm's frame (kept per network and robot)."""
+    made_for = getattr(net, "robot", None)
+    if net is None or made_for is None or robot.arm is robot:
+        return False
+    try:
+        per_net = _ARM_FRAME.setdefault(net, weakref.WeakKeyDictionary())
+    except TypeError:  # not weak-referenceable: decide each time
+        per_net = {}
+    found = per_net.get(robot)
+    if found is None:
+        found = per_net[robot] = made_for.definition_hash == robot.arm_hash != robot.definition_hash
+    return found

@@ -38,13 +38,12 @@ from pathlib import Path
 import torch
 
 from nik.ik import backends, networks, stages
-from nik.ik.plan import Plan, choose_network
+from nik.ik.plan import Plan, choose_network, in_arm_frame
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.lm.batched import LMCfg
 from nik.robots import Robot, load_robot
 from nik.robots.reach import within_reach
-from nik.threads import threads_for
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["REFINE_METHODS", "IKSolver"]
@@ -141,7 +140,7 @@ class IKSolver:
         if fallback == "auto":
             fallback = "analytic" if self.closed_form else "multistart"
         self.fallback = fallback
-        self._arm_frame = (None, False)
+        self._plans: dict = {}
 
     @property
     def net(self):
@@ -185,23 +184,22 @@ class IKSolver:
     ) -> Plan:
         """The :class:`~nik.ik.plan.Plan` of a call on ``backend`` (``"compiled"`` | ``"torch"``) with these
         tolerances, seed and iteration cap: resolved here, once, from the solver's settings (:mod:`nik.ik.plan`)."""
-        net = choose_network(self._net, self._net_one, self._given, backend)
-        src = "network" if net is not None else "analytic" if self.closed_form else "multistart"
-        lm_cfg = self.swarm_cfg if isinstance(self.swarm_cfg, LMCfg) else None
-        return Plan(
-            src, net, self._in_arm_frame(net), self.refine, lm_cfg, max_iters,
-            restarts=src == "multistart" or self.fallback == "multistart", near=not self.closed_form,
-            fallback=self.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
-            swarm_cfg=self.swarm_cfg, polish=self.polish,
-        )  # fmt: skip
-
-    def _in_arm_frame(self, net) -> bool:
-        """Whether ``net`` was made for the bare arm of a robot with frames (kept per network)."""
-        if self._arm_frame[0] is not net:
-            robot, made_for = self.robot, getattr(net, "robot", None)
-            framed = net is not None and made_for is not None and robot.arm is not robot
-            self._arm_frame = (net, framed and made_for.definition_hash == robot.arm_hash != robot.definition_hash)
-        return self._arm_frame[1]
+        key = (backend, tol_pos, tol_rot, seed, max_iters, self._net, self._given, self.fallback, self.refine,
+               id(self.swarm_cfg), self.polish, self.closed_form)  # fmt: skip
+        plan = self._plans.get(key)
+        if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
+            net = choose_network(self._net, self._net_one, self._given, backend)
+            src = "network" if net is not None else "analytic" if self.closed_form else "multistart"
+            lm_cfg = self.swarm_cfg if isinstance(self.swarm_cfg, LMCfg) else None
+            plan = Plan(
+                src, net, in_arm_frame(self.robot, net), self.refine, lm_cfg, max_iters,
+                restarts=src == "multistart" or self.fallback == "multistart", near=not self.closed_form,
+                fallback=self.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
+                swarm_cfg=self.swarm_cfg, polish=self.polish,
+            )  # fmt: skip
+            self._plans = {} if len(self._plans) > 64 else self._plans
+            self._plans[key] = plan
+        return plan
 
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
@@ -254,11 +252,7 @@ class IKSolver:
         be = backends.choose(self, T_target)
         if plan is None:
             plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
-        job = be.job(self.robot, plan, T_target, q_near, representation)
-        if be.name == "torch":
-            with threads_for(job.size):
-                return stages.run(plan, job)
-        return stages.run(plan, job)
+        return be.solve(self.robot, plan, T_target, q_near, representation)
 
     def solve_all(
         self,
@@ -280,6 +274,9 @@ class IKSolver:
         (two solutions are the same when no joint differs by more than ``dedupe_tol`` radians,
         modulo 2 pi). For a redundant arm (7 joints) the solutions form a continuum; K is then
         simply how many distinct samples of it the starts found.
+        Cost: on the CPU the LM runs compiled from each start; panda and xarm7 with 256 starts take 50-100 ms a
+        pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the
+        path of targets on a GPU).
         """
         T = as_poses(T_target, representation)
         if T.shape[0] != 1:

@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import torch
 
 from nik.ik.backends import Job, Refined
@@ -248,9 +249,14 @@ def all_solutions(
 ) -> torch.Tensor:
     """``(K, dof)`` every distinct solution found for the one pose of ``job`` (see :meth:`IKSolver.solve_all`):
     the valid closed-form solutions, or LM (100 iterations, no restarts) from every hypothesis of the network
-    and ``n_starts`` uniform starts, kept where within tolerance, polished to rounding level (:func:`_polish`),
-    best first, de-duplicated at ``dedupe_tol``."""
-    from nik.lm import lm_solve
+    and ``n_starts`` uniform starts (compiled on the CPU, the batched torch LM on a GPU), kept where within tolerance,
+    best first, de-duplicated at ``dedupe_tol``.
+
+    Before the last de-duplication the survivors are driven by LM (30 iterations) to ``eps ** 0.75`` of the dtype
+    (about 2e-12 in float64): the solver's tolerance (0.1 mm / 0.1 deg) leaves the starts that reached one IK
+    branch up to about 0.1 deg apart in each joint; polished, they meet, so the de-duplication sees one solution
+    per branch. A polished answer replaces its start only where its error is not larger. Cost on the CPU (one
+    thread, panda, 256 starts): tens of milliseconds (``python benchmarks/solve_all.py``)."""
 
     robot, T = job.robot, job.T
     if closed_form:
@@ -264,41 +270,43 @@ def all_solutions(
         Tn = _arm_targets(robot, T) if plan.net_in_arm_frame else T
         hyp = plan.net.hypotheses(Tn)[0] if hasattr(plan.net, "hypotheses") else plan.net.predict(Tn)
         starts = torch.cat([robot.clamp(hyp), starts])
-    Tk = T.expand(starts.shape[0], 4, 4)
-    q, it = lm_solve(robot, Tk, starts, tol_pos=job.tol_pos, tol_rot=job.tol_rot, max_iters=100, restarts=0)
-    q = robot.clamp(q)
-    pos, rot = pose_error(Tk, robot.fk(q))
+    lm = _each_start_compiled if T.device.type == "cpu" else _each_start_torch
+    q, pos, rot, it = lm(plan, robot, T, starts, job.tol_pos, job.tol_rot, 100)
     found = Answers(q, pos, rot, it)
     ok = found.ok(job)
     q, score = q[ok], found.score()[ok]
     q = dedupe(q[score.argsort()], tol=dedupe_tol, prismatic=robot.prismatic)  # fewer to polish
-    pos, rot = pose_error(T.expand(q.shape[0], 4, 4), robot.fk(q))
-    found = _polish(robot, T, Answers(q, pos, rot, torch.zeros(q.shape[0], dtype=torch.long, device=q.device)))
-    return dedupe(found.q[found.score().argsort()], tol=dedupe_tol, prismatic=robot.prismatic)
+    if q.shape[0] > 1:  # LM to rounding level: starts that reached one branch meet (docstring)
+        tol = torch.finfo(T.dtype).eps ** 0.75
+        pos0, rot0 = pose_error(T.expand(q.shape[0], 4, 4), robot.fk(q))
+        q1, pos1, rot1, _ = lm(plan, robot, T, q, tol, tol, 30)
+        s0, s1 = pos0 + 0.1 * rot0, pos1 + 0.1 * rot1
+        better = s1 <= s0
+        q = torch.where(better[:, None], q1, q)[torch.where(better, s1, s0).argsort()]
+    return dedupe(q, tol=dedupe_tol, prismatic=robot.prismatic)
 
 
-def _polish(robot, T: torch.Tensor, found: Answers, *, iters: int = 30) -> Answers:
-    """LM from each of ``found`` (K solutions of the one pose ``T: (1, 4, 4)``) to rounding level.
+def _each_start_compiled(plan: Plan, robot, T: torch.Tensor, starts: torch.Tensor, tol_pos, tol_rot, iters):
+    """LM (compiled, :class:`nik.lm.compiled.CompiledLM`, no restarts) from each of ``starts: (K, dof)`` towards the
+    one pose ``T: (1, 4, 4)``: ``(q (K, dof), pos (K,), rot (K,), iterations (K,))`` as tensors of ``T``'s dtype."""
+    from nik.ik.model import model_of
 
-    The solver's tolerance (0.1 mm / 0.1 deg) leaves the starts that reached one IK branch up to about 0.1 deg
-    apart in each joint; driven on to ``eps ** 0.75`` of the dtype (about 2e-12 in float64) they meet, so the
-    de-duplication sees one solution per branch. A polished answer replaces its start only where its error is
-    not larger.
-    """
+    Tk = np.ascontiguousarray(np.broadcast_to(T[0].detach().double().numpy(), (starts.shape[0], 4, 4)))
+    q0 = np.ascontiguousarray(starts.detach().double().numpy())
+    run = model_of(robot, plan.lm_cfg).lm.solve(
+        Tk, q0, tol_pos=tol_pos, tol_rot=tol_rot, seed=plan.seed, max_iters=iters, restarts=False
+    )
+    dt = T.dtype
+    return (torch.from_numpy(run.q).to(dt), torch.from_numpy(run.pos_err).to(dt), torch.from_numpy(run.rot_err).to(dt),
+            torch.from_numpy(run.iterations))  # fmt: skip
+
+
+def _each_start_torch(plan: Plan, robot, T: torch.Tensor, starts: torch.Tensor, tol_pos, tol_rot, iters):
+    """:func:`_each_start_compiled` with the batched torch LM (targets on a GPU)."""
     from nik.lm import lm_solve
 
-    if found.q.shape[0] <= 1:
-        return found
-    tol = torch.finfo(T.dtype).eps ** 0.75
-    Tk = T.expand(found.q.shape[0], 4, 4)
-    q, _ = lm_solve(robot, Tk, found.q, tol_pos=tol, tol_rot=tol, max_iters=iters, restarts=0)
+    Tk = T.expand(starts.shape[0], 4, 4)
+    q, it = lm_solve(robot, Tk, starts, cfg=plan.lm_cfg, tol_pos=tol_pos, tol_rot=tol_rot, max_iters=iters, restarts=0)
     q = robot.clamp(q)
     pos, rot = pose_error(Tk, robot.fk(q))
-    polished = Answers(q, pos, rot, found.iterations)
-    better = polished.score() <= found.score()
-    return Answers(
-        torch.where(better[:, None], q, found.q),
-        torch.where(better, pos, found.pos_err),
-        torch.where(better, rot, found.rot_err),
-        found.iterations,
-    )
+    return q, pos, rot, it

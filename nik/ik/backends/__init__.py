@@ -16,20 +16,24 @@ answers satisfy the same contract (joints
 inside the limits, errors measured by FK, honest ``success`` and ``reachable``), the same seed gives the same answer,
 and ``IKResult.source`` names the guess that served.
 
-Backend interface (``be``; arrays are numpy on the compiled backend, tensors on torch):
+Backend interface (``be``; arrays are numpy on the compiled backend, tensors on torch; ``plan``: the call's
+:class:`~nik.ik.plan.Plan`, never the solver):
 
-- ``be.job(solver, T_target, q_near, representation, tol_pos, tol_rot, seed, max_iters) -> Job``: validated
-  targets (:mod:`nik.ik.targets`), reach flags, the unreachable warning;
-- ``be.network(solver, job) -> (hyp (B, K, dof) ranked best first, pos (B,), rot (B,), checked)``: ``checked`` is
+- ``be.solve(robot, plan, T_target, q_near, representation) -> IKResult``: one call: the torch backend validates and
+  runs the stages in a Python loop (:func:`nik.ik.stages.run`), the compiled one validates and runs them all in one
+  kernel call (:mod:`nik.kernels.driver`);
+- ``be.job(robot, plan, T_target, q_near, representation) -> Job``: validated targets (:mod:`nik.ik.targets`),
+  reach flags, the unreachable warning;
+- ``be.network(plan, job) -> (hyp (B, K, dof) ranked best first, pos (B,), rot (B,), checked)``: ``checked`` is
   ``(ok (B,), failing)`` where the backend measured them against the job's tolerances already, else None;
-- ``be.closed_form(solver, job, idx, q_near) -> (q, pos, rot)``;
-- ``be.uniform_guess(solver, job) -> q``: the best of 64 uniform configurations (a raw guess for ``refine="none"``);
-- ``be.refine(solver, job, idx, q0, restarts) -> Refined``: the solver's refiner (LM; on torch also a swarm) from
+- ``be.closed_form(plan, job, idx, q_near) -> (q, pos, rot)``;
+- ``be.uniform_guess(plan, job) -> q``: the best of 64 uniform configurations (a raw guess for ``refine="none"``);
+- ``be.refine(plan, job, idx, q0, restarts) -> Refined``: the plan's refiner (LM; on torch also a swarm) from
   ``q0`` (None: uniform starts);
-- ``be.lm(solver, job, idx, q0, restarts) -> Refined``: LM whatever the refine method (the multistart fallback);
-- ``be.lm_starts(solver, job, idx, starts (b, K, dof)) -> Refined``: LM from several starts per target in turn;
+- ``be.lm(plan, job, idx, q0, restarts) -> Refined``: LM whatever the refine method (the multistart fallback);
+- ``be.lm_starts(plan, job, idx, starts (b, K, dof)) -> Refined``: LM from several starts per target in turn;
 - ``be.merge(answers, job, idx, refined, strict)``: answers take the refined rows that are better, in place;
-- ``be.result(solver, job, answers, source) -> IKResult`` (tensors);
+- ``be.result(job, answers, source) -> IKResult`` (numpy arrays for numpy input, else tensors);
 - array helpers: ``nonzero``, ``rows``, ``arange(n, like)``, ``copy``, ``put``, ``norm``, ``zeros_long(n, like)``
   (``like``: an array whose device the result takes).
 """

@@ -1,7 +1,11 @@
 """The compiled backend: the stages' work on float64 numpy arrays through the numba kernels of :mod:`nik.kernels`.
 
-For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here each
-piece of work is one kernel call over the whole batch. Every per-robot fact (chain arrays, limits, reach bound,
+For one pose the torch pipeline spends about a millisecond in per-operation overhead, not arithmetic; here a call
+is validated (:func:`~nik.ik.targets.pose_array`) and then runs every stage of its plan in one kernel call
+(:func:`nik.kernels.driver.solve`, :meth:`CompiledBackend.solve`), which calls the stage kernels below in the order
+of :func:`nik.ik.stages.run`; those stages, run one by one over the same kernels, remain the staged path (a network
+the kernels do not pack, more than :data:`PACKED_MAX_BATCH` poses with a network) and the reference the driver is
+tested against. Every per-robot fact (chain arrays, limits, reach bound,
 closed-form constants, the compiled LM, packed networks) comes from the robot's model (:mod:`nik.ik.model`),
 looked up once per call:
 
@@ -27,6 +31,7 @@ float32 limits and measured again.
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -54,15 +59,43 @@ def _kernels():
     if _KERNELS is None:
         from types import SimpleNamespace
 
-        from nik.kernels import closed, lm, seeded
+        from nik.kernels import closed, driver, lm, seeded
+        from nik.lm.compiled import _seed
 
         _KERNELS = SimpleNamespace(
+            solve=driver.solve,
+            klm=lm,
+            seed=_seed,
             rank=seeded.rank,
             merge=seeded.merge,
             closed_guess=closed.guess,
             pose_errors=lm.pose_errors,
         )
     return _KERNELS
+
+
+_SOURCE = {"network": 0, "analytic": 1, "multistart": 2}  # nik.kernels.driver.SOURCE_*
+_FALLBACK = {"none": 0, "analytic": 1, "multistart": 2}  # nik.kernels.driver.FALLBACK_*
+_REACH_SLACK = 1e-9  # nik.robots.reach.REACH_SLACK
+
+
+@dataclass(frozen=True)
+class _Absent:
+    """The arrays of a packed network where there is none (the driver reads none of them)."""
+
+    flat: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float32))
+    layout: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
+    activation: int = 0
+    in_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    in_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    out_center: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    out_half: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prismatic: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
+    heads: int = 0
+
+
+_NO_NET = _Absent()
+_NO_CLOSED = np.zeros(0)
 
 
 class CompiledBackend:
@@ -108,18 +141,70 @@ class CompiledBackend:
         )  # fmt: skip
 
     # -- the job -------------------------------------------------------------------
-    def job(self, robot, plan, T_target, q_near, representation) -> Job:
+    def job(self, robot, plan, T_target, q_near, representation, *, reach: bool = True, stacklevel: int = 2) -> Job:
+        """The validated targets of one call; ``reach=False`` leaves the reach flags to the driver (:meth:`solve`)."""
         T, dtype = pose_array(T_target, representation)
         model = model_of(robot, plan.lm_cfg)
-        reachable, every = model.reach(T)
-        if not every:
-            warnings.warn(model.unreachable_message(T, reachable), UserWarning, stacklevel=4)
-        near = q_near_array(q_near, T.shape[0], robot)
+        if reach:
+            reachable, every = model.reach(T)
+            if not every:
+                warnings.warn(model.unreachable_message(T, reachable), UserWarning, stacklevel=stacklevel)
+        else:
+            reachable = np.empty(T.shape[0], dtype=bool)
+        near = None if q_near is None else q_near_array(q_near, T.shape[0], robot)
         tol_pos, tol_rot = plan.stage_tolerances(dtype == torch.float32)
         return Job(
             self, robot, T, reachable, near, tol_pos, tol_rot, dtype, plan.tol_pos, plan.tol_rot, model,
             numpy_out=isinstance(T_target, np.ndarray),
         )  # fmt: skip
+
+    # -- the whole plan in one kernel call -------------------------------------------------------------------------
+    def solve(self, robot, plan, T_target, q_near, representation) -> IKResult:
+        """The plan on the targets: validated (:meth:`job`), then every stage in one call of
+        :func:`nik.kernels.driver.solve` (the same stages on the same kernels as :func:`nik.ik.stages.run`, the same
+        answers, reach flags included); the staged path where the driver does not apply (a network the kernels do
+        not pack, or more than :data:`PACKED_MAX_BATCH` poses with a network)."""
+        job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        model = job.model
+        packed = None
+        if plan.source == "network":
+            packed = model.packed(plan.net) if job.size <= PACKED_MAX_BATCH else None
+            if packed is None:
+                from nik.ik import stages
+
+                job.reachable, every = model.reach(job.T)
+                if not every:
+                    warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=3)
+                return stages.run(plan, job)
+        return self._driver(plan, job, packed)
+
+    def _driver(self, plan, job: Job, packed) -> IKResult:
+        model, B, n = job.model, job.size, job.model.dof
+        k = _kernels()
+        lm = model.lm
+        opts, iopts = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, False)
+        _, iopts_multi = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, True)
+        p = packed or _NO_NET
+        Tin = model.arm_targets(job.T) if packed is not None and plan.net_in_arm_frame else job.T
+        closed = model.closed if model.closed is not None else _NO_CLOSED
+        check = model.closed_check[job.dtype] if model.closed_check is not None else 0.0
+        use_near = job.q_near is not None
+        q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
+        ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
+        every = k.solve(
+            model.G, model.joints, job.T, model.center, model.radius, _REACH_SLACK, _SOURCE[plan.source], p.flat,
+            p.layout, p.activation, p.in_mean, p.in_std, p.out_center, p.out_half, p.prismatic, p.heads, Tin, closed,
+            check, LIMIT_ROUNDING, job.q_near if use_near else q, use_near, opts, iopts, iopts_multi, lm.budget,
+            k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses, plan.near, _FALLBACK[plan.fallback], job.tol_pos,
+            job.tol_rot, q, pos, rot, ok, iters, job.reachable,
+        )  # fmt: skip
+        if not every:
+            warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=4)
+        from nik.ik.stages import Answers
+
+        answers = Answers(q, pos, rot, iters)
+        answers._ok = ok
+        return self.result(job, answers, plan.source)
 
     # -- guesses -----------------------------------------------------------------------
     def network(self, plan, job: Job):

@@ -73,13 +73,24 @@ class TorchBackend:
         answers.iterations[idx] += res.iterations.to(answers.iterations.dtype)
         answers._ok = None
 
+    # -- one call --------------------------------------------------------------------------
+    def solve(self, robot, plan, T_target, q_near, representation) -> IKResult:
+        """The plan on the targets: validated (:meth:`job`), then the stages in a Python loop
+        (:func:`nik.ik.stages.run`) with the thread count of :func:`nik.threads.threads_for`."""
+        from nik.ik import stages
+        from nik.threads import threads_for
+
+        job = self.job(robot, plan, T_target, q_near, representation, stacklevel=4)
+        with threads_for(job.size):
+            return stages.run(plan, job)
+
     # -- the job -------------------------------------------------------------------
-    def job(self, robot, plan, T_target, q_near, representation) -> Job:
+    def job(self, robot, plan, T_target, q_near, representation, *, stacklevel: int = 2) -> Job:
         T = as_poses(T_target, representation)
         reachable = within_reach(robot, T)
         msg = unreachable_message(robot, T, reachable)
         if msg is not None:
-            warnings.warn(msg, UserWarning, stacklevel=4)
+            warnings.warn(msg, UserWarning, stacklevel=stacklevel)
         near = as_q_near(q_near, T, robot.dof, prismatic=robot.prismatic, limits=robot.limits)
         tol_pos, tol_rot = plan.stage_tolerances(T.dtype == torch.float32)
         numpy_out = isinstance(T_target, np.ndarray)
