@@ -182,8 +182,8 @@ class CompiledBackend:
         model, B, n = job.model, job.size, job.model.dof
         k = _kernels()
         lm = model.lm
-        opts, iopts = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, False)
-        _, iopts_multi = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, True)
+        opts, iopts = lm.options(job.tol_pos, job.tol_rot, plan.max_iters)
+        _, iopts_multi = lm.options(job.tol_pos, job.tol_rot, plan.max_iters, multistart=True)
         p = packed or _NO_NET
         Tin = model.arm_targets(job.T) if packed is not None and plan.net_in_arm_frame else job.T
         closed = model.closed if model.closed is not None else _NO_CLOSED
