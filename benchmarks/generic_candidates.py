@@ -32,6 +32,7 @@ import torch
 from nik.data import load_dataset
 from nik.learn.multi import pose_loss_per_sample
 from nik.nets.multi import MultiHypIKNet, hypothesis_pose_error
+from nik.tolerances import score
 
 
 def _evaluate(robot, hyp_fn, n: int, seed: int = 12345) -> dict:
@@ -41,7 +42,7 @@ def _evaluate(robot, hyp_fn, n: int, seed: int = 12345) -> dict:
     with torch.no_grad():
         hyp = robot.clamp(hyp_fn(T.float()).double())  # (B, K, dof)
     pos, rot = hypothesis_pose_error(robot, T, hyp)
-    best = (pos + 0.1 * rot).argmin(-1, keepdim=True)
+    best = score(pos, rot).argmin(-1, keepdim=True)
     out = {}
     for name, (p, r) in {
         "single": (pos[:, 0], rot[:, 0]),

@@ -8,7 +8,7 @@ call by call, each path would run in the caches the other just filled):
 - FK + geometric Jacobian: the kernel / ``robot.fk_and_jacobian`` / the numpy one-pose LM's ``fk_jacobian``;
 - Levenberg-Marquardt for one pose, no network (300 reachable targets, each with its own seed): the kernel
   (best of ``--first-starts`` uniform configurations, then LM with up to 274 uniform restarts: the restart
-  budget of the numpy one-pose path) / the numpy path (``nik.lm.single``, what ``IKSolver.solve`` ran for
+  budget of the numpy one-pose path) / the numpy path (``tests/lm_reference.py``, what ``IKSolver.solve`` ran for
   one pose before the kernels). Median, p95, max per call; success within 0.1 mm and
   0.1 deg by torch FK of the answer; joints outside the limits;
 - the MLP forward pass of the shipped network (one pose: 1 row for a multi-head network, 8 rows for a
@@ -39,6 +39,7 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(1, str(ROOT / "tests"))  # the numpy one-pose LM, the tests' reference (tests/lm_reference.py)
 
 import nik  # noqa: E402
 from nik import kernels as K  # noqa: E402
@@ -71,8 +72,9 @@ def med(ts) -> str:
 
 
 def fk_rows(robot, calls: int) -> list[str]:
+    from lm_reference import SingleLM
+
     from nik.kinematics import FKKernel
-    from nik.lm.single import SingleLM
 
     G, joints = K.chain_model(robot.G, robot.offsets, robot.limits, robot.prismatic)
     q = robot.sample(1, generator=torch.Generator().manual_seed(0), dtype=torch.float64)[0]
@@ -95,9 +97,10 @@ def fk_rows(robot, calls: int) -> list[str]:
 
 def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = True):
     """Per-call microseconds, successes and joints outside the limits of the kernel LM (and of the numpy one-pose
-    LM of ``nik.lm.single``, the path ``IKSolver.solve`` took for one pose before the kernels)."""
+    LM of ``tests/lm_reference.py``, the path ``IKSolver.solve`` took for one pose before the kernels)."""
+    from lm_reference import SingleLM, best_of, lm_solve_one
+
     from nik.lm import LMCfg
-    from nik.lm.single import SingleLM, best_of, lm_solve_one
 
     G, joints = K.chain_model(robot.G, robot.offsets, robot.limits, robot.prismatic)
     qt = robot.sample(n_targets, generator=torch.Generator().manual_seed(TARGET_SEED_BASE), dtype=torch.float64)

@@ -46,7 +46,7 @@ import nik
 from nik.nets import load_pretrained
 from nik.nets.multi import BranchHeadsIKNet, BranchIKNet, hypothesis_pose_error
 from nik.nets.registry import SHIPPED_DIR, index, role_of
-from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT, score
 
 TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
 SECTIONS = ("raw", "lm", "cost", "pays", "stream", "all", "paper")
@@ -94,7 +94,7 @@ def timed(runs: dict, repeats: int) -> dict:
 def raw_network(robot, net, q: torch.Tensor, T: torch.Tensor) -> dict:
     hyp = net.hypotheses(T).to(T.dtype)
     pos, rot = hypothesis_pose_error(robot, T, hyp)
-    best = (pos + 0.1 * rot).argmin(-1, keepdim=True)
+    best = score(pos, rot).argmin(-1, keepdim=True)
     if isinstance(net, BranchIKNet | BranchHeadsIKNet):
         pick, single_name = net.labels(q)[:, None], "given branch"
     else:

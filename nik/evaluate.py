@@ -25,7 +25,7 @@ import torch
 
 from nik.poses import matrix_to_rpy, pose_error, rpy_to_matrix
 from nik.robots import Robot, load_robot
-from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT, score
 
 __all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "plot_errors", "robot_to_urdf", "write_report"]
 
@@ -232,7 +232,7 @@ def _pk_solve(
     torch.manual_seed(seed)
     target = pk.Transform3d(matrix=T)
     sol, seconds = _timed(lambda: ik.solve(target), T.device)
-    err = sol.err_pos + 0.1 * sol.err_rot  # (B, retries)
+    err = score(sol.err_pos, sol.err_rot)  # (B, retries)
     idx = err.argmin(-1)
     q = torch.gather(sol.solutions, 1, idx[:, None, None].expand(-1, 1, robot.dof)).squeeze(1)
     note = f"PseudoInverseIK, {retries} retries, {max_iterations} iterations"

@@ -8,7 +8,15 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["DEFAULT_TOL_POS", "DEFAULT_TOL_POS_MM", "DEFAULT_TOL_ROT", "DEFAULT_TOL_ROT_DEG", "describe"]
+__all__ = [
+    "DEFAULT_TOL_POS",
+    "DEFAULT_TOL_POS_MM",
+    "DEFAULT_TOL_ROT",
+    "DEFAULT_TOL_ROT_DEG",
+    "SCORE_ROT_WEIGHT",
+    "describe",
+    "score",
+]
 
 #: Position tolerance in millimetres (what users read) and metres (what nik computes in).
 DEFAULT_TOL_POS_MM = 0.1
@@ -16,6 +24,18 @@ DEFAULT_TOL_POS = 1e-4  # m
 #: Rotation tolerance (geodesic angle) in degrees and radians: 0.1 deg = 1.745e-3 rad.
 DEFAULT_TOL_ROT_DEG = 0.1
 DEFAULT_TOL_ROT = math.radians(DEFAULT_TOL_ROT_DEG)  # rad
+
+
+#: Weight of the rotation error (radians) beside the position error (metres) where two answers are compared by one
+#: number (:func:`score`): which hypothesis, closed-form branch or start is the best, which answer a stage keeps.
+#: 0.1 m per radian: a 1 mm position error weighs as much as a 0.57 deg rotation error.
+SCORE_ROT_WEIGHT = 0.1
+
+
+def score(pos_err, rot_err):
+    """``pos_err + SCORE_ROT_WEIGHT * rot_err``: one number per answer, lower is better (metres and radians; floats,
+    numpy arrays or tensors of any shape). The compiled kernels use :data:`SCORE_ROT_WEIGHT` itself."""
+    return pos_err + SCORE_ROT_WEIGHT * rot_err
 
 
 def describe(tol_pos: float, tol_rot: float) -> str:

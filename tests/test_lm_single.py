@@ -1,12 +1,12 @@
-"""nik.swarm.lm_single: the numpy lean path for one pose agrees with the batched kernels and solves."""
+"""tests/lm_reference.py (the numpy one-pose LM the tests compare with) agrees with nik's FK, its Jacobian and LM."""
 
 from __future__ import annotations
 
 import pytest
 import torch
+from lm_reference import SingleLM
 
 import nik
-from nik.lm.single import SingleLM
 
 
 @pytest.mark.parametrize("name", ["panda", "ur5", "kuka_kr"])
@@ -20,6 +20,33 @@ def test_fk_and_jacobian_match_the_batched_kernels(name):
         torch.testing.assert_close(torch.from_numpy(T[:3]), T_ref[i, :3], atol=1e-12, rtol=0)
         torch.testing.assert_close(torch.from_numpy(J), J_ref[i], atol=1e-12, rtol=0)
     torch.testing.assert_close(torch.from_numpy(model.fk_many(q.numpy())), robot.fk(q), atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "xarm7"])
+def test_compiled_lm_takes_the_same_steps_as_the_numpy_reference(name):
+    """From the same starts, without restarts, the compiled kernel and the independent numpy LM end at the same
+    joints (to rounding) after the same number of iterations: one algorithm, written twice."""
+    import numpy as np
+    from lm_reference import lm_solve_one
+
+    from nik.lm import LMCfg
+    from nik.lm.compiled import CompiledLM
+
+    robot = nik.load_robot(name)
+    cfg, ref, lm = LMCfg(), SingleLM.from_robot(robot), CompiledLM.of(robot)
+    g = torch.Generator().manual_seed(3)
+    qt = robot.sample(12, generator=g, dtype=torch.float64)
+    T = robot.fk(qt).numpy()
+    lo, hi = robot.limits.double().numpy().T
+    q0 = np.clip((qt + 0.3 * torch.randn(qt.shape, generator=g, dtype=torch.float64)).numpy(), lo, hi)
+    run = lm.solve(T, q0, tol_pos=1e-4, tol_rot=1.745e-3, seed=0, restarts=False)
+    assert run.converged.sum() >= 10  # the comparison covers converged runs, not only stalled ones
+    for i in range(12):
+        q, its = lm_solve_one(
+            ref, T[i], q0[i], cfg=cfg, tol_pos=1e-4, tol_rot=1.745e-3, first_iters=cfg.iters, restarts=0, sample=None
+        )
+        assert its == int(run.iterations[i])
+        np.testing.assert_allclose(run.q[i], q, atol=1e-9, rtol=0)
 
 
 def test_one_pose_per_call_is_solved_inside_the_limits_and_reproducibly():

@@ -237,7 +237,6 @@ def _bad_path(kind: str, robot) -> tuple:
     [
         ("nan", "NaN"),
         ("one pose", "at least 2 waypoints"),
-        ("millimetres", "millimetres"),
         ("not orthonormal", "orthonormal"),
         ("q_start outside the limits", "joint 5 .* outside its limits"),
         ("q_start of the wrong length", r"q_start: expected shape \(6,\)"),
@@ -291,13 +290,36 @@ def test_cli_exit_1_when_a_waypoint_fails(tmp_path, capsys):
     assert "warning: solve_path on ur5: waypoint" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("args", [["--unit", "mm"], ["--q-start", "1", "2", "3"], ["--q-start", *["0"] * 5, "200"]])
+def test_a_path_in_millimetres_is_warned_about_and_flagged_as_solve_does_it(ur5):
+    """One behaviour for targets beyond the reach, solve and solve_path alike: a warning (one line, the millimetre
+    question where they lie 100 x beyond), ``reachable`` False, no success; no exception."""
+    T, _ = _bad_path("millimetres", ur5.robot)
+    with pytest.warns(UserWarning, match="millimetres") as caught:
+        res = ur5.solve_path(T)
+    assert "\n" not in str(caught[0].message)
+    with pytest.warns(UserWarning, match="were the positions given in millimetres"):
+        one = ur5.solve(T)
+    assert torch.equal(res.reachable, one.reachable) and not bool(res.reachable.any())
+    assert not bool(res.success.any())
+    assert res.path.reasons == ["out of reach"] * T.shape[0]
+
+
+def test_cli_path_given_in_the_wrong_unit_exits_1_with_the_millimetre_question(tmp_path, capsys):
+    robot = nik.load_robot("ur5")
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 5)
+    T[:, :3, 3] *= 1e6  # kilometres given as millimetres: still far beyond the reach in metres
+    poses = tmp_path / "path.csv"
+    _write_poses(poses, T)
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--unit", "mm"]) == 1
+    assert "millimetres" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["--q-start", "1", "2", "3"], ["--q-start", *["0"] * 5, "200"]])
 def test_cli_bad_input_exit_2_one_line(tmp_path, capsys, args):
     robot = nik.load_robot("ur5")
     q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
     T = _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 5)
-    if args[:2] == ["--unit", "mm"]:
-        T[:, :3, 3] *= 1e6  # kilometres given as millimetres: still far beyond the reach in metres
     poses = tmp_path / "path.csv"
     _write_poses(poses, T)
     assert main(["path", "--robot", "ur5", "--poses", str(poses), *args]) == 2
@@ -313,3 +335,80 @@ def test_cli_plot_writes_a_png(tmp_path):
     _write_poses(poses, _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 10))
     assert main(["path", "--robot", "ur5", "--poses", str(poses), "--plot", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# ---- the solver's settings are the path's -----------------------------------------------------------------------
+def _panda_line_past_its_reach(robot):
+    """A panda line from the middle of its ranges whose far end the arm cannot reach in that orientation (within the
+    reach bound: the LM restarts are drawn there)."""
+    lo, hi = robot.limits.double().T
+    q0 = lo + (hi - lo) * torch.tensor([0.5, 0.55, 0.5, 0.5, 0.5, 0.45, 0.5], dtype=torch.float64)
+    return q0, _line(robot, q0, [1.0, 0.5, 0.0], 0.15, 30)
+
+
+def _ur5_line_out_of_reach(robot):
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    outward = robot.fk(q0[None])[0, :3, 3] - reach_center(robot)
+    outward[2] = 0.0
+    return _line(robot, q0, outward, reach_radius(robot), 40)
+
+
+def _quiet_path(solver, T, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return solver.solve_path(T, **kw)
+
+
+def test_the_solvers_lm_settings_drive_the_paths_lm(panda):
+    from nik.lm import LMCfg
+
+    q0, T = _panda_line_past_its_reach(panda.robot)
+    plain = _quiet_path(panda, T, q_start=q0)
+    short = _quiet_path(nik.IKSolver(panda.robot, swarm_cfg=LMCfg(max_step=0.05)), T, q_start=q0)
+    assert int(short.iterations.sum()) > int(plain.iterations.sum())  # shorter LM steps: more of them
+    assert torch.equal(short.success, _reached(panda.robot, T, short.q))
+
+
+def test_fallback_none_draws_no_uniform_restarts_along_the_path(panda):
+    from nik.lm import LMCfg
+
+    q0, T = _panda_line_past_its_reach(panda.robot)
+    plain = _quiet_path(panda, T, q_start=q0)
+    bare = _quiet_path(nik.IKSolver(panda.robot, fallback="none"), T, q_start=q0)
+    per_try = LMCfg().iters  # a waypoint: LM from the pulled seed, then from the previous answer, nothing more
+    assert int(bare.iterations.max()) <= 2 * per_try < int(plain.iterations.max())
+    assert torch.equal(bare.success, _reached(panda.robot, T, bare.q))
+
+
+def test_refine_none_keeps_the_closed_forms_branches_as_they_are(ur5):
+    T = _ur5_line_out_of_reach(ur5.robot)
+    plain = _quiet_path(ur5, T)
+    raw = _quiet_path(nik.IKSolver(ur5.robot, refine="none"), T)
+    assert int(plain.iterations.sum()) > 0 and int(raw.iterations.sum()) == 0  # no LM at the unreached waypoints
+    assert torch.equal(raw.success, _reached(ur5.robot, T, raw.q))
+    assert torch.equal(raw.success, plain.success)
+    with pytest.raises(ValueError, match="refine='none'"):
+        nik.IKSolver("panda", refine="none").solve_path(T[:5])
+
+
+def test_fallback_multistart_restarts_the_closed_form_arms_gaps(ur5):
+    T = _ur5_line_out_of_reach(ur5.robot)
+    plain = _quiet_path(ur5, T)
+    more = _quiet_path(nik.IKSolver(ur5.robot, fallback="multistart"), T)
+    assert int(more.iterations.sum()) > int(plain.iterations.sum())
+    assert torch.equal(more.success, _reached(ur5.robot, T, more.q))
+
+
+def test_a_solver_forced_onto_torch_is_refused_in_one_line(ur5):
+    T = _ur5_line_out_of_reach(ur5.robot)[:5]
+    with pytest.raises(ValueError, match="backend='torch'") as err:
+        nik.IKSolver(ur5.robot, backend="torch").solve_path(T)
+    assert "\n" not in str(err.value)
+
+
+def test_a_solver_without_a_network_starts_its_chains_from_uniform_starts_only(panda):
+    q0 = torch.tensor([0.2, 0.3, -0.2, -1.8, 0.1, 2.0, 0.5], dtype=torch.float64)
+    T = _line(panda.robot, q0, [0.0, 0.0, 1.0], 0.12, 20)
+    bare = nik.IKSolver(panda.robot, checkpoint=None).solve_path(T)
+    assert bare.source == "multistart"
+    assert bool(_reached(panda.robot, T, bare.q).all()) and _largest_step(bare.q) < math.radians(3.0)

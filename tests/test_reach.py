@@ -55,3 +55,21 @@ def test_message_counts_the_far_targets_and_asks_about_millimetres_only_when_far
     assert msg.startswith("1 of 3 target(s)") and "millimetres" not in msg
     T[1, :3, 3] *= 1000.0
     assert "millimetres" in unreachable_message(robot, T, within_reach(robot, T), unit_hint="pass --unit mm")
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_compiled_flags_and_the_message_agree_with_the_torch_bound(name):
+    """One bound, one message: the compiled flags (the robot's model, what solve and solve_path use) equal
+    within_reach on targets on both sides of the bound, and the model words its warning with unreachable_message."""
+    from nik.ik.model import model_of
+
+    robot = nik.load_robot(name)
+    T = robot.fk(robot.sample(64, generator=torch.Generator().manual_seed(4), dtype=torch.float64))
+    scale = torch.linspace(0.5, 400.0, 64, dtype=torch.float64)
+    c = reach_center(robot)
+    T[:, :3, 3] = c + (T[:, :3, 3] - c) * scale[:, None]
+    flags = within_reach(robot, T)
+    assert 0 < int(flags.sum()) < 64
+    compiled, every = model_of(robot).reach(T.numpy().copy())
+    assert compiled.tolist() == flags.tolist() and not every
+    assert model_of(robot).unreachable_message(T.numpy(), compiled) == unreachable_message(robot, T, flags)

@@ -6,7 +6,7 @@
 - :mod:`nik.ik.backends`: where a stage's work is computed: compiled numba kernels on numpy (CPU) or torch (GPU,
   the swarms);
 - :mod:`nik.ik.guesses`: guess providers ``(robot, T, ...) -> q`` (network, closed form, multistart) and
-  the choice among several solutions (``q_near``, de-duplication);
+  de-duplication;
 - :mod:`nik.ik.refiners`: refiners ``(robot, T, q0) -> RefineResult`` (LM, the swarms);
 - :mod:`nik.ik.targets`: target poses in any accepted form -> ``(B, 4, 4)``, the input checks of both backends;
   :mod:`nik.ik.result`: :class:`IKResult`;
@@ -17,7 +17,7 @@ The room composes the rooms below it (robots, nets, analytic, lm, swarm); only l
 import it.
 """
 
-from nik.ik.guesses import dedupe, nearest_solution
+from nik.ik.guesses import dedupe
 from nik.ik.refiners import RefineResult, lm_refine, swarm_refine
 from nik.ik.result import IKResult, PathReport
 from nik.ik.solver import REFINE_METHODS, IKSolver
@@ -37,6 +37,5 @@ __all__ = [
     "check_tolerances",
     "dedupe",
     "lm_refine",
-    "nearest_solution",
     "swarm_refine",
 ]

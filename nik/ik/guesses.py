@@ -2,25 +2,28 @@
 
 :class:`nik.IKSolver` composes one of these with a refiner (:mod:`nik.ik.refiners`):
 
-- :func:`analytic_guess`: the closed form of arms that have one (:func:`nik.analytic.solve`; the valid
-  solution nearest ``q_near``, or the one farthest inside the joint ranges; out of reach, the clamped one
-  that comes closest);
+- :func:`analytic_guess`: the closed form of arms that have one (:func:`nik.analytic.solve`; the choice among its
+  solutions is :func:`nik.kernels.closed.pick`, the one rule of both backends: the valid solution nearest
+  ``q_near``, or the one farthest inside the joint ranges; out of reach, the clamped one that comes closest);
 - :func:`multistart_guess`: the best of ``n_starts`` uniform configurations by pose error;
 - :func:`network_guess`: a trained network's prediction, clamped to the limits.
 
-Also here: choosing among several solutions (:func:`nearest_solution`, used by ``q_near``) and
-dropping duplicates (:func:`dedupe`, used by ``solve_all``).
+Also here: dropping duplicates (:func:`dedupe`, used by ``solve_all``). The torch form of the choice among
+closed-form solutions that lived here (``nearest_solution``) is now the tests' reference
+(``tests/pick_reference.py``).
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
 from nik.poses import pose_error
+from nik.tolerances import score
 
-__all__ = ["LIMIT_ROUNDING", "analytic_guess", "dedupe", "multistart_guess", "nearest_solution", "network_guess"]
+__all__ = ["LIMIT_ROUNDING", "analytic_guess", "dedupe", "multistart_guess", "network_guess"]
 
 #: Relative tolerance (radians per radian of limit) within which an angle counts as on a joint limit.
 LIMIT_ROUNDING = 1e-9
@@ -38,80 +41,30 @@ def multistart_guess(robot, T: torch.Tensor, *, seed: int = 0, n_starts: int = 6
     B = T.shape[0]
     q = robot.sample(B * n_starts, generator=g, dtype=T.dtype, device=T.device).reshape(B, n_starts, -1)
     pos, rot = pose_error(T[:, None], robot.fk(q))
-    idx = (pos + 0.1 * rot).argmin(-1)
+    idx = score(pos, rot).argmin(-1)
     return torch.gather(q, 1, idx[:, None, None].expand(-1, 1, q.shape[-1])).squeeze(1)
 
 
 def analytic_guess(robot, T: torch.Tensor, *, q_near: torch.Tensor | None = None) -> torch.Tensor:
-    """``(B, dof)``: the closed-form solution (arms with a closed form) for ``T: (B, 4, 4)``; see the module text."""
+    """``(B, dof)``: the closed-form solution (arms with a closed form) for ``T: (B, 4, 4)``: the 8 solutions of
+    :func:`nik.analytic.solve` (on ``T``'s device), one chosen per target by the one rule of both backends,
+    :func:`nik.kernels.closed.pick` (the valid solution nearest ``q_near``, each angle moved by whole turns as near
+    it as the limits allow, or the one whose worst joint is farthest inside its range; with none valid, the clamped
+    solution nearest the target), computed on the CPU in float64 and returned in ``T``'s dtype and device."""
     from nik.analytic import solve
+    from nik.kernels.closed import pick
 
     sols, valid = solve(robot, T)
-    lo, hi = robot.limits_as(T)
-    if q_near is not None:
-        q, _ = nearest_solution(sols, valid, q_near, lo, hi)
-        return robot.clamp(q)
-    q = _central_solution(sols, valid, lo, hi)
-    none = ~valid.any(-1)
-    if bool(none.any()):  # unreachable or outside the limits: the clamped solution that comes closest
-        clamped = robot.clamp(sols[none])
-        pos, rot = pose_error(T[none, None], robot.fk(clamped))
-        idx = (pos + 0.1 * rot).argmin(-1)
-        q = q.clone()
-        q[none] = torch.gather(clamped, 1, idx[:, None, None].expand(-1, 1, clamped.shape[-1])).squeeze(1)
-    return robot.clamp(q)
-
-
-def _near_representative(sols: torch.Tensor, q_near: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """Each angle of ``sols: (B, K, dof)`` moved by a multiple of 2 pi, staying inside ``[lo, hi]``,
-    as near as possible to ``q_near: (B, dof)`` (matters for joints with more than a full turn of range)."""
-    two_pi = 2 * math.pi
-    target = q_near[:, None]
-    k = torch.round((target - sols) / two_pi)
-    best = sols
-    best_d = (sols - target).abs()
-    # a turn that lands within rounding of a limit counts as inside (and is clamped onto it): q_near
-    # often sits exactly on a limit (a previous answer, clamped), and sols + 2 pi k differs from it by 1e-15
-    tol = LIMIT_ROUNDING * (1.0 + torch.maximum(lo.abs(), hi.abs()))
-    for shift in (k - 1, k, k + 1):
-        cand = sols + shift * two_pi
-        ok = (cand >= lo - tol) & (cand <= hi + tol)
-        cand = torch.minimum(torch.maximum(cand, lo), hi)
-        d = torch.where(ok, (cand - target).abs(), torch.full_like(cand, float("inf")))
-        take = d < best_d
-        best = torch.where(take, cand, best)
-        best_d = torch.where(take, d, best_d)
-    return best
-
-
-def nearest_solution(
-    sols: torch.Tensor, valid: torch.Tensor, q_near: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Among ``sols: (B, K, dof)`` with ``valid: (B, K)``, the one nearest ``q_near: (B, dof)``.
-
-    Distance: Euclidean norm of the joint differences after each angle is moved by multiples of
-    2 pi (inside the limits) as near ``q_near`` as it goes, i.e. the joint motion to reach it.
-
-    Returns:
-        ``q: (B, dof)`` and ``found: (B,)`` bool (False where no solution is valid; ``q`` is then
-        the nearest of all).
-    """
-    rep = _near_representative(sols, q_near, lo, hi)
-    dist = torch.linalg.vector_norm(rep - q_near[:, None], dim=-1)
-    found = valid.any(-1)
-    dist = torch.where(valid | ~found[:, None], dist, torch.full_like(dist, float("inf")))
-    idx = dist.argmin(-1)
-    q = torch.gather(rep, 1, idx[:, None, None].expand(-1, 1, rep.shape[-1])).squeeze(1)
-    return q, found
-
-
-def _central_solution(sols: torch.Tensor, valid: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """Among valid ``sols: (B, K, dof)``, the one whose worst joint is farthest inside its range."""
-    margin = torch.minimum(sols - lo, hi - sols) / (hi - lo)
-    score = margin.amin(-1)
-    score = torch.where(valid, score, torch.full_like(score, -float("inf")))
-    idx = score.argmax(-1)
-    return torch.gather(sols, 1, idx[:, None, None].expand(-1, 1, sols.shape[-1])).squeeze(1)
+    G, joints = robot.chain_arrays()
+    cpu = {"device": "cpu", "dtype": torch.float64}
+    B, n = T.shape[0], robot.dof
+    out = np.empty((B, n))
+    near = np.zeros((B, n)) if q_near is None else np.ascontiguousarray(q_near.detach().to(**cpu).numpy())
+    pick(
+        np.ascontiguousarray(sols.detach().to(**cpu).numpy()), np.ascontiguousarray(valid.cpu().numpy()), G, joints,
+        np.ascontiguousarray(T.detach().to(**cpu).numpy()), near, q_near is not None, LIMIT_ROUNDING, out,
+    )  # fmt: skip
+    return robot.clamp(torch.from_numpy(out).to(device=T.device, dtype=T.dtype))
 
 
 def dedupe(q: torch.Tensor, *, tol: float = 1e-3, prismatic: torch.Tensor | None = None) -> torch.Tensor:

@@ -2,48 +2,68 @@
 
 A path is more than N independent poses: the arm has to move from each answer to the next, so a solution
 that jumps to another IK branch half-way (a joint turning 180 degrees between two waypoints 3 mm apart) is no
-answer, however exact each pose is. :func:`solve_path` therefore looks at the whole path before it commits:
+answer, however exact each pose is. :func:`solve_path` therefore looks at the whole path before it commits. Its
+stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the robot's one compiled model
+(:func:`nik.ik.model.model_of`: limits, wraps, reach, closed form, LM), plus one: the choice over the whole path.
 
-1. **candidates** at each waypoint. On an arm with a closed form (:func:`nik.analytic.family`): all 8 branches
-   of every waypoint, in one compiled call. On other arms (redundant 7-joint arms among them): chains of
-   Levenberg-Marquardt, each waypoint seeded by the chain's answer at the previous one, started from
-   ``q_start``, or, without it, from the network's hypotheses and from uniform starts at the first waypoint
-   (several chains side by side, each the continuation of a different posture).
-2. **the choice over the whole path**: by dynamic programming over the branches (:func:`nik.ik.path_kernels.path_dp`),
-   the sequence whose largest step is the smallest, and among those the one with the least sum of squared steps
-   (then the least total joint motion); with ``q_start`` the step from it to the first waypoint counts too, so the
-   trajectory starts nearest it. Among chains, the one with the fewest failed waypoints, then the smallest largest
-   step, then the least motion. With ``q_start`` on a closed-form arm the LM chain from ``q_start`` is tried first
-   and kept when it follows every waypoint in steps of at most :data:`PATH_FOLLOW_STEP` (its branch meets no
-   limit: nothing to look ahead for).
-3. **polish**: a waypoint left without a valid candidate (closed-form arms) gets LM seeded by its predecessor's
-   answer (its best effort, flagged); the chains are that already.
-4. **redundant arms**: the extra freedom is resolved along the path by seeding each waypoint with its
+1. **the reach bound** (the model's compiled flags): waypoints provably out of reach are flagged (``reachable``)
+   and get no restarts; the warning carries the words of :func:`nik.robots.reach.unreachable_message`, with the
+   millimetre question 100 x beyond the reach, as :meth:`~nik.IKSolver.solve` warns (neither raises).
+2. **guess: candidates** at each waypoint. On an arm with a closed form (:func:`nik.analytic.family`): all 8
+   branches of every waypoint, in one compiled call (the model's closed form; an arm that fits its family only
+   within a tolerance gets the ideal arm's closed form checked at the model's tolerance, the one policy of
+   :mod:`nik.ik.model`). On other arms (redundant 7-joint arms among them): chains of Levenberg-Marquardt, each
+   waypoint seeded by the chain's answer at the previous one, started from ``q_start``, or, without it, from the
+   network's hypotheses (the compiled backend's guess stage: the packed network) and from uniform starts at the
+   first waypoint (several chains side by side, each the continuation of a different posture).
+3. **the choice over the whole path**: by dynamic programming over the candidates
+   (:func:`nik.ik.path_kernels.path_dp`; the branches, or every chain's answer at every waypoint), the sequence
+   whose largest step is the smallest, and among those the one with the least sum of squared steps (then the least
+   total joint motion); with ``q_start`` the step from it to the first waypoint counts too, so the trajectory starts
+   nearest it. With ``q_start`` on a closed-form arm the LM chain from ``q_start`` is tried first and kept when it
+   follows every waypoint in steps of at most :data:`PATH_FOLLOW_STEP` (its branch meets no limit: nothing to look
+   ahead for).
+4. **refine**: a chosen branch that misses the tolerance (an approximate closed form) gets LM from it; a waypoint
+   left without a valid branch gets LM seeded by its neighbour's answer (its best effort, flagged); the chains are
+   that already.
+5. **redundant arms**: the extra freedom is resolved along the path by seeding each waypoint with its
    predecessor's answer moved :data:`PATH_PULL` of the way towards the middle of the joint ranges (at most
    :data:`PATH_PULL_CAP` per joint and waypoint): LM from that seed removes whatever would move the tool, the
    rest is self-motion away from the limits, so the arm does not drift into a limit and then jump.
-5. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
+6. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
    on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
+
+**Settings**: the solver's, as :meth:`~nik.IKSolver.solve` reads them. The LM config (``swarm_cfg`` an
+:class:`nik.lm.LMCfg`) is the chains' and polishes' LM; ``fallback="multistart"`` (the default without a closed
+form) lets a waypoint the chain does not reach draw up to :data:`PATH_RESTARTS` uniform restarts (within reach),
+``"none"`` or ``"analytic"`` none (on a closed-form arm a restart could only jump to another branch);
+``refine="none"`` keeps the closed form's branches as they are (no LM; refused on an arm without a closed form,
+which has no other way along the path); the swarm methods are local along a path, where each waypoint is seeded by
+the one before: their LM polish is the chains' LM. ``backend="torch"`` is refused (the chains run in the compiled
+kernels); ``checkpoint=None`` (no network) leaves the uniform starts alone.
 
 The step between two configurations is the largest joint motion ``max_j |q_i,j - q_i-1,j|`` (radians; metres on
 prismatic joints), measured on the returned joints: a joint whose range is wider than a full turn may cross
 pi, one limited to [-pi, pi] may not. Paths are solved on the CPU in float64 (the work is sequential by nature);
-the result comes back in the dtype and on the device of the input poses.
+the result comes back in the dtype and on the device of the input poses. ``q_start`` is checked as ``q_near`` is
+(:func:`nik.ik.targets.q_near_array`), and must lie inside the limits.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-import weakref
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
 
+from nik.ik.model import model_of
 from nik.ik.result import IKResult, PathReport
-from nik.ik.targets import check_tolerances, pose_array
-from nik.robots.reach import MM_HINT_FACTOR, REACH_SLACK, reach_center, reach_radius
+from nik.ik.targets import check_tolerances, pose_array, q_near_array
+from nik.tolerances import score
 
 __all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
 
@@ -67,8 +87,6 @@ PATH_FOLLOW_STEP = math.radians(2.0)
 PATH_STARTS = 8
 #: Two first-waypoint answers closer than this (largest joint difference, radians) are one chain.
 PATH_DEDUPE = 1e-2
-#: A joint may turn continuously past +-pi when its range exceeds a full turn by this much (radians).
-WRAP_MARGIN = 1e-6
 
 
 def solve_path(
@@ -85,7 +103,8 @@ def solve_path(
     """One continuous joint trajectory through the waypoints ``T_path`` (see :meth:`nik.IKSolver.solve_path`).
 
     Args:
-        solver: the :class:`nik.IKSolver` whose robot, closed form and network are used.
+        solver: the :class:`nik.IKSolver` whose robot, closed form, network and settings are used (see the module
+            docstring, "settings").
         T_path: ``(N, 4, 4)``, ``(N, 7)`` or ``(N, 6)`` waypoints in order (metres, radians), N >= 2.
         q_start: ``(dof,)`` the joints before the path (radians, inside the limits) or None.
         tol_pos, tol_rot: success tolerances, metres and radians.
@@ -96,10 +115,17 @@ def solve_path(
     Returns:
         :class:`IKResult` of N rows (``q: (N, dof)``) with ``path``: a :class:`PathReport`.
 
+    Warns:
+        UserWarning: one line naming the first waypoint out of reach (with the reach bound's own words, and the
+            millimetre question where a waypoint lies 100 x beyond: :func:`nik.robots.reach.unreachable_message`,
+            as :meth:`nik.IKSolver.solve` warns), beyond a joint limit on every branch, not reached, or forcing a
+            reconfiguration.
+
     Raises:
-        ValueError: bad poses (NaN, shape, a non-orthonormal rotation), fewer than 2 waypoints, positions that
-            look like millimetres, a bad tolerance or ``max_step``, a ``q_start`` of the wrong length, not finite
-            or outside the limits.
+        ValueError: bad poses (NaN, shape, a non-orthonormal rotation), fewer than 2 waypoints, a bad tolerance or
+            ``max_step``, a ``q_start`` refused as ``q_near`` is (:func:`nik.ik.targets.q_near_array`) or outside
+            the limits, a solver whose settings a path cannot follow (``backend="torch"``; ``refine="none"`` on an
+            arm without a closed form).
     """
     Tn, dtype, device = _poses(T_path, representation)
     if Tn.shape[0] < 2:
@@ -108,38 +134,30 @@ def solve_path(
     if not (isinstance(max_step, int | float) and math.isfinite(max_step) and max_step > 0):
         raise ValueError(f"max_step: expected a number > 0 (radians), got {max_step!r}")
     robot = solver.robot
-    facts = _facts(robot)
-    d = Tn[:, :3, 3] - facts["center"]
-    ratio = np.sqrt((d * d).sum(axis=1)) / facts["radius"]
-    worst = int(ratio.argmax())
-    if ratio[worst] >= MM_HINT_FACTOR:
-        raise ValueError(
-            f"T_path: waypoint {worst} lies {ratio[worst]:.3g} x beyond the reach of {robot.name} "
-            f"({facts['radius'] * 1e3:.0f} mm); were the positions given in millimetres? nik expects metres"
-        )
-    reachable = ratio <= 1.0 + REACH_SLACK
-    q0 = _q_start(robot, facts, q_start)
-    from nik.lm.compiled import CompiledLM
-
-    lm = CompiledLM.of(robot)
+    plan = _plan(solver, tol_pos, tol_rot, seed)
+    model = model_of(robot, plan.lm_cfg)
+    reachable, every = model.reach(Tn)
+    reach_note = None if every else model.unreachable_message(Tn, reachable)
+    q0 = _q_start(robot, model, q_start)
+    run = _Run(plan, model, Tn, q0, reachable)
     follows = None
-    if solver.closed_form and q0 is not None:  # the quick answer: LM from q_start along the path, if it follows
-        follows = _follows_from_start(lm, facts, Tn, q0, reachable, tol_pos, tol_rot, seed, max_step)
+    if solver.closed_form and q0 is not None and run.refine:  # the quick answer: LM from q_start, if it follows
+        follows = _follows_from_start(run, max_step)
     if follows is not None:
         q, its, found, source = *follows, None, "q_start"
     elif solver.closed_form:
-        q, its, found, source = _closed_form_path(robot, lm, facts, Tn, q0, reachable, tol_pos, tol_rot, seed)
+        q, its, found, source = _closed_form_path(run)
     else:
-        q, its, source = _chain_path(solver, lm, Tn, q0, reachable, tol_pos, tol_rot, seed)
+        q, its, source = _chain_path(run)
         found = None
-    pos, rot = _errors(lm, Tn, q)
-    inside = ((q >= facts["lo"] - 1e-9) & (q <= facts["hi"] + 1e-9)).all(axis=1)
+    pos, rot = _errors(model, Tn, q)
+    inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
     success = (pos <= tol_pos) & (rot <= tol_rot) & inside
     reasons = [""] * len(success)
     for i in np.nonzero(~success)[0]:
         why = "" if found is None else found[i]
         reasons[i] = why or ("out of reach" if not reachable[i] else "not reached")
-    report = _report(robot, q, q0, success, reasons, max_step)
+    report = _report(robot, q, q0, success, reasons, max_step, reach_note)
     if report.warning is not None:
         warnings.warn(report.warning, UserWarning, stacklevel=3)
     like = dict(dtype=dtype, device=device)
@@ -156,7 +174,7 @@ def solve_path(
 
 
 # ---------------------------------------------------------------------------
-# input
+# input, settings
 # ---------------------------------------------------------------------------
 def _poses(T_path, representation) -> tuple[np.ndarray, torch.dtype, torch.device]:
     """``(T: (N, 4, 4) float64 C-contiguous, dtype, device)`` of the waypoints, checked by
@@ -172,162 +190,206 @@ def _poses(T_path, representation) -> tuple[np.ndarray, torch.dtype, torch.devic
     return Tn, dtype or checked_dtype, device
 
 
-def _facts(robot) -> dict:
-    """Per robot, once: limits, the joints that may turn past +-pi, the reach bound, the compiled closed form."""
-    facts = _ROBOTS.get(robot)
-    if facts is None:
-        lo, hi = robot.limits.double().numpy().T.copy()
-        prismatic = robot.prismatic.numpy().astype(bool)
-        facts = {
-            "lo": lo,
-            "hi": hi,
-            "prismatic": prismatic,
-            "wraps": ((hi - lo) > 2 * math.pi + WRAP_MARGIN) & ~prismatic,
-            "center": reach_center(robot).double().numpy(),
-            "radius": max(reach_radius(robot), 1e-300),
-            "closed": None,
-        }
-        from nik.analytic import family
-
-        if family(robot) is not None:
-            from nik.analytic.solve import closed_form
-            from nik.kernels.closed import closed_form_array
-
-            facts["closed"] = closed_form_array(closed_form(robot))
-        _ROBOTS[robot] = facts
-    return facts
+def _plan(solver, tol_pos: float, tol_rot: float, seed: int):
+    """The solver's :class:`~nik.ik.plan.Plan` of a compiled call (:meth:`nik.IKSolver.plan`: the network that
+    guesses, the LM config, refine, fallback), refused in one line where a path cannot follow it."""
+    if solver.backend == "torch":
+        raise ValueError(
+            "solve_path: the path's chains run on the compiled kernels (each waypoint seeded by the one before); "
+            "this solver forces backend='torch'"
+        )
+    if solver.refine == "none" and not solver.closed_form:
+        raise ValueError(
+            f"solve_path: refine='none' leaves {solver.robot.name} (no closed form) without a way to follow the path; "
+            "use refine='lm'"
+        )
+    return solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
 
 
-_ROBOTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+@dataclass
+class _Run:
+    """One call: its plan (:mod:`nik.ik.plan`), the robot's model, the waypoints ``T (N, 4, 4)``, ``q0 (dof,)`` or
+    None and ``reachable (N,)``."""
+
+    plan: Any
+    model: Any
+    T: np.ndarray
+    q0: np.ndarray | None
+    reachable: np.ndarray
+
+    @property
+    def tol_pos(self) -> float:
+        return self.plan.tol_pos
+
+    @property
+    def tol_rot(self) -> float:
+        return self.plan.tol_rot
+
+    @property
+    def seed(self) -> int:
+        return self.plan.seed
+
+    @property
+    def refine(self) -> bool:
+        """False with ``refine="none"``: the closed form's branches as they are, no LM."""
+        return self.plan.refine != "none"
+
+    @property
+    def restarts(self) -> int:
+        """Uniform restarts a waypoint the chain does not reach may draw: :data:`PATH_RESTARTS` with
+        ``fallback="multistart"``, else none."""
+        return PATH_RESTARTS if self.plan.fallback == "multistart" else 0
+
+    def chains(self, T, starts, reachable, *, pull: float, restarts: int, seed: int | None = None):
+        """:func:`nik.ik.path_kernels.path_chains` along ``T`` from ``starts: (K, dof)``: ``q (K, N, dof)``,
+        iterations ``(K, N)``, ok ``(K, N)`` (LM options: the model's LM with this call's tolerances)."""
+        from nik.ik.path_kernels import path_chains
+        from nik.kernels.lm import seed_state
+
+        lm = self.model.lm
+        K, n, N = starts.shape[0], starts.shape[1], T.shape[0]
+        opts, iopts = lm.options(self.tol_pos, self.tol_rot)
+        q = np.empty((K, N, n))
+        its, ok = np.empty((K, N), dtype=np.int64), np.empty((K, N), dtype=bool)
+        pos, rot = np.empty((K, N)), np.empty((K, N))
+        budget = np.where(reachable, restarts, 0).astype(np.int64)
+        path_chains(
+            lm.G, lm.joints, np.ascontiguousarray(T), np.ascontiguousarray(starts, dtype=np.float64), opts, iopts,
+            budget, seed_state(self.seed if seed is None else seed), pull, PATH_PULL_CAP if pull > 0 else 0.0, q,
+            its, ok, pos, rot,
+        )  # fmt: skip
+        return q, its, ok
 
 
-def _q_start(robot, facts, q_start) -> np.ndarray | None:
-    """``q_start`` as ``(dof,)`` float64, checked: length, finite, inside the limits (ValueError naming the joint)."""
+def _q_start(robot, model, q_start) -> np.ndarray | None:
+    """``q_start`` as ``(dof,)`` float64: one configuration, checked as ``q_near`` is
+    (:func:`nik.ik.targets.q_near_array`: finite, degrees warned about), then inside the limits (ValueError naming
+    the joint: the arm is there)."""
     if q_start is None:
         return None
-    if isinstance(q_start, torch.Tensor):
-        q_start = q_start.detach().cpu().double().numpy()
-    try:
-        q = np.asarray(q_start, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"q_start: expected {robot.dof} numbers (radians), got {type(q_start).__name__}") from err
-    if q.shape != (robot.dof,):
-        raise ValueError(f"q_start: expected shape ({robot.dof},) for {robot.name}, got {q.shape}")
-    if not np.isfinite(q).all():
-        raise ValueError(f"q_start: joint {int(np.argmin(np.isfinite(q)))} is NaN or inf")
-    lo, hi = facts["lo"], facts["hi"]
-    out = np.nonzero((q < lo - 1e-9) | (q > hi + 1e-9))[0]
+    shape = tuple(q_start.shape) if isinstance(q_start, torch.Tensor | np.ndarray) else np.shape(q_start)
+    if shape != (robot.dof,):
+        raise ValueError(f"q_start: expected shape ({robot.dof},) for {robot.name}, got {shape}")
+    q = q_near_array(q_start, 1, robot, name="q_start")[0]
+    out = np.nonzero((q < model.lo - 1e-9) | (q > model.hi + 1e-9))[0]
     if out.size:
         j = int(out[0])
-        prismatic = bool(robot.prismatic[j])
-        f, unit = (1e3, "mm") if prismatic else (180.0 / math.pi, "deg")
+        f, unit = (1e3, "mm") if model.prismatic[j] else (180.0 / math.pi, "deg")
         raise ValueError(
             f"q_start: joint {j} ({robot.joint_names[j]}) = {q[j] * f:.6g} {unit} lies outside its limits "
-            f"[{lo[j] * f:.6g}, {hi[j] * f:.6g}] {unit}"
+            f"[{model.lo[j] * f:.6g}, {model.hi[j] * f:.6g}] {unit}"
         )
-    return q
+    return np.ascontiguousarray(q)
 
 
-def _errors(lm, Tn: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _errors(model, Tn: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Position (m) and rotation (rad) errors of ``q: (N, dof)`` against ``Tn: (N, 4, 4)`` (compiled FK)."""
     from nik.kernels.lm import pose_errors
 
     pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
-    pose_errors(lm.G, lm.joints, Tn, np.ascontiguousarray(q), pos, rot)
+    pose_errors(model.G, model.joints, Tn, np.ascontiguousarray(q), pos, rot)
     return pos, rot
 
 
-def _options(lm, tol_pos: float, tol_rot: float) -> tuple[np.ndarray, np.ndarray]:
-    """The compiled LM's options with the call's tolerances (the seed is the first start)."""
-    from nik.kernels import lm as klm
-
-    opts, iopts = lm.opts.copy(), lm.iopts.copy()
-    opts[klm.TOL_POS], opts[klm.TOL_ROT] = tol_pos, tol_rot
-    iopts[klm.FIRST_STARTS] = 0
-    return opts, iopts
-
-
-def _chains(lm, Tn, starts, reachable, tol_pos, tol_rot, seed, *, pull: float, restarts: int = PATH_RESTARTS):
-    """:func:`nik.ik.path_kernels.path_chains` from ``starts: (K, dof)``: ``q (K, N, dof)``, iterations, ok."""
-    from nik.ik.path_kernels import path_chains
-    from nik.kernels.lm import seed_state
-
-    K, n, N = starts.shape[0], starts.shape[1], Tn.shape[0]
-    opts, iopts = _options(lm, tol_pos, tol_rot)
-    q = np.empty((K, N, n))
-    its, ok = np.empty((K, N), dtype=np.int64), np.empty((K, N), dtype=bool)
-    pos, rot = np.empty((K, N)), np.empty((K, N))
-    budget = np.where(reachable, restarts, 0).astype(np.int64)
-    path_chains(
-        lm.G, lm.joints, Tn, np.ascontiguousarray(starts, dtype=np.float64), opts, iopts, budget,
-        seed_state(seed), pull, PATH_PULL_CAP if pull > 0 else 0.0, q, its, ok, pos, rot,
-    )  # fmt: skip
-    return q, its, ok
-
-
-def _follows_from_start(lm, facts, Tn, q0, reachable, tol_pos, tol_rot, seed, max_step):
+def _follows_from_start(run: _Run, max_step: float):
     """``(q (N, dof), iterations (N,))`` of the LM chain from ``q0`` when it follows the whole path smoothly
     (:data:`PATH_FOLLOW_STEP`), else None."""
-    q, its, ok = _chains(lm, Tn, q0[None], reachable, tol_pos, tol_rot, seed, pull=0.0, restarts=0)
+    q, its, ok = run.chains(run.T, run.q0[None], run.reachable, pull=0.0, restarts=0)
     q, its = q[0], its[0]
     if not ok.all():
         return None
-    steps = np.abs(np.diff(np.concatenate([q0[None], q]), axis=0)).max()
-    inside = ((q >= facts["lo"] - 1e-9) & (q <= facts["hi"] + 1e-9)).all()
+    steps = np.abs(np.diff(np.concatenate([run.q0[None], q]), axis=0)).max()
+    inside = ((q >= run.model.lo - 1e-9) & (q <= run.model.hi + 1e-9)).all()
     return (q, its) if inside and steps <= min(PATH_FOLLOW_STEP, max_step) else None
 
 
 # ---------------------------------------------------------------------------
 # arms with a closed form: every branch at every waypoint, the choice by dynamic programming
 # ---------------------------------------------------------------------------
-def _closed_form_path(robot, lm, facts, Tn, q0, reachable, tol_pos, tol_rot, seed):
-    """``(q (N, 6), iterations (N,), reasons, source)`` of a closed-form arm."""
+def _closed_form_path(run: _Run):
+    """``(q (N, 6), iterations (N,), reasons, source)`` of a closed-form arm: the guess stage (every branch of every
+    waypoint), the choice over the whole path, then the refine stage (LM from the chosen branch where it misses the
+    tolerance: an approximate closed form, :mod:`nik.ik.model`; LM from the neighbour's answer where no branch
+    serves)."""
     from nik.ik.path_kernels import path_dp
 
+    model, Tn, q0 = run.model, run.T, run.q0
     N = Tn.shape[0]
-    closed = facts["closed"]
-    if closed is not None:
-        from nik.kernels.closed import solutions
-
-        cand, valid = np.empty((N, 8, 6)), np.empty((N, 8), dtype=bool)
-        solutions(closed, lm.G, lm.joints, tol_pos, tol_rot, Tn, cand, valid)
-    else:  # an arm that fits its family only within a tolerance: the torch closed form with its Newton polish
-        from nik.analytic import solve
-
-        c, v = solve(robot, torch.from_numpy(Tn), tol_pos=tol_pos, tol_rot=tol_rot)
-        cand, valid = np.ascontiguousarray(c.numpy()), np.ascontiguousarray(v.numpy())
-    wraps = facts["wraps"]
+    # valid: inside the limits and within the call's tolerance by FK (an approximate closed form: within the model's
+    # check, the one policy of nik.ik.model; LM then polishes what misses the call's tolerance)
+    cand, valid = (
+        model.closed_solutions(Tn) if model.approximate else model.closed_solutions(Tn, run.tol_pos, run.tol_rot)
+    )
+    wraps = model.wraps
     choice = np.empty(N, dtype=np.int64)
     start = np.zeros(6) if q0 is None else q0
     path_dp(cand, valid, wraps, start, q0 is not None, 1e-9, choice)
     have = choice >= 0
-    reasons = [""] * N
-    if not have.any():  # no waypoint has a valid branch: LM along the path from q_start or a multistart
-        first = _first_answer(lm, Tn, q0, reachable, tol_pos, tol_rot, seed)
-        q, its, _ = _chains(lm, Tn, first[None], reachable, tol_pos, tol_rot, seed, pull=0.0, restarts=0)
+    its = np.zeros(N, dtype=np.int64)
+    if not have.any() and run.refine:  # no waypoint has a valid branch: LM along the path from q_start or a start
+        first = _first_answer(run)
+        q, its, _ = run.chains(Tn, first[None], run.reachable, pull=0.0, restarts=0)
         q, its = q[0], its[0]
+    elif not have.any():  # refine="none": the clamped branch nearest each pose (nik.kernels.closed.pick)
+        q = _nearest_clamped(model, Tn, cand)
     else:
         q = cand[np.arange(N), np.maximum(choice, 0)]
         if wraps.any():
-            q, fits = _unwrap(q, have, wraps, q0, facts["lo"], facts["hi"])
+            q, fits = _unwrap(q, have, wraps, q0, model.lo, model.hi)
             if not fits:  # some run cannot stay inside its limits: choose the whole turns with the branches
-                q = _with_turns(cand, valid, have, wraps, q0, facts["lo"], facts["hi"])
-        its = np.zeros(N, dtype=np.int64)
-        if not have.all():
-            q, its = _fill_gaps(lm, Tn, q, have, reachable, tol_pos, tol_rot, seed)
+                q = _with_turns(cand, valid, have, wraps, q0, model.lo, model.hi)
+        if run.refine:
+            q, its = _polish(run, q, have)
+            if not have.all():
+                q, its = _fill_gaps(run, q, its, have)
+        elif not have.all():
+            gaps = np.nonzero(~have)[0]
+            q[gaps] = _nearest_clamped(model, Tn[gaps], cand[gaps])
+    reasons = [""] * N
     for i in np.nonzero(~have)[0]:
-        reasons[i] = _closed_form_reason(lm, Tn[i], cand[i], reachable[i], tol_pos, tol_rot)
+        reasons[i] = _closed_form_reason(run, i, cand[i])
     return q, its, reasons, "analytic"
 
 
-def _closed_form_reason(lm, Ti, cand_i, reachable_i, tol_pos, tol_rot) -> str:
-    """Why no branch serves a waypoint: some reaches the pose outside the limits, or none reaches it at all."""
-    if not reachable_i:
+def _nearest_clamped(model, T: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """``(B, 6)``: per pose of ``T: (B, 4, 4)``, the branch of ``cand: (B, 8, 6)`` that comes nearest it once clamped
+    into the limits (the closed form's one rule for a pose no branch reaches: :func:`nik.kernels.closed.pick`)."""
+    from nik.ik.guesses import LIMIT_ROUNDING
+    from nik.kernels.closed import pick
+
+    out = np.empty((T.shape[0], cand.shape[2]))
+    none = np.zeros((T.shape[0], 8), dtype=bool)
+    T, near = np.ascontiguousarray(T), np.zeros_like(out)
+    pick(np.ascontiguousarray(cand), none, model.G, model.joints, T, near, False, LIMIT_ROUNDING, out)
+    return out
+
+
+def _polish(run: _Run, q: np.ndarray, have: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The refine stage on the chosen branches: LM (no restarts) from each one that misses the call's tolerance (an
+    approximate closed form's branch, checked at :data:`nik.ik.model.APPROXIMATE_CHECK_TOL`), kept where better."""
+    its = np.zeros(q.shape[0], dtype=np.int64)
+    if not run.model.approximate:
+        return q, its
+    pos, rot = _errors(run.model, run.T, q)
+    idx = np.nonzero(have & ((pos > run.tol_pos) | (rot > run.tol_rot)))[0]
+    if idx.size:
+        res = run.model.lm.solve(
+            run.T[idx], q[idx], tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False
+        )
+        better = score(res.pos_err, res.rot_err) <= score(pos[idx], rot[idx])
+        q = q.copy()
+        q[idx[better]] = res.q[better]
+        its[idx] = res.iterations
+    return q, its
+
+
+def _closed_form_reason(run: _Run, i: int, cand_i: np.ndarray) -> str:
+    """Why no branch serves waypoint ``i``: some reaches the pose outside the limits, or none reaches it at all."""
+    if not run.reachable[i]:
         return "out of reach"
-    pos, rot = _errors(lm, np.repeat(Ti[None], 8, axis=0), cand_i)  # the branches' joints before the limits
-    return (
-        "beyond a joint limit on every branch" if bool(((pos <= tol_pos) & (rot <= tol_rot)).any()) else "out of reach"
-    )
+    pos, rot = _errors(run.model, np.repeat(run.T[i][None], 8, axis=0), cand_i)  # the branches before the limits
+    near = bool(((pos <= run.tol_pos) & (rot <= run.tol_rot)).any())
+    return "beyond a joint limit on every branch" if near else "out of reach"
 
 
 def _unwrap(q, have, wraps, q0, lo, hi) -> tuple[np.ndarray, bool]:
@@ -376,16 +438,17 @@ def _with_turns(cand, valid, have, wraps, q0, lo, hi) -> np.ndarray:
     return big[np.arange(N), np.maximum(choice, 0)]
 
 
-def _fill_gaps(lm, Tn, q, have, reachable, tol_pos, tol_rot, seed):
+def _fill_gaps(run: _Run, q: np.ndarray, its: np.ndarray, have: np.ndarray):
     """Waypoints without a valid branch: LM seeded by the answer next to them (the previous one; for a leading
-    gap, the first waypoint that has a branch, walking back), without uniform restarts (the closed form found no
-    solution there: a restart could only jump). Their best effort, flagged by the final check."""
-    N = q.shape[0]
-    kw = {"pull": 0.0, "restarts": 0}
-    its = np.zeros(N, dtype=np.int64)
+    gap, the first waypoint that has a branch, walking back), uniform restarts only with ``fallback="multistart"``
+    (the closed form found no solution there: a restart could only jump). Their best effort, flagged by the final
+    check."""
+    N, Tn, reachable = q.shape[0], run.T, run.reachable
+    kw = {"pull": 0.0, "restarts": run.restarts}
+    its = its.copy()
     first = int(np.argmax(have))
     for i in range(first - 1, -1, -1):  # a leading gap, walking back from the first solved waypoint
-        qi, it, _ = _chains(lm, Tn[i : i + 1], q[i + 1][None], reachable[i : i + 1], tol_pos, tol_rot, seed, **kw)
+        qi, it, _ = run.chains(Tn[i : i + 1], q[i + 1][None], reachable[i : i + 1], **kw)
         q[i], its[i] = qi[0, 0], it[0, 0]
     i = first + 1
     while i < N:  # the other gaps, each run of missing waypoints in one compiled chain
@@ -395,68 +458,97 @@ def _fill_gaps(lm, Tn, q, have, reachable, tol_pos, tol_rot, seed):
         j = i
         while j < N and not have[j]:
             j += 1
-        qi, it, _ = _chains(lm, Tn[i:j], q[i - 1][None], reachable[i:j], tol_pos, tol_rot, seed + i, **kw)
+        qi, it, _ = run.chains(Tn[i:j], q[i - 1][None], reachable[i:j], seed=run.seed + i, **kw)
         q[i:j], its[i:j] = qi[0], it[0]
         i = j
     return q, its
 
 
 # ---------------------------------------------------------------------------
-# other arms: LM chains seeded by the predecessor, the best chain chosen
+# other arms: LM chains seeded by the predecessor, the choice over the whole path
 # ---------------------------------------------------------------------------
-def _first_answer(lm, Tn, q0, reachable, tol_pos, tol_rot, seed) -> np.ndarray:
+def _first_answer(run: _Run) -> np.ndarray:
     """A start for a single chain: ``q0``, else LM from uniform starts at the first waypoint."""
-    if q0 is not None:
-        return q0
-    run = lm.solve(Tn[:1], None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, reachable=reachable[:1])
-    return run.q[0]
+    if run.q0 is not None:
+        return run.q0
+    res = run.model.lm.solve(
+        run.T[:1], None, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, reachable=run.reachable[:1]
+    )
+    return res.q[0]
 
 
-def _chain_path(solver, lm, Tn, q0, reachable, tol_pos, tol_rot, seed):
-    """``(q (N, dof), iterations (N,), source)`` of an arm without a closed form."""
-    robot = solver.robot
-    pull = PATH_PULL if robot.dof > 6 else 0.0
-    if q0 is not None:
-        q, its, _ = _chains(lm, Tn, q0[None], reachable, tol_pos, tol_rot, seed, pull=pull)
+def _chain_path(run: _Run):
+    """``(q (N, dof), iterations (N,), source)`` of an arm without a closed form: chains of LM from the start
+    postures (candidates at every waypoint: each chain's answer), the choice over the whole path by
+    :func:`nik.ik.path_kernels.path_dp` over those candidates."""
+    from nik.ik.path_kernels import path_dp
+
+    pull = PATH_PULL if run.model.dof > 6 else 0.0
+    kw = {"pull": pull, "restarts": run.restarts}
+    if run.q0 is not None:
+        q, its, _ = run.chains(run.T, run.q0[None], run.reachable, **kw)
         return q[0], its[0], "q_start"
-    starts, sources = _start_postures(solver, lm, Tn, reachable, tol_pos, tol_rot, seed)
-    q, its, ok = _chains(lm, Tn, starts, reachable, tol_pos, tol_rot, seed, pull=pull)
-    steps = np.abs(np.diff(q, axis=1)).max(axis=2)  # (K, N - 1)
-    fails = (~ok).sum(axis=1)
-    motion = np.abs(np.diff(q, axis=1)).sum(axis=(1, 2))
-    best = int(np.lexsort((motion, steps.max(axis=1), fails))[0])
-    return q[best], its[best], sources[best]
+    starts, sources = _start_postures(run)
+    q, its, ok = run.chains(run.T, starts, run.reachable, **kw)
+    if q.shape[0] == 1:
+        return q[0], its[0], sources[0]
+    N = run.T.shape[0]
+    cand = np.ascontiguousarray(q.transpose(1, 0, 2))  # (N, K, dof): every chain's answer at every waypoint
+    choice = np.empty(N, dtype=np.int64)
+    path_dp(cand, np.ascontiguousarray(ok.T), run.model.wraps, np.zeros(run.model.dof), False, 1e-9, choice)
+    if (choice < 0).all():  # no chain reaches any waypoint: the chain with the least largest step
+        steps = np.abs(np.diff(q, axis=1)).max(axis=(1, 2))
+        best = int(np.argmin(steps))
+        return q[best], its[best], sources[best]
+    chosen = np.nonzero(choice >= 0)[0]
+    for i in np.nonzero(choice < 0)[0]:  # a waypoint no chain reaches: the chain chosen before it continues
+        before = chosen[chosen < i]
+        choice[i] = choice[before[-1]] if before.size else choice[chosen[0]]
+    rows = np.arange(N)
+    return q[choice, rows], its[choice, rows], sources[int(choice[0])]
 
 
-def _start_postures(solver, lm, Tn, reachable, tol_pos, tol_rot, seed) -> tuple[np.ndarray, list[str]]:
+def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
     """Distinct solutions of the first waypoint: ``(K, dof)`` and where each came from (``network`` for the
-    network's hypotheses polished by LM, ``multistart`` for LM from uniform starts)."""
+    network's hypotheses, the guess stage's packed network, polished by LM; ``multistart`` for LM from uniform
+    starts)."""
+    lm, T0, tol = run.model.lm, run.T[:1], {"tol_pos": run.tol_pos, "tol_rot": run.tol_rot, "seed": run.seed}
     seeds, sources = [], []
-    net = solver.net
-    if net is not None and hasattr(net, "hypotheses"):
-        with torch.no_grad():
-            hyp = net.hypotheses(torch.from_numpy(Tn[:1]))[0].double().cpu().numpy()
+    hyp = _hypotheses(run)
+    if hyp is not None:
         seeds.append(hyp)
         sources += ["network"] * hyp.shape[0]
-    T0 = np.repeat(Tn[:1], PATH_STARTS, axis=0)
-    uni = lm.solve(T0, None, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, restarts=False)
+    uni = lm.solve(np.repeat(T0, PATH_STARTS, axis=0), None, restarts=False, **tol)
     seeds.append(uni.q)
     sources += ["multistart"] * PATH_STARTS
     seeds = np.concatenate(seeds)
-    T0 = np.repeat(Tn[:1], seeds.shape[0], axis=0)
-    run = lm.solve(T0, seeds, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, restarts=False)
-    order = np.argsort(~run.converged, kind="stable")  # reached ones first, network before uniform
-    q = run.q[order]
+    res = lm.solve(np.repeat(T0, seeds.shape[0], axis=0), seeds, restarts=False, **tol)
+    order = np.argsort(~res.converged, kind="stable")  # reached ones first, network before uniform
+    q = res.q[order]
     close = np.abs(q[:, None] - q[None]).max(axis=-1) <= PATH_DEDUPE  # (K, K)
     kept = order[~np.triu(close, k=1).any(axis=0)]  # drop each answer close to an earlier one
-    return run.q[kept], [sources[i] for i in kept]
+    return res.q[kept], [sources[i] for i in kept]
+
+
+def _hypotheses(run: _Run) -> np.ndarray | None:
+    """``(K, dof)`` the plan's network's hypotheses for the first waypoint, ranked by FK: the compiled backend's
+    guess stage (the packed network, targets in the arm's frame where the network was made for the bare arm), or
+    None where the plan has no network."""
+    if run.plan.net is None:
+        return None
+    from nik.ik.backends import Job, compiled_backend
+
+    be, m, T0 = compiled_backend(), run.model, run.T[:1]
+    job = Job(be, m.robot, T0, run.reachable[:1], None, run.tol_pos, run.tol_rot, torch.float64, model=m)
+    return np.ascontiguousarray(be.network(run.plan, job)[0][0])
 
 
 # ---------------------------------------------------------------------------
 # the report
 # ---------------------------------------------------------------------------
-def _report(robot, q, q0, success, reasons, max_step) -> PathReport:
-    """Steps, the largest one and where, reconfigurations, and the warning about the first problem."""
+def _report(robot, q, q0, success, reasons, max_step, reach_note=None) -> PathReport:
+    """Steps, the largest one and where, reconfigurations, and the warning about the first problem (with the reach
+    bound's line, ``reach_note``, where waypoints lie provably out of reach)."""
     prev = np.concatenate([(q[:1] if q0 is None else q0[None]), q[:-1]])
     dq = np.abs(q - prev)
     steps, joints = dq.max(axis=1), dq.argmax(axis=1)
@@ -487,6 +579,8 @@ def _report(robot, q, q0, success, reasons, max_step) -> PathReport:
             f"solve_path on {robot.name}: {what}; {n_fail} waypoint(s) not reached, {int(reconf.sum())} step(s) above "
             f"max_step, largest step {steps[at] * (180.0 / math.pi):.1f} deg into waypoint {at}"
         )
+        if reach_note is not None:
+            warning += f"; {reach_note}"
     return PathReport(
         steps=torch.from_numpy(steps),
         step_joints=torch.from_numpy(joints),

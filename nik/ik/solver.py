@@ -230,7 +230,7 @@ class IKSolver:
                 both from :mod:`nik.tolerances`, the tolerance every table measures).
             seed: seeds every random choice (same seed, same answer).
             q_near: ``(dof,)`` or ``(B, dof)`` current configuration, radians: among the solutions
-                found, return the one nearest to it (joint motion, see :func:`nik.ik.guesses.nearest_solution`).
+                found, return the one nearest to it (joint motion, see :func:`nik.kernels.closed.pick`).
                 Closed-form arms pick among the 8 closed-form solutions; otherwise the refinement is
                 also run from ``q_near`` itself and the successful answer nearest ``q_near`` is kept.
             max_iters: iteration limit of the refinement (default: the method's config).

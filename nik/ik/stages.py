@@ -37,6 +37,7 @@ from nik.ik.guesses import analytic_guess, dedupe, multistart_guess, network_gue
 from nik.ik.plan import Plan
 from nik.ik.result import IKResult
 from nik.poses import pose_error
+from nik.tolerances import score
 
 __all__ = [
     "Answers",
@@ -81,7 +82,7 @@ class Answers:
 
     def score(self):
         """``(B,)``: the error used to compare two answers (metres + 0.1 x radians)."""
-        return self.pos_err + 0.1 * self.rot_err
+        return score(self.pos_err, self.rot_err)
 
     def merge(self, job: Job, idx, other: Refined, *, strict: bool) -> Answers:
         """In place: target ``idx[i]`` takes row ``i`` of ``other`` where that is better (``strict``: a lower
@@ -195,7 +196,7 @@ def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     ok_b = (res.pos_err <= job.tol_pos) & (res.rot_err <= job.tol_rot)
     dist_a = be.norm(answers.q - job.q_near)
     dist_b = be.norm(res.q - job.q_near)
-    worse_a = answers.score() > (res.pos_err + 0.1 * res.rot_err)
+    worse_a = answers.score() > score(res.pos_err, res.rot_err)
     take_b = (ok_b & (~ok_a | (dist_b < dist_a))) | (~ok_a & ~ok_b & worse_a)
     return answers.take(job, idx, res, take_b)
 

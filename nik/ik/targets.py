@@ -187,9 +187,9 @@ def _checked_poses(a: np.ndarray, representation: str | None) -> np.ndarray | No
     return a if kp.poses_ok(a, ORTHONORMAL_TOL) else None
 
 
-def q_near_array(q_near, B: int, robot) -> np.ndarray | None:
+def q_near_array(q_near, B: int, robot, *, name: str = "q_near") -> np.ndarray | None:
     """``q_near`` as ``(B, dof)`` float64 numpy for the compiled backend (None stays None); raises and warns as
-    :func:`as_q_near`."""
+    :func:`as_q_near` (``name`` in its messages: ``q_start`` of a path is checked here too)."""
     if q_near is None:
         return None
     dof = robot.dof
@@ -210,7 +210,7 @@ def q_near_array(q_near, B: int, robot) -> np.ndarray | None:
     if a is None:
         probe = torch.empty(B, 4, 4, dtype=torch.float64)
         lim = robot.limits
-        return as_q_near(q_near, probe, dof, prismatic=robot.prismatic, limits=lim).numpy().copy()
+        return as_q_near(q_near, probe, dof, prismatic=robot.prismatic, limits=lim, name=name).numpy().copy()
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
@@ -226,7 +226,13 @@ def check_tolerances(tol_pos: float, tol_rot: float) -> None:
 
 
 def as_q_near(
-    q_near, T: torch.Tensor, dof: int, *, prismatic: torch.Tensor | None = None, limits: torch.Tensor | None = None
+    q_near,
+    T: torch.Tensor,
+    dof: int,
+    *,
+    prismatic: torch.Tensor | None = None,
+    limits: torch.Tensor | None = None,
+    name: str = "q_near",
 ) -> torch.Tensor | None:
     """``q_near`` (None, ``(dof,)`` or ``(B, dof)``, radians; a tensor, array or list) as ``(B, dof)`` in the
     dtype and device of ``T: (B, 4, 4)``; None stays None. Raises ``ValueError`` naming a bad shape or value;
@@ -236,11 +242,11 @@ def as_q_near(
         return None
     B = T.shape[0]
     q = q_near if isinstance(q_near, torch.Tensor) else torch.as_tensor(np.asarray(q_near, dtype=np.float64))
-    validate_joints(q, dof, name="q_near")
-    warn_degrees(q, name="q_near", prismatic=prismatic, limits=limits, stacklevel=4)
+    validate_joints(q, dof, name=name)
+    warn_degrees(q, name=name, prismatic=prismatic, limits=limits, stacklevel=4)
     q = q.to(dtype=T.dtype, device=T.device)
     if q.ndim == 1:
         q = q.expand(B, -1)
     if q.shape != (B, dof):
-        raise ValueError(f"q_near: expected shape ({dof},) or ({B}, {dof}), got {tuple(q.shape)}")
+        raise ValueError(f"{name}: expected shape ({dof},) or ({B}, {dof}), got {tuple(q.shape)}")
     return q

@@ -2,8 +2,8 @@
 
 For one pose, the cost of the torch path is per-operation overhead, not arithmetic; these kernels
 do the same work as plain compiled loops over small float64 numpy arrays, in microseconds. They
-import nothing from nik (numpy and numba only), so every room may use them; the torch code stays
-the reference they are tested against.
+import nothing from nik but the constants of :mod:`nik.tolerances` (numpy and numba only), so every room may use
+them; the torch code stays the reference they are tested against.
 
 - :mod:`nik.kernels.chain`: the model arrays of a robot (:func:`chain_model`), FK of one
   configuration or a small batch, FK + geometric Jacobian;

@@ -9,9 +9,10 @@ Slot ``k`` is ``shoulder + 2 elbow + 4 wrist``, as there. The constants come in 
 imports nothing from nik. Arms that fit their family only within a tolerance (``polish``: three Newton steps
 after the closed form in ``nik.analytic.solve``) are not handled here (:func:`closed_form_array` says so).
 
-:func:`pick` then chooses one solution per target as ``nik.ik.guesses.analytic_guess`` does: the valid one
-nearest ``q_near`` (each angle moved by whole turns, within the limits, as near ``q_near`` as it goes), or the
-one whose worst joint is farthest inside its range; with none valid, the clamped solution nearest the target.
+:func:`pick` then chooses one solution per target (the one rule: ``nik.ik.guesses.analytic_guess`` calls it
+too): the valid one nearest ``q_near`` (each angle moved by whole turns, within the limits, as near ``q_near`` as
+it goes), or the one whose worst joint is farthest inside its range; with none valid, the clamped solution nearest
+the target.
 
 Scratch is allocated inside each kernel, per call: threads may share the constants and the model arrays.
 """
@@ -25,6 +26,7 @@ import numpy as np
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, _chain
 from nik.kernels.lm import _residual
+from nik.tolerances import SCORE_ROT_WEIGHT
 
 __all__ = ["FIELDS", "closed_form_array", "guess", "pick", "solutions"]
 
@@ -352,7 +354,7 @@ def _pick_one(q, valid, G, joints, P, q_near, use_near, limit_rounding, out, Tq,
                 cand[j] = min(max(q[s, j], joints[j, LOWER]), joints[j, UPPER])
             _chain(G, joints, cand, Tq)
             _, pos, rot = _residual(P, Tq, 1.0, e)
-            if pos + 0.1 * rot < best_score:
-                best, best_score = s, pos + 0.1 * rot
+            if pos + SCORE_ROT_WEIGHT * rot < best_score:
+                best, best_score = s, pos + SCORE_ROT_WEIGHT * rot
                 for j in range(n):
                     out[j] = cand[j]

@@ -25,6 +25,7 @@ from nik.kernels._jit import kernel
 from nik.kernels.chain import _chain
 from nik.kernels.lm import _bounds, _copy, _lm_one, _residual, _work_size
 from nik.kernels.mlp import mlp_forward
+from nik.tolerances import SCORE_ROT_WEIGHT
 
 __all__ = ["hypotheses", "lm_starts", "merge", "rank", "ranked_hypotheses"]
 
@@ -127,7 +128,7 @@ def rank(G, joints, Tt, starts, pos, rot):
             _bounds(joints, starts[b, k])
             _chain(G, joints, starts[b, k], T)
             _, p[k], r[k] = _residual(Tt[b], T, 1.0, e)
-            score[k] = p[k] + 0.1 * r[k]
+            score[k] = p[k] + SCORE_ROT_WEIGHT * r[k]
         for k in range(1, K):  # insertion sort: K is small
             s, pk, rk = score[k], p[k], r[k]
             _copy(starts[b, k], row)
@@ -159,8 +160,8 @@ def lm_starts(G, joints, Tt, starts, opts, iopts, seed, q, iterations, converged
         for k in range(starts.shape[1]):
             it, ok, p, r = _lm_one(G, joints, Tt[b], starts[b, k], opts, iopts, 0, rng, cand, work)
             total += it
-            if ok or p + 0.1 * r < best:
-                best = p + 0.1 * r
+            if ok or p + SCORE_ROT_WEIGHT * r < best:
+                best = p + SCORE_ROT_WEIGHT * r
                 _copy(cand, q[b])
                 pos[b], rot[b] = p, r
             if ok:
@@ -177,7 +178,7 @@ def merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, strict, tol_pos
     n = q.shape[1]
     for i in range(idx.shape[0]):
         b = idx[i]
-        new, old = rpos[i] + 0.1 * rrot[i], pos[b] + 0.1 * rot[b]
+        new, old = rpos[i] + SCORE_ROT_WEIGHT * rrot[i], pos[b] + SCORE_ROT_WEIGHT * rot[b]
         if new < old or (not strict and new == old):
             for j in range(n):
                 q[b, j] = rq[i, j]

@@ -29,6 +29,7 @@ import torch
 
 from nik.learn.modules import GradientIK
 from nik.nets.multi import BranchHeadsIKNet, BranchIKNet, MultiHypIKNet, hypothesis_pose_error
+from nik.tolerances import score
 
 #: Kinds trained on the hypothesis of each sample's branch label (the others: relaxed winner-takes-all).
 BRANCH_KINDS = ("branch_heads", "branch")
@@ -171,7 +172,7 @@ class MultiSolutionIK(GradientIK):
         net = self.net
         hyp = net.hypotheses(T).double()
         pos, rot = hypothesis_pose_error(net.robot, T.double(), hyp)
-        best = (pos + 0.1 * rot).argmin(-1, keepdim=True)
+        best = score(pos, rot).argmin(-1, keepdim=True)
         bpos, brot = pos.gather(1, best)[:, 0] * 1e3, torch.rad2deg(rot.gather(1, best)[:, 0])
         out = {
             "pos_mm": float(bpos.median()),

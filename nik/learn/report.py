@@ -26,6 +26,7 @@ import torch
 
 from nik.ik import IKSolver
 from nik.nets.multi import hypothesis_pose_error
+from nik.tolerances import score
 
 __all__ = ["NetworkReport", "network_report"]
 
@@ -74,7 +75,7 @@ def network_report(
     with torch.no_grad():
         hyp = net.hypotheses(T)
     pos, rot = hypothesis_pose_error(robot, T, hyp)
-    best = (pos + 0.1 * rot).argmin(-1, keepdim=True)
+    best = score(pos, rot).argmin(-1, keepdim=True)
     p, r = pos.gather(1, best)[:, 0] * 1e3, torch.rad2deg(rot.gather(1, best)[:, 0])
     raw = {
         "n": int(n_raw),

@@ -138,7 +138,7 @@ class CompiledLM:
         ``reachable: (B,)`` is False)."""
         klm = _klm()
         B, n = T.shape[0], self.joints.shape[0]
-        opts, iopts = self._options(klm, tol_pos, tol_rot, max_iters, q0 is None)
+        opts, iopts = self.options(tol_pos, tol_rot, max_iters, multistart=q0 is None)
         if q0 is None:
             q0 = np.zeros((B, n))
         elif q0.dtype != np.float64 or not q0.flags.c_contiguous:
@@ -169,7 +169,7 @@ class CompiledLM:
 
         klm = _klm()
         B, n = T.shape[0], self.joints.shape[0]
-        opts, iopts = self._options(klm, tol_pos, tol_rot, max_iters, False)
+        opts, iopts = self.options(tol_pos, tol_rot, max_iters)
         run = CompiledRun(
             np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
         )
@@ -178,8 +178,14 @@ class CompiledLM:
         lm_starts(self.G, self.joints, T, starts, opts, iopts, _seed(klm, seed), *astuple_run(run))
         return run
 
-    def _options(self, klm, tol_pos, tol_rot, max_iters, multistart) -> tuple[np.ndarray, np.ndarray]:
-        """The kernel's options with the call's tolerances, iteration limit and first starts (kept per value)."""
+    def options(
+        self, tol_pos: float, tol_rot: float, max_iters: int | None = None, *, multistart: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(opts, iopts)`` of the kernels (:func:`nik.kernels.lm.lm_options`) with the call's tolerances (metres,
+        radians), iteration limit of the first start (None: the config's) and, with ``multistart``, the best of
+        :data:`FIRST_STARTS` uniform configurations as the first start (else the given start is the first);
+        kept per value. Every caller of the LM kernels (this class, the paths' chains) takes them from here."""
+        klm = _klm()
         key = (float(tol_pos), float(tol_rot), max_iters, multistart)
         found = self._per_call.get(key)
         if found is None:

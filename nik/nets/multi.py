@@ -37,6 +37,7 @@ from torch import nn
 from nik.nets.mlp import ACTIVATIONS
 from nik.poses import POSE_DIMS, pose_error, pose_to_vector
 from nik.robots import Robot
+from nik.tolerances import score as pos_rot_score
 
 __all__ = ["KINDS", "BranchHeadsIKNet", "BranchIKNet", "MultiHypIKNet", "build_net", "hypothesis_pose_error"]
 
@@ -189,11 +190,11 @@ class _HypothesisNet(nn.Module):
 
     @torch.no_grad()
     def ranked_hypotheses(self, T: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Hypotheses sorted by FK pose error (position + 0.1 m/rad x rotation), best first:
+        """Hypotheses sorted by FK pose error (:func:`nik.tolerances.score`), best first:
         ``q: (B, K, dof)`` and that error ``(B, K)``."""
         q = self.hypotheses(T)
         pos, rot = hypothesis_pose_error(self.robot, T, q)
-        score = pos + 0.1 * rot
+        score = pos_rot_score(pos, rot)
         order = score.argsort(dim=-1)
         q = torch.gather(q, 1, order[..., None].expand(-1, -1, q.shape[-1]))
         return q, torch.gather(score, 1, order)

@@ -21,6 +21,7 @@ from nik.nets.multi import hypothesis_pose_error
 from nik.nets.pair import load_pair, pair_paths, read_pair_meta, save_pair
 from nik.nets.registry import SHIPPED_DIR, SINGLE_POSE, find_network, index, role_of
 from nik.robots import Robot, load_robot
+from nik.tolerances import score
 
 __all__ = [
     "PRETRAINED_DIR",
@@ -65,7 +66,7 @@ def validation_error(net, *, seed: int, n: int) -> dict:
     T = robot.fk(q)
     hyp = net.hypotheses(T)
     pos, rot = hypothesis_pose_error(robot, T, hyp)
-    best = (pos + 0.1 * rot).argmin(-1, keepdim=True)
+    best = score(pos, rot).argmin(-1, keepdim=True)
     out = {"seed": int(seed), "n": int(n)}
     for name, (p, r) in {
         "best": (pos.gather(1, best)[:, 0], rot.gather(1, best)[:, 0]),

@@ -9,8 +9,8 @@ What the page shows:
   errors (mm, deg) and the joint angles (deg; prismatic joints in mm) as text;
 - every solution of the pose (``IKSolver.solve_all``) as faint ghost arms (a check box), drawn when a drag
   ends;
-- with ``poses``: a slider over them; with ``path``: the path drawn, its joint trajectory (each waypoint
-  solved from the previous one, nearest it) played back with a slider and a play button.
+- with ``poses``: a slider over them; with ``path``: the path drawn, its joint trajectory
+  (:meth:`nik.IKSolver.solve_path`: continuous over the whole path) played back with a slider and a play button.
 
 Drags arrive on viser's thread pool; one worker thread solves the newest pose and drops the ones that a
 newer drag superseded, so the page never queues stale solves; the ghosts wait for the end of the drag.
@@ -347,12 +347,28 @@ class Viewer:
         )
 
     def _solve_path(self) -> None:
-        """Each waypoint solved nearest the previous answer: a joint trajectory without jumps where one exists."""
-        q = None  # the first waypoint: the solver's own choice
-        for T in self.path:
-            shown = self._solve(T, q)
-            self._path_shown.append(shown)
-            q = shown.q
+        """The path's trajectory from :meth:`nik.IKSolver.solve_path` (the choice over the whole path: no branch
+        jump where one can be avoided); each waypoint shown as the solve there, its time the call's share."""
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():  # unreached waypoints are shown on the page, not warned about
+            warnings.simplefilter("ignore", UserWarning)
+            res = self.solver.solve_path(
+                self.path, tol_pos=self.cfg.tol_pos, tol_rot=self.cfg.tol_rot, seed=self.cfg.seed
+            )
+        ms = 1e3 * (time.perf_counter() - t0) / len(self.path)
+        for i, T in enumerate(self.path):
+            self._path_shown.append(
+                ViewState(
+                    T,
+                    res.q[i].double(),
+                    bool(res.success[i]),
+                    bool(res.reachable[i]),
+                    float(res.pos_err[i]),
+                    float(res.rot_err[i]),
+                    res.source,
+                    ms,
+                )
+            )
 
     def _solve_and_show(self, T: torch.Tensor) -> None:
         self._show(self._solve(T, self._shown.q))

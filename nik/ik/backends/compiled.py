@@ -185,8 +185,8 @@ class CompiledBackend:
         static = model.driver_args.get(key)
         if static is None:  # what the driver takes from the plan and the model, gathered once per plan
             lm = model.lm
-            opts, iopts = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, False)
-            _, iopts_multi = lm._options(k.klm, job.tol_pos, job.tol_rot, plan.max_iters, True)
+            opts, iopts = lm.options(job.tol_pos, job.tol_rot, plan.max_iters)
+            _, iopts_multi = lm.options(job.tol_pos, job.tol_rot, plan.max_iters, multistart=True)
             p = packed or _NO_NET
             closed = model.closed if model.closed is not None else _NO_CLOSED
             check = model.closed_check[job.dtype] if model.closed_check is not None else 0.0

@@ -19,6 +19,7 @@ from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near
 from nik.poses import pose_error
 from nik.robots.reach import unreachable_message, within_reach
+from nik.tolerances import score
 
 __all__ = ["TorchBackend"]
 
@@ -63,7 +64,7 @@ class TorchBackend:
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
         """:meth:`nik.ik.stages.Answers.merge` with tensor operations (the failing count is counted again when
         asked: None)."""
-        new, old = res.pos_err + 0.1 * res.rot_err, answers.score()[idx]
+        new, old = score(res.pos_err, res.rot_err), answers.score()[idx]
         mask = new < old if strict else new <= old
         keep = idx[mask]
         answers.q[keep] = res.q[mask].to(answers.q.dtype)
@@ -107,7 +108,7 @@ class TorchBackend:
             Ta = _arm_targets(robot, T)
             hyp = net.hypotheses(Ta) if hasattr(net, "hypotheses") else robot.clamp(net.predict(Ta))[:, None]
             pos, rot = hypothesis_pose_error(robot, T, hyp)
-            order = (pos + 0.1 * rot).argsort(dim=-1)
+            order = score(pos, rot).argsort(dim=-1)
             hyp = torch.gather(hyp, 1, order[..., None].expand(-1, -1, hyp.shape[-1]))
         elif hasattr(net, "ranked_hypotheses"):
             hyp = net.ranked_hypotheses(T)[0]

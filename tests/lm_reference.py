@@ -1,11 +1,10 @@
-"""The Levenberg-Marquardt of :mod:`nik.lm.batched` for one pose in float64 numpy.
+"""A second implementation of nik's Levenberg-Marquardt for one pose, in plain float64 numpy: a test reference.
 
-For a single target the batched torch version is bound by per-op overhead (microseconds per
-tensor op, dozens of ops per iteration); here one iteration is a few small numpy calls. It is the
-same algorithm (same error, Marquardt-scaled damping, active set at the limits, stall test,
-in-place restarts for a failing target that is within reach). :meth:`nik.IKSolver.solve` used it for
-batches of one on the CPU until the compiled kernels (:mod:`nik.lm.compiled`, about 20x faster); it
-stays as a plain second implementation, measured against them in ``benchmarks/latency_kernels.py``.
+Not part of the package (no solver runs it): the same algorithm as the compiled kernel :mod:`nik.kernels.lm` and
+the batched torch :mod:`nik.lm.batched` (same error, Marquardt-scaled damping, active set at the limits, stall test,
+restarts for a failing target), written independently, so that tests and ``benchmarks/latency_kernels.py`` can
+compare the kernels with it. (It was ``nik.lm.single``, the one-pose path of :meth:`nik.IKSolver.solve` before the
+kernels.)
 
 The FK + Jacobian: joint ``i`` contributes ``M_i = Rz(q_i + o_i) G_i = c P_i + s Q_i + R_i`` with
 constant ``P_i, Q_i, R_i`` (rows of ``G_i`` mixed by the rotation), so all ``M_i`` come from three
