@@ -68,3 +68,75 @@ def test_remove_refuses_a_shipped_network_a_missing_one_and_a_path(tiny_panda):
     with pytest.raises(CheckpointError, match="plain file name"):
         remove("../mine")
     assert (user_dir() / "mine.safetensors").is_file()
+
+
+def _tiny(path, seed):
+    torch.manual_seed(seed)
+    net = MultiHypIKNet(nik.load_robot("panda"), hidden=[8], heads=2).eval()
+    return save(net, path, validation={"n": 50}).with_suffix(".safetensors")
+
+
+@pytest.mark.parametrize("what", ["install", "remove", "save"])
+def test_a_kill_at_any_instant_leaves_the_old_or_the_new_pair_whole(tmp_path, kill_at, monkeypatch, what):
+    # fault injection: the command dies before its k-th filesystem operation, for every k until one completes;
+    # the next run must find the old pair or the new one whole (checksum verified), nothing staged left over, and
+    # the command must work again. "save" is nik train's export (nik.nets.pair.save_pair), "install" also the
+    # copy of nik train --install.
+    from nik.nets import pair as pair_mod
+    from nik.nets.pair import load_pair, save_pair
+
+    a, b = _tiny(tmp_path / "a.safetensors", 0), _tiny(tmp_path / "b.safetensors", 1)
+    panda = nik.load_robot("panda")
+    folder = user_dir() if what != "save" else tmp_path / "runs"
+    dst = folder / "mine.safetensors"
+
+    def setup():
+        if what == "save":
+            save_pair(load_pair(a), dst)
+        else:
+            install(a, name="mine")
+
+    def act():
+        if what == "install":
+            install(b, name="mine")
+        elif what == "remove":
+            remove("mine")
+        else:
+            save_pair(load_pair(b), dst)
+
+    net_a, net_b = load_pair(a), load_pair(b)
+
+    def same(x, y):
+        return all(torch.equal(u, v) for u, v in zip(x.state_dict().values(), y.state_dict().values(), strict=True))
+
+    for k in range(100):
+        setup()
+        counter = kill_at(k)
+        try:
+            act()
+        except BaseException as err:  # noqa: B036 - the simulated kill is a BaseException
+            assert type(err).__name__ == "Killed", err
+        counter.undo()
+        with monkeypatch.context() as m:
+            m.setattr(pair_mod, "_pid_alive", lambda pid: False, raising=False)  # the killed run's process is gone
+            found = find_network(panda) if what != "save" else (dst if dst.exists() else None)
+            if found is not None and what == "save":
+                load_pair(found)  # what nik.IKSolver(checkpoint=...) does first
+        if what == "remove" and found is None or found is not None and found.parent != folder:
+            assert what == "remove", k  # the shipped panda network serves again: the pair is gone, not half
+        else:
+            got = load_pair(found)  # whole: its checksum verified
+            assert found == dst and (same(got, net_a) or same(got, net_b)), k
+        if what != "save":  # the registry's listing tidies the folder; a save tidies its own at the next save
+            assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == [], k
+        if not counter.killed:
+            break
+        if what == "remove" and found is None or found is not None and found.parent != folder:
+            continue  # removed: nothing left to do again
+        with monkeypatch.context() as m:
+            m.setattr(pair_mod, "_pid_alive", lambda pid: False, raising=False)
+            act()  # the next run (another process) works
+        if what != "remove":
+            assert same(load_pair(dst), net_b)
+        assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == [], k
+    assert k >= 3 and not counter.killed  # remove: 3 operations; install and save: more
