@@ -140,3 +140,33 @@ def test_a_kill_at_any_instant_leaves_the_old_or_the_new_pair_whole(tmp_path, ki
             assert same(load_pair(dst), net_b)
         assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == [], k
     assert k >= 3 and not counter.killed  # remove: 3 operations; install and save: more
+
+
+def _strings(value):
+    if isinstance(value, str):
+        yield value
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            yield str(k)
+            yield from _strings(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _strings(v)
+
+
+def test_shipped_jsons_record_no_path_of_the_machine_that_made_them_but_the_command_and_the_data_hash():
+    import re
+
+    from nik.learn.recipe import data_sha256
+    from nik.nets.registry import SHIPPED_DIR
+
+    absolute = re.compile(r"(^|[\s='\"])(/|~/|[A-Za-z]:[\\/])\w")  # /tmp/..., ~/..., C:\...
+    files = sorted(SHIPPED_DIR.glob("*.json"))
+    assert len(files) >= 6
+    for js in files:
+        meta = json.loads(js.read_text())
+        bad = [s for s in _strings(meta) if absolute.search(s)]
+        assert bad == [], f"{js.name}: {bad}"
+        training = meta["training"]
+        assert training["command"].startswith("nik train ")
+        assert training["data_sha256"] == data_sha256(training["data"], meta["robot_hash"]), js.name
