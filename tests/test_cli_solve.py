@@ -169,6 +169,28 @@ def test_solve_csv_in_csv_out_with_a_trained_checkpoint(checkpoint, tmp_path, ca
 
 
 @needs_training
+def test_solutions_csv_is_written_whole_or_not_at_all(tmp_path):
+    from nik.cli.solve import write_solutions_csv
+
+    class Broken:  # a result whose third row cannot be written
+        q = torch.zeros(3, 2, dtype=torch.float64)
+        pos_err = rot_err = torch.zeros(3, dtype=torch.float64)
+        success = torch.ones(3, dtype=torch.bool)
+        iterations = [1, 1]
+
+        def __len__(self):
+            return 3
+
+    out = tmp_path / "solutions.csv"
+    out.write_text("old\n")
+    with pytest.raises(IndexError):
+        write_solutions_csv(out, ["j1", "j2"], Broken())
+    assert out.read_text() == "old\n" and sorted(p.name for p in tmp_path.iterdir()) == ["solutions.csv"]
+    Broken.iterations = [1, 1, 1]
+    write_solutions_csv(out, ["j1", "j2"], Broken())
+    assert len(out.read_text().splitlines()) == 4 and sorted(p.name for p in tmp_path.iterdir()) == ["solutions.csv"]
+
+
 def test_checkpoint_for_another_robot_is_one_line_error(checkpoint, capsys):
     pose = ["1", "0", "1", "1", "0", "0", "0"]
     rc = main(["solve", "--robot", "kuka_kr", "--checkpoint", str(checkpoint), "--pose", *pose])

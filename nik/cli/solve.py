@@ -203,13 +203,33 @@ def _units(prismatic, n: int) -> tuple[list[str], list[str], list[float]]:
     return si, shown, [1e3 if p else 180.0 / math.pi for p in flags]
 
 
+def _written_whole(path: Path):
+    """A context: an open text file at a temporary name beside ``path``, renamed to ``path`` when the block ends
+    without error (a reader never sees half a file; a failed write leaves the old one and no temporary)."""
+    import contextlib
+    import os
+
+    @contextlib.contextmanager
+    def opened():
+        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        try:
+            with tmp.open("w", newline="") as fh:
+                yield fh
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    return opened()
+
+
 def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None) -> None:
     """Write one row per target: ``index``, joints in radians and degrees (prismatic joints: metres and mm,
-    columns ``<name>_m`` / ``<name>_mm``), errors (mm, deg), success, iterations."""
+    columns ``<name>_m`` / ``<name>_mm``), errors (mm, deg), success, iterations. Written to a temporary name and
+    renamed."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     si, shown, factor = _units(prismatic, len(joint_names))
-    with path.open("w", newline="") as fh:
+    with _written_whole(path) as fh:
         w = csv.writer(fh)
         w.writerow(
             [
