@@ -310,6 +310,13 @@ def test_swap_interrupted_between_renames_is_restored(tmp_path, kuka):
     assert torch.equal(_arrays(out)[0], old[0])
 
 
+def test_loading_a_dataset_killed_between_the_renames_of_an_overwrite_puts_the_old_copy_back(tmp_path, kuka):
+    out = generate_dataset(kuka, 50, tmp_path / "d", progress=False, fsync=False)
+    old = _arrays(out)
+    os.rename(out, tmp_path / ".d.old-999999999-dead")
+    assert torch.equal(load_dataset(out).q, old[0])
+
+
 @pytest.mark.parametrize("damage", ["truncate", "flip_byte", "delete"])
 @pytest.mark.parametrize("fname", ["q.npy", "pose.npy", "branch.npy"])
 def test_corruption_is_detected_naming_the_file(tmp_path, kuka, damage, fname):

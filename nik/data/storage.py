@@ -518,10 +518,18 @@ def load_dataset(path: str | Path, *, robot=None, verify: bool = True, mmap: boo
         :class:`IKDataset` with ``q: (N, dof)``, ``pose: (N, 4, 4)``, ``branch: (N,)`` or None,
         ``meta`` and the train/val/test splits.
 
+    Where ``path`` is missing but an overwrite killed between its two renames left the old copy aside, that copy
+    is put back first when whole (:meth:`AtomicDirectory.cleanup_stale`).
+
     Raises:
         DatasetError: missing or malformed directory, truncated or altered file, robot mismatch.
     """
     path = Path(path)
+    if not path.exists() and path.name not in ("", ".", ".."):
+        try:  # an overwrite killed between its two renames left the old copy aside: it comes back if whole
+            AtomicDirectory(path).cleanup_stale()
+        except OSError:
+            pass
     meta = read_meta(path)
     if "shard" in meta:
         sh = meta["shard"]

@@ -250,12 +250,13 @@ def _sha_of(path: Path) -> str | None:
         return None
 
 
-def _recorded_sha(js: Path) -> str | None:
+def _recorded_sha(text: str) -> str | None:
+    """The ``weights_sha256`` a pair's JSON text records, or None."""
     try:
-        meta = json.loads(js.read_text())
-        return meta.get("weights_sha256") if isinstance(meta, dict) else None
-    except (OSError, UnicodeDecodeError, ValueError):
+        meta = json.loads(text)
+    except ValueError:
         return None
+    return meta.get("weights_sha256") if isinstance(meta, dict) else None
 
 
 def write_pair_files(st: str | Path, weights: bytes, meta_text: str) -> Path:
@@ -268,7 +269,7 @@ def write_pair_files(st: str | Path, weights: bytes, meta_text: str) -> Path:
     st, js = pair_paths(st)
     d = st.parent
     recover_pairs(d)
-    if _sha_of_bytes(weights) != _recorded_sha_text(meta_text):
+    if hashlib.sha256(weights).hexdigest() != _recorded_sha(meta_text):
         raise CheckpointError(f"{js}: the JSON does not record the SHA-256 of the weights to write; nothing written")
     tag = f"{os.getpid()}-{secrets.token_hex(4)}"
     new_st, new_js = d / f".{st.stem}.new-{tag}.safetensors", d / f".{st.stem}.new-{tag}.json"
@@ -287,18 +288,6 @@ def write_pair_files(st: str | Path, weights: bytes, meta_text: str) -> Path:
     os.replace(ready, js)
     _fsync_dir(d)
     return st
-
-
-def _sha_of_bytes(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
-def _recorded_sha_text(text: str) -> str | None:
-    try:
-        meta = json.loads(text)
-    except ValueError:
-        return None
-    return meta.get("weights_sha256") if isinstance(meta, dict) else None
 
 
 def recover_pairs(directory: str | Path) -> bool:
@@ -322,7 +311,10 @@ def recover_pairs(directory: str | Path) -> bool:
         st, js = d / f"{name}.safetensors", d / f"{name}.json"
         try:
             if "ready" in kinds:
-                want = _recorded_sha(ready)
+                try:
+                    want = _recorded_sha(ready.read_text())
+                except (OSError, UnicodeDecodeError):
+                    want = None
                 weights = new_st if new_st.exists() else st
                 if want is not None and _sha_of(weights) == want:
                     if weights == new_st:
@@ -330,8 +322,9 @@ def recover_pairs(directory: str | Path) -> bool:
                     os.replace(ready, js)
                     _fsync_dir(d)
                     finished = True
-            if "del" in kinds and not js.exists() and st.exists():  # a removal died after taking the JSON away
-                st.unlink()
+            installing = any(n.startswith(f".{name}.ready-") for n in names)  # a live install's weights: keep
+            if "del" in kinds and not js.exists() and st.exists() and not installing:
+                st.unlink()  # a removal died after taking the JSON away
             for p in (new_st, new_js, ready, d / f".{name}.del-{pid}-{tag}.json"):
                 if p.exists():
                     p.unlink()
