@@ -246,14 +246,11 @@ def remove(name: str, *, directory: str | Path | None = None) -> list[Path]:
         raise FileNotFoundError(f"no installed network {name!r} in {d} (installed: {', '.join(have) or 'none'})")
     # the JSON first, renamed to a name no run restores: from then on the pair is gone (a weights file without
     # its JSON is never listed), whatever instant a kill lands at
-    js = d / f"{name}.json"
+    js, doomed = d / f"{name}.json", d / f".{name}.del-{os.getpid()}-{secrets.token_hex(4)}.json"
     if js.is_file():
-        doomed = d / f".{name}.del-{os.getpid()}-{secrets.token_hex(4)}.json"
         os.rename(js, doomed)
-        (d / f"{name}.safetensors").unlink(missing_ok=True)
-        doomed.unlink()
-    else:
-        (d / f"{name}.safetensors").unlink(missing_ok=True)
+    (d / f"{name}.safetensors").unlink(missing_ok=True)
+    doomed.unlink(missing_ok=True)
     for p in files:
         _CACHE.pop(p, None)
     return files

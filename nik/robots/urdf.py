@@ -188,8 +188,13 @@ class EndLinkChoice:
 def _words(name: str) -> set[str]:
     """The lower-case words of a name, split at non-alphanumerics and camel case (``jointGripper``: joint,
     gripper; ``LHand``: l, hand)."""
+    return set(_word_list(name))
+
+
+def _word_list(name: str) -> list[str]:
+    """The lower-case words of a name in order (:func:`_words`)."""
     split = re.sub(r"([A-Z])([A-Z][a-z])", r"\1_\2", re.sub(r"([a-z0-9])([A-Z])", r"\1_\2", name))
-    return set(re.split(r"[^a-z0-9]+", split.lower())) - {""}
+    return [w for w in re.split(r"[^a-z0-9]+", split.lower()) if w]
 
 
 def _is_gripper_joint(name: str) -> bool:
@@ -213,8 +218,7 @@ def _tool_kind(link: str) -> int | None:
 
 
 def _is_hand_link(link: str) -> bool:
-    split = re.sub(r"([A-Z])([A-Z][a-z])", r"\1_\2", re.sub(r"([a-z0-9])([A-Z])", r"\1_\2", link))
-    words = [w for w in re.split(r"[^a-z0-9]+", split.lower()) if w]
+    words = _word_list(link)
     return "hand" in words and set(words[words.index("hand") + 1 :]) <= {"link"}
 
 
