@@ -652,3 +652,28 @@ def test_a_kill_at_any_instant_leaves_the_old_or_the_new_dataset_whole(tmp_path,
         run(2)
         assert torch.equal(_arrays(out)[0], new) and _siblings(tmp_path, "d") == []
     assert k > 5 and not counter.killed  # every instant up to a whole run was tried
+
+
+def test_a_generate_whose_process_dies_between_its_renames_leaves_the_old_dataset_for_the_next_process(tmp_path):
+    # a real death (os._exit in a subprocess): the old dataset moved aside, the new one not yet in its place
+    out = generate_dataset("kuka_kr", 100, tmp_path / "d", seed=1, progress=False, fsync=False)
+    old = _arrays(out)[0]
+    script = (
+        "import os\n"
+        "rename = os.rename\n"
+        "def dying(a, b):\n"
+        "    if '.tmp-' in str(a):\n"
+        "        os._exit(9)  # the old one is aside; the new one would take its name now\n"
+        "    rename(a, b)\n"
+        "os.rename = dying\n"
+        "from nik.cli import main\n"
+        f"main(['generate', '--robot', 'kuka_kr', '--n', '100', '--seed', '2', '--out', {str(out)!r}, "
+        "'--overwrite', '--no-progress'])\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 9, proc.stderr
+    assert not out.exists() and sorted(n.split("-")[0] for n in _leftovers(tmp_path, "d")) == [".d.old", ".d.tmp"]
+    assert torch.equal(load_dataset(out).q, old)  # the next process puts the old one back
+    generate_dataset("kuka_kr", 100, out, seed=2, overwrite=True, progress=False, fsync=False)
+    assert _leftovers(tmp_path, "d") == []

@@ -170,3 +170,36 @@ def test_shipped_jsons_record_no_path_of_the_machine_that_made_them_but_the_comm
         training = meta["training"]
         assert training["command"].startswith("nik train ")
         assert training["data_sha256"] == data_sha256(training["data"], meta["robot_hash"]), js.name
+
+
+def test_an_install_whose_process_dies_after_its_commit_point_is_finished_by_the_next_process(tiny_panda, tmp_path):
+    # a real death (os._exit in a subprocess, its pid then gone), between the weights' and the JSON's renames
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from nik.nets.pair import load_pair
+
+    root = Path(__file__).resolve().parents[1]
+    other = _tiny(tmp_path / "other.safetensors", 1)
+    install(tiny_panda, name="mine")
+    script = (
+        "import os\n"
+        "replace = os.replace\n"
+        "def dying(a, b):\n"
+        "    replace(a, b)\n"
+        "    os._exit(9)  # killed right after the weights took their name, before the JSON did\n"
+        "os.replace = dying\n"
+        "from nik.cli import main\n"
+        f"main(['networks', 'install', {str(other)!r}, '--name', 'mine'])\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 9, proc.stderr
+    assert any(p.name.startswith(".mine.ready-") for p in user_dir().iterdir())  # the commit point was passed
+    found = find_network(nik.load_robot("panda"))  # the next process (this one) finishes it
+    assert found == user_dir() / "mine.safetensors"
+    got, want = load_pair(found), load_pair(other)
+    assert all(torch.equal(a, b) for a, b in zip(got.state_dict().values(), want.state_dict().values(), strict=True))
+    assert [p.name for p in user_dir().iterdir() if p.name.startswith(".")] == []
