@@ -85,6 +85,37 @@ def builtin_robots() -> list[str]:
     return sorted(p.stem for p in BUILTIN_DIR.glob("*.yaml") if _is_robot_file(p))
 
 
+def _names_builtin(name_or_path) -> bool:
+    """Whether ``name_or_path`` is written as a plain name (a built-in's, when one is called so), not as a path:
+    a ``str`` without a folder separator, a leading ``.`` or a robot-file suffix (``./panda``, ``panda.yaml`` and
+    a :class:`~pathlib.Path` that exists are paths)."""
+    text = str(name_or_path)
+    if isinstance(name_or_path, Path):
+        return not name_or_path.exists() and name_or_path.parent == Path(".")
+    seps = {"/", "\\"}
+    return not any(sep in text for sep in seps) and not text.startswith(".") and "." not in text
+
+
+_SHADOW_WARNED: set[str] = set()
+
+
+def _warn_shadowed(name: str) -> None:
+    """Say once per name that a file or folder of the working directory named like a built-in is not what loads."""
+    if name in _SHADOW_WARNED:
+        return
+    _SHADOW_WARNED.add(name)
+    import warnings
+
+    from nik.errors import RobotDefinitionWarning
+
+    warnings.warn(
+        f"{name!r} is the built-in arm; the {name!r} in the working directory is not loaded "
+        f"(write ./{name}, or the robot file's path with its .yaml/.urdf suffix, to load a file)",
+        RobotDefinitionWarning,
+        stacklevel=3,
+    )
+
+
 def _is_robot_file(path: Path) -> bool:
     try:
         data = yaml.safe_load(path.read_text())
@@ -133,12 +164,10 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
     base, tool = as_frame(base, name="base"), as_frame(tool, name="tool")
     text = str(name_or_path)
     path = Path(text)
-    builtin = BUILTIN_DIR / f"{text}.yaml"
-    if _names_builtin(name_or_path) and builtin.is_file() and _is_robot_file(builtin):
-        if path.exists():
-            _warn_shadowed(text)
-        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool)
-    if path.suffix.lower() in {".urdf", ".yaml", ".yml"} or path.exists():
+    named_builtin = _names_builtin(name_or_path) and _is_robot_file(BUILTIN_DIR / f"{text}.yaml")
+    if named_builtin and path.exists():
+        _warn_shadowed(text)
+    if not named_builtin and (path.suffix.lower() in {".urdf", ".yaml", ".yml"} or path.exists()):
         if path.is_dir():
             raise RobotDefinitionError(f"{text} is a folder, not a robot file (.yaml or .urdf)")
         if not path.is_file():
@@ -148,39 +177,11 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
 
             return load_urdf(path, end_link=end_link, base=base, tool=tool)
         return robot_from_file(path, end_link=end_link, base=base, tool=tool)
+    builtin = BUILTIN_DIR / f"{text}.yaml"
+    if builtin.is_file() and _is_robot_file(builtin):
+        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool)
     raise RobotDefinitionError(
         f"unknown robot {text!r}: not a built-in ({', '.join(builtin_robots())}) and not a robot file"
-    )
-
-
-def _names_builtin(name_or_path) -> bool:
-    """Whether ``name_or_path`` is written as a plain name (a built-in's, when one is called so), not as a path:
-    a ``str`` without a folder separator, a leading ``.`` or a robot-file suffix (``./panda``, ``panda.yaml`` and
-    a :class:`~pathlib.Path` that exists are paths)."""
-    text = str(name_or_path)
-    if isinstance(name_or_path, Path):
-        return not name_or_path.exists() and name_or_path.parent == Path(".")
-    seps = {"/", "\\"}
-    return not any(sep in text for sep in seps) and not text.startswith(".") and "." not in text
-
-
-_SHADOW_WARNED: set[str] = set()
-
-
-def _warn_shadowed(name: str) -> None:
-    """Say once per name that a file or folder of the working directory named like a built-in is not what loads."""
-    if name in _SHADOW_WARNED:
-        return
-    _SHADOW_WARNED.add(name)
-    import warnings
-
-    from nik.errors import RobotDefinitionWarning
-
-    warnings.warn(
-        f"{name!r} is the built-in arm; the {name!r} in the working directory is not loaded "
-        f"(write ./{name}, or the robot file's path with its .yaml/.urdf suffix, to load a file)",
-        RobotDefinitionWarning,
-        stacklevel=3,
     )
 
 
