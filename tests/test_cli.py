@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import pickle
 import subprocess
 import sys
@@ -82,3 +83,23 @@ def test_import_nik_help_and_solve_do_not_load_lightning_or_matplotlib():
     done = subprocess.run([sys.executable, "-c", _STARTUP], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["networks", "list"],
+        ["solve", "--robot", "kuka_kr", "--pose", "1", "0.2", "1.2", "0", "0.7071068", "0", "0.7071068"],
+    ],
+)
+def test_output_into_a_closed_pipe_ends_quietly_without_a_traceback(argv):
+    # nik networks | head: the reader is gone before nik writes (a pipe whose read end is closed)
+    script = (
+        "import os, sys\n"
+        "r, w = os.pipe(); os.close(r); os.dup2(w, 1)\n"
+        "from nik.cli import main\n"
+        f"sys.exit(main({argv!r}))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 141 and proc.stderr == "", proc.stderr

@@ -169,6 +169,72 @@ def test_solve_csv_in_csv_out_with_a_trained_checkpoint(checkpoint, tmp_path, ca
 
 
 @needs_training
+def test_solutions_csv_is_written_whole_or_not_at_all(tmp_path):
+    from nik.cli.solve import write_solutions_csv
+
+    class Broken:  # a result whose third row cannot be written
+        q = torch.zeros(3, 2, dtype=torch.float64)
+        pos_err = rot_err = torch.zeros(3, dtype=torch.float64)
+        success = torch.ones(3, dtype=torch.bool)
+        iterations = [1, 1]
+
+        def __len__(self):
+            return 3
+
+    out = tmp_path / "solutions.csv"
+    out.write_text("old\n")
+    with pytest.raises(IndexError):
+        write_solutions_csv(out, ["j1", "j2"], Broken())
+    assert out.read_text() == "old\n" and sorted(p.name for p in tmp_path.iterdir()) == ["solutions.csv"]
+    Broken.iterations = [1, 1, 1]
+    write_solutions_csv(out, ["j1", "j2"], Broken())
+    assert len(out.read_text().splitlines()) == 4 and sorted(p.name for p in tmp_path.iterdir()) == ["solutions.csv"]
+
+
+FIVE_JOINTS = """\
+name: five_joints  # an SO-101-like arm: base yaw, shoulder, elbow, wrist pitch, wrist roll
+convention: dh
+unit: mm
+angles: deg
+joints:
+  - {alpha: 90, a: 0, d: 120, limits: [-170, 170]}
+  - {alpha: 0, a: 110, d: 0, offset: 90, limits: [-100, 100]}
+  - {alpha: 0, a: 130, d: 0, limits: [-140, 140]}
+  - {alpha: 90, a: 0, d: 0, offset: 90, limits: [-100, 100]}
+  - {alpha: 0, a: 0, d: 100, limits: [-170, 170]}
+"""
+
+
+def test_a_five_joint_arm_says_what_to_ask_for_and_never_calls_an_orientation_out_of_reach(tmp_path, capsys):
+    arm = tmp_path / "five.yaml"
+    arm.write_text(FIVE_JOINTS)
+    robot = nik.load_robot(arm)
+    q = torch.tensor([[0.3, 0.2, 0.4, 0.1, 0.2]], dtype=torch.float64)
+    T = robot.fk(q)
+    turned = T.clone()  # the same position, the tool turned 60 deg about its x axis: no 5-joint configuration has it
+    c, s = math.cos(math.radians(60)), math.sin(math.radians(60))
+    turned[:, :3, :3] = T[:, :3, :3] @ torch.tensor([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=torch.float64)
+    far = T.clone()
+    far[:, :3, 3] *= 5  # 5 x the distance: beyond the reach bound
+    with pytest.warns(UserWarning, match="1 of 3 target"):  # only the far one is said to be beyond the reach
+        res = nik.IKSolver(robot).solve(torch.cat([T, turned, far]), seed=0)
+    assert res.success.tolist() == [True, False, False]
+    assert res.reachable.tolist() == [True, True, False]  # not proven out of reach: the position is within it
+
+    def solve(T1):
+        p, w = T1[0, :3, 3].tolist(), matrix_to_quaternion(T1[0, :3, :3]).tolist()
+        rc = main(["solve", "--robot", str(arm), "--pose", *map(str, p + w)])
+        return rc, capsys.readouterr().err
+
+    rc, err = solve(T)
+    assert rc == 0 and err == ""
+    rc, err = solve(turned)
+    assert rc == 1 and "5 joints" in err and "--position-only" in err and "--free-axis z" in err
+    assert "beyond the reach" not in err and err.count("\n") == 1
+    rc, err = solve(far)
+    assert rc == 1 and "beyond the reach of five_joints" in err
+
+
 def test_checkpoint_for_another_robot_is_one_line_error(checkpoint, capsys):
     pose = ["1", "0", "1", "1", "0", "0", "0"]
     rc = main(["solve", "--robot", "kuka_kr", "--checkpoint", str(checkpoint), "--pose", *pose])

@@ -3,6 +3,7 @@
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -309,6 +310,13 @@ def test_swap_interrupted_between_renames_is_restored(tmp_path, kuka):
     assert torch.equal(_arrays(out)[0], old[0])
 
 
+def test_loading_a_dataset_killed_between_the_renames_of_an_overwrite_puts_the_old_copy_back(tmp_path, kuka):
+    out = generate_dataset(kuka, 50, tmp_path / "d", progress=False, fsync=False)
+    old = _arrays(out)
+    os.rename(out, tmp_path / ".d.old-999999999-dead")
+    assert torch.equal(load_dataset(out).q, old[0])
+
+
 @pytest.mark.parametrize("damage", ["truncate", "flip_byte", "delete"])
 @pytest.mark.parametrize("fname", ["q.npy", "pose.npy", "branch.npy"])
 def test_corruption_is_detected_naming_the_file(tmp_path, kuka, damage, fname):
@@ -567,3 +575,105 @@ def test_dataset_of_an_arm_with_a_prismatic_joint(tmp_path):
     bad.write_text("angles: deg\nranges: [[-90, 90], [-90, 90], [0.1, 0.8], [-90, 90], [-45, 45], [-90, 90]]\n")
     with pytest.raises(ValueError, match=r"joint 3 range \[100 mm, 800 mm\] lies outside the joint limits \[304.8 mm"):
         generate_dataset(robot, 10, tmp_path / "bad", ranges=bad, progress=False, fsync=False)
+
+
+def _siblings(tmp_path, name):
+    return sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(f".{name}."))
+
+
+def test_a_half_deleted_old_copy_is_never_put_back_and_generate_works(tmp_path, monkeypatch):
+    # issue 30.1's recipe: a half-deleted .X.old-* (meta.json and q.npy only) and X missing
+    from nik.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["generate", "--robot", "kuka_kr", "--n", "1000", "--out", "X", "--no-progress"]) == 0
+    half = tmp_path / ".X.old-999999999-abcd"
+    half.mkdir()
+    for f in ("meta.json", "q.npy"):
+        (half / f).write_bytes((tmp_path / "X" / f).read_bytes())
+    shutil.rmtree(tmp_path / "X")
+    assert main(["generate", "--robot", "kuka_kr", "--n", "1000", "--out", "X", "--no-progress"]) == 0
+    assert len(load_dataset(tmp_path / "X")) == 1000  # whole (checksums verified)
+    assert _siblings(tmp_path, "X") == []
+
+
+def test_an_old_copy_whose_files_fail_their_checksums_is_deleted_not_restored(tmp_path, kuka):
+    out = generate_dataset(kuka, 50, tmp_path / "d", progress=False, fsync=False)
+    aside = tmp_path / ".d.old-999999999-dead"
+    os.rename(out, aside)
+    data = bytearray((aside / "pose.npy").read_bytes())
+    data[-1] ^= 1
+    (aside / "pose.npy").write_bytes(bytes(data))
+    AtomicDirectory(out).cleanup_stale()
+    assert not out.exists() and _siblings(tmp_path, "d") == []
+
+
+@pytest.mark.parametrize("what", ["generate", "merge"])
+def test_a_kill_at_any_instant_leaves_the_old_or_the_new_dataset_whole(tmp_path, kuka, kill_at, monkeypatch, what):
+    # fault injection: the run dies before its k-th filesystem operation, for every k until one completes; then
+    # the next run's clean-up must find the old or the new dataset whole, and a further overwrite must work
+    from nik.data import merge_shards, storage
+
+    out = tmp_path / "d"
+    shards = {}
+    if what == "merge":
+        for seed in (1, 2):
+            shards[seed] = [
+                generate_dataset(kuka, 60, tmp_path / f"s{seed}{i}", seed=seed, shard=(i, 2), block_size=30)
+                for i in range(2)
+            ]
+
+    def run(seed):
+        if what == "merge":
+            return merge_shards(out, shards[seed], overwrite=True)
+        return generate_dataset(kuka, 60, out, seed=seed, overwrite=True, block_size=30, progress=False)
+
+    run(1)
+    old = _arrays(out)[0]
+    run(2)
+    new = _arrays(out)[0]
+    assert not torch.equal(old, new)
+    for k in range(200):
+        run(1)
+        counter = kill_at(k)
+        try:
+            run(2)
+        except BaseException as err:  # noqa: B036 - the simulated kill is a BaseException
+            assert type(err).__name__ == "Killed", err
+        counter.undo()
+        if not counter.killed:
+            break
+        with monkeypatch.context() as m:
+            m.setattr(storage, "_pid_alive", lambda pid: False)  # the killed run's process is gone
+            AtomicDirectory(out).cleanup_stale()  # what the next run does first
+        q = _arrays(out)[0]  # whole: every checksum verified
+        assert torch.equal(q, old) or torch.equal(q, new), k
+        assert _siblings(tmp_path, "d") == [], k
+        run(2)
+        assert torch.equal(_arrays(out)[0], new) and _siblings(tmp_path, "d") == []
+    assert k > 5 and not counter.killed  # every instant up to a whole run was tried
+
+
+def test_a_generate_whose_process_dies_between_its_renames_leaves_the_old_dataset_for_the_next_process(tmp_path):
+    # a real death (os._exit in a subprocess): the old dataset moved aside, the new one not yet in its place
+    out = generate_dataset("kuka_kr", 100, tmp_path / "d", seed=1, progress=False, fsync=False)
+    old = _arrays(out)[0]
+    script = (
+        "import os\n"
+        "rename = os.rename\n"
+        "def dying(a, b):\n"
+        "    if '.tmp-' in str(a):\n"
+        "        os._exit(9)  # the old one is aside; the new one would take its name now\n"
+        "    rename(a, b)\n"
+        "os.rename = dying\n"
+        "from nik.cli import main\n"
+        f"main(['generate', '--robot', 'kuka_kr', '--n', '100', '--seed', '2', '--out', {str(out)!r}, "
+        "'--overwrite', '--no-progress'])\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 9, proc.stderr
+    assert not out.exists() and sorted(n.split("-")[0] for n in _leftovers(tmp_path, "d")) == [".d.old", ".d.tmp"]
+    assert torch.equal(load_dataset(out).q, old)  # the next process puts the old one back
+    generate_dataset("kuka_kr", 100, out, seed=2, overwrite=True, progress=False, fsync=False)
+    assert _leftovers(tmp_path, "d") == []

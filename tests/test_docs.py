@@ -98,3 +98,35 @@ def test_every_example_robot_data_skip_names_the_one_extra_of_pyproject_that_ins
     assert len(named) == 1, named
     (extra,) = named
     assert '"example-robot-data' in extras[extra], (extra, extras)
+
+
+def test_ci_installs_every_extra_and_program_the_tests_skip_without():
+    # CI runs README's set-up and tests (.ci/run); every optional extra a skip message names (pip install -e
+    # ".[X]") and every program a test looks up (shutil.which) must be installed there, or its tests never run
+    ci = (ROOT / ".ci" / "run").read_text()
+    installed = set()
+    for extras in re.findall(r"pip install[^\n]*-e \"?'?\.\[([\w,-]+)\]", ci):
+        installed.update(extras.split(","))
+    apt = " ".join(re.findall(r"apt-get install[^\n]*", ci))
+    wanted_extras, programs = set(), set()
+    for test in sorted((ROOT / "tests").glob("test_*.py")):
+        text = test.read_text()
+        wanted_extras.update(
+            e for found in re.findall(r"pip install -e ['\"]\.\[([\w,-]+)\]", text) for e in found.split(",")
+        )
+        programs.update(re.findall(r"shutil\.which\(\"([\w.-]+)\"\)", text))
+    assert {"view", "urdf-tests"} <= wanted_extras and "chromium-headless-shell" in programs
+    assert wanted_extras - {"dev"} <= installed, wanted_extras - installed
+    assert all(p in apt for p in programs), (programs, apt)
+
+
+def test_every_evaluation_table_of_the_docs_has_the_default_pipeline_row_and_the_guess_that_served_each_row():
+    # tables of nik evaluate made before the default-pipeline row and the per-row guess label misread as current
+    text = (ROOT / "docs" / "evaluation.md").read_text()
+    tables = re.findall(r"^\| method \|.*\n\|[-|]+\|\n((?:\|.*\n?)+)", text, re.M)
+    assert len(tables) >= 2
+    for rows in tables:
+        rows = [r for r in rows.strip().splitlines()]
+        assert rows[0].startswith("| default pipeline |"), rows[0]
+        notes = [r.rstrip(" |").rsplit("|", 1)[1].strip() for r in rows if not r.startswith("| pytorch-kinematics |")]
+        assert all(n.startswith("guess ") for n in notes), notes

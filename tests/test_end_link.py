@@ -87,14 +87,41 @@ def test_default_end_link_is_a_conventional_tool_link_past_fixed_joints(tmp_path
 
 
 def test_default_end_link_names_every_candidate_when_several_fit(tmp_path):
-    text = urdf(("j_a", "fixed", "l3", "ee_link"), ("j_b", "fixed", "l3", "tool0"), ("j_c", "fixed", "tool0", "flange"))
+    text = urdf(
+        ("j_a", "fixed", "l3", "arm_tool"), ("j_b", "fixed", "l3", "ee_link"), ("j_c", "fixed", "ee_link", "flange")
+    )
     robot, notes = load(tmp_path, text)
-    assert robot.end_link == "tool0"  # tool0 before ee and flange
+    assert robot.end_link == "ee_link"  # ee before flange and tool
     (note,) = notes
-    assert "candidates tool0, ee_link, flange" in note and "end_link" in note
-    assert choose_end_link(text).candidates == ("tool0", "ee_link", "flange")
+    assert "candidates ee_link, flange, arm_tool" in note and "end_link" in note
+    assert choose_end_link(text).candidates == ("ee_link", "flange", "arm_tool")
     text = urdf(("j_a", "fixed", "l3", "flange"), ("j_b", "fixed", "flange", "hand_tcp"))
     assert load(tmp_path, text)[0].end_link == "hand_tcp"  # a TCP before the flange it is mounted on
+
+
+def test_tool0_is_picked_silently_over_the_other_names_of_a_ur_urdf(tmp_path):
+    # the UR URDFs of example-robot-data end in wrist_3_link -> ee_link and -> tool0 (ROS-Industrial's flange)
+    text = urdf(
+        ("ee_fixed_joint", "fixed", "l3", "ee_link"), ("wrist_3_link-tool0_fixed_joint", "fixed", "l3", "tool0")
+    )
+    robot, notes = load(tmp_path, text)
+    assert robot.end_link == "tool0" and not notes
+    assert choose_end_link(text).candidates == ("tool0", "ee_link")  # still known, just not worth a warning
+
+
+def test_a_hand_link_is_the_default_tool_link_only_where_no_tool_link_is_named(tmp_path):
+    # Baxter: right_wrist -> right_hand_link (the flange) -> right_hand_camera_link, right_gripper_base_link ...
+    text = urdf(
+        ("right_hand_joint", "fixed", "l3", "right_hand_link"),
+        ("right_hand_camera_joint", "fixed", "right_hand_link", "right_hand_camera_link"),
+        ("right_gripper_base_joint", "fixed", "right_hand_link", "right_gripper_base_link"),
+    )
+    robot, notes = load(tmp_path, text)
+    assert robot.end_link == "right_hand_link" and not notes
+    assert_fk_is_pk_chain_to(robot, text, "right_hand_link")
+    text = urdf(("j_hand", "fixed", "l3", "panda_hand"), ("j_tcp", "fixed", "panda_hand", "panda_hand_tcp"))
+    robot, notes = load(tmp_path, text)
+    assert robot.end_link == "panda_hand_tcp" and not notes  # a TCP first; the hand is no candidate next to it
 
 
 def test_a_tool_link_behind_a_moving_joint_is_no_candidate(tmp_path):

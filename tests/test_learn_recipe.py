@@ -63,6 +63,10 @@ def test_acceptance_nik_train_exports_a_network_that_loads_by_path_under_another
     meta = json.loads(out.with_suffix(".json").read_text())
     assert meta["training"]["command"] == "nik " + " ".join([*args, "--out", str(out)])
     assert meta["training"]["data"]["source"] == "fk_stream" and meta["training"]["steps"] == 30
+    from nik.learn.recipe import data_sha256
+
+    assert meta["training"]["data_sha256"] == data_sha256(meta["training"]["data"], meta["robot_hash"])
+    assert "run_dir" not in meta["training"]  # a path of this machine: the command says where the run went
     assert meta["net"]["kind"] == "multihead" and meta["robot"] == "test_arm"
     run = tmp_path / "runs" / "test_arm"
     assert (run / "last.ckpt").is_file() and (run / "history.csv").is_file() and (run / "report.txt").is_file()

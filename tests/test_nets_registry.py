@@ -68,3 +68,138 @@ def test_remove_refuses_a_shipped_network_a_missing_one_and_a_path(tiny_panda):
     with pytest.raises(CheckpointError, match="plain file name"):
         remove("../mine")
     assert (user_dir() / "mine.safetensors").is_file()
+
+
+def _tiny(path, seed):
+    torch.manual_seed(seed)
+    net = MultiHypIKNet(nik.load_robot("panda"), hidden=[8], heads=2).eval()
+    return save(net, path, validation={"n": 50}).with_suffix(".safetensors")
+
+
+@pytest.mark.parametrize("what", ["install", "remove", "save"])
+def test_a_kill_at_any_instant_leaves_the_old_or_the_new_pair_whole(tmp_path, kill_at, monkeypatch, what):
+    # fault injection: the command dies before its k-th filesystem operation, for every k until one completes;
+    # the next run must find the old pair or the new one whole (checksum verified), nothing staged left over, and
+    # the command must work again. "save" is nik train's export (nik.nets.pair.save_pair), "install" also the
+    # copy of nik train --install.
+    from nik.nets import pair as pair_mod
+    from nik.nets.pair import load_pair, save_pair
+
+    a, b = _tiny(tmp_path / "a.safetensors", 0), _tiny(tmp_path / "b.safetensors", 1)
+    panda = nik.load_robot("panda")
+    folder = user_dir() if what != "save" else tmp_path / "runs"
+    dst = folder / "mine.safetensors"
+
+    def setup():
+        if what == "save":
+            save_pair(load_pair(a), dst)
+        else:
+            install(a, name="mine")
+
+    def act():
+        if what == "install":
+            install(b, name="mine")
+        elif what == "remove":
+            remove("mine")
+        else:
+            save_pair(load_pair(b), dst)
+
+    net_a, net_b = load_pair(a), load_pair(b)
+
+    def same(x, y):
+        return all(torch.equal(u, v) for u, v in zip(x.state_dict().values(), y.state_dict().values(), strict=True))
+
+    for k in range(100):
+        setup()
+        counter = kill_at(k)
+        try:
+            act()
+        except BaseException as err:  # noqa: B036 - the simulated kill is a BaseException
+            assert type(err).__name__ == "Killed", err
+        counter.undo()
+        with monkeypatch.context() as m:
+            m.setattr(pair_mod, "_pid_alive", lambda pid: False, raising=False)  # the killed run's process is gone
+            found = find_network(panda) if what != "save" else (dst if dst.exists() else None)
+            if found is not None and what == "save":
+                load_pair(found)  # what nik.IKSolver(checkpoint=...) does first
+        if what == "remove" and found is None or found is not None and found.parent != folder:
+            assert what == "remove", k  # the shipped panda network serves again: the pair is gone, not half
+        else:
+            got = load_pair(found)  # whole: its checksum verified
+            assert found == dst and (same(got, net_a) or same(got, net_b)), k
+        if what != "save":  # the registry's listing tidies the folder; a save tidies its own at the next save
+            assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == [], k
+        if not counter.killed:
+            break
+        if what == "remove" and found is None or found is not None and found.parent != folder:
+            continue  # removed: nothing left to do again
+        with monkeypatch.context() as m:
+            m.setattr(pair_mod, "_pid_alive", lambda pid: False, raising=False)
+            act()  # the next run (another process) works
+        if what != "remove":
+            assert same(load_pair(dst), net_b)
+        assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == [], k
+    assert k >= 3 and not counter.killed  # remove: 3 operations; install and save: more
+
+
+def _strings(value):
+    if isinstance(value, str):
+        yield value
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            yield str(k)
+            yield from _strings(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _strings(v)
+
+
+def test_shipped_jsons_record_no_path_of_the_machine_that_made_them_but_the_command_and_the_data_hash():
+    import re
+
+    from nik.learn.recipe import data_sha256
+    from nik.nets.registry import SHIPPED_DIR
+
+    absolute = re.compile(r"(^|[\s='\"])(/|~/|[A-Za-z]:[\\/])\w")  # /tmp/..., ~/..., C:\...
+    files = sorted(SHIPPED_DIR.glob("*.json"))
+    assert len(files) >= 6
+    for js in files:
+        meta = json.loads(js.read_text())
+        bad = [s for s in _strings(meta) if absolute.search(s)]
+        assert bad == [], f"{js.name}: {bad}"
+        training = meta["training"]
+        assert training["command"].startswith("nik train ")
+        assert training["data_sha256"] == data_sha256(training["data"], meta["robot_hash"]), js.name
+
+
+def test_an_install_whose_process_dies_after_its_commit_point_is_finished_by_the_next_process(tiny_panda, tmp_path):
+    # a real death (os._exit in a subprocess, its pid then gone), between the weights' and the JSON's renames
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from nik.nets.pair import load_pair
+
+    root = Path(__file__).resolve().parents[1]
+    other = _tiny(tmp_path / "other.safetensors", 1)
+    install(tiny_panda, name="mine")
+    script = (
+        "import os\n"
+        "replace = os.replace\n"
+        "def dying(a, b):\n"
+        "    replace(a, b)\n"
+        "    os._exit(9)  # killed right after the weights took their name, before the JSON did\n"
+        "os.replace = dying\n"
+        "from nik.cli import main\n"
+        f"main(['networks', 'install', {str(other)!r}, '--name', 'mine'])\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 9, proc.stderr
+    assert any(p.name.startswith(".mine.ready-") for p in user_dir().iterdir())  # the commit point was passed
+    found = find_network(nik.load_robot("panda"))  # the next process (this one) finishes it
+    assert found == user_dir() / "mine.safetensors"
+    got, want = load_pair(found), load_pair(other)
+    assert all(torch.equal(a, b) for a, b in zip(got.state_dict().values(), want.state_dict().values(), strict=True))
+    assert [p.name for p in user_dir().iterdir() if p.name.startswith(".")] == []

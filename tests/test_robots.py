@@ -1,6 +1,7 @@
 """Robot loading: built-ins, YAML files in every unit, URDF options, sampling, and clear errors."""
 
 import math
+import warnings
 from pathlib import Path
 
 import pytest
@@ -320,3 +321,27 @@ def test_an_unwritable_cache_folder_only_means_parsing_every_time(tmp_path, monk
     monkeypatch.setenv("XDG_CACHE_HOME", str(blocker))  # nik/robots cannot be created under a file
     a, b = nik.load_robot("ur5"), nik.load_robot("ur5")
     assert a.definition_hash == b.definition_hash
+
+
+def test_a_folder_named_like_a_builtin_does_not_hide_it(tmp_path, monkeypatch):
+    from nik.robots import config
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(config, "_SHADOW_WARNED", set(), raising=False)
+    (tmp_path / "panda").mkdir()  # users keep folders named after their robot
+    with pytest.warns(nik.RobotDefinitionWarning, match=r"built-in arm.*\./panda"):
+        robot = nik.load_robot("panda")
+    assert robot.definition_hash == nik.load_robot(config.BUILTIN_DIR / "panda.yaml").definition_hash
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # said once
+        nik.load_robot("panda")
+    with pytest.raises(nik.RobotDefinitionError, match="folder, not a robot file"):
+        nik.load_robot("./panda")  # written as a path: the folder
+
+
+def test_a_robot_file_path_wins_over_a_builtin_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    write(tmp_path, PAPER_A_PUMA, "ur5.yaml")
+    assert nik.load_robot("ur5.yaml").dof == 6 and nik.load_robot("ur5.yaml").name != "ur5"
+    assert nik.load_robot("./ur5.yaml").name == nik.load_robot("ur5.yaml").name
+    assert nik.load_robot("ur5").name == "ur5"  # the plain name stays the built-in

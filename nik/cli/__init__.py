@@ -2,7 +2,9 @@
 
 Each submodule of ``nik.cli`` registers its subcommands with ``register(subparsers)`` and
 sets ``func`` on its parser; :func:`main` dispatches and turns a ``ValueError`` (nik's
-errors included) or a missing file into one line on stderr and exit code 2, without a traceback.
+errors included) or a missing file into one line on stderr and exit code 2, without a traceback. Output
+piped into a reader that stops early (``nik networks | head``) ends quietly with exit code 141, as a
+command killed by SIGPIPE does.
 
 The top room: it may import every other room, and none imports it.
 """
@@ -45,13 +47,31 @@ def main(argv: list[str] | None = None) -> int:
             from nik.threads import set_threads
 
             set_threads(threads)
-        return int(args.func(args) or 0)
+        rc = int(args.func(args) or 0)
+        sys.stdout.flush()  # here, not at interpreter exit, so that a closed pipe is caught below
+        return rc
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 141
     except KeyboardInterrupt:
         print("nik: interrupted", file=sys.stderr)
         return 130
     except (ValueError, FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError) as err:
         print(f"nik {args.command}: error: {err}", file=sys.stderr)
         return 2
+
+
+def _quiet_stdout() -> None:
+    """The reader of stdout is gone: send what is left to /dev/null, so that the interpreter's last flush at exit
+    does not raise (and print) the same error again."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # stdout is no file (captured): nothing will be flushed to a pipe
+        pass
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -29,7 +29,9 @@ def register(sub) -> None:
         "network shipped with nik for the robot (or --checkpoint), else a multi-start; then the --refine method "
         "to tolerance. Prints joint angles in degrees (prismatic joints: their travel in mm), the position error in "
         "mm, the rotation error in degrees and the success flag. Exit status: 0 when every pose was reached within "
-        "tolerance, 1 when some was not, 2 on an error.",
+        "tolerance, 1 when some was not, 2 on an error. An arm of fewer than 6 joints cannot reach every "
+        "orientation at a position: ask for the position only (--position-only) or for the position and the "
+        "direction of the tool's z axis (--free-axis z).",
     )
     add_robot_arguments(s)
     s.add_argument(
@@ -203,13 +205,49 @@ def _units(prismatic, n: int) -> tuple[list[str], list[str], list[float]]:
     return si, shown, [1e3 if p else 180.0 / math.pi for p in flags]
 
 
+def few_joints_note(robot, success, reachable) -> str | None:
+    """One line for an arm of fewer than 6 joints that missed a target its reach bound does not rule out, else None.
+
+    Such an arm reaches a (dof)-dimensional set of the 6-D poses: at a reachable position most orientations are
+    out of its reach, and nothing proves which (``reachable`` stays True: it only says the position bound rules
+    the target out). The line says so and names the tolerant goals that ask for what it can do."""
+    if robot.dof >= 6 or not bool((~success & reachable).any()):
+        return None
+    return (
+        f"{robot.name} has {robot.dof} joints, fewer than the 6 that reach any orientation at a position: most "
+        "full poses are beyond it even where the position is within reach; for the position only pass "
+        "--position-only, for the position and the direction of the tool's z axis --free-axis z "
+        '(Python: bounds="position" / bounds="axis_z")'
+    )
+
+
+def _written_whole(path: Path):
+    """A context: an open text file at a temporary name beside ``path``, renamed to ``path`` when the block ends
+    without error (a reader never sees half a file; a failed write leaves the old one and no temporary)."""
+    import contextlib
+    import os
+
+    @contextlib.contextmanager
+    def opened():
+        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        try:
+            with tmp.open("w", newline="") as fh:
+                yield fh
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    return opened()
+
+
 def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None) -> None:
     """Write one row per target: ``index``, joints in radians and degrees (prismatic joints: metres and mm,
-    columns ``<name>_m`` / ``<name>_mm``), errors (mm, deg), success, iterations."""
+    columns ``<name>_m`` / ``<name>_mm``), errors (mm, deg), success, iterations. Written to a temporary name and
+    renamed."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     si, shown, factor = _units(prismatic, len(joint_names))
-    with path.open("w", newline="") as fh:
+    with _written_whole(path) as fh:
         w = csv.writer(fh)
         w.writerow(
             [
@@ -290,6 +328,9 @@ def _cmd_solve(args) -> int:
         _plot(robot, T, res, every, args.plot, tolerance=describe(args.tol_mm * 1e-3, math.radians(args.tol_deg)))
     hint = "pass --unit mm" if args.unit == "m" else ""
     msg = unreachable_message(robot, T, res.reachable, unit_hint=hint)
+    if msg is not None:
+        print(f"nik solve: {msg}", file=sys.stderr)
+    msg = few_joints_note(robot, res.success, res.reachable)
     if msg is not None:
         print(f"nik solve: {msg}", file=sys.stderr)
     if args.out:

@@ -14,7 +14,8 @@ pages a training loop touches are read. Splits are contiguous index ranges
 zero-copy slice of the mapped arrays.
 
 Writing is atomic at the directory level: files go to a hidden temporary sibling
-``.NAME.tmp-<pid>-<random>`` that is renamed to ``NAME`` only when complete.
+``.NAME.tmp-<pid>-<random>`` that is renamed to ``NAME`` only when complete; a kill at any instant
+leaves the old or the new dataset whole (:class:`AtomicDirectory`).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ __all__ = [
     "IKDataset",
     "NpyStreamWriter",
     "AtomicDirectory",
+    "is_whole",
     "load_dataset",
     "sha256_file",
 ]
@@ -136,12 +138,19 @@ class AtomicDirectory:
             # on normal exit: tmp is renamed to out (an old out is swapped out, then removed)
         # on an exception (Ctrl-C included): tmp is removed, out is untouched
 
-    A run killed outright (SIGKILL, power loss) may leave ``.NAME.tmp-<pid>-<random>``
-    behind; the next :class:`AtomicDirectory` for the same ``out`` removes every such
-    temporary whose process is gone. With ``overwrite=True`` the old directory is kept until
-    the new one is complete: it is renamed to ``.NAME.old-<pid>-<random>``, the new one takes
-    its name, and only then is the old one deleted. A run killed between those two renames
-    leaves ``out`` missing and the old copy aside; the next run renames it back.
+    A kill at any instant (SIGKILL, power loss) leaves ``out`` as the old or the new directory, whole, or,
+    between the two renames of an overwrite, missing with the old one whole aside; the next
+    :class:`AtomicDirectory` for the same ``out`` (:meth:`cleanup_stale`) puts it back. The sibling names,
+    each ``.NAME.<kind>-<pid>-<random>``, say what a copy is:
+
+    - ``tmp``: being written; never put back (removed once its process is gone);
+    - ``old``: the old ``out``, moved aside whole by an overwrite before the new one takes its name; put back
+      only where ``out`` is missing and the copy is whole, verified against its own checksums (a half copy, or
+      one that is not a dataset, is deleted, never restored);
+    - ``del``: being deleted; renamed so before the first file is removed, never put back.
+
+    With ``overwrite=True`` the order is: rename ``out`` to ``old``, rename ``tmp`` to ``out``, rename ``old``
+    to ``del``, delete ``del``. Only the directory renames change what ``out`` is, and each is atomic.
     """
 
     def __init__(self, out: str | Path, *, overwrite: bool = False, marker: str = META_FILE):
@@ -176,17 +185,20 @@ class AtomicDirectory:
                 raise FileExistsError(f"refusing to overwrite {out}: it is not a nik dataset directory")
         if not os.access(parent, os.W_OK | os.X_OK):
             raise PermissionError(f"output folder {parent} is not writable")
-        tmp = parent / f".{out.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}"
+        tmp = self._sibling("tmp")
         try:
             tmp.mkdir()
         except OSError as err:
             raise PermissionError(f"cannot write in output folder {parent}: {err.strerror or err}") from err
         self.tmp = tmp
 
+    def _sibling(self, kind: str) -> Path:
+        return self.out.parent / f".{self.out.name}.{kind}-{os.getpid()}-{secrets.token_hex(4)}"
+
     def _siblings(self, kind: str) -> Iterator[tuple[Path, int]]:
         prefix = f".{self.out.name}.{kind}-"
         try:
-            entries = list(self.out.parent.iterdir())
+            entries = sorted(self.out.parent.iterdir())
         except OSError:
             return
         for p in entries:
@@ -196,20 +208,35 @@ class AtomicDirectory:
             if pid_text.isdigit():
                 yield p, int(pid_text)
 
+    def _delete(self, p: Path) -> None:
+        """Rename ``p`` to a ``del`` name (never put back), then remove it."""
+        doomed = self._sibling("del")
+        try:
+            os.rename(p, doomed)
+        except OSError:
+            return
+        _remove(doomed)
+
     def cleanup_stale(self) -> list[Path]:
-        """Remove temporaries of ``out`` left by dead processes (restoring a swapped-out old copy)."""
+        """Tidy the siblings of ``out`` left by dead processes: put a whole old copy back where ``out`` is
+        missing (class docstring), delete every other one. Returns the siblings removed."""
         removed = []
+        for p, pid in self._siblings("del"):
+            if not _pid_alive(pid):
+                _remove(p)
+                removed.append(p)
         for p, pid in self._siblings("old"):
             if _pid_alive(pid):
                 continue
-            if not self.out.exists():
+            if not (self.out.exists() or self.out.is_symlink()) and is_whole(p):
                 os.rename(p, self.out)  # an overwrite died between its two renames: put the old one back
+                _fsync_dir(self.out.parent)
             else:
-                shutil.rmtree(p, ignore_errors=True)
+                self._delete(p)
                 removed.append(p)
         for p, pid in self._siblings("tmp"):
             if not _pid_alive(pid):
-                shutil.rmtree(p, ignore_errors=True)
+                self._delete(p)
                 removed.append(p)
         return removed
 
@@ -225,18 +252,18 @@ class AtomicDirectory:
                     f"{out} was created by someone else while this run was writing; pass "
                     "--overwrite (overwrite=True) to replace it"
                 )
-            old = out.parent / f".{out.name}.old-{os.getpid()}-{secrets.token_hex(4)}"
+            old = self._sibling("old")
             os.rename(out, old)
         os.rename(self.tmp, out)
         _fsync_dir(out.parent)
         self.tmp = None
         if old is not None:
-            shutil.rmtree(old) if old.is_dir() and not old.is_symlink() else old.unlink()
+            self._delete(old)
         return out
 
     def abort(self) -> None:
         if self.tmp is not None:
-            shutil.rmtree(self.tmp, ignore_errors=True)
+            _remove(self.tmp)
             self.tmp = None
 
     def __enter__(self) -> Path:
@@ -253,6 +280,40 @@ class AtomicDirectory:
                 raise
         else:
             self.abort()
+
+
+def _remove(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    else:
+        try:
+            p.unlink()
+        except OSError:
+            pass
+
+
+def is_whole(path: str | Path) -> bool:
+    """Whether the directory ``path`` is a whole nik dataset (or shard): its ``meta.json`` reads and every array
+    file it lists is there with its recorded size and SHA-256 (one read of each file)."""
+    path = Path(path)
+    if path.is_symlink() or not path.is_dir():
+        return False
+    try:
+        meta = read_meta(path)
+        files = meta["files"]
+        if not isinstance(files, dict) or not files:
+            return False
+        for fname, info in files.items():
+            fpath = path / fname
+            if Path(fname).name != fname or not fpath.is_file():
+                return False
+            if "bytes" in info and fpath.stat().st_size != info["bytes"]:
+                return False
+            if sha256_file(fpath) != info["sha256"]:
+                return False
+    except (DatasetError, OSError, KeyError, TypeError, AttributeError):
+        return False
+    return True
 
 
 def _fsync_dir(path: Path) -> None:
@@ -457,10 +518,18 @@ def load_dataset(path: str | Path, *, robot=None, verify: bool = True, mmap: boo
         :class:`IKDataset` with ``q: (N, dof)``, ``pose: (N, 4, 4)``, ``branch: (N,)`` or None,
         ``meta`` and the train/val/test splits.
 
+    Where ``path`` is missing but an overwrite killed between its two renames left the old copy aside, that copy
+    is put back first when whole (:meth:`AtomicDirectory.cleanup_stale`).
+
     Raises:
         DatasetError: missing or malformed directory, truncated or altered file, robot mismatch.
     """
     path = Path(path)
+    if not path.exists() and path.name not in ("", ".", ".."):
+        try:  # an overwrite killed between its two renames left the old copy aside: it comes back if whole
+            AtomicDirectory(path).cleanup_stale()
+        except OSError:
+            pass
     meta = read_meta(path)
     if "shard" in meta:
         sh = meta["shard"]

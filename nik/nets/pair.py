@@ -12,8 +12,15 @@ The JSON holds what rebuilds and checks the network:
 :func:`load_pair` checks, in this order, that the files exist, the JSON parses and has every field, the
 weights' SHA-256 matches, the robot's definition hash matches, the architecture is known and every tensor
 has the shape the architecture needs; any failure is a :class:`nik.CheckpointError` of one line naming the
-file and the problem (a field of the JSON where the architecture does not fit). :func:`save_pair` writes
-both files to temporary names and renames them.
+file and the problem (a field of the JSON where the architecture does not fit).
+
+:func:`write_pair_files` (used by :func:`save_pair` and :func:`nik.nets.registry.install`) replaces a pair so that a
+kill at any instant leaves the old pair or the new one whole: both files are staged under hidden names
+(``.NAME.new-<pid>-<random>.safetensors`` / ``.json``), the weights are checked against the JSON's SHA-256, the
+staged JSON is renamed to ``.NAME.ready-<pid>-<random>.json`` (the commit point), then the weights and the JSON
+take their names. :func:`recover_pairs` finishes a commit whose process died after its commit point (where the
+staged weights still match the JSON's checksum) and deletes what a dead process staged before it, and the weights
+of a removal (:func:`nik.nets.registry.remove`) that died after renaming the JSON to ``.NAME.del-<pid>-<random>.json``.
 """
 
 from __future__ import annotations
@@ -21,6 +28,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
+import secrets
 from pathlib import Path
 
 import torch
@@ -28,7 +37,16 @@ import torch
 from nik.errors import CheckpointError
 from nik.robots import Robot, load_robot
 
-__all__ = ["PAIR_FORMAT", "architecture_mismatch", "load_pair", "pair_paths", "read_pair_meta", "save_pair"]
+__all__ = [
+    "PAIR_FORMAT",
+    "architecture_mismatch",
+    "load_pair",
+    "pair_paths",
+    "read_pair_meta",
+    "recover_pairs",
+    "save_pair",
+    "write_pair_files",
+]
 
 #: Version of the JSON; 2 added ``weights_sha256`` (format 1 files are refused: re-export them).
 PAIR_FORMAT = 2
@@ -150,6 +168,8 @@ def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
     except OSError as err:
         raise CheckpointError(f"{st}: unreadable ({_one_line(err)})") from err
     digest = hashlib.sha256(data).hexdigest()
+    if digest != meta["weights_sha256"] and recover_pairs(st.parent):  # a replacement killed half-way: finish it
+        return load_pair(st, robot=robot)
     if digest != meta["weights_sha256"]:
         size = meta.get("weights_bytes")
         how = f"{len(data)} bytes, {size} recorded: truncated or grown" if size not in (None, len(data)) else "damaged"
@@ -187,14 +207,130 @@ def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
     return net.to(torch.float32).eval()
 
 
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+_STAGED = re.compile(r"^\.(?P<name>.+)\.(?P<kind>new|ready|del)-(?P<pid>\d+)-(?P<tag>[0-9a-f]+)\.(safetensors|json)$")
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
     try:
-        write(tmp)
-        tmp.replace(path)
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        os.close(fd)
+
+
+def _write_synced(path: Path, data: bytes) -> None:
+    with open(path, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    path.chmod(0o644)
+
+
+def _sha_of(path: Path) -> str | None:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _recorded_sha(text: str) -> str | None:
+    """The ``weights_sha256`` a pair's JSON text records, or None."""
+    try:
+        meta = json.loads(text)
+    except ValueError:
+        return None
+    return meta.get("weights_sha256") if isinstance(meta, dict) else None
+
+
+def write_pair_files(st: str | Path, weights: bytes, meta_text: str) -> Path:
+    """Replace the pair ``st`` (``NAME.safetensors`` + ``NAME.json``) by ``weights`` and the JSON ``meta_text`` so
+    that a kill at any instant leaves the old pair or the new one whole (module docstring); returns ``st``.
+
+    Raises:
+        CheckpointError: ``meta_text`` does not record the SHA-256 of ``weights`` (nothing is replaced).
+    """
+    st, js = pair_paths(st)
+    d = st.parent
+    recover_pairs(d)
+    if hashlib.sha256(weights).hexdigest() != _recorded_sha(meta_text):
+        raise CheckpointError(f"{js}: the JSON does not record the SHA-256 of the weights to write; nothing written")
+    tag = f"{os.getpid()}-{secrets.token_hex(4)}"
+    new_st, new_js = d / f".{st.stem}.new-{tag}.safetensors", d / f".{st.stem}.new-{tag}.json"
+    ready = d / f".{st.stem}.ready-{tag}.json"
+    try:
+        _write_synced(new_st, weights)
+        _write_synced(new_js, meta_text.encode())
+        os.rename(new_js, ready)  # the commit point: from here on the new pair wins
+        _fsync_dir(d)
+    except BaseException:
+        for p in (new_st, new_js):
+            if p.exists():
+                p.unlink()
+        raise
+    os.replace(new_st, st)
+    os.replace(ready, js)
+    _fsync_dir(d)
+    return st
+
+
+def recover_pairs(directory: str | Path) -> bool:
+    """Tidy what dead processes left in ``directory`` while replacing pairs: a commit past its commit point is
+    finished (where the weights, staged or already in place, match the JSON's checksum), anything else they
+    staged is deleted. Returns whether a pair was finished. Cheap where there is nothing to do (one listing)."""
+    d = Path(directory)
+    try:
+        names = [p.name for p in d.iterdir() if p.name.startswith(".")]
+    except OSError:
+        return False
+    staged = {}
+    for n in names:
+        m = _STAGED.match(n)
+        if m and not _pid_alive(int(m["pid"])):
+            staged.setdefault((m["name"], m["pid"], m["tag"]), set()).add(m["kind"])
+    finished = False
+    for (name, pid, tag), kinds in sorted(staged.items()):
+        new_st, new_js = d / f".{name}.new-{pid}-{tag}.safetensors", d / f".{name}.new-{pid}-{tag}.json"
+        ready = d / f".{name}.ready-{pid}-{tag}.json"
+        st, js = d / f"{name}.safetensors", d / f"{name}.json"
+        try:
+            if "ready" in kinds:
+                try:
+                    want = _recorded_sha(ready.read_text())
+                except (OSError, UnicodeDecodeError):
+                    want = None
+                weights = new_st if new_st.exists() else st
+                if want is not None and _sha_of(weights) == want:
+                    if weights == new_st:
+                        os.replace(new_st, st)
+                    os.replace(ready, js)
+                    _fsync_dir(d)
+                    finished = True
+            installing = any(n.startswith(f".{name}.ready-") for n in names)  # a live install's weights: keep
+            if "del" in kinds and not js.exists() and st.exists() and not installing:
+                st.unlink()  # a removal died after taking the JSON away
+            for p in (new_st, new_js, ready, d / f".{name}.del-{pid}-{tag}.json"):
+                if p.exists():
+                    p.unlink()
+        except OSError:
+            continue
+    return finished
 
 
 def save_pair(
@@ -229,10 +365,4 @@ def save_pair(
     if role is not None:
         meta["role"] = role
 
-    def write_weights(tmp: Path) -> None:
-        tmp.write_bytes(data)
-        tmp.chmod(0o644)
-
-    _atomic_write(st, write_weights)
-    _atomic_write(js, lambda tmp: tmp.write_text(json.dumps(meta, indent=2) + "\n"))
-    return st
+    return write_pair_files(st, data, json.dumps(meta, indent=2) + "\n")

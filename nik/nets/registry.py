@@ -26,12 +26,12 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
+import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
 from nik.errors import CheckpointError
-from nik.nets.pair import pair_paths, read_pair_meta
+from nik.nets.pair import pair_paths, read_pair_meta, recover_pairs, write_pair_files
 
 __all__ = [
     "SHIPPED_DIR",
@@ -109,7 +109,11 @@ def index(dirs: list[Path] | None = None) -> list[tuple[Path, str | None]]:
     for d in search_dirs() if dirs is None else dirs:
         if not d.is_dir():
             continue
+        if d != SHIPPED_DIR:
+            recover_pairs(d)  # an install or removal killed half-way: finished or undone before anything is read
         for js in sorted(d.glob("*.json")):
+            if js.name.startswith("."):  # staged by a replacement in progress (nik.nets.pair.write_pair_files)
+                continue
             st = js.with_suffix(".safetensors")
             if st.exists():
                 out.append((st, _hash_of(js)))
@@ -147,8 +151,9 @@ def _find(robot, dirs, role) -> Path | None:
 
 def install(path: str | Path, *, name: str | None = None, directory: str | Path | None = None) -> Path:
     """Copy the pair at ``path`` into the user folder (or ``directory``) as ``<name>.safetensors`` + ``.json``
-    (default name: the robot's recorded name); the copy is checked (:func:`nik.nets.pair.load_pair`) first.
-    Returns the installed ``.safetensors``."""
+    (default name: the robot's recorded name); the copy is checked (:func:`nik.nets.pair.load_pair`) first and
+    replaces an installed pair of that name so that a kill at any instant leaves the old or the new one whole
+    (:func:`nik.nets.pair.write_pair_files`). Returns the installed ``.safetensors``."""
     from nik.nets.pair import load_pair
 
     st, js = pair_paths(path)
@@ -157,12 +162,8 @@ def install(path: str | Path, *, name: str | None = None, directory: str | Path 
     name = _plain_name(name or meta.get("robot") or st.stem, "install")
     d = Path(directory) if directory is not None else user_dir()
     d.mkdir(parents=True, exist_ok=True)
-    dst_st, dst_js = d / f"{name}.safetensors", d / f"{name}.json"
-    for src, dst in ((st, dst_st), (js, dst_js)):
-        tmp = dst.with_name(f".{dst.name}.tmp{os.getpid()}")
-        shutil.copyfile(src, tmp)
-        tmp.replace(dst)
-    return dst_st
+    # the bytes written are checked against the JSON's checksum again (the source may change after load_pair)
+    return write_pair_files(d / f"{name}.safetensors", st.read_bytes(), js.read_text())
 
 
 @dataclass(frozen=True)
@@ -233,6 +234,7 @@ def remove(name: str, *, directory: str | Path | None = None) -> list[Path]:
     """
     name = _plain_name(name, "remove")
     d = Path(directory) if directory is not None else user_dir()
+    recover_pairs(d)
     files = [p for p in (d / f"{name}.safetensors", d / f"{name}.json") if p.is_file()]
     if not files:
         if (SHIPPED_DIR / f"{name}.json").is_file():
@@ -242,7 +244,13 @@ def remove(name: str, *, directory: str | Path | None = None) -> list[Path]:
             )
         have = sorted(st.stem for st, _ in index([d]))
         raise FileNotFoundError(f"no installed network {name!r} in {d} (installed: {', '.join(have) or 'none'})")
+    # the JSON first, renamed to a name no run restores: from then on the pair is gone (a weights file without
+    # its JSON is never listed), whatever instant a kill lands at
+    js, doomed = d / f"{name}.json", d / f".{name}.del-{os.getpid()}-{secrets.token_hex(4)}.json"
+    if js.is_file():
+        os.rename(js, doomed)
+    (d / f"{name}.safetensors").unlink(missing_ok=True)
+    doomed.unlink(missing_ok=True)
     for p in files:
-        p.unlink()
         _CACHE.pop(p, None)
     return files

@@ -85,6 +85,37 @@ def builtin_robots() -> list[str]:
     return sorted(p.stem for p in BUILTIN_DIR.glob("*.yaml") if _is_robot_file(p))
 
 
+def _names_builtin(name_or_path) -> bool:
+    """Whether ``name_or_path`` is written as a plain name (a built-in's, when one is called so), not as a path:
+    a ``str`` without a folder separator, a leading ``.`` or a robot-file suffix (``./panda``, ``panda.yaml`` and
+    a :class:`~pathlib.Path` that exists are paths)."""
+    text = str(name_or_path)
+    if isinstance(name_or_path, Path):
+        return not name_or_path.exists() and name_or_path.parent == Path(".")
+    seps = {"/", "\\"}
+    return not any(sep in text for sep in seps) and not text.startswith(".") and "." not in text
+
+
+_SHADOW_WARNED: set[str] = set()
+
+
+def _warn_shadowed(name: str) -> None:
+    """Say once per name that a file or folder of the working directory named like a built-in is not what loads."""
+    if name in _SHADOW_WARNED:
+        return
+    _SHADOW_WARNED.add(name)
+    import warnings
+
+    from nik.errors import RobotDefinitionWarning
+
+    warnings.warn(
+        f"{name!r} is the built-in arm; the {name!r} in the working directory is not loaded "
+        f"(write ./{name}, or the robot file's path with its .yaml/.urdf suffix, to load a file)",
+        RobotDefinitionWarning,
+        stacklevel=3,
+    )
+
+
 def _is_robot_file(path: Path) -> bool:
     try:
         data = yaml.safe_load(path.read_text())
@@ -98,7 +129,10 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
 
     Args:
         name_or_path: a built-in name (:func:`builtin_robots`), a ``.yaml``/``.yml`` robot file,
-            a ``.urdf`` file, or a :class:`Robot` (returned as is, or with the frames below).
+            a ``.urdf`` file, or a :class:`Robot` (returned as is, or with the frames below). A built-in's name
+            is the built-in arm even where a file or folder of that name is in the working directory (a
+            :class:`nik.RobotDefinitionWarning` says so once, and how to load the file: ``./panda``); a path
+            (``./panda``, ``robots/panda``, ``panda.yaml``) is always read as a file.
         end_link: for URDF arms, the tool link. Default (:func:`nik.robots.urdf.choose_end_link`):
 
             1. the arm is the longest chain of revolute joints from the root, gripper and hand joints not
@@ -130,7 +164,12 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
     base, tool = as_frame(base, name="base"), as_frame(tool, name="tool")
     text = str(name_or_path)
     path = Path(text)
-    if path.suffix.lower() in {".urdf", ".yaml", ".yml"} or path.exists():
+    named_builtin = _names_builtin(name_or_path) and _is_robot_file(BUILTIN_DIR / f"{text}.yaml")
+    if named_builtin and path.exists():
+        _warn_shadowed(text)
+    if not named_builtin and (path.suffix.lower() in {".urdf", ".yaml", ".yml"} or path.exists()):
+        if path.is_dir():
+            raise RobotDefinitionError(f"{text} is a folder, not a robot file (.yaml or .urdf)")
         if not path.is_file():
             raise RobotDefinitionError(f"robot file not found: {path}")
         if path.suffix.lower() == ".urdf":

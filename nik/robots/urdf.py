@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 #: Version of the cached parse results (bump when the conversion to the normal form changes).
-URDF_CACHE_FORMAT = 3  # 3: the default tool link prefers conventional names and leaves grippers out
+URDF_CACHE_FORMAT = 4  # 3: conventional names preferred, grippers left out; 4: a hand link (Baxter's) is one
 
 #: joint types of the URDF format; floating and planar joints are kept as fixed (an error only on the arm's chain)
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
@@ -141,9 +141,11 @@ def _parse_chain(text: str, source: str):
 GRIPPER_WORDS = ("gripper", "finger", "jaw", "knuckle", "thumb")
 
 #: Conventional tool-link names, best first: a tool link is picked by the first kind its name fits
-#: (``*tcp*``, ``*end_effector*``, ``tool0``, a word ``ee`` or ``eef``, a word ``flange``, a word ``tool``;
-#: the words of ``arm_tool_link`` are arm, tool, link, of ``gripperMover`` gripper, mover).
-TOOL_LINK_KINDS = ("*tcp*", "*end_effector*", "tool0", "ee|eef", "flange", "tool")
+#: (``*tcp*``, ``*end_effector*``, ``tool0``, a word ``ee`` or ``eef``, a word ``flange``, a word ``tool``, the
+#: hand: a word ``hand`` followed by nothing or ``link`` only, as Baxter's flange ``right_hand_link``, not the
+#: sensors on it, ``right_hand_camera_link``; the words of ``arm_tool_link`` are arm, tool, link, of
+#: ``gripperMover`` gripper, mover).
+TOOL_LINK_KINDS = ("*tcp*", "*end_effector*", "tool0", "ee|eef", "flange", "tool", "hand")
 
 
 @dataclass(frozen=True)
@@ -165,7 +167,7 @@ class EndLinkChoice:
     def note(self) -> str | None:
         """One line for the user when the choice left joints out or had several candidates; else None."""
         parts = []
-        if len(self.candidates) > 1:
+        if len(self.candidates) > 1 and self.link != "tool0":  # tool0 (ROS-Industrial's flange) said nothing more
             parts.append(
                 f"candidates {', '.join(self.candidates)} (preferred in the order {', '.join(TOOL_LINK_KINDS)})"
             )
@@ -186,8 +188,13 @@ class EndLinkChoice:
 def _words(name: str) -> set[str]:
     """The lower-case words of a name, split at non-alphanumerics and camel case (``jointGripper``: joint,
     gripper; ``LHand``: l, hand)."""
+    return set(_word_list(name))
+
+
+def _word_list(name: str) -> list[str]:
+    """The lower-case words of a name in order (:func:`_words`)."""
     split = re.sub(r"([A-Z])([A-Z][a-z])", r"\1_\2", re.sub(r"([a-z0-9])([A-Z])", r"\1_\2", name))
-    return set(re.split(r"[^a-z0-9]+", split.lower())) - {""}
+    return [w for w in re.split(r"[^a-z0-9]+", split.lower()) if w]
 
 
 def _is_gripper_joint(name: str) -> bool:
@@ -205,8 +212,14 @@ def _tool_kind(link: str) -> int | None:
         bool(words & {"ee", "eef"}),
         "flange" in words,
         "tool" in words,
+        _is_hand_link(link),
     )
     return next((i for i, fit in enumerate(fits) if fit), None)
+
+
+def _is_hand_link(link: str) -> bool:
+    words = _word_list(link)
+    return "hand" in words and set(words[words.index("hand") + 1 :]) <= {"link"}
 
 
 def choose_end_link(data: str | bytes, source: str = "URDF") -> EndLinkChoice:
@@ -254,6 +267,9 @@ def choose_end_link(data: str | bytes, source: str = "URDF") -> EndLinkChoice:
         order += 1
         todo += [(c, depth + 1) for c in frame.children if c.joint.joint_type == "fixed" and c.joint.name not in free]
     found.sort()
+    hand = TOOL_LINK_KINDS.index("hand")
+    if found and found[0][0] != hand:  # the hand is the last resort: never a candidate next to a tool link
+        found = [f for f in found if f[0] != hand]
     left_out = tuple(f.joint.name for f in _frames(end) if f is not end and f.joint.joint_type != "fixed")
     candidates = tuple(name for *_, name in found)
     return EndLinkChoice(candidates[0] if candidates else end.link.name, end.link.name, count, candidates, left_out)
