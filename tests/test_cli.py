@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import pickle
 import subprocess
 import sys
@@ -82,3 +83,34 @@ def test_import_nik_help_and_solve_do_not_load_lightning_or_matplotlib():
     done = subprocess.run([sys.executable, "-c", _STARTUP], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+_HELP_EVERYWHERE = """
+import sys
+from nik.cli import build_parser, main
+commands = list(build_parser()._subparsers._group_actions[0].choices)
+for command in commands:
+    try:
+        main([command, "--help"])
+    except SystemExit as done:
+        assert done.code == 0, (command, done.code)
+print(len(commands), "torch" in sys.modules)
+"""
+
+
+def test_nik_help_imports_no_torch():
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    top = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "nik.cli", "--help"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert top.returncode == 0 and "usage: nik" in top.stdout, top.stderr[-2000:]
+    imported = {line.rsplit("|", 1)[-1].strip() for line in top.stderr.splitlines() if line.startswith("import time")}
+    assert "nik.cli" in imported and "torch" not in imported
+    each = subprocess.run([sys.executable, "-c", _HELP_EVERYWHERE], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert each.returncode == 0, each.stderr[-2000:]
+    count, loaded = each.stdout.split()[-2:]
+    assert int(count) >= 9 and loaded == "False"  # every subcommand's --help too

@@ -13,7 +13,7 @@ __all__ = ["register"]
 
 
 def register(sub) -> None:
-    from nik.learn.compare import build_parser
+    from nik.learn.cli import build_parser
 
     t = sub.add_parser(
         "train",
