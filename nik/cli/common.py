@@ -3,10 +3,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import warnings
+from pathlib import Path
 
-__all__ = ["add_robot_arguments", "robot_from_args", "tool_link_text"]
+__all__ = ["add_robot_arguments", "notes_as_lines", "robot_from_args", "tool_link_text"]
+
+_NIK_DIR = str(Path(__file__).resolve().parents[1])
 
 _FRAME = ("X", "Y", "Z", "QW", "QX", "QY", "QZ")
 
@@ -69,6 +73,30 @@ def robot_from_args(args):
             f"--end-link applies to URDF arms; {robot.name} is defined by joint parameters (no links to choose from)"
         )
     return robot
+
+
+@contextlib.contextmanager
+def notes_as_lines():
+    """While the block runs, nik's own warnings (:class:`nik.RobotDefinitionWarning`, and user warnings raised
+    from nik's code) are printed to stderr as they come, each as one line ``nik: note: MESSAGE`` with no source
+    line; other warnings are shown as Python shows them."""
+    from nik.errors import RobotDefinitionWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", RobotDefinitionWarning)
+        shown = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            ours = issubclass(category, RobotDefinitionWarning) or (
+                issubclass(category, UserWarning) and str(filename).startswith(_NIK_DIR)
+            )
+            if ours:
+                print(f"nik: note: {message}", file=sys.stderr, flush=True)
+            else:
+                shown(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
 
 
 def tool_link_text(robot) -> str:

@@ -6,8 +6,11 @@ The full LightningCLI stays ``python train.py fit --config configs/train/<method
 
 from __future__ import annotations
 
+import json
 import shlex
 import sys
+
+from nik.cli.common import notes_as_lines
 
 __all__ = ["register"]
 
@@ -104,7 +107,8 @@ def _cmd_train(args) -> int:
         eval_one=args.eval_one,
         command=shlex.join(getattr(args, "invocation", None) or ["nik", *sys.argv[1:]]),
     )
-    res = train_network(cfg)
+    with notes_as_lines():  # the default tool link of a URDF and the like: one line each, as they come
+        res = train_network(cfg)
     print(
         f"trained {res.kind} network for {res.wall_s / 60:.1f} min ({res.steps} steps, {res.samples / 1e6:.2f} M "
         f"samples); wrote {res.out} and {res.out.with_suffix('.json')}"
@@ -113,11 +117,30 @@ def _cmd_train(args) -> int:
         print(f"installed as {res.installed}")
         for line in res.usage:
             print(f"  {line}")
+    else:
+        print(
+            f"not installed: `nik networks install {shlex.quote(str(res.out))}` (or --install) makes nik.IKSolver "
+            f"and nik solve find it for this arm; without it: "
+            f"nik.IKSolver({_arm_expression(args)}, checkpoint={json.dumps(str(res.out))})"
+        )
     if res.report is not None:
         print("evaluation (position mm, rotation deg; success within 0.1 mm / 0.1 deg; CPU, this process):")
         for line in res.report.lines():
             print("  " + line)
     return 0
+
+
+def _arm_expression(args) -> str:
+    """The Python that loads the trained arm again (:func:`nik.learn.usage.robot_expression`), else ``ARM``."""
+    import warnings
+
+    from nik.learn.usage import robot_expression
+    from nik.robots import load_robot
+
+    with warnings.catch_warnings():  # its notes were printed when training began
+        warnings.simplefilter("ignore")
+        robot = load_robot(args.robot, end_link=args.end_link)
+    return robot_expression(robot, args.robot, args.end_link) or "ARM"
 
 
 def _cmd_compare(args) -> int:
