@@ -7,6 +7,7 @@ the frames written here as matrices (rotations by Rodrigues' formula, not by nik
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 
@@ -248,6 +249,33 @@ def test_cli_solve_with_tool_and_base_answers_for_the_tcp(capsys):
     pos, rot = nik.pose_error(T[0], got)
     assert float(pos) <= 1e-4 and float(rot) <= 1e-3
     assert_close(torch.tensor(doc["tool"], dtype=torch.float64), TOOL, atol=1e-12, rtol=0)
+
+
+@pytest.mark.parametrize("command", ["solve", "path"])
+def test_cli_base_and_tool_positions_follow_unit_mm(tmp_path, capsys, command):
+    plain = nik.load_robot("kuka_kr")
+    T = BASE @ plain.fk(_q(plain, 2, 7)) @ TOOL
+    mm = [[*(1e3 * p[:3]).tolist(), *p[3:].tolist()] for p in nik.poses.pose_to_vector(T, "quat")]
+    poses = tmp_path / "poses.csv"
+    poses.write_text("x,y,z,qw,qx,qy,qz\n" + "".join(",".join(map(repr, p)) + "\n" for p in mm))
+    out = tmp_path / "q.csv"
+    in_mm = [[*(1e3 * np.array(v[:3])).tolist(), *v[3:]] for v in (TOOL7, BASE7)]  # a 160 mm tool, not 160 m
+    args = [
+        command,
+        "--robot",
+        "kuka_kr",
+        "--unit",
+        "mm",
+        "--tool",
+        *map(repr, in_mm[0]),
+        "--base",
+        *map(repr, in_mm[1]),
+    ]
+    assert main([*args, "--poses", str(poses), "--out", str(out)]) == 0, capsys.readouterr().err
+    rows = list(csv.DictReader(out.open()))
+    q = torch.tensor([[float(r[f"{n}_deg"]) for n in plain.joint_names] for r in rows], dtype=torch.float64)
+    pos, rot = nik.pose_error(T, BASE @ plain.fk(q.deg2rad()) @ TOOL)  # the frames read as millimetres
+    assert float(pos.max()) <= 1e-4 and float(rot.max()) <= 1e-3
 
 
 def test_cli_generate_with_tool_records_it_in_the_dataset(tmp_path, capsys):

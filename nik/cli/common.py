@@ -32,8 +32,8 @@ def add_robot_arguments(parser) -> None:
         nargs=7,
         default=None,
         metavar=_FRAME,
-        help="the robot's base in your world frame: position (metres, whatever --unit) and unit quaternion; "
-        "poses are then in the world frame",
+        help="the robot's base in your world frame: position (the unit of --unit where the command has one, else "
+        "metres) and unit quaternion; poses are then in the world frame",
     )
     parser.add_argument(
         "--tool",
@@ -41,13 +41,14 @@ def add_robot_arguments(parser) -> None:
         nargs=7,
         default=None,
         metavar=_FRAME,
-        help="the tool centre point (TCP) in the frame of the last link: position (metres, whatever --unit) and "
-        "unit quaternion; poses are then the TCP's (a network trained without it is not used)",
+        help="the tool centre point (TCP) in the frame of the last link: position (the unit of --unit where the "
+        "command has one, else metres) and unit quaternion; poses are then the TCP's",
     )
 
 
 def robot_from_args(args):
-    """The robot of ``--robot`` with ``--end-link``, ``--base`` and ``--tool``.
+    """The robot of ``--robot`` with ``--end-link``, ``--base`` and ``--tool`` (positions in ``--unit`` where the
+    command has one: ``--unit mm`` reads them in millimetres, as the poses).
 
     ``--end-link`` on an arm without links is a ValueError; a note on the default tool link (gripper joints
     left out, several candidates) goes to stderr as one line.
@@ -55,14 +56,11 @@ def robot_from_args(args):
     from nik.errors import RobotDefinitionWarning
     from nik.robots import load_robot
 
+    scale = 1e-3 if getattr(args, "unit", "m") == "mm" else 1.0  # --base / --tool positions follow --unit
+    base, tool = (_frame_si(getattr(args, key, None), scale) for key in ("base", "tool"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RobotDefinitionWarning)
-        robot = load_robot(
-            args.robot,
-            end_link=args.end_link,
-            base=getattr(args, "base", None),
-            tool=getattr(args, "tool", None),
-        )
+        robot = load_robot(args.robot, end_link=args.end_link, base=base, tool=tool)
     for w in caught:
         if issubclass(w.category, RobotDefinitionWarning):
             print(f"nik: note: {w.message}", file=sys.stderr)
@@ -73,6 +71,13 @@ def robot_from_args(args):
             f"--end-link applies to URDF arms; {robot.name} is defined by joint parameters (no links to choose from)"
         )
     return robot
+
+
+def _frame_si(frame, scale: float):
+    """``X Y Z QW QX QY QZ`` with the position times ``scale`` (to metres); None stays None."""
+    if frame is None:
+        return None
+    return [v * scale for v in frame[:3]] + list(frame[3:])
 
 
 @contextlib.contextmanager
