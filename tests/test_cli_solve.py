@@ -205,6 +205,31 @@ def test_solve_csv_errors_name_file_and_line(tmp_path, capsys):
     assert "b.csv line 3: column 'y' must be a number, got 'abc'" in capsys.readouterr().err
 
 
+def test_solve_reads_a_csv_with_excels_utf8_byte_order_mark(tmp_path, capsys):
+    robot = nik.load_robot("puma560")
+    T, rows = _pose_rows(robot, 3, 4)
+    plain = _write_csv(tmp_path / "plain.csv", rows)
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())  # Excel's "CSV UTF-8"
+    assert main(["solve", "--robot", "puma560", "--poses", str(bom), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    q = torch.tensor([r["q_rad"] for r in doc["results"]], dtype=torch.float64)
+    pos, rot = nik.pose_error(T, robot.fk(q))
+    assert float(pos.max()) < 1e-4 and float(rot.max()) < 1e-3
+
+
+@pytest.mark.parametrize("command", ["solve", "path"])
+def test_csv_errors_count_file_lines_from_1_for_every_check(tmp_path, capsys, command):
+    bad = tmp_path / "q.csv"  # header on line 1, a blank line 3: the bad quaternion is on file line 5
+    bad.write_text("x,y,z,qw,qx,qy,qz\n0.4,0.1,0.5,0,1,0,0\n\n0.4,0.1,0.5,0,1,0,0\n0.4,0.1,0.5,0,2,0,0\n")
+    assert main([command, "--robot", "puma560", "--poses", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad} line 5: quaternion (qw, qx, qy, qz) has norm 2" in err and err.count("\n") == 1
+    bad.write_text("x,y,z,qw,qx,qy,qz\n0.4,0.1,0.5,0,1,0,0\n0.4,0.1,nan,0,1,0,0\n")
+    assert main([command, "--robot", "puma560", "--poses", str(bad)]) == 2
+    assert f"{bad} line 3: a pose contains NaN or inf" in capsys.readouterr().err
+
+
 def test_unreachable_pose_exits_1_and_says_no(capsys):
     assert main(["solve", "--robot", "puma560", "--refine", "lm", "--pose", "3", "0", "0", "1", "0", "0", "0"]) == 1
     assert "NO" in capsys.readouterr().out

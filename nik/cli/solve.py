@@ -159,13 +159,18 @@ def add_threads_argument(parser, *, default=None) -> None:
 # ---------------------------------------------------------------------------
 def read_poses_csv(path: str | Path):
     """``(B, 7)`` float64 tensor from a CSV with header ``x,y,z,qw,qx,qy,qz`` (any column order,
-    extra columns ignored). Errors name the file, line and column."""
+    extra columns ignored; a UTF-8 byte-order mark, as Excel's "CSV UTF-8" writes, is skipped). Errors name the
+    file, the line (1-based, as an editor counts them: the header is line 1) and the column; a quaternion whose
+    norm is off 1 by more than :data:`nik.ik.targets.QUAT_NORM_TOL`, NaN or inf included, is refused here, by
+    its line."""
     import torch
+
+    from nik.ik.targets import QUAT_NORM_TOL
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"poses file not found: {path}")
-    with path.open(newline="") as fh:
+    with path.open(newline="", encoding="utf-8-sig") as fh:
         reader = csv.reader(fh)
         try:
             header = next(reader)
@@ -179,7 +184,8 @@ def read_poses_csv(path: str | Path):
             )
         cols = [names.index(c) for c in POSE_COLUMNS]
         rows = []
-        for line, rec in enumerate(reader, start=2):
+        for rec in reader:
+            line = reader.line_num  # the file line this record ends on
             if not rec or all(not v.strip() for v in rec):
                 continue
             vals = []
@@ -189,6 +195,14 @@ def read_poses_csv(path: str | Path):
                 except (IndexError, ValueError):
                     got = rec[c] if c < len(rec) else "nothing"
                     raise ValueError(f"{path} line {line}: column {name!r} must be a number, got {got!r}") from None
+            norm = math.sqrt(sum(v * v for v in vals[3:]))
+            if not all(math.isfinite(v) for v in vals):
+                raise ValueError(f"{path} line {line}: a pose contains NaN or inf ({','.join(map(str, vals))})")
+            if abs(norm - 1.0) > QUAT_NORM_TOL:
+                raise ValueError(
+                    f"{path} line {line}: quaternion (qw, qx, qy, qz) has norm {norm:.6g}; a unit quaternion is "
+                    f"expected (norm within {QUAT_NORM_TOL:g} of 1 is normalised)"
+                )
             rows.append(vals)
     if not rows:
         raise ValueError(f"{path}: no poses after the header")
