@@ -230,6 +230,32 @@ def test_csv_errors_count_file_lines_from_1_for_every_check(tmp_path, capsys, co
     assert f"{bad} line 3: a pose contains NaN or inf" in capsys.readouterr().err
 
 
+def test_plot_of_all_solutions_draws_at_most_8_ghosts_a_pose_and_says_so(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import nik.view
+    from nik.cli.solve import PLOT_MAX_GHOSTS, _plot
+
+    robot = nik.load_robot("panda")
+    gen = torch.Generator().manual_seed(5)
+    q = robot.sample(2, generator=gen, dtype=torch.float64)
+    res = nik.IKSolver(robot).solve(robot.fk(q), seed=0)
+    every = [robot.sample(120, generator=gen, dtype=torch.float64), q[1:]]  # a 7-joint arm's continuum; one
+    drawn = {}
+    real = nik.view.plot_arm
+
+    def spy(robot, q, path, *, ghosts=None, **kw):
+        drawn.update(ghosts=ghosts, title=kw["title"])
+        return real(robot, q, path, ghosts=ghosts, **kw)
+
+    monkeypatch.setattr(nik.view, "plot_arm", spy)
+    _plot(robot, robot.fk(q), res, every, tmp_path / "arm.png", tolerance="0.1 mm / 0.1 deg")
+    assert (tmp_path / "arm.png").stat().st_size > 0
+    assert PLOT_MAX_GHOSTS == 8 and drawn["ghosts"].shape == (8 + 1, 7)
+    assert all(any(torch.equal(g, s) for s in every[0]) for g in drawn["ghosts"][:8])  # drawn from the found ones
+    assert "9 of 121 solutions drawn faint (at most 8 a pose)" in drawn["title"]
+    assert "nik: note: --plot draws 9 of the 121 solutions found" in capsys.readouterr().err
+
+
 def test_unreachable_pose_exits_1_and_says_no(capsys):
     assert main(["solve", "--robot", "puma560", "--refine", "lm", "--pose", "3", "0", "0", "1", "0", "0", "0"]) == 1
     assert "NO" in capsys.readouterr().out
