@@ -15,8 +15,8 @@
    (``resume`` continues from it, the time budget counting the earlier part), ``history.csv`` and
    ``curve.png`` in ``runs/<name>/``;
 5. **export** of the pair (:mod:`nik.nets.pair`, SHA-256 recorded) to ``out`` (default
-   ``runs/<name>/<name>.safetensors``) with the command that ran, the data, its hash (:func:`data_sha256`; no
-   path of the machine) and the counters; ``install`` copies it to the user folder, where ``IKSolver(robot)`` finds it for this arm by definition hash
+   ``runs/<name>/<name>.safetensors``) with the command that ran, the data and the counters; ``install``
+   copies it to the user folder, where ``IKSolver(robot)`` finds it for this arm by definition hash
    (:mod:`nik.nets.registry`), and says how to get it (:mod:`nik.learn.usage`: on an arm with a closed form
    the closed form stays the default, and ``checkpoint=PATH`` uses the network);
 6. **evaluation** (:func:`nik.learn.report.network_report`): raw error, and network + LM against no
@@ -177,19 +177,6 @@ def _datamodule(cfg: TrainCfg, robot: Robot):
     return dm
 
 
-def data_sha256(data: dict, robot_hash: str) -> str:
-    """The hash of the training data a pair records (``training.data_sha256``): the SHA-256 of the canonical JSON of
-    the data's description (``training.data``: a seeded FK stream's sampler, seed and sizes, or a dataset's files'
-    SHA-256) without its ``path``, and of the arm's definition hash. The samples are a function of these, so two
-    runs with the same hash saw the same data, wherever their files were; no path of the machine is recorded."""
-    import hashlib
-    import json
-
-    described = {k: v for k, v in data.items() if k != "path"}
-    text = json.dumps({"data": described, "robot_hash": robot_hash}, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
 def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
     """Run the recipe (module docstring); ``log(line)`` receives the progress lines (default: stderr).
 
@@ -264,16 +251,15 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
     trainer.fit(model, datamodule=dm, ckpt_path=ckpt_path)
     net = model.net.to(torch.float32).eval()
     counters = {"loss_evals": int(model.loss_evals), "sample_evals": int(model.sample_evals), "wall_s": model.wall_s}
-    data = dm.describe()
     training = {
         "command": cfg.command or "not recorded (nik.learn.recipe.train_network called from Python)",
-        "data": data,
-        "data_sha256": data_sha256(data, robot.definition_hash),
+        "data": dm.describe(),
         "kind_choice": why,
         "minutes_budget": cfg.minutes,
         "steps": int(trainer.global_step),
         "counters": counters,
         "seed": cfg.seed,
+        "run_dir": str(run_dir),
     }
     if model._earlier_commands:
         training["resumed_from_commands"] = list(model._earlier_commands)
