@@ -53,8 +53,8 @@ def load(tmp_path, text, **kw):
     return robot, notes
 
 
-def assert_fk_is_pk_chain_to(robot, text, link):
-    chain = build_pk_chain(text, link).to(dtype=torch.float64)
+def assert_fk_is_pk_chain_to(robot, text, link, root_link=""):
+    chain = build_pk_chain(text, link, root_link).to(dtype=torch.float64)
     q = robot.sample(6, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
     assert_close(robot.fk(q), chain.forward_kinematics(q).get_matrix(), atol=1e-9, rtol=0)
 
@@ -189,3 +189,41 @@ def test_kinova_jaco2_ends_at_its_end_effector_160_mm_past_link_6(tmp_path):
     q = robot.sample(4, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     gap = torch.linalg.vector_norm(robot.fk(q)[:, :3, 3] - link6.fk(q)[:, :3, 3], dim=-1)
     assert_close(gap, torch.full((4,), 0.16, dtype=torch.float64), atol=2e-3, rtol=0)
+
+
+@pytest.mark.parametrize(
+    "rel", ["tiago_description/robots/tiago.urdf", "pr2_description/urdf/pr2.urdf"], ids=["tiago", "pr2"]
+)
+def test_root_link_leaves_a_mobile_manipulators_torso_out(rel):
+    path = _erd(rel)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotDefinitionWarning)
+        whole = nik.load_robot(path)
+        arm = nik.load_robot(path, root_link="torso_lift_link")
+    assert whole.joint_names[0] == "torso_lift_joint" and bool(whole.prismatic[0])  # the torso lift by default
+    assert arm.dof == 7 and arm.joint_names == whole.joint_names[1:] and arm.end_link == whole.end_link
+    assert_fk_is_pk_chain_to(arm, path.read_bytes(), arm.end_link, root_link="torso_lift_link")
+    q = arm.sample(3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    lift = torch.cat([torch.full((3, 1), float(whole.limits[0, 0])), q], dim=1)
+    # the same arm: poses relative to the first one agree (the torso link's placement drops out)
+    rel_whole = torch.linalg.inv(whole.fk(lift[:1])) @ whole.fk(lift)
+    assert_close(rel_whole, torch.linalg.inv(arm.fk(q[:1])) @ arm.fk(q), atol=1e-9, rtol=0)
+
+
+def test_root_link_on_the_command_line_and_on_an_arm_without_links(tmp_path, capsys):
+    from nik.cli import main
+
+    path = _erd("tiago_description/robots/tiago.urdf")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotDefinitionWarning)
+        arm = nik.load_robot(path, root_link="torso_lift_link")
+    T = arm.fk(arm.sample(1, generator=torch.Generator().manual_seed(4), dtype=torch.float64))[0]
+    pose = nik.poses.pose_to_vector(T, "quat").tolist()
+    argv = ["solve", "--robot", str(path), "--root-link", "torso_lift_link", "--json", "--pose", *map(repr, pose)]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["joint_names"] == arm.joint_names and doc["results"][0]["success"] is True
+    with pytest.raises(nik.RobotDefinitionError, match="root_link applies to URDF arms; puma560"):
+        nik.load_robot("puma560", root_link="base")
+    assert main(["solve", "--robot", "puma560", "--root-link", "base", "--pose", *map(repr, pose)]) == 2
+    assert "root_link applies to URDF arms" in capsys.readouterr().err

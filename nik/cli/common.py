@@ -8,7 +8,7 @@ import sys
 import warnings
 from pathlib import Path
 
-__all__ = ["add_robot_arguments", "notes_as_lines", "robot_from_args", "tool_link_text"]
+__all__ = ["add_robot_arguments", "add_root_link_argument", "notes_as_lines", "robot_from_args", "tool_link_text"]
 
 _NIK_DIR = str(Path(__file__).resolve().parents[1])
 
@@ -26,6 +26,7 @@ def add_robot_arguments(parser) -> None:
         "(*tcp*, *end_effector*, tool0, ee, flange, tool) at the end of the longest chain of revolute joints, "
         "gripper joints left out (docs/robots.md; the output names the one used)",
     )
+    add_root_link_argument(parser)
     parser.add_argument(
         "--base",
         type=float,
@@ -46,9 +47,20 @@ def add_robot_arguments(parser) -> None:
     )
 
 
+def add_root_link_argument(parser) -> None:
+    """``--root-link LINK``: the link a URDF arm's chain starts from (:func:`nik.load_robot`'s ``root_link``)."""
+    parser.add_argument(
+        "--root-link",
+        default=None,
+        metavar="LINK",
+        help="URDF: the link the arm starts from (default the URDF's root); on a mobile manipulator, e.g. "
+        "torso_lift_link for TIAGo or PR2, the arm without the torso lift, poses in that link's frame",
+    )
+
+
 def robot_from_args(args):
-    """The robot of ``--robot`` with ``--end-link``, ``--base`` and ``--tool`` (positions in ``--unit`` where the
-    command has one: ``--unit mm`` reads them in millimetres, as the poses).
+    """The robot of ``--robot`` with ``--end-link``, ``--root-link``, ``--base`` and ``--tool`` (positions in
+    ``--unit`` where the command has one: ``--unit mm`` reads them in millimetres, as the poses).
 
     ``--end-link`` on an arm without links is a ValueError; a note on the default tool link (gripper joints
     left out, several candidates) goes to stderr as one line.
@@ -60,7 +72,9 @@ def robot_from_args(args):
     base, tool = (_frame_si(getattr(args, key, None), scale) for key in ("base", "tool"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RobotDefinitionWarning)
-        robot = load_robot(args.robot, end_link=args.end_link, base=base, tool=tool)
+        robot = load_robot(
+            args.robot, end_link=args.end_link, base=base, tool=tool, root_link=getattr(args, "root_link", None)
+        )
     for w in caught:
         if issubclass(w.category, RobotDefinitionWarning):
             print(f"nik: note: {w.message}", file=sys.stderr)

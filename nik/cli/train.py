@@ -10,7 +10,7 @@ import json
 import shlex
 import sys
 
-from nik.cli.common import notes_as_lines
+from nik.cli.common import add_root_link_argument, notes_as_lines
 
 __all__ = ["register"]
 
@@ -30,6 +30,7 @@ def register(sub) -> None:
     )
     t.add_argument("robot", metavar="ROBOT", help="built-in robot name, YAML robot file or URDF")
     t.add_argument("--end-link", default=None, help="URDF: the tool link (default: the end of the longest chain)")
+    add_root_link_argument(t)
     t.add_argument("--minutes", type=float, default=20.0, help="training wall-clock budget in minutes (default 20)")
     t.add_argument("--data", default=None, help="dataset folder (nik generate); default: fresh FK samples every step")
     t.add_argument(
@@ -85,6 +86,7 @@ def _cmd_train(args) -> int:
     cfg = TrainCfg(
         robot=args.robot,
         end_link=args.end_link,
+        root_link=args.root_link,
         minutes=args.minutes,
         data=args.data,
         out=args.out,
@@ -139,8 +141,8 @@ def _arm_expression(args) -> str:
 
     with warnings.catch_warnings():  # its notes were printed when training began
         warnings.simplefilter("ignore")
-        robot = load_robot(args.robot, end_link=args.end_link)
-    return robot_expression(robot, args.robot, args.end_link) or "ARM"
+        robot = load_robot(args.robot, end_link=args.end_link, root_link=args.root_link)
+    return robot_expression(robot, args.robot, args.end_link, root_link=args.root_link) or "ARM"
 
 
 def _cmd_compare(args) -> int:

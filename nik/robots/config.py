@@ -93,7 +93,9 @@ def _is_robot_file(path: Path) -> bool:
     return isinstance(data, dict) and ("joints" in data or "urdf" in data)
 
 
-def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=None) -> Robot:
+def load_robot(
+    name_or_path, *, end_link: str | None = None, base=None, tool=None, root_link: str | None = None
+) -> Robot:
     """Load a robot by built-in name, YAML file or URDF file.
 
     Args:
@@ -113,6 +115,9 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
             The moving joints past the arm (a gripper's) are left out; a :class:`nik.RobotDefinitionWarning`
             names them, and the candidates where several links fit. Built-in arms name their ``end_link``.
         base: the pose of the robot's base (first frame, a URDF's root link) in your world frame.
+        root_link: for URDF arms, the link the chain starts from (default the URDF's root; a robot file's
+            ``root_link:``). On a mobile manipulator (TIAGo, PR2: the torso lift is a joint of the chain from the
+            root) ``root_link="torso_lift_link"`` gives the arm alone, its poses in that link's frame.
         tool: the tool centre point (TCP) in the frame of the last link (``end_link``, the flange).
             Each a ``(4, 4)`` transform or ``(7,)`` x, y, z (metres) and quaternion w, x, y, z; FK is then
             ``base @ T(q) @ tool`` for every solver (:mod:`nik.robots.frames`), replacing a robot file's own
@@ -136,24 +141,28 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
         if path.suffix.lower() == ".urdf":
             from nik.robots.urdf import load_urdf
 
-            return load_urdf(path, end_link=end_link, base=base, tool=tool)
-        return robot_from_file(path, end_link=end_link, base=base, tool=tool)
+            return load_urdf(path, end_link=end_link, root_link=root_link, base=base, tool=tool)
+        return robot_from_file(path, end_link=end_link, base=base, tool=tool, root_link=root_link)
     builtin = BUILTIN_DIR / f"{text}.yaml"
     if builtin.is_file() and _is_robot_file(builtin):
-        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool)
+        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool, root_link=root_link)
     raise RobotDefinitionError(
         f"unknown robot {text!r}: not a built-in ({', '.join(builtin_robots())}) and not a robot file"
     )
 
 
-def robot_from_file(path: str | Path, *, end_link: str | None = None, base=None, tool=None) -> Robot:
+def robot_from_file(
+    path: str | Path, *, end_link: str | None = None, base=None, tool=None, root_link: str | None = None
+) -> Robot:
     """Load a YAML robot file; see the module docstring for the schema."""
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as err:
         raise RobotDefinitionError(f"{path}: not valid YAML ({err})") from err
-    return robot_from_config(data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool)
+    return robot_from_config(
+        data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool, root_link=root_link
+    )
 
 
 def robot_from_config(
@@ -164,9 +173,10 @@ def robot_from_config(
     end_link: str | None = None,
     base=None,
     tool=None,
+    root_link: str | None = None,
 ) -> Robot:
-    """Build a :class:`Robot` from a parsed YAML mapping; ``base`` / ``tool`` (as in :func:`load_robot`)
-    replace the mapping's."""
+    """Build a :class:`Robot` from a parsed YAML mapping; ``base`` / ``tool`` / ``root_link`` (as in
+    :func:`load_robot`) replace the mapping's."""
     if not isinstance(data, dict):
         raise RobotDefinitionError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
     _no_unknown(data, _TOP_KEYS, source)
@@ -186,9 +196,14 @@ def robot_from_config(
         return load_urdf(
             urdf,
             end_link=end_link or data.get("end_link"),
-            root_link=data.get("root_link"),
+            root_link=root_link or data.get("root_link"),
             name=data.get("name"),
             **frames,
+        )
+    if root_link is not None:
+        raise RobotDefinitionError(
+            f"{source}: root_link applies to URDF arms; {data.get('name') or 'this robot'} is defined by joint "
+            "parameters (no links to choose from)"
         )
     return with_frames(_chain_from_config(data, source, length, angle), **frames)
 
