@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -144,7 +145,32 @@ def test_builtin_arms_keep_the_definition_hash_their_shipped_network_was_trained
     with warnings.catch_warnings():
         warnings.simplefilter("error", RobotDefinitionWarning)  # a built-in names its tool link: no note
         robot = nik.load_robot(doc["robot"])
-    assert robot.definition_hash == doc["robot_hash"]
+        # ur5 and panda put their vendor's flange on top of the trained chain as a tool frame (a tool frame
+        # changes no joint: the network serves the chain); their own end_link loads that chain alone
+        chain = robot if robot.tool is None else nik.load_robot(doc["robot"], end_link=robot.end_link)
+    assert chain.tool is None and chain.definition_hash == doc["robot_hash"]
+
+
+@pytest.mark.parametrize(
+    "name, flange, tool, tcp",
+    [
+        ("ur5", "tool0", [0, 0, 0.15, 1, 0, 0, 0], None),  # the pose the UR pendant reports
+        ("panda", "panda_link8", [0, 0, 0.1034, math.cos(math.pi / 8), 0, 0, -math.sin(math.pi / 8)], "panda_hand_tcp"),
+    ],
+)
+def test_builtin_arms_poses_are_of_the_vendors_flange_and_tool_is_given_in_its_frame(name, flange, tool, tcp):
+    urdf = f"configs/robots/urdf/{name}.urdf"
+    robot = nik.load_robot(name)
+    q = robot.sample(6, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    assert_fk_is_pk_chain_to(robot, Path(urdf).read_bytes(), flange)  # the URDF's own chain to the flange link
+    T_tool = torch.eye(4, dtype=torch.float64)
+    T_tool[:3, 3] = torch.tensor(tool[:3], dtype=torch.float64)
+    T_tool[:3, :3] = nik.poses.quaternion_to_matrix(torch.tensor(tool[3:], dtype=torch.float64))
+    assert_close(nik.load_robot(name, tool=tool).fk(q), robot.fk(q) @ T_tool, atol=1e-12, rtol=0)
+    if tcp is not None:  # Franka's hand TCP: 103.4 mm past the flange, turned -45 deg about z
+        assert_close(nik.load_robot(name, tool=tool).fk(q), nik.load_robot(urdf, end_link=tcp).fk(q), atol=1e-6, rtol=0)
+    bare = nik.load_robot(name, end_link=robot.end_link)  # a given end_link is the link poses mean: no flange
+    assert bare.tool is None and float((bare.fk(q) - robot.fk(q))[:, :3, 3].norm(dim=-1).min()) > 0.08
 
 
 def test_builtin_urdf_arms_name_their_end_link():

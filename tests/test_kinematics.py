@@ -120,8 +120,8 @@ def test_urdf_with_other_end_link_matches_pytorch_kinematics():
 
 
 def test_urdf_float64_origins_differ_from_pytorch_kinematics_only_by_its_float32_rpy_parse():
-    exact = load_urdf("configs/robots/urdf/panda.urdf", end_link="panda_link7", origins="float64")
-    pk_like = nik.load_robot("panda")  # the built-in ends at panda_link7
+    exact = load_urdf("configs/robots/urdf/panda.urdf", end_link="panda_link8", origins="float64")
+    pk_like = nik.load_robot("panda")  # the built-in's poses are of the flange panda_link8
     q = random_q(exact, 50)
     assert_close(exact.fk(q), pk_like.fk(q), atol=2e-7, rtol=0)
     R = exact.fk(q)[:, :3, :3]

@@ -93,7 +93,8 @@ def test_frames_survive_the_definition_round_trip_and_a_robot_takes_frames_too()
     robot = nik.load_robot("panda", base=BASE7, tool=TOOL7)
     again = nik.Robot.from_definition(json.loads(json.dumps(robot.to_definition())))
     assert again.definition_hash == robot.definition_hash
-    assert_close(again.tool, TOOL, atol=1e-15, rtol=0)
+    flange = nik.load_robot("panda").tool  # panda_link8, the flange: tool= is given in its frame
+    assert_close(again.tool, flange @ TOOL, atol=1e-15, rtol=0)
     assert_close(again.base, BASE, atol=1e-15, rtol=0)
     q = _q(robot, 5)
     assert_close(again.fk(q), robot.fk(q), atol=0, rtol=0)
@@ -248,7 +249,7 @@ def test_cli_solve_with_tool_and_base_answers_for_the_tcp(capsys):
     got = BASE @ plain.fk(torch.tensor(r["q_rad"], dtype=torch.float64)) @ TOOL
     pos, rot = nik.pose_error(T[0], got)
     assert float(pos) <= 1e-4 and float(rot) <= 1e-3
-    assert_close(torch.tensor(doc["tool"], dtype=torch.float64), TOOL, atol=1e-12, rtol=0)
+    assert_close(torch.tensor(doc["tool"], dtype=torch.float64), plain.tool @ TOOL, atol=1e-12, rtol=0)  # tool0 @ TCP
 
 
 @pytest.mark.parametrize("command", ["solve", "path"])

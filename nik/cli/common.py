@@ -119,10 +119,20 @@ def notes_as_lines():
 
 
 def tool_link_text(robot) -> str:
-    """``" (tool link NAME)"`` for a URDF arm, with ``", tool frame at x, y, z mm"`` when a tool frame is set;
+    """``" (tool link NAME)"`` for a URDF arm (``" (flange tool0 on wrist_3_link)"`` where the robot file names
+    the vendor's flange), with ``", tool frame at x, y, z mm"`` when a tool frame is set (past the flange);
     ``""`` for an arm without links or frames."""
-    parts = [f"tool link {robot.end_link}"] if robot.end_link else []
-    tool = getattr(robot, "tool", None)
+    tool, flange = getattr(robot, "tool", None), getattr(robot, "flange", None)
+    if flange is not None:
+        on = f" on {robot.end_link}" if robot.end_link else ""
+        parts = [f"flange {robot.flange_link}{on}"]
+        import torch
+
+        tool = torch.linalg.inv(flange) @ tool  # the part past the flange
+        if torch.allclose(tool, torch.eye(4, dtype=tool.dtype), atol=1e-12, rtol=0):
+            tool = None
+    else:
+        parts = [f"tool link {robot.end_link}"] if robot.end_link else []
     if tool is not None:
         parts.append("tool frame at " + ", ".join(f"{1e3 * float(v):.1f}" for v in tool[:3, 3]) + " mm")
     return f" ({', '.join(parts)})" if parts else ""

@@ -103,6 +103,7 @@ def with_frames(robot, *, base=None, tool=None):
     )
     out.base = _compose(B, robot.base, left=True)
     out.tool = _compose(X, robot.tool, left=False)
+    out.flange_link, out.flange = robot.flange_link, robot.flange
     return out
 
 
