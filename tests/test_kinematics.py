@@ -105,7 +105,8 @@ def test_builtin_fk_matches_explicit_products_at_100_configurations(name):
 @pytest.mark.parametrize("name", ["panda", "ur5", "xarm7"])
 def test_urdf_arm_fk_matches_pytorch_kinematics(name):
     robot = nik.load_robot(name)
-    chain = build_pk_chain(open(robot.source).read(), robot.end_link).to(dtype=torch.float64)
+    link = robot.flange_link or robot.end_link  # the link a pose means: ur5's tool0, panda's panda_link8
+    chain = build_pk_chain(open(robot.source).read(), link).to(dtype=torch.float64)
     assert chain.get_joint_parameter_names() == robot.joint_names
     q = random_q(robot, 100)
     assert_close(robot.fk(q), chain.forward_kinematics(q).get_matrix(), atol=1e-9, rtol=0)
