@@ -63,28 +63,6 @@ def test_evaluate_with_a_poisoned_checkpoint_prints_one_line_and_exits_2(kind, p
     assert not (tmp_path / "eval").exists()
 
 
-_STARTUP = """
-import contextlib, io, sys
-import nik
-import nik.cli
-from nik.cli import main
-with contextlib.redirect_stdout(io.StringIO()):
-    try:
-        main(["--help"])
-    except SystemExit:
-        pass
-    rc = main(["solve", "--robot", "puma560", "--pose", "0.4", "0.15", "0.3", "0", "1", "0", "0"])
-assert rc == 0, rc
-print(sorted(m for m in ("lightning", "pytorch_lightning", "matplotlib") if m in sys.modules))
-"""
-
-
-def test_import_nik_help_and_solve_do_not_load_lightning_or_matplotlib():
-    done = subprocess.run([sys.executable, "-c", _STARTUP], cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert done.stdout.strip().splitlines()[-1] == "[]"
-
-
 _HELP_EVERYWHERE = """
 import sys
 from nik.cli import build_parser, main
@@ -114,3 +92,25 @@ def test_nik_help_imports_no_torch():
     assert each.returncode == 0, each.stderr[-2000:]
     count, loaded = each.stdout.split()[-2:]
     assert int(count) >= 9 and loaded == "False"  # every subcommand's --help too
+
+
+_STARTUP = """
+import contextlib, io, sys
+import nik
+import nik.cli
+from nik.cli import main
+with contextlib.redirect_stdout(io.StringIO()):
+    try:
+        main(["--help"])
+    except SystemExit:
+        pass
+    rc = main(["solve", "--robot", "puma560", "--pose", "0.4", "0.15", "0.3", "0", "1", "0", "0"])
+assert rc == 0, rc
+print(sorted(m for m in ("lightning", "pytorch_lightning", "matplotlib") if m in sys.modules))
+"""
+
+
+def test_import_nik_help_and_solve_do_not_load_lightning_or_matplotlib():
+    done = subprocess.run([sys.executable, "-c", _STARTUP], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"
