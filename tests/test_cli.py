@@ -84,11 +84,14 @@ def test_nik_help_imports_no_torch():
         env=env,
         capture_output=True,
         text=True,
+        timeout=120,
     )
     assert top.returncode == 0 and "usage: nik" in top.stdout, top.stderr[-2000:]
     imported = {line.rsplit("|", 1)[-1].strip() for line in top.stderr.splitlines() if line.startswith("import time")}
     assert "nik.cli" in imported and "torch" not in imported
-    each = subprocess.run([sys.executable, "-c", _HELP_EVERYWHERE], cwd=ROOT, env=env, capture_output=True, text=True)
+    each = subprocess.run(
+        [sys.executable, "-c", _HELP_EVERYWHERE], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
+    )
     assert each.returncode == 0, each.stderr[-2000:]
     count, loaded = each.stdout.split()[-2:]
     assert int(count) >= 9 and loaded == "False"  # every subcommand's --help too
