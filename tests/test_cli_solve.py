@@ -335,9 +335,9 @@ def test_end_link_chooses_the_tool_link_and_the_output_names_it(capsys):
     q = torch.tensor([doc["results"][0]["q_si"]], dtype=torch.float64)
     err_pos = (robot.fk(q)[0, :3, 3] - T[0, :3, 3]).norm()
     assert float(err_pos) < 1e-4  # the tool0 pose is reached by tool0, not by the flange
-    # without --end-link the default tool link is used, and named
-    assert main(["solve", "--robot", "ur5", "--threads", "1", "--pose", *pose]) in (0, 1)
-    assert "tool link wrist_3_link" in capsys.readouterr().out
+    # without --end-link the built-in's flange is used, and named: tool0 itself, on the trained chain's last link
+    assert main(["solve", "--robot", "ur5", "--threads", "1", "--pose", *pose]) == 0
+    assert "flange tool0 on wrist_3_link" in capsys.readouterr().out
 
 
 def test_bad_end_link_is_a_one_line_error(capsys):

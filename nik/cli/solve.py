@@ -18,6 +18,8 @@ __all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solution
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 #: nik solve --plot draws the solutions of at most this many poses
 PLOT_MAX_POSES = 20
+#: and at most this many of each pose's other solutions (--all) as faint arms, as nik view (ViewCfg.max_ghosts)
+PLOT_MAX_GHOSTS = 8
 REFINE_CHOICES = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 
@@ -90,7 +92,7 @@ def register(sub) -> None:
         "--all",
         action="store_true",
         help="also find every distinct solution of each pose (IKSolver.solve_all) and print them (degrees); "
-        "--plot draws them as faint arms",
+        f"--plot draws up to {PLOT_MAX_GHOSTS} of each pose's as faint arms",
     )
     s.add_argument(
         "--plot",
@@ -385,15 +387,31 @@ def _print_every(robot, every, *, limit: int = 50) -> None:
 
 
 def _plot(robot, T, res, every, path, *, tolerance: str) -> None:
-    """``--plot``: the solutions of the first :data:`PLOT_MAX_POSES` poses, their targets, ``--all``'s as ghosts."""
+    """``--plot``: the solutions of the first :data:`PLOT_MAX_POSES` poses, their targets, and ``--all``'s as
+    ghosts: at most :data:`PLOT_MAX_GHOSTS` a pose (spread evenly over its list), said in the title and in a
+    ``nik: note:`` line (a 7-joint arm has a continuum of solutions: 100 ghosts were a black blob)."""
     import torch
 
     from nik.view import plot_arm
 
     n = min(len(res), PLOT_MAX_POSES)
-    ghosts = torch.cat(every[:n]) if every is not None else None
+    ghosts, found, drawn = None, 0, 0
+    if every is not None:
+        picked = []
+        for sols in every[:n]:
+            k = min(len(sols), PLOT_MAX_GHOSTS)
+            picked.append(sols[torch.linspace(0, len(sols) - 1, k).round().long()] if k else sols)
+            found, drawn = found + len(sols), drawn + k
+        ghosts = torch.cat(picked)
     shown = f"{n} of {len(res)} poses" if n < len(res) else f"{n} pose{'s' * (n > 1)}"
     title = f"{robot.name}: {shown}, {int(res.success[:n].sum())} reached within {tolerance}"
+    if drawn < found:
+        title += f"\n{drawn} of {found} solutions drawn faint (at most {PLOT_MAX_GHOSTS} a pose)"
+        print(
+            f"nik: note: --plot draws {drawn} of the {found} solutions found (at most {PLOT_MAX_GHOSTS} a pose, "
+            "spread over each pose's list; the output lists them all)",
+            file=sys.stderr,
+        )
     plot_arm(robot, res.q[:n], path, ghosts=ghosts, T_target=T[:n], title=title)
 
 
