@@ -42,8 +42,9 @@ def add_robot_arguments(parser) -> None:
         nargs=7,
         default=None,
         metavar=_FRAME,
-        help="the tool centre point (TCP) in the frame of the last link: position (the unit of --unit where the "
-        "command has one, else metres) and unit quaternion; poses are then the TCP's",
+        help="the tool centre point (TCP) in the flange's frame (the last link, or a built-in's flange: ur5's tool0, "
+        "panda's panda_link8): position (the unit of --unit where the command has one, else metres) and unit "
+        "quaternion; poses are then the TCP's",
     )
 
 

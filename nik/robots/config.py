@@ -216,15 +216,13 @@ def robot_from_config(
             name=data.get("name"),
             **frames,
         )
-        if flange is not None:
-            robot.flange_link, robot.flange = flange_link, torch.from_numpy(flange)
-        return robot
-    if root_link is not None:
+    elif root_link is not None:
         raise RobotDefinitionError(
             f"{source}: root_link applies to URDF arms; {data.get('name') or 'this robot'} is defined by joint "
             "parameters (no links to choose from)"
         )
-    robot = with_frames(_chain_from_config(data, source, length, angle), **frames)
+    else:
+        robot = with_frames(_chain_from_config(data, source, length, angle), **frames)
     if flange is not None:
         robot.flange_link, robot.flange = flange_link, torch.from_numpy(flange)
     return robot
