@@ -173,6 +173,18 @@ def test_builtin_arms_poses_are_of_the_vendors_flange_and_tool_is_given_in_its_f
     assert bare.tool is None and float((bare.fk(q) - robot.fk(q))[:, :3, 3].norm(dim=-1).min()) > 0.08
 
 
+def test_ur5_with_a_half_turn_base_gives_poses_in_urs_base_frame_as_the_pendant_does():
+    robot = nik.load_robot("ur5", base=[0, 0, 0, 0, 0, 0, 1])  # Rz(pi): the README's pendant frame
+    text = Path("configs/robots/urdf/ur5.urdf").read_text()
+    assert '<origin rpy="0 0 -3.14159265359" xyz="0 0 0" />' in text  # base_link -> base (UR's controller frame)
+    c, s = math.cos(-3.14159265359), math.sin(-3.14159265359)
+    base_in_base_link = torch.tensor([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], dtype=torch.float64)
+    chain = build_pk_chain(text, "tool0").to(dtype=torch.float64)  # tool0 in base_link
+    q = robot.sample(5, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
+    expected = torch.linalg.inv(base_in_base_link) @ chain.forward_kinematics(q).get_matrix()
+    assert_close(robot.fk(q), expected, atol=1e-9, rtol=0)
+
+
 def test_builtin_urdf_arms_name_their_end_link():
     import yaml
 
