@@ -101,9 +101,9 @@ def with_frames(robot, *, base=None, tool=None):
         source=robot.source,
         prismatic=robot.prismatic,
     )
+    out.flange_link, out.flange = robot.flange_link, robot.flange
     out.base = _compose(B, robot.base, left=True)
     out.tool = _compose(X, robot.tool, left=False)
-    out.flange_link, out.flange = robot.flange_link, robot.flange
     return out
 
 
