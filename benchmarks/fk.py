@@ -56,7 +56,7 @@ def pinocchio_model(robot):
     model = pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full
     if [model.names[j] for j in range(1, model.njoints)] != list(robot.joint_names):
         raise SystemExit(f"{robot.name}: Pinocchio's joints {list(model.names)[1:]} are not nik's {robot.joint_names}")
-    data, frame = model.createData(), model.getFrameId(robot.end_link)
+    data, frame = model.createData(), model.getFrameId(robot.flange_link or robot.end_link)
     q = robot.sample(4, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     for row in q:
         pin.forwardKinematics(model, data, row.numpy())
@@ -134,7 +134,7 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     for name in args.robots:
         robot = nik.load_robot(name)
-        chain = build_pk_chain(open(robot.source).read(), robot.end_link)
+        chain = build_pk_chain(open(robot.source).read(), robot.flange_link or robot.end_link)
         for dtype in (torch.float32, torch.float64):
             pk_chain = chain.to(dtype=dtype)
             for batch in args.batches:

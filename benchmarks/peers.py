@@ -103,7 +103,7 @@ def rtb_model(robot):
 
     with redirect_stdout(io.StringIO()), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # Robot.URDF: still the documented way in 1.x
-        ets = rtb.Robot.URDF(str(URDF[robot.name].resolve())).ets(end=robot.end_link)
+        ets = rtb.Robot.URDF(str(URDF[robot.name].resolve())).ets(end=robot.flange_link or robot.end_link)
     q = robot.sample(32, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
     gap = max(float(np.abs(ets.eval(qi) - Ti).max()) for qi, Ti in zip(q.numpy(), robot.fk(q).numpy(), strict=True))
     if gap > 1e-6:
@@ -263,7 +263,7 @@ def latency_robot(name: str):
     if name in EXAMPLE_ROBOTS and path is None:
         return None, None, None
     robot = nik.load_robot(path if name in EXAMPLE_ROBOTS else name)
-    end = robot.end_link
+    end = robot.flange_link or robot.end_link  # the link a pose means (a built-in's flange, tool0)
     if path is not None:
         path = kinematics_only(Path(path))
     else:  # an arm defined by a table: a URDF written from nik's normal form

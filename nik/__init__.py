@@ -2,7 +2,7 @@
 
 robot -> FK -> dataset -> trained network -> swarm refinement -> result.
 The public names are listed in ``__all__``; submodules (``nik.data``, ``nik.analytic``, ...)
-are imported on first attribute access so that ``import nik`` stays light.
+are imported on first attribute access so that ``import nik`` stays light (it imports no torch).
 """
 
 from __future__ import annotations
@@ -10,8 +10,6 @@ from __future__ import annotations
 import importlib
 
 from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError, RobotDefinitionWarning
-from nik.poses import pose_error
-from nik.robots import Robot, builtin_robots, load_robot
 
 __version__ = "0.1.0"
 
@@ -34,7 +32,16 @@ _SUBMODULES = {
     "tolerances",
     "view",
 }
-_LAZY = {"IKSolver": "nik.ik", "IKResult": "nik.ik", "set_threads": "nik.threads"}
+# torch is imported with the first of these, not by ``import nik`` (``nik --help`` stays light)
+_LAZY = {
+    "IKSolver": "nik.ik",
+    "IKResult": "nik.ik",
+    "set_threads": "nik.threads",
+    "pose_error": "nik.poses",
+    "Robot": "nik.robots",
+    "builtin_robots": "nik.robots",
+    "load_robot": "nik.robots",
+}
 
 __all__ = [
     "CheckpointError",

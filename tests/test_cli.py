@@ -63,6 +63,40 @@ def test_evaluate_with_a_poisoned_checkpoint_prints_one_line_and_exits_2(kind, p
     assert not (tmp_path / "eval").exists()
 
 
+_HELP_EVERYWHERE = """
+import sys
+from nik.cli import build_parser, main
+commands = list(build_parser()._subparsers._group_actions[0].choices)
+for command in commands:
+    try:
+        main([command, "--help"])
+    except SystemExit as done:
+        assert done.code == 0, (command, done.code)
+print(len(commands), "torch" in sys.modules)
+"""
+
+
+def test_nik_help_imports_no_torch():
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    top = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "nik.cli", "--help"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert top.returncode == 0 and "usage: nik" in top.stdout, top.stderr[-2000:]
+    imported = {line.rsplit("|", 1)[-1].strip() for line in top.stderr.splitlines() if line.startswith("import time")}
+    assert "nik.cli" in imported and "torch" not in imported
+    each = subprocess.run(
+        [sys.executable, "-c", _HELP_EVERYWHERE], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
+    )
+    assert each.returncode == 0, each.stderr[-2000:]
+    count, loaded = each.stdout.split()[-2:]
+    assert int(count) >= 9 and loaded == "False"  # every subcommand's --help too
+
+
 _STARTUP = """
 import contextlib, io, sys
 import nik

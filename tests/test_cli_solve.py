@@ -271,6 +271,57 @@ def test_solve_csv_errors_name_file_and_line(tmp_path, capsys):
     assert "b.csv line 3: column 'y' must be a number, got 'abc'" in capsys.readouterr().err
 
 
+def test_solve_reads_a_csv_with_excels_utf8_byte_order_mark(tmp_path, capsys):
+    robot = nik.load_robot("puma560")
+    T, rows = _pose_rows(robot, 3, 4)
+    plain = _write_csv(tmp_path / "plain.csv", rows)
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())  # Excel's "CSV UTF-8"
+    assert main(["solve", "--robot", "puma560", "--poses", str(bom), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    q = torch.tensor([r["q_rad"] for r in doc["results"]], dtype=torch.float64)
+    pos, rot = nik.pose_error(T, robot.fk(q))
+    assert float(pos.max()) < 1e-4 and float(rot.max()) < 1e-3
+
+
+@pytest.mark.parametrize("command", ["solve", "path"])
+def test_csv_errors_count_file_lines_from_1_for_every_check(tmp_path, capsys, command):
+    bad = tmp_path / "q.csv"  # header on line 1, a blank line 3: the bad quaternion is on file line 5
+    bad.write_text("x,y,z,qw,qx,qy,qz\n0.4,0.1,0.5,0,1,0,0\n\n0.4,0.1,0.5,0,1,0,0\n0.4,0.1,0.5,0,2,0,0\n")
+    assert main([command, "--robot", "puma560", "--poses", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad} line 5: quaternion (qw, qx, qy, qz) has norm 2" in err and err.count("\n") == 1
+    bad.write_text("x,y,z,qw,qx,qy,qz\n0.4,0.1,0.5,0,1,0,0\n0.4,0.1,nan,0,1,0,0\n")
+    assert main([command, "--robot", "puma560", "--poses", str(bad)]) == 2
+    assert f"{bad} line 3: a pose contains NaN or inf" in capsys.readouterr().err
+
+
+def test_plot_of_all_solutions_draws_at_most_8_ghosts_a_pose_and_says_so(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import nik.view
+    from nik.cli.solve import PLOT_MAX_GHOSTS, _plot
+
+    robot = nik.load_robot("panda")
+    gen = torch.Generator().manual_seed(5)
+    q = robot.sample(2, generator=gen, dtype=torch.float64)
+    res = nik.IKSolver(robot).solve(robot.fk(q), seed=0)
+    every = [robot.sample(120, generator=gen, dtype=torch.float64), q[1:]]  # a 7-joint arm's continuum; one
+    drawn = {}
+    real = nik.view.plot_arm
+
+    def spy(robot, q, path, *, ghosts=None, **kw):
+        drawn.update(ghosts=ghosts, title=kw["title"])
+        return real(robot, q, path, ghosts=ghosts, **kw)
+
+    monkeypatch.setattr(nik.view, "plot_arm", spy)
+    _plot(robot, robot.fk(q), res, every, tmp_path / "arm.png", tolerance="0.1 mm / 0.1 deg")
+    assert (tmp_path / "arm.png").stat().st_size > 0
+    assert PLOT_MAX_GHOSTS == 8 and drawn["ghosts"].shape == (8 + 1, 7)
+    assert all(any(torch.equal(g, s) for s in every[0]) for g in drawn["ghosts"][:8])  # drawn from the found ones
+    assert "9 of 121 solutions drawn faint (at most 8 a pose)" in drawn["title"]
+    assert "nik: note: --plot draws 9 of the 121 solutions found" in capsys.readouterr().err
+
+
 def test_unreachable_pose_exits_1_and_says_no(capsys):
     assert main(["solve", "--robot", "puma560", "--refine", "lm", "--pose", "3", "0", "0", "1", "0", "0", "0"]) == 1
     assert "NO" in capsys.readouterr().out
@@ -350,9 +401,9 @@ def test_end_link_chooses_the_tool_link_and_the_output_names_it(capsys):
     q = torch.tensor([doc["results"][0]["q_si"]], dtype=torch.float64)
     err_pos = (robot.fk(q)[0, :3, 3] - T[0, :3, 3]).norm()
     assert float(err_pos) < 1e-4  # the tool0 pose is reached by tool0, not by the flange
-    # without --end-link the default tool link is used, and named
-    assert main(["solve", "--robot", "ur5", "--threads", "1", "--pose", *pose]) in (0, 1)
-    assert "tool link wrist_3_link" in capsys.readouterr().out
+    # without --end-link the built-in's flange is used, and named: tool0 itself, on the trained chain's last link
+    assert main(["solve", "--robot", "ur5", "--threads", "1", "--pose", *pose]) == 0
+    assert "flange tool0 on wrist_3_link" in capsys.readouterr().out
 
 
 def test_bad_end_link_is_a_one_line_error(capsys):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -53,8 +54,8 @@ def load(tmp_path, text, **kw):
     return robot, notes
 
 
-def assert_fk_is_pk_chain_to(robot, text, link):
-    chain = build_pk_chain(text, link).to(dtype=torch.float64)
+def assert_fk_is_pk_chain_to(robot, text, link, root_link=""):
+    chain = build_pk_chain(text, link, root_link).to(dtype=torch.float64)
     q = robot.sample(6, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
     assert_close(robot.fk(q), chain.forward_kinematics(q).get_matrix(), atol=1e-9, rtol=0)
 
@@ -171,7 +172,44 @@ def test_builtin_arms_keep_the_definition_hash_their_shipped_network_was_trained
     with warnings.catch_warnings():
         warnings.simplefilter("error", RobotDefinitionWarning)  # a built-in names its tool link: no note
         robot = nik.load_robot(doc["robot"])
-    assert robot.definition_hash == doc["robot_hash"]
+        # ur5 and panda put their vendor's flange on top of the trained chain as a tool frame (a tool frame
+        # changes no joint: the network serves the chain); their own end_link loads that chain alone
+        chain = robot if robot.tool is None else nik.load_robot(doc["robot"], end_link=robot.end_link)
+    assert chain.tool is None and chain.definition_hash == doc["robot_hash"]
+
+
+@pytest.mark.parametrize(
+    "name, flange, tool, tcp",
+    [
+        ("ur5", "tool0", [0, 0, 0.15, 1, 0, 0, 0], None),  # the pose the UR pendant reports
+        ("panda", "panda_link8", [0, 0, 0.1034, math.cos(math.pi / 8), 0, 0, -math.sin(math.pi / 8)], "panda_hand_tcp"),
+    ],
+)
+def test_builtin_arms_poses_are_of_the_vendors_flange_and_tool_is_given_in_its_frame(name, flange, tool, tcp):
+    urdf = f"configs/robots/urdf/{name}.urdf"
+    robot = nik.load_robot(name)
+    q = robot.sample(6, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    assert_fk_is_pk_chain_to(robot, Path(urdf).read_bytes(), flange)  # the URDF's own chain to the flange link
+    T_tool = torch.eye(4, dtype=torch.float64)
+    T_tool[:3, 3] = torch.tensor(tool[:3], dtype=torch.float64)
+    T_tool[:3, :3] = nik.poses.quaternion_to_matrix(torch.tensor(tool[3:], dtype=torch.float64))
+    assert_close(nik.load_robot(name, tool=tool).fk(q), robot.fk(q) @ T_tool, atol=1e-12, rtol=0)
+    if tcp is not None:  # Franka's hand TCP: 103.4 mm past the flange, turned -45 deg about z
+        assert_close(nik.load_robot(name, tool=tool).fk(q), nik.load_robot(urdf, end_link=tcp).fk(q), atol=1e-6, rtol=0)
+    bare = nik.load_robot(name, end_link=robot.end_link)  # a given end_link is the link poses mean: no flange
+    assert bare.tool is None and float((bare.fk(q) - robot.fk(q))[:, :3, 3].norm(dim=-1).min()) > 0.08
+
+
+def test_ur5_with_a_half_turn_base_gives_poses_in_urs_base_frame_as_the_pendant_does():
+    robot = nik.load_robot("ur5", base=[0, 0, 0, 0, 0, 0, 1])  # Rz(pi): the README's pendant frame
+    text = Path("configs/robots/urdf/ur5.urdf").read_text()
+    assert '<origin rpy="0 0 -3.14159265359" xyz="0 0 0" />' in text  # base_link -> base (UR's controller frame)
+    c, s = math.cos(-3.14159265359), math.sin(-3.14159265359)
+    base_in_base_link = torch.tensor([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], dtype=torch.float64)
+    chain = build_pk_chain(text, "tool0").to(dtype=torch.float64)  # tool0 in base_link
+    q = robot.sample(5, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
+    expected = torch.linalg.inv(base_in_base_link) @ chain.forward_kinematics(q).get_matrix()
+    assert_close(robot.fk(q), expected, atol=1e-9, rtol=0)
 
 
 def test_builtin_urdf_arms_name_their_end_link():
@@ -216,3 +254,41 @@ def test_kinova_jaco2_ends_at_its_end_effector_160_mm_past_link_6(tmp_path):
     q = robot.sample(4, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     gap = torch.linalg.vector_norm(robot.fk(q)[:, :3, 3] - link6.fk(q)[:, :3, 3], dim=-1)
     assert_close(gap, torch.full((4,), 0.16, dtype=torch.float64), atol=2e-3, rtol=0)
+
+
+@pytest.mark.parametrize(
+    "rel", ["tiago_description/robots/tiago.urdf", "pr2_description/urdf/pr2.urdf"], ids=["tiago", "pr2"]
+)
+def test_root_link_leaves_a_mobile_manipulators_torso_out(rel):
+    path = _erd(rel)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotDefinitionWarning)
+        whole = nik.load_robot(path)
+        arm = nik.load_robot(path, root_link="torso_lift_link")
+    assert whole.joint_names[0] == "torso_lift_joint" and bool(whole.prismatic[0])  # the torso lift by default
+    assert arm.dof == 7 and arm.joint_names == whole.joint_names[1:] and arm.end_link == whole.end_link
+    assert_fk_is_pk_chain_to(arm, path.read_bytes(), arm.end_link, root_link="torso_lift_link")
+    q = arm.sample(3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    lift = torch.cat([torch.full((3, 1), float(whole.limits[0, 0])), q], dim=1)
+    # the same arm: poses relative to the first one agree (the torso link's placement drops out)
+    rel_whole = torch.linalg.inv(whole.fk(lift[:1])) @ whole.fk(lift)
+    assert_close(rel_whole, torch.linalg.inv(arm.fk(q[:1])) @ arm.fk(q), atol=1e-9, rtol=0)
+
+
+def test_root_link_on_the_command_line_and_on_an_arm_without_links(tmp_path, capsys):
+    from nik.cli import main
+
+    path = _erd("tiago_description/robots/tiago.urdf")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotDefinitionWarning)
+        arm = nik.load_robot(path, root_link="torso_lift_link")
+    T = arm.fk(arm.sample(1, generator=torch.Generator().manual_seed(4), dtype=torch.float64))[0]
+    pose = nik.poses.pose_to_vector(T, "quat").tolist()
+    argv = ["solve", "--robot", str(path), "--root-link", "torso_lift_link", "--json", "--pose", *map(repr, pose)]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["joint_names"] == arm.joint_names and doc["results"][0]["success"] is True
+    with pytest.raises(nik.RobotDefinitionError, match="root_link applies to URDF arms; puma560"):
+        nik.load_robot("puma560", root_link="base")
+    assert main(["solve", "--robot", "puma560", "--root-link", "base", "--pose", *map(repr, pose)]) == 2
+    assert "root_link applies to URDF arms" in capsys.readouterr().err

@@ -105,7 +105,8 @@ def test_builtin_fk_matches_explicit_products_at_100_configurations(name):
 @pytest.mark.parametrize("name", ["panda", "ur5", "xarm7"])
 def test_urdf_arm_fk_matches_pytorch_kinematics(name):
     robot = nik.load_robot(name)
-    chain = build_pk_chain(open(robot.source).read(), robot.end_link).to(dtype=torch.float64)
+    link = robot.flange_link or robot.end_link  # the link a pose means: ur5's tool0, panda's panda_link8
+    chain = build_pk_chain(open(robot.source).read(), link).to(dtype=torch.float64)
     assert chain.get_joint_parameter_names() == robot.joint_names
     q = random_q(robot, 100)
     assert_close(robot.fk(q), chain.forward_kinematics(q).get_matrix(), atol=1e-9, rtol=0)
@@ -120,8 +121,8 @@ def test_urdf_with_other_end_link_matches_pytorch_kinematics():
 
 
 def test_urdf_float64_origins_differ_from_pytorch_kinematics_only_by_its_float32_rpy_parse():
-    exact = load_urdf("configs/robots/urdf/panda.urdf", end_link="panda_link7", origins="float64")
-    pk_like = nik.load_robot("panda")  # the built-in ends at panda_link7
+    exact = load_urdf("configs/robots/urdf/panda.urdf", end_link="panda_link8", origins="float64")
+    pk_like = nik.load_robot("panda")  # the built-in's poses are of the flange panda_link8
     q = random_q(exact, 50)
     assert_close(exact.fk(q), pk_like.fk(q), atol=2e-7, rtol=0)
     R = exact.fk(q)[:, :3, :3]

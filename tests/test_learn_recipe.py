@@ -179,3 +179,16 @@ def test_nik_train_help_does_not_load_lightning():
     )
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.stdout.strip().splitlines()[-1] == "False", done.stderr[-2000:]
+
+
+def test_train_without_install_says_how_to_install_and_prints_notes_as_one_line(tmp_path, capsys):
+    urdf = ROOT / "configs" / "robots" / "urdf" / "panda.urdf"  # its default tool link leaves the fingers out
+    args = ["train", str(urdf), *TINY[:2], "--max-steps", "2", "--hidden", "8", "--no-eval"]
+    assert main([*args, "--val-n", "50", "--threads", "1", "--runs", str(tmp_path / "runs")]) == 0
+    out, err = capsys.readouterr()
+    pair = tmp_path / "runs" / "panda" / "panda.safetensors"
+    assert f"not installed: `nik networks install {pair}`" in out
+    assert f'nik.IKSolver(nik.load_robot("{urdf}", end_link="panda_hand_tcp"), checkpoint="{pair}")' in out
+    note = [line for line in err.splitlines() if "default tool link" in line]
+    assert len(note) == 1 and note[0].startswith("nik: note: panda.urdf: default tool link 'panda_hand_tcp'")
+    assert "Warning" not in err and "load_urdf(" not in err  # no category, no source line

@@ -92,3 +92,12 @@ def test_a_renamed_arm_that_no_call_reloads_is_described_by_its_hash():
     assert f"definition hash {robot.definition_hash}" in line and "nik.load_robot(ARM" in line
     (line,) = network_usage(robot, "/x/mine.safetensors", source=robot)
     assert line.endswith("nik.IKSolver(robot)")
+
+
+def test_the_printed_call_keeps_the_root_link_the_arm_was_trained_from():
+    urdf = (URDF / "panda.urdf").resolve()
+    robot = nik.load_robot(urdf, end_link="panda_link8", root_link="panda_link1")
+    code = robot_expression(robot, urdf, "panda_link8", root_link="panda_link1")
+    assert code == f'nik.load_robot("{urdf}", end_link="panda_link8", root_link="panda_link1")'
+    assert eval(code, {"nik": nik}).definition_hash == robot.definition_hash  # the same 6-joint arm
+    assert robot_expression(robot, urdf, "panda_link8") is None  # without it, the call would load another arm

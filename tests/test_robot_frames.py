@@ -7,6 +7,7 @@ the frames written here as matrices (rotations by Rodrigues' formula, not by nik
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 
@@ -92,7 +93,8 @@ def test_frames_survive_the_definition_round_trip_and_a_robot_takes_frames_too()
     robot = nik.load_robot("panda", base=BASE7, tool=TOOL7)
     again = nik.Robot.from_definition(json.loads(json.dumps(robot.to_definition())))
     assert again.definition_hash == robot.definition_hash
-    assert_close(again.tool, TOOL, atol=1e-15, rtol=0)
+    flange = nik.load_robot("panda").tool  # panda_link8, the flange: tool= is given in its frame
+    assert_close(again.tool, flange @ TOOL, atol=1e-15, rtol=0)
     assert_close(again.base, BASE, atol=1e-15, rtol=0)
     q = _q(robot, 5)
     assert_close(again.fk(q), robot.fk(q), atol=0, rtol=0)
@@ -247,7 +249,34 @@ def test_cli_solve_with_tool_and_base_answers_for_the_tcp(capsys):
     got = BASE @ plain.fk(torch.tensor(r["q_rad"], dtype=torch.float64)) @ TOOL
     pos, rot = nik.pose_error(T[0], got)
     assert float(pos) <= 1e-4 and float(rot) <= 1e-3
-    assert_close(torch.tensor(doc["tool"], dtype=torch.float64), TOOL, atol=1e-12, rtol=0)
+    assert_close(torch.tensor(doc["tool"], dtype=torch.float64), plain.tool @ TOOL, atol=1e-12, rtol=0)  # tool0 @ TCP
+
+
+@pytest.mark.parametrize("command", ["solve", "path"])
+def test_cli_base_and_tool_positions_follow_unit_mm(tmp_path, capsys, command):
+    plain = nik.load_robot("kuka_kr")
+    T = BASE @ plain.fk(_q(plain, 2, 7)) @ TOOL
+    mm = [[*(1e3 * p[:3]).tolist(), *p[3:].tolist()] for p in nik.poses.pose_to_vector(T, "quat")]
+    poses = tmp_path / "poses.csv"
+    poses.write_text("x,y,z,qw,qx,qy,qz\n" + "".join(",".join(map(repr, p)) + "\n" for p in mm))
+    out = tmp_path / "q.csv"
+    in_mm = [[*(1e3 * np.array(v[:3])).tolist(), *v[3:]] for v in (TOOL7, BASE7)]  # a 160 mm tool, not 160 m
+    args = [
+        command,
+        "--robot",
+        "kuka_kr",
+        "--unit",
+        "mm",
+        "--tool",
+        *map(repr, in_mm[0]),
+        "--base",
+        *map(repr, in_mm[1]),
+    ]
+    assert main([*args, "--poses", str(poses), "--out", str(out)]) == 0, capsys.readouterr().err
+    rows = list(csv.DictReader(out.open()))
+    q = torch.tensor([[float(r[f"{n}_deg"]) for n in plain.joint_names] for r in rows], dtype=torch.float64)
+    pos, rot = nik.pose_error(T, BASE @ plain.fk(q.deg2rad()) @ TOOL)  # the frames read as millimetres
+    assert float(pos.max()) <= 1e-4 and float(rot.max()) <= 1e-3
 
 
 def test_cli_generate_with_tool_records_it_in_the_dataset(tmp_path, capsys):

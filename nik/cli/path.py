@@ -91,7 +91,7 @@ def _cmd_path(args) -> int:
         if issubclass(w.category, UserWarning):
             print(f"nik path: warning: {w.message}", file=sys.stderr)
     if args.out:
-        write_trajectory_csv(args.out, robot, res)
+        write_trajectory_csv(args.out, robot, res, q_start)
     if args.plot:
         plot_trajectory(args.plot, robot, res)
     rep = res.path
@@ -114,14 +114,23 @@ def _cmd_path(args) -> int:
     return 0 if ok == len(res) else 1
 
 
-def write_trajectory_csv(path: str | Path, robot, res) -> None:
+def write_trajectory_csv(path: str | Path, robot, res, q_start=None) -> None:
     """One row per waypoint: ``index``, the joints in degrees (``<name>_deg``; prismatic: ``<name>_mm``), the
-    position error (mm), rotation error (deg), ``success``, ``step_deg`` (the largest joint motion into that
-    waypoint, degrees; prismatic joints' motion counted in mm) and ``reason`` (why a waypoint failed, else empty).
-    Written to a temporary name, then renamed."""
+    position error (mm), rotation error (deg), ``success``, ``step_deg`` (the largest motion of a revolute joint
+    into that waypoint, degrees), for an arm with prismatic joints also ``step_mm`` (the largest slide of a
+    prismatic joint, mm), and ``reason`` (why a waypoint failed, else empty). The step into waypoint 0 is from
+    ``q_start`` ((dof,) radians / metres), 0 without it. Written to a temporary name, then renamed."""
+    import torch
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
+    q = res.q.detach().cpu().double()
+    prev = torch.cat([q[:1] if q_start is None else torch.as_tensor(q_start, dtype=q.dtype).reshape(1, -1), q[:-1]])
+    dq = (q - prev).abs()
+    slides = robot.prismatic.tolist()
+    step_deg = torch.rad2deg(dq[:, [not p for p in slides]].amax(dim=1))
+    step_mm = 1e3 * dq[:, slides].amax(dim=1) if any(slides) else None
     rep = res.path
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
@@ -135,19 +144,20 @@ def write_trajectory_csv(path: str | Path, robot, res) -> None:
                     "rot_err_deg",
                     "success",
                     "step_deg",
+                    *(["step_mm"] if step_mm is not None else []),
                     "reason",
                 ]
             )
             for i in range(len(res)):
-                jj = int(rep.step_joints[i])
                 w.writerow(
                     [
                         i,
-                        *[f"{v * f:.10g}" for v, f in zip(res.q[i].tolist(), factor, strict=True)],
+                        *[f"{v * f:.10g}" for v, f in zip(q[i].tolist(), factor, strict=True)],
                         f"{float(res.pos_err[i]) * 1e3:.6g}",
                         f"{math.degrees(float(res.rot_err[i])):.6g}",
                         int(bool(res.success[i])),
-                        f"{float(rep.steps[i]) * factor[jj]:.6g}",
+                        f"{float(step_deg[i]):.6g}",
+                        *([f"{float(step_mm[i]):.6g}"] if step_mm is not None else []),
                         rep.reasons[i],
                     ]
                 )

@@ -18,6 +18,8 @@ __all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solution
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 #: nik solve --plot draws the solutions of at most this many poses
 PLOT_MAX_POSES = 20
+#: and at most this many of each pose's other solutions (--all) as faint arms, as nik view (ViewCfg.max_ghosts)
+PLOT_MAX_GHOSTS = 8
 REFINE_CHOICES = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 
@@ -92,7 +94,7 @@ def register(sub) -> None:
         "--all",
         action="store_true",
         help="also find every distinct solution of each pose (IKSolver.solve_all) and print them (degrees); "
-        "--plot draws them as faint arms",
+        f"--plot draws up to {PLOT_MAX_GHOSTS} of each pose's as faint arms",
     )
     s.add_argument(
         "--plot",
@@ -161,13 +163,18 @@ def add_threads_argument(parser, *, default=None) -> None:
 # ---------------------------------------------------------------------------
 def read_poses_csv(path: str | Path):
     """``(B, 7)`` float64 tensor from a CSV with header ``x,y,z,qw,qx,qy,qz`` (any column order,
-    extra columns ignored). Errors name the file, line and column."""
+    extra columns ignored; a UTF-8 byte-order mark, as Excel's "CSV UTF-8" writes, is skipped). Errors name the
+    file, the line (1-based, as an editor counts them: the header is line 1) and the column; a quaternion whose
+    norm is off 1 by more than :data:`nik.ik.targets.QUAT_NORM_TOL`, NaN or inf included, is refused here, by
+    its line."""
     import torch
+
+    from nik.ik.targets import QUAT_NORM_TOL
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"poses file not found: {path}")
-    with path.open(newline="") as fh:
+    with path.open(newline="", encoding="utf-8-sig") as fh:
         reader = csv.reader(fh)
         try:
             header = next(reader)
@@ -181,7 +188,8 @@ def read_poses_csv(path: str | Path):
             )
         cols = [names.index(c) for c in POSE_COLUMNS]
         rows = []
-        for line, rec in enumerate(reader, start=2):
+        for rec in reader:
+            line = reader.line_num  # the file line this record ends on
             if not rec or all(not v.strip() for v in rec):
                 continue
             vals = []
@@ -191,6 +199,14 @@ def read_poses_csv(path: str | Path):
                 except (IndexError, ValueError):
                     got = rec[c] if c < len(rec) else "nothing"
                     raise ValueError(f"{path} line {line}: column {name!r} must be a number, got {got!r}") from None
+            norm = math.sqrt(sum(v * v for v in vals[3:]))
+            if not all(math.isfinite(v) for v in vals):
+                raise ValueError(f"{path} line {line}: a pose contains NaN or inf ({','.join(map(str, vals))})")
+            if abs(norm - 1.0) > QUAT_NORM_TOL:
+                raise ValueError(
+                    f"{path} line {line}: quaternion (qw, qx, qy, qz) has norm {norm:.6g}; a unit quaternion is "
+                    f"expected (norm within {QUAT_NORM_TOL:g} of 1 is normalised)"
+                )
             rows.append(vals)
     if not rows:
         raise ValueError(f"{path}: no poses after the header")
@@ -412,15 +428,31 @@ def _print_every(robot, every, *, limit: int = 50) -> None:
 
 
 def _plot(robot, T, res, every, path, *, tolerance: str) -> None:
-    """``--plot``: the solutions of the first :data:`PLOT_MAX_POSES` poses, their targets, ``--all``'s as ghosts."""
+    """``--plot``: the solutions of the first :data:`PLOT_MAX_POSES` poses, their targets, and ``--all``'s as
+    ghosts: at most :data:`PLOT_MAX_GHOSTS` a pose (spread evenly over its list), said in the title and in a
+    ``nik: note:`` line (a 7-joint arm has a continuum of solutions: 100 ghosts were a black blob)."""
     import torch
 
     from nik.view import plot_arm
 
     n = min(len(res), PLOT_MAX_POSES)
-    ghosts = torch.cat(every[:n]) if every is not None else None
+    ghosts, found, drawn = None, 0, 0
+    if every is not None:
+        picked = []
+        for sols in every[:n]:
+            k = min(len(sols), PLOT_MAX_GHOSTS)
+            picked.append(sols[torch.linspace(0, len(sols) - 1, k).round().long()] if k else sols)
+            found, drawn = found + len(sols), drawn + k
+        ghosts = torch.cat(picked)
     shown = f"{n} of {len(res)} poses" if n < len(res) else f"{n} pose{'s' * (n > 1)}"
     title = f"{robot.name}: {shown}, {int(res.success[:n].sum())} reached within {tolerance}"
+    if drawn < found:
+        title += f"\n{drawn} of {found} solutions drawn faint (at most {PLOT_MAX_GHOSTS} a pose)"
+        print(
+            f"nik: note: --plot draws {drawn} of the {found} solutions found (at most {PLOT_MAX_GHOSTS} a pose, "
+            "spread over each pose's list; the output lists them all)",
+            file=sys.stderr,
+        )
     plot_arm(robot, res.q[:n], path, ghosts=ghosts, T_target=T[:n], title=title)
 
 

@@ -6,14 +6,17 @@ The full LightningCLI stays ``python train.py fit --config configs/train/<method
 
 from __future__ import annotations
 
+import json
 import shlex
 import sys
+
+from nik.cli.common import add_root_link_argument, notes_as_lines
 
 __all__ = ["register"]
 
 
 def register(sub) -> None:
-    from nik.learn.compare import build_parser
+    from nik.learn.cli import build_parser
 
     t = sub.add_parser(
         "train",
@@ -27,6 +30,7 @@ def register(sub) -> None:
     )
     t.add_argument("robot", metavar="ROBOT", help="built-in robot name, YAML robot file or URDF")
     t.add_argument("--end-link", default=None, help="URDF: the tool link (default: the end of the longest chain)")
+    add_root_link_argument(t)
     t.add_argument("--minutes", type=float, default=20.0, help="training wall-clock budget in minutes (default 20)")
     t.add_argument("--data", default=None, help="dataset folder (nik generate); default: fresh FK samples every step")
     t.add_argument(
@@ -82,6 +86,7 @@ def _cmd_train(args) -> int:
     cfg = TrainCfg(
         robot=args.robot,
         end_link=args.end_link,
+        root_link=args.root_link,
         minutes=args.minutes,
         data=args.data,
         out=args.out,
@@ -104,7 +109,8 @@ def _cmd_train(args) -> int:
         eval_one=args.eval_one,
         command=shlex.join(getattr(args, "invocation", None) or ["nik", *sys.argv[1:]]),
     )
-    res = train_network(cfg)
+    with notes_as_lines():  # the default tool link of a URDF and the like: one line each, as they come
+        res = train_network(cfg)
     print(
         f"trained {res.kind} network for {res.wall_s / 60:.1f} min ({res.steps} steps, {res.samples / 1e6:.2f} M "
         f"samples); wrote {res.out} and {res.out.with_suffix('.json')}"
@@ -113,11 +119,30 @@ def _cmd_train(args) -> int:
         print(f"installed as {res.installed}")
         for line in res.usage:
             print(f"  {line}")
+    else:
+        print(
+            f"not installed: `nik networks install {shlex.quote(str(res.out))}` (or --install) makes nik.IKSolver "
+            f"and nik solve find it for this arm; without it: "
+            f"nik.IKSolver({_arm_expression(args)}, checkpoint={json.dumps(str(res.out))})"
+        )
     if res.report is not None:
         print("evaluation (position mm, rotation deg; success within 0.1 mm / 0.1 deg; CPU, this process):")
         for line in res.report.lines():
             print("  " + line)
     return 0
+
+
+def _arm_expression(args) -> str:
+    """The Python that loads the trained arm again (:func:`nik.learn.usage.robot_expression`), else ``ARM``."""
+    import warnings
+
+    from nik.learn.usage import robot_expression
+    from nik.robots import load_robot
+
+    with warnings.catch_warnings():  # its notes were printed when training began
+        warnings.simplefilter("ignore")
+        robot = load_robot(args.robot, end_link=args.end_link, root_link=args.root_link)
+    return robot_expression(robot, args.robot, args.end_link, root_link=args.root_link) or "ARM"
 
 
 def _cmd_compare(args) -> int:

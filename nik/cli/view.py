@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+from nik.cli.common import add_root_link_argument
 from nik.cli.solve import read_poses_csv
 
 __all__ = ["register"]
@@ -22,6 +23,7 @@ def register(sub) -> None:
     )
     v.add_argument("robot", metavar="ROBOT", help="built-in robot name, YAML robot file or URDF")
     v.add_argument("--end-link", default=None, metavar="LINK", help="URDF: the tool link")
+    add_root_link_argument(v)
     v.add_argument(
         "--checkpoint",
         default="auto",

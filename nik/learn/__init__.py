@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import importlib
 
-from nik.learn.de import DECfg, DEState, de_ask, de_init, de_minimize, de_step, de_tell
-from nik.learn.losses import evaluate, joint_mse, pose_loss
-from nik.learn.population import flat_params, init_population, population_fitness, population_raw, set_flat_params
-
+# every name is imported on first use, so that the CLI's parsers (nik.learn.cli) import no torch
 _LAZY = {
+    **dict.fromkeys(("DECfg", "DEState", "de_ask", "de_init", "de_minimize", "de_step", "de_tell"), "nik.learn.de"),
+    **dict.fromkeys(("evaluate", "joint_mse", "pose_loss"), "nik.learn.losses"),
+    **dict.fromkeys(
+        ("flat_params", "init_population", "population_fitness", "population_raw", "set_flat_params"),
+        "nik.learn.population",
+    ),
     "IKModule": "nik.learn.modules",
     "GradientIK": "nik.learn.modules",
     "DEIK": "nik.learn.modules",
@@ -26,24 +29,7 @@ _LAZY = {
     "Threads": "nik.learn.callbacks",
 }
 
-__all__ = [
-    "DECfg",
-    "DEState",
-    "de_ask",
-    "de_init",
-    "de_minimize",
-    "de_step",
-    "de_tell",
-    "evaluate",
-    "joint_mse",
-    "pose_loss",
-    "flat_params",
-    "init_population",
-    "population_fitness",
-    "population_raw",
-    "set_flat_params",
-    *sorted(_LAZY),
-]
+__all__ = sorted(_LAZY)
 
 
 def __getattr__(name: str):

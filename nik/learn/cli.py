@@ -8,18 +8,40 @@ the shipped configs set ``default_root_dir`` to ``runs/<method>``. The default l
 
 from __future__ import annotations
 
+import argparse
 import logging
 import sys
 import warnings
 from pathlib import Path
 
-__all__ = ["TRAIN_CONFIG_DIR", "METHODS", "cli_main", "method_config"]
+__all__ = ["TRAIN_CONFIG_DIR", "METHODS", "NET_NAMES", "build_parser", "cli_main", "method_config"]
 
 #: The shipped training configs (``configs/train`` at the repository root), one per method.
 TRAIN_CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "train"
 METHODS = ("bp", "adam", "lbfgs", "de", "de_bp")
+#: The networks ``nik compare`` trains (:data:`nik.learn.compare.NETS`): paper C's 6-8-6 net and the default.
+NET_NAMES = ("paper", "default")
 #: ``--ckpt_path`` values that Lightning resolves itself (not files).
 _SPECIAL_CKPT = ("last", "best", "hpc", "registry")
+
+
+def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    """The arguments of ``nik compare`` (:func:`nik.learn.compare.compare`); here, so that parsing imports no torch."""
+    ap = ap or argparse.ArgumentParser(description="Compare bp, adam, lbfgs, de, de_bp on one dataset and budget")
+    ap.add_argument("--data", type=Path, default=Path("data/kuka_kr_100k"))
+    ap.add_argument("--budget", type=float, default=60.0, help="wall-clock seconds per run")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--methods", nargs="+", default=METHODS, choices=METHODS)
+    ap.add_argument("--nets", nargs="+", default=list(NET_NAMES), choices=list(NET_NAMES))
+    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/learners_kuka_kr"))
+    ap.add_argument("--runs-dir", type=Path, default=Path("runs/compare"))
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads (default 1: on a shared CPU, 2 OpenMP threads stall on each other)",
+    )
+    return ap
 
 
 def method_config(method: str) -> Path:

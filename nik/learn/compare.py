@@ -26,13 +26,13 @@ from pathlib import Path
 
 import torch
 
-from nik.learn.cli import METHODS, cli_main, method_config
+from nik.learn.cli import METHODS, NET_NAMES, build_parser, cli_main, method_config
 from nik.learn.losses import evaluate
 from nik.nets import DEFAULT, PAPER_C
 
 __all__ = ["NETS", "run_one", "table", "plot", "compare", "build_parser", "main"]
 
-NETS = {"paper": PAPER_C, "default": DEFAULT}
+NETS = dict(zip(NET_NAMES, (PAPER_C, DEFAULT), strict=True))
 PAPER_TOL_DEG = 0.003
 
 #: Per-method settings for the comparison beyond the config file (validation cadence; DE on the big net).
@@ -204,24 +204,6 @@ def plot(history: list[dict], path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-
-
-def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
-    ap = ap or argparse.ArgumentParser(description="Compare bp, adam, lbfgs, de, de_bp on one dataset and budget")
-    ap.add_argument("--data", type=Path, default=Path("data/kuka_kr_100k"))
-    ap.add_argument("--budget", type=float, default=60.0, help="wall-clock seconds per run")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--methods", nargs="+", default=METHODS, choices=METHODS)
-    ap.add_argument("--nets", nargs="+", default=list(NETS), choices=list(NETS))
-    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/learners_kuka_kr"))
-    ap.add_argument("--runs-dir", type=Path, default=Path("runs/compare"))
-    ap.add_argument(
-        "--threads",
-        type=int,
-        default=1,
-        help="torch threads (default 1: on a shared CPU, 2 OpenMP threads stall on each other)",
-    )
-    return ap
 
 
 def compare(args: argparse.Namespace) -> list[dict]:

@@ -68,6 +68,7 @@ class TrainCfg:
 
     robot: str | Path | Robot
     end_link: str | None = None
+    root_link: str | None = None  # URDF: the link the chain starts from (default the URDF's root)
     minutes: float = 20.0  # wall-clock budget of the training (min), resumed parts included
     data: str | None = None  # dataset folder; None: fresh FK samples every step
     out: str | None = None  # NAME.safetensors; default runs/<name>/<name>.safetensors
@@ -199,7 +200,11 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
             run to resume, a new run over an existing one, a damaged checkpoint.
     """
     write = log or (lambda line: print(line, file=sys.stderr, flush=True))
-    robot = cfg.robot if isinstance(cfg.robot, Robot) else load_robot(cfg.robot, end_link=cfg.end_link)
+    robot = (
+        cfg.robot
+        if isinstance(cfg.robot, Robot)
+        else load_robot(cfg.robot, end_link=cfg.end_link, root_link=cfg.root_link)
+    )
     name = cfg.name or robot.name
     if not name or Path(name).name != name:
         raise ValueError(f"--name must be a plain name, got {name!r}")
@@ -292,7 +297,9 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
         from nik.learn.usage import network_usage
 
         result.installed = install(out, name=name)
-        result.usage = network_usage(robot, result.installed, source=cfg.robot, end_link=cfg.end_link)
+        result.usage = network_usage(
+            robot, result.installed, source=cfg.robot, end_link=cfg.end_link, root_link=cfg.root_link
+        )
         write(f"nik train: installed as {result.installed}")
         for line in result.usage:
             write(f"nik train: {line}")

@@ -19,35 +19,45 @@ from nik.robots import Robot, builtin_robots, load_robot
 __all__ = ["network_usage", "recorded_source", "robot_expression"]
 
 
-def _same_arm(expr_args: tuple, robot: Robot) -> bool:
+def _same_arm(expr_args: tuple, robot: Robot, root_link: str | None = None) -> bool:
     path, end_link = expr_args
     try:
-        return load_robot(path, end_link=end_link).definition_hash == robot.definition_hash
+        return load_robot(path, end_link=end_link, root_link=root_link).definition_hash == robot.definition_hash
     except (ValueError, OSError):
         return False
 
 
-def robot_expression(robot: Robot, source: str | Path | Robot | None = None, end_link: str | None = None) -> str | None:
+def robot_expression(
+    robot: Robot,
+    source: str | Path | Robot | None = None,
+    end_link: str | None = None,
+    *,
+    root_link: str | None = None,
+) -> str | None:
     """Python that loads ``robot`` again, as an argument of ``nik.IKSolver(...)``: ``"NAME"`` for a built-in,
     ``"/abs/arm.yaml"`` for a YAML file, ``nik.load_robot("/abs/arm.urdf", end_link="LINK")`` for a URDF (the
-    tool link the arm really has). ``source``: how the arm was given (a name or path; a :class:`Robot` or None);
-    where it does not give the same arm, a built-in of the robot's name is tried. None when no such call gives
-    the same definition hash."""
+    tool link the arm really has; ``root_link="LINK"`` added where one was given). ``source``: how the arm was
+    given (a name or path; a :class:`Robot` or None); where it does not give the same arm, a built-in of the
+    robot's name is tried. None when no such call gives the same definition hash."""
     if source is not None and not isinstance(source, Robot):
         path = Path(source)
         if not path.is_file():  # a built-in name
-            if end_link is None and _same_arm((str(source), None), robot):
-                return json.dumps(str(source))
+            if end_link is None and _same_arm((str(source), None), robot, root_link):
+                return _call(json.dumps(str(source)), None, root_link)
         else:
             path = path.resolve()
             link = robot.end_link if path.suffix.lower() == ".urdf" else end_link
-            if _same_arm((path, link), robot):
-                if link is None:
-                    return json.dumps(str(path))
-                return f"nik.load_robot({json.dumps(str(path))}, end_link={json.dumps(link)})"
+            if _same_arm((path, link), robot, root_link):
+                return _call(json.dumps(str(path)), link, root_link)
     if robot.name in builtin_robots() and _same_arm((robot.name, None), robot):
         return json.dumps(robot.name)
     return None
+
+
+def _call(arm: str, end_link: str | None, root_link: str | None) -> str:
+    """``arm`` (a quoted name or path) as the argument of ``nik.IKSolver``: itself, or a ``nik.load_robot`` call."""
+    keywords = [f"{k}={json.dumps(v)}" for k, v in (("end_link", end_link), ("root_link", root_link)) if v]
+    return f"nik.load_robot({', '.join([arm, *keywords])})" if keywords else arm
 
 
 def recorded_source(meta: dict) -> tuple[str | None, str | None]:
@@ -72,7 +82,12 @@ def recorded_source(meta: dict) -> tuple[str | None, str | None]:
 
 
 def network_usage(
-    robot: Robot, installed: str | Path, *, source: str | Path | Robot | None = None, end_link: str | None = None
+    robot: Robot,
+    installed: str | Path,
+    *,
+    source: str | Path | Robot | None = None,
+    end_link: str | None = None,
+    root_link: str | None = None,
 ) -> list[str]:
     """What to call to solve with the network installed at ``installed`` for ``robot`` (module docstring): lines of
     text, each ending with the Python to run. ``source``, ``end_link``: how the arm was given
@@ -80,7 +95,7 @@ def network_usage(
     from nik.analytic import family
 
     h = robot.definition_hash
-    expr = robot_expression(robot, source, end_link)
+    expr = robot_expression(robot, source, end_link, root_link=root_link)
     if expr is not None:
         arm, which = expr, f"this arm (definition hash {h})"
     elif isinstance(source, Robot):

@@ -9,7 +9,8 @@ YAML schema (see ``shared/spec/interface.md``)::
     unit: mm | m              # lengths (default m)
     angles: deg | rad         # angles: alpha, theta, revolute offset and limits (default rad)
     base: {position: [x, y, z], rpy: [r, p, y]}     # optional: T = base @ arm @ tool (any convention, URDF too)
-    tool: {position: [x, y, z], rpy: [r, p, y]}     # optional: the tool (TCP) in the last link's frame
+    tool: {position: [x, y, z], rpy: [r, p, y]}     # optional: the tool (TCP) in the flange's frame
+    flange: {link: tool0, position: [x, y, z], rpy: [r, p, y]}   # optional: the flange in the last link's frame
     joints:
       - {alpha: -90, a: 0, d: 0, offset: 0, limits: [-160, 160], name: j1}   # dh / mdh, revolute
       - {type: prismatic, alpha: 0, a: 0, d: 0, theta: 0, limits: [300, 900]}  # dh / mdh, prismatic
@@ -41,6 +42,14 @@ Frames (``base``, ``tool``, and ``home`` of poe): ``position`` (the file's lengt
 ``quaternion`` (w, x, y, z). ``base`` places the arm's first frame (the URDF's root link) in the world,
 ``tool`` the tool centre point in the frame of the last link (the URDF's ``end_link``); both are folded into
 the normal form (:mod:`nik.robots.frames`). :func:`load_robot`'s ``base=`` / ``tool=`` replace the file's.
+
+``flange`` (``link``: its name, and a frame's fields) is the vendor's flange, the frame a pose means, in the
+frame of the file's last link (``end_link``): the built-in ur5 and panda end their trained chain at
+``wrist_3_link`` / ``panda_link7`` and name ``tool0`` / ``panda_link8`` this way, so that the shipped networks
+(matched on the chain without its frames) stay valid. FK is then ``base @ T_end_link(q) @ flange @ tool``: a
+``tool`` (the file's or ``tool=``) is given in the flange's frame; :attr:`Robot.flange_link` and
+:attr:`Robot.flange` record it. A given ``end_link=`` names the link poses mean and drops the
+flange (it belongs to the file's ``end_link``).
 """
 
 from __future__ import annotations
@@ -49,6 +58,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import torch
 import yaml
 
 from nik.errors import RobotDefinitionError
@@ -74,6 +84,7 @@ _TOP_KEYS = {
     "end_link",
     "root_link",
     "description",
+    "flange",
 }
 _DH_KEYS = {"alpha", "a", "d", "offset", "limits", "name", "theta", "type"}
 _POE_KEYS = {"axis", "point", "offset", "limits", "name", "type"}
@@ -124,7 +135,9 @@ def _is_robot_file(path: Path) -> bool:
     return isinstance(data, dict) and ("joints" in data or "urdf" in data)
 
 
-def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=None) -> Robot:
+def load_robot(
+    name_or_path, *, end_link: str | None = None, base=None, tool=None, root_link: str | None = None
+) -> Robot:
     """Load a robot by built-in name, YAML file or URDF file.
 
     Args:
@@ -147,10 +160,14 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
             The moving joints past the arm (a gripper's) are left out; a :class:`nik.RobotDefinitionWarning`
             names them, and the candidates where several links fit. Built-in arms name their ``end_link``.
         base: the pose of the robot's base (first frame, a URDF's root link) in your world frame.
-        tool: the tool centre point (TCP) in the frame of the last link (``end_link``, the flange).
-            Each a ``(4, 4)`` transform or ``(7,)`` x, y, z (metres) and quaternion w, x, y, z; FK is then
-            ``base @ T(q) @ tool`` for every solver (:mod:`nik.robots.frames`), replacing a robot file's own
-            ``base:`` / ``tool:``. The definition hash changes with a frame other than the identity, so a
+        root_link: for URDF arms, the link the chain starts from (default the URDF's root; a robot file's
+            ``root_link:``). On a mobile manipulator (TIAGo, PR2: the torso lift is a joint of the chain from the
+            root) ``root_link="torso_lift_link"`` gives the arm alone, its poses in that link's frame.
+        tool: the tool centre point (TCP) in the frame of the flange: the last link (``end_link``), or the
+            vendor's flange a robot file names (``flange:``; the built-in ur5's ``tool0``, panda's
+            ``panda_link8``). Each a ``(4, 4)`` transform or ``(7,)`` x, y, z (metres) and quaternion w, x, y, z;
+            FK is then ``base @ T(q) @ tool`` for every solver (:mod:`nik.robots.frames`), replacing a robot
+            file's own ``base:`` / ``tool:``. The definition hash changes with a frame other than the identity, so a
             network trained without it is not used for it.
 
     Raises:
@@ -175,24 +192,28 @@ def load_robot(name_or_path, *, end_link: str | None = None, base=None, tool=Non
         if path.suffix.lower() == ".urdf":
             from nik.robots.urdf import load_urdf
 
-            return load_urdf(path, end_link=end_link, base=base, tool=tool)
-        return robot_from_file(path, end_link=end_link, base=base, tool=tool)
+            return load_urdf(path, end_link=end_link, root_link=root_link, base=base, tool=tool)
+        return robot_from_file(path, end_link=end_link, base=base, tool=tool, root_link=root_link)
     builtin = BUILTIN_DIR / f"{text}.yaml"
     if builtin.is_file() and _is_robot_file(builtin):
-        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool)
+        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool, root_link=root_link)
     raise RobotDefinitionError(
         f"unknown robot {text!r}: not a built-in ({', '.join(builtin_robots())}) and not a robot file"
     )
 
 
-def robot_from_file(path: str | Path, *, end_link: str | None = None, base=None, tool=None) -> Robot:
+def robot_from_file(
+    path: str | Path, *, end_link: str | None = None, base=None, tool=None, root_link: str | None = None
+) -> Robot:
     """Load a YAML robot file; see the module docstring for the schema."""
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as err:
         raise RobotDefinitionError(f"{path}: not valid YAML ({err})") from err
-    return robot_from_config(data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool)
+    return robot_from_config(
+        data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool, root_link=root_link
+    )
 
 
 def robot_from_config(
@@ -203,9 +224,10 @@ def robot_from_config(
     end_link: str | None = None,
     base=None,
     tool=None,
+    root_link: str | None = None,
 ) -> Robot:
-    """Build a :class:`Robot` from a parsed YAML mapping; ``base`` / ``tool`` (as in :func:`load_robot`)
-    replace the mapping's."""
+    """Build a :class:`Robot` from a parsed YAML mapping; ``base`` / ``tool`` / ``root_link`` (as in
+    :func:`load_robot`) replace the mapping's."""
     if not isinstance(data, dict):
         raise RobotDefinitionError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
     _no_unknown(data, _TOP_KEYS, source)
@@ -216,20 +238,33 @@ def robot_from_config(
         else _frame(data.get(key), length, angle, f"{source}: {key}")
         for key, given in (("base", base), ("tool", tool))
     }
+    flange = None
+    if data.get("flange") is not None and end_link is None:  # the tool (TCP) is given in the flange's frame
+        flange_link, flange = _flange(data["flange"], length, angle, f"{source}: flange")
+        frames["tool"] = flange if frames["tool"] is None else flange @ frames["tool"]
     if "urdf" in data:
         from nik.robots.urdf import load_urdf
 
         urdf = Path(data["urdf"])
         if not urdf.is_absolute() and base_dir is not None:
             urdf = base_dir / urdf
-        return load_urdf(
+        robot = load_urdf(
             urdf,
             end_link=end_link or data.get("end_link"),
-            root_link=data.get("root_link"),
+            root_link=root_link or data.get("root_link"),
             name=data.get("name"),
             **frames,
         )
-    return with_frames(_chain_from_config(data, source, length, angle), **frames)
+    elif root_link is not None:
+        raise RobotDefinitionError(
+            f"{source}: root_link applies to URDF arms; {data.get('name') or 'this robot'} is defined by joint "
+            "parameters (no links to choose from)"
+        )
+    else:
+        robot = with_frames(_chain_from_config(data, source, length, angle), **frames)
+    if flange is not None:
+        robot.flange_link, robot.flange = flange_link, torch.from_numpy(flange)
+    return robot
 
 
 def _units(data: dict, source: str) -> tuple[float, float]:
@@ -349,6 +384,13 @@ def _limits(value, where: str) -> np.ndarray:
     if not lim[0] < lim[1]:
         raise RobotDefinitionError(f"{where}.limits: lower must be < upper, got {value!r}")
     return lim
+
+
+def _flange(spec, length: float, angle: float, where: str) -> tuple[str, np.ndarray]:
+    """``{link: NAME, position: ..., rpy | rotation | quaternion: ...}`` -> (NAME, 4x4): the vendor's flange."""
+    if not isinstance(spec, dict) or not isinstance(spec.get("link"), str) or not spec["link"]:
+        raise RobotDefinitionError(f"{where}: expected a mapping with 'link' (the flange's name) and its frame")
+    return spec["link"], _frame({k: v for k, v in spec.items() if k != "link"}, length, angle, where)
 
 
 def _frame(spec, length: float, angle: float, where: str) -> np.ndarray | None:

@@ -101,6 +101,7 @@ def with_frames(robot, *, base=None, tool=None):
         source=robot.source,
         prismatic=robot.prismatic,
     )
+    out.flange_link, out.flange = robot.flange_link, robot.flange
     out.base = _compose(B, robot.base, left=True)
     out.tool = _compose(X, robot.tool, left=False)
     out._arm = robot.arm  # the exact bare arm (its hash matches its networks: Robot.arm_hash)

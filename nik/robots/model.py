@@ -242,6 +242,10 @@ class Robot:
         #: metres), recorded for reports; None when the definition has none of its own.
         self.base: torch.Tensor | None = None
         self.tool: torch.Tensor | None = None
+        #: the vendor's flange a robot file names (``flange:``, e.g. the built-in ur5's ``tool0``): its link name
+        #: and its (4, 4) pose in ``end_link``'s frame, the first factor of :attr:`tool`; None otherwise.
+        self.flange_link: str | None = None
+        self.flange: torch.Tensor | None = None
         self._cache: dict[tuple[torch.dtype, torch.device], tuple[torch.Tensor, torch.Tensor]] = {}
         self._kernel: FKKernel | None = None
         self._arrays: tuple[np.ndarray, np.ndarray] | None = None
