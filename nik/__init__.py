@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 
+from nik.collision import World  # also registers Robot.collision_spheres' builder
 from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError, RobotDefinitionWarning
 from nik.poses import pose_error
 from nik.robots import Robot, builtin_robots, load_robot
@@ -18,6 +19,7 @@ __version__ = "0.1.0"
 _SUBMODULES = {
     "analytic",
     "cli",
+    "collision",
     "data",
     "evaluate",
     "ik",
@@ -45,6 +47,7 @@ __all__ = [
     "Robot",
     "RobotDefinitionError",
     "RobotDefinitionWarning",
+    "World",
     "__version__",
     "builtin_robots",
     "load_robot",
