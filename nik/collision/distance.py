@@ -137,13 +137,24 @@ def collision_residual(
     return torch.clamp(margin - d, min=0.0)
 
 
-def collides(robot, q, world=None, *, margin: float = 0.0, model=None, self_collision: bool = True) -> torch.Tensor:
+def collides(
+    robot, q, world=None, *, margin: float = 0.0, model=None, self_collision: bool = True, compiled: bool = True
+):
     """``(B,)`` bool: some active pair or some link is closer than ``margin`` (metres; 0: overlapping) for
-    ``q: (B, dof)`` (numpy or torch; numpy in, numpy out)."""
-    as_numpy = isinstance(q, np.ndarray)
-    qt = torch.as_tensor(q, dtype=torch.float64)
-    if qt.ndim == 1:
-        qt = qt[None]
+    ``q: (B, dof)`` or ``(dof,)`` (numpy in, numpy out; torch in, torch out). ``compiled``: the numba kernel
+    (:mod:`nik.kernels.collision`) for CPU input; else (or on another device) the torch path."""
+    as_numpy = not isinstance(q, torch.Tensor)
+    model = robot.collision_spheres() if model is None else model
+    if compiled and (as_numpy or q.device.type == "cpu"):
+        from nik.collision.compiled import kernel_arguments
+        from nik.kernels.collision import collides_batch
+
+        Q = np.ascontiguousarray(np.asarray(q.detach() if not as_numpy else q, dtype=np.float64).reshape(-1, robot.dof))
+        (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
+        out = np.empty(len(Q), dtype=np.bool_)
+        collides_batch(G, joints, Q, *rest, float(margin), out)
+        return out if as_numpy else torch.from_numpy(out)
+    qt = torch.as_tensor(q, dtype=torch.float64).reshape(-1, robot.dof)
     with torch.no_grad():
         d = signed_distances(robot, qt, world, model=model, self_collision=self_collision)
     hit = (d < margin).any(dim=1)

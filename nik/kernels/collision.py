@@ -1,0 +1,243 @@
+"""Signed distances of the arm's spheres and their Jacobians for one configuration: LM residual rows, compiled.
+
+The model is data (:meth:`nik.collision.CollisionModel.arrays`, :meth:`nik.collision.World.packed`):
+
+- ``spheres: (S, 4)`` centre in its frame and radius (metres), ``sphere_frame: (S,)`` int64 (0 = base, k = the
+  frame after joint k), ``body_start: (L + 1,)`` int64 (link ``l`` owns spheres ``body_start[l]:body_start[l+1]``),
+  ``pairs: (P, 2)`` int64 active link pairs;
+- the world: ``w_spheres: (Ns, 4)``, ``w_boxes: (Nb, 15)`` (R row by row, centre, half sizes),
+  ``w_capsules: (Nc, 7)``.
+
+Rows (``R = P + L``): row ``p < P`` is the smallest ``|c_i - c_j| - r_i - r_j`` over the spheres of pair ``p``
+(``inf`` when ``self_on`` is False); row ``P + l`` is the smallest signed distance from link ``l``'s spheres
+to any obstacle (``inf`` for an empty world). The Jacobian row is that of the minimising sphere pair (or
+sphere and obstacle): ``n . (dc_i/dq - dc_j/dq)``, with ``dc/dq`` column ``m`` equal to ``z_m x (c - p_m)``
+(revolute) or ``z_m`` (prismatic) for the joints before the sphere's frame and 0 after.
+:func:`collision_residual` turns them into LM rows ``max(0, margin - d)`` and ``-dd/dq`` where active.
+
+The reference is :mod:`nik.collision.distance` (torch); the tests compare the two and check the Jacobians
+by finite differences.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nik.kernels._jit import kernel
+from nik.kernels.chain import OFFSET, PRISMATIC, _joint, _start, _times
+
+__all__ = ["collides_batch", "collision_distances", "collision_distances_batch", "collision_residual"]
+
+
+@kernel
+def _frames(G, joints, q, F):
+    """``F (n + 1, 3, 4)``: identity, then the frame after each joint."""
+    n = q.shape[0]
+    for r in range(3):
+        for k in range(4):
+            F[0, r, k] = 1.0 if r == k else 0.0
+    T = np.empty((3, 4))
+    _start(T, G[0])
+    for i in range(n):
+        _joint(T, joints[i, PRISMATIC] != 0.0, q[i] + joints[i, OFFSET])
+        for r in range(3):
+            for k in range(4):
+                F[i + 1, r, k] = T[r, k]
+        _times(T, G[i + 1])
+
+
+@kernel
+def _place(F, spheres, sphere_frame, X):
+    for s in range(spheres.shape[0]):
+        f = sphere_frame[s]
+        for r in range(3):
+            X[s, r] = F[f, r, 0] * spheres[s, 0] + F[f, r, 1] * spheres[s, 1] + F[f, r, 2] * spheres[s, 2] + F[f, r, 3]
+
+
+@kernel
+def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, row):
+    """``row[m] += sign * v . dc/dq_m`` for a point ``(x, y, z)`` riding on frame ``frame``."""
+    for m in range(frame):
+        zx, zy, zz = F[m + 1, 0, 2], F[m + 1, 1, 2], F[m + 1, 2, 2]
+        if joints[m, PRISMATIC] != 0.0:
+            row[m] += sign * (vx * zx + vy * zy + vz * zz)
+        else:
+            rx, ry, rz = x - F[m + 1, 0, 3], y - F[m + 1, 1, 3], z - F[m + 1, 2, 3]
+            cx, cy, cz = zy * rz - zz * ry, zz * rx - zx * rz, zx * ry - zy * rx
+            row[m] += sign * (vx * cx + vy * cy + vz * cz)
+
+
+@kernel
+def _obstacle(x, y, z, w_spheres, w_boxes, w_capsules, g):
+    """Smallest signed distance from the point ``(x, y, z)`` to the obstacles, and its gradient in ``g (3,)``."""
+    best = np.inf
+    for o in range(w_spheres.shape[0]):
+        dx, dy, dz = x - w_spheres[o, 0], y - w_spheres[o, 1], z - w_spheres[o, 2]
+        n = math.sqrt(dx * dx + dy * dy + dz * dz)
+        d = n - w_spheres[o, 3]
+        if d < best:
+            best = d
+            if n > 0:
+                g[0], g[1], g[2] = dx / n, dy / n, dz / n
+            else:
+                g[0], g[1], g[2] = 0.0, 0.0, 1.0
+    for o in range(w_capsules.shape[0]):
+        ax, ay, az = w_capsules[o, 0], w_capsules[o, 1], w_capsules[o, 2]
+        bx, by, bz = w_capsules[o, 3] - ax, w_capsules[o, 4] - ay, w_capsules[o, 5] - az
+        L2 = bx * bx + by * by + bz * bz
+        t = 0.0
+        if L2 > 0:
+            t = ((x - ax) * bx + (y - ay) * by + (z - az) * bz) / L2
+            t = min(1.0, max(0.0, t))
+        dx, dy, dz = x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz)
+        n = math.sqrt(dx * dx + dy * dy + dz * dz)
+        d = n - w_capsules[o, 6]
+        if d < best:
+            best = d
+            if n > 0:
+                g[0], g[1], g[2] = dx / n, dy / n, dz / n
+            else:
+                g[0], g[1], g[2] = 0.0, 0.0, 1.0
+    loc = np.empty(3)
+    qd = np.empty(3)
+    gl = np.empty(3)
+    for o in range(w_boxes.shape[0]):
+        px, py, pz = x - w_boxes[o, 9], y - w_boxes[o, 10], z - w_boxes[o, 11]
+        for j in range(3):  # R^T (p - c)
+            loc[j] = w_boxes[o, j] * px + w_boxes[o, 3 + j] * py + w_boxes[o, 6 + j] * pz
+            qd[j] = abs(loc[j]) - w_boxes[o, 12 + j]
+        qmax = max(qd[0], max(qd[1], qd[2]))
+        if qmax > 0:
+            s = 0.0
+            for j in range(3):
+                w = max(qd[j], 0.0)
+                s += w * w
+            d = math.sqrt(s)
+            for j in range(3):
+                gl[j] = (math.copysign(1.0, loc[j]) * max(qd[j], 0.0) / d) if d > 0 else 0.0
+        else:
+            d = qmax
+            a = 0 if qd[0] >= qd[1] and qd[0] >= qd[2] else (1 if qd[1] >= qd[2] else 2)
+            for j in range(3):
+                gl[j] = math.copysign(1.0, loc[j]) if j == a else 0.0
+        if d < best:
+            best = d
+            for i in range(3):
+                g[i] = w_boxes[o, 3 * i] * gl[0] + w_boxes[o, 3 * i + 1] * gl[1] + w_boxes[o, 3 * i + 2] * gl[2]
+    return best
+
+
+@kernel
+def _rows(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J, want_jacobian
+):
+    n = q.shape[0]
+    S = spheres.shape[0]
+    P = pairs.shape[0]
+    L = body_start.shape[0] - 1
+    F = np.empty((n + 1, 3, 4))
+    X = np.empty((S, 3))
+    _frames(G, joints, q, F)
+    _place(F, spheres, sphere_frame, X)
+    if want_jacobian:
+        for r in range(P + L):
+            for m in range(n):
+                J[r, m] = 0.0
+    for p in range(P):
+        best, bi, bj = np.inf, -1, -1
+        if self_on:
+            a, b = pairs[p, 0], pairs[p, 1]
+            for i in range(body_start[a], body_start[a + 1]):
+                for j in range(body_start[b], body_start[b + 1]):
+                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+                    dist = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3]
+                    if dist < best:
+                        best, bi, bj = dist, i, j
+        d[p] = best
+        if want_jacobian and bi >= 0:
+            dx, dy, dz = X[bi, 0] - X[bj, 0], X[bi, 1] - X[bj, 1], X[bi, 2] - X[bj, 2]
+            nn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if nn > 0:
+                vx, vy, vz = dx / nn, dy / nn, dz / nn
+                _add_point_jacobian(F, joints, sphere_frame[bi], X[bi, 0], X[bi, 1], X[bi, 2], vx, vy, vz, 1.0, J[p])
+                _add_point_jacobian(F, joints, sphere_frame[bj], X[bj, 0], X[bj, 1], X[bj, 2], vx, vy, vz, -1.0, J[p])
+    g = np.empty(3)
+    gb = np.zeros(3)
+    for link in range(L):
+        best, bs = np.inf, -1
+        for s in range(body_start[link], body_start[link + 1]):
+            dist = _obstacle(X[s, 0], X[s, 1], X[s, 2], w_spheres, w_boxes, w_capsules, g) - spheres[s, 3]
+            if dist < best:
+                best, bs = dist, s
+                gb[0], gb[1], gb[2] = g[0], g[1], g[2]
+        d[P + link] = best
+        if want_jacobian and bs >= 0 and best < np.inf:
+            _add_point_jacobian(
+                F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J[P + link]
+            )
+
+
+@kernel
+def collision_distances(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J
+):
+    """Rows ``d (P + L,)`` (metres) and their Jacobian ``J (P + L, n)`` for ``q: (n,)`` (module docstring)."""
+    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J, True)
+
+
+@kernel
+def collision_residual(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr
+):
+    """LM rows ``r = max(0, margin - d)`` ``(P + L,)`` and ``Jr = dr/dq`` ``(P + L, n)`` for ``q: (n,)``; returns
+    the smallest distance ``d`` (metres; ``inf`` when there is nothing to check)."""
+    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr, True)
+    smallest = np.inf
+    for k in range(r.shape[0]):
+        dist = r[k]
+        smallest = min(smallest, dist)
+        if margin - dist > 0:
+            r[k] = margin - dist
+            for m in range(Jr.shape[1]):
+                Jr[k, m] = -Jr[k, m]
+        else:
+            r[k] = 0.0
+            for m in range(Jr.shape[1]):
+                Jr[k, m] = 0.0
+    return smallest
+
+
+@kernel
+def collision_distances_batch(
+    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, D
+):
+    """Rows ``D (B, P + L)`` for ``Q: (B, n)``, no Jacobian."""
+    J = np.empty((0, Q.shape[1]))
+    for b in range(Q.shape[0]):
+        _rows(
+            G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, D[b], J,
+            False,
+        )
+
+
+@kernel
+def collides_batch(
+    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, out
+):
+    """``out (B,)`` bool: some row of ``Q[b]`` is below ``margin`` (metres)."""
+    R = pairs.shape[0] + body_start.shape[0] - 1
+    d = np.empty(R)
+    J = np.empty((0, Q.shape[1]))
+    for b in range(Q.shape[0]):
+        _rows(
+            G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+            False,
+        )
+        hit = False
+        for k in range(R):
+            if d[k] < margin:
+                hit = True
+                break
+        out[b] = hit
