@@ -101,7 +101,7 @@ def _capsule_dist(p: torch.Tensor, caps: torch.Tensor) -> torch.Tensor:
 
 def world_distances(model, world, centers: torch.Tensor) -> torch.Tensor:
     """``(B, L)``: per link, the smallest signed distance from its spheres to the world's obstacles (inf for an
-    empty world)."""
+    empty world, and for the links on frame 0: the fixed base touches the table it stands on by design)."""
     like = dict(dtype=centers.dtype, device=centers.device)
     rad = torch.as_tensor(model.radii, **like)
     best = torch.full(centers.shape[:2], float("inf"), **like)
@@ -114,7 +114,8 @@ def world_distances(model, world, centers: torch.Tensor) -> torch.Tensor:
             best = torch.minimum(best, _box_sdf(centers, boxes).min(dim=-1).values)
         if len(caps):
             best = torch.minimum(best, _capsule_dist(centers, caps).min(dim=-1).values)
-    return _segment_min(best - rad, model.sphere_body, len(model.links))
+    best = torch.where(torch.as_tensor(model.sphere_frame == 0, device=best.device), float("inf"), best - rad)
+    return _segment_min(best, model.sphere_body, len(model.links))
 
 
 def signed_distances(robot, q: torch.Tensor, world=None, *, model=None, self_collision: bool = True) -> torch.Tensor:

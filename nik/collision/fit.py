@@ -184,16 +184,15 @@ def _volume_ratio(centers, radii, volume: float, rng) -> float:
 
 def _volume(tri: np.ndarray) -> float:
     """Volume enclosed by a closed, consistently oriented triangle surface (divergence theorem); the convex
-    hull's where that is not positive."""
+    hull's where that is not plausible (not between 0.3 and 1 times the hull's)."""
     v = float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0)
-    if v > 0:
-        return v
     try:
         from scipy.spatial import ConvexHull
 
-        return float(ConvexHull(tri.reshape(-1, 3)).volume)
+        hull = float(ConvexHull(tri.reshape(-1, 3)).volume)
     except Exception:  # noqa: BLE001 - flat geometry
-        return 0.0
+        return max(v, 0.0)
+    return v if 0.3 * hull <= v <= hull * (1 + 1e-9) else hull  # an open or inconsistently oriented surface
 
 
 def fit_spheres(

@@ -10,7 +10,8 @@ The model is data (:meth:`nik.collision.CollisionModel.arrays`, :meth:`nik.colli
 
 Rows (``R = P + L``): row ``p < P`` is the smallest ``|c_i - c_j| - r_i - r_j`` over the spheres of pair ``p``
 (``inf`` when ``self_on`` is False); row ``P + l`` is the smallest signed distance from link ``l``'s spheres
-to any obstacle (``inf`` for an empty world). The Jacobian row is that of the minimising sphere pair (or
+to any obstacle (``inf`` for an empty world and for links on frame 0, the fixed base: a base standing on a
+table touches it by design). The Jacobian row is that of the minimising sphere pair (or
 sphere and obstacle): ``n . (dc_i/dq - dc_j/dq)``, with ``dc/dq`` column ``m`` equal to ``z_m x (c - p_m)``
 (revolute) or ``z_m`` (prismatic) for the joints before the sphere's frame and 0 after.
 :func:`collision_residual` turns them into LM rows ``max(0, margin - d)`` and ``-dd/dq`` where active.
@@ -167,6 +168,9 @@ def _rows(
     gb = np.zeros(3)
     for link in range(L):
         best, bs = np.inf, -1
+        if body_start[link] < body_start[link + 1] and sphere_frame[body_start[link]] == 0:
+            d[P + link] = np.inf  # the base's links never move: their contacts with the world are the user's set-up
+            continue
         for s in range(body_start[link], body_start[link + 1]):
             dist = _obstacle(X[s, 0], X[s, 1], X[s, 2], w_spheres, w_boxes, w_capsules, g) - spheres[s, 3]
             if dist < best:
@@ -217,7 +221,19 @@ def collision_distances_batch(
     J = np.empty((0, Q.shape[1]))
     for b in range(Q.shape[0]):
         _rows(
-            G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, D[b], J,
+            G,
+            joints,
+            Q[b],
+            spheres,
+            sphere_frame,
+            body_start,
+            pairs,
+            w_spheres,
+            w_boxes,
+            w_capsules,
+            self_on,
+            D[b],
+            J,
             False,
         )
 
@@ -232,7 +248,19 @@ def collides_batch(
     J = np.empty((0, Q.shape[1]))
     for b in range(Q.shape[0]):
         _rows(
-            G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+            G,
+            joints,
+            Q[b],
+            spheres,
+            sphere_frame,
+            body_start,
+            pairs,
+            w_spheres,
+            w_boxes,
+            w_capsules,
+            self_on,
+            d,
+            J,
             False,
         )
         hit = False
