@@ -7,7 +7,9 @@ for coal and ``bench``/``urdf-tests`` for the URDF). Prints, for random configur
 (each one reachable by definition), without a world and in a scene (a table and 10 seeded boxes / spheres /
 capsules near the arm): how many the meshes call colliding, how many nik calls colliding, how many nik calls
 free that collide (must be 0) and how many nik calls colliding that are free (the price of conservative
-spheres); and the time per configuration of each check (one core, one process).
+spheres); and the time per configuration of each check (one core, one process). Two scopes of link pairs: every
+pair but adjacent links, and MoveIt's (the pairs the panda's SRDF disables left out, by nik and by the mesh check
+alike).
 """
 
 from __future__ import annotations
@@ -21,7 +23,9 @@ import numpy as np
 import torch
 
 import nik
+from nik.collision import collides, collision_model
 from nik.collision.meshcheck import MeshCheck
+from nik.collision.model import srdf_disabled, srdf_of
 
 
 def panda_urdf() -> Path:
@@ -59,16 +63,6 @@ def scene(seed: int) -> nik.World:
     return world
 
 
-def verdicts(robot, mesh, Q, world):
-    t = time.perf_counter()
-    ours = nik.collision.collides(robot, Q, world)
-    t_nik = (time.perf_counter() - t) / len(Q)
-    t = time.perf_counter()
-    theirs = mesh.collides(Q, world)
-    t_mesh = (time.perf_counter() - t) / len(Q)
-    return ours, theirs, t_nik, t_mesh
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=2000)
@@ -78,31 +72,46 @@ def main(argv=None) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         robot = nik.load_robot(urdf, end_link="panda_hand")
-    t = time.perf_counter()
-    model = robot.collision_spheres()
-    print(f"model: {model} ({time.perf_counter() - t:.1f} s, cached after the first run)")
-    print(f"  overreach per link (mm): {dict(zip(model.links, (1000 * model.gaps).round(0).astype(int)))}")
-    mesh = MeshCheck(robot, urdf)
+    srdf = srdf_of(urdf)
     g = torch.Generator().manual_seed(args.seed)
-    dropped = mesh.drop_always(robot.sample(200, generator=g, dtype=torch.float64).numpy())
-    print(f"mesh pairs checked: {len(mesh.pairs)} (always in contact, left out: {dropped})")
     Q = np.ascontiguousarray(robot.sample(args.samples, generator=g, dtype=torch.float64).numpy())
-    # the kernels compile (or load) before timing
-    nik.collision.collides(robot, Q[:2], scene(args.seed))
-    print(f"\n{args.samples} random configurations, seed {args.seed}")
+    world = scene(args.seed)
+    print(f"{args.samples} random configurations of the panda (arm, hand, fingers), seed {args.seed}")
     print(
-        "| world | mesh: colliding | nik: colliding | nik free, mesh colliding | nik colliding, mesh free "
+        "| pairs | world | mesh: colliding | nik: colliding | nik free, mesh colliding | nik colliding, mesh free "
         "| nik us/config | coal us/config |"
     )
-    print("|---|---|---|---|---|---|---|")
-    for name, world in (("none (self only)", None), ("table + 10 obstacles", scene(args.seed))):
-        ours, theirs, t_nik, t_mesh = verdicts(robot, mesh, Q, world)
-        missed = int((~ours & theirs).sum())
-        extra = int((ours & ~theirs).sum())
-        print(
-            f"| {name} | {theirs.mean():.1%} | {ours.mean():.1%} | {missed} | {extra} ({extra / len(Q):.1%}) "
-            f"| {1e6 * t_nik:.1f} | {1e6 * t_mesh:.0f} |"
+    print("|---|---|---|---|---|---|---|---|")
+    notes = []
+    for use_srdf in (False, True):
+        t = time.perf_counter()
+        model = collision_model(robot, srdf=use_srdf)
+        built = time.perf_counter() - t
+        skip = list(srdf_disabled(srdf)) if use_srdf and srdf is not None else []
+        mesh = MeshCheck(robot, urdf, skip=skip)
+        label = "all but adjacent" if not use_srdf else "MoveIt SRDF's off"
+        notes.append(
+            f"{label}: {model} ({built:.1f} s, cached); sphere overreach per link (mm): "
+            + ", ".join(f"{n} {1000 * x:.0f}" for n, x in zip(model.links, model.gaps, strict=True))
+            + f"; left out by sampling: {sorted(k for k, v in model.left_out.items() if v in ('always', 'never'))}"
         )
+        collides(robot, Q[:2], world, model=model)  # compile / load the kernels before timing
+        for name, w in (("none (self only)", None), ("table + 10 obstacles", world)):
+            t = time.perf_counter()
+            ours = collides(robot, Q, w, model=model)
+            t_nik = (time.perf_counter() - t) / len(Q)
+            t = time.perf_counter()
+            theirs = mesh.collides(Q, w)
+            t_mesh = (time.perf_counter() - t) / len(Q)
+            missed = int((~ours & theirs).sum())
+            extra = int((ours & ~theirs).sum())
+            print(
+                f"| {label} | {name} | {theirs.mean():.1%} | {ours.mean():.1%} | {missed} "
+                f"| {extra} ({extra / len(Q):.1%}) | {1e6 * t_nik:.1f} | {1e6 * t_mesh:.0f} |"
+            )
+    print()
+    for note in notes:
+        print(note)
 
 
 if __name__ == "__main__":

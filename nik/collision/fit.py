@@ -8,11 +8,12 @@ that no sphere held would have a ray to infinity crossing the surface outside ev
 Curved primitives are first replaced by polyhedra that contain them (:mod:`nik.collision.shapes`), so the same
 argument covers them.
 
-How the spheres are placed (choices): ``K`` centres by k-means (seeded) on points inside the body's convex hull,
-which slices long links along their length; triangles go to the sphere that needs the least radius for them; then
-a few rounds of (centre = approximate smallest ball around its triangles' corners, Badoiu-Clarkson) and
-(reassign each triangle to the sphere that holds it with the most room). ``K`` grows from 1 until the spheres
-overreach the geometry by at most ``tolerance`` metres, or ``max_spheres`` is reached.
+How the spheres are placed (choices): candidate centres are seeded points inside the body's convex hull (and
+on its surface), each with the radius that reaches ``tolerance`` past its nearest surface point (so a sphere
+bulges out of a flat or convex face by about ``tolerance``); a greedy set cover picks the candidate that holds the
+most triangles not yet held until all are (a triangle no candidate holds goes to the chosen sphere that grows
+least for it), and each radius then shrinks to the farthest corner of its own triangles. Where that needs more
+than ``max_spheres``, the reach grows by half and the cover is redone.
 
 Overreach (:class:`SphereFit`): ``gap`` is the largest distance from a point of the union's boundary to the
 geometry's surface (metres, measured on 96 points per sphere against the subdivided surface's corners), and
@@ -28,11 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SPHERE_PENALTY", "SphereFit", "fit_spheres", "subdivide"]
-
-#: Where no sphere count meets the tolerance, the count kept is the one with the smallest
-#: ``volume_ratio + SPHERE_PENALTY * count``: one more sphere must shrink the union by 2 % of the body's volume.
-SPHERE_PENALTY = 0.02
+__all__ = ["SphereFit", "fit_spheres", "subdivide"]
 
 
 @dataclass
@@ -53,21 +50,22 @@ class SphereFit:
 
 
 def subdivide(triangles: np.ndarray, max_edge: float) -> np.ndarray:
-    """``triangles: (T, 3, 3)`` split (each into four, repeatedly) until no edge is longer than ``max_edge``."""
+    """``triangles: (T, 3, 3)`` split in two at the middle of their longest edge, repeatedly, until no edge is
+    longer than ``max_edge`` (long slivers become a row of pieces, not a grid)."""
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     out = []
-    for _ in range(40):
-        edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
-        small = edges <= max_edge
+    for _ in range(64):
+        lengths = np.linalg.norm(tri - np.roll(tri, -1, axis=1), axis=2)  # edge k: corner k -> corner k + 1
+        small = lengths.max(axis=1) <= max_edge
         out.append(tri[small])
-        tri = tri[~small]
+        tri, lengths = tri[~small], lengths[~small]
         if not len(tri):
             break
-        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
-        tri = np.concatenate(
-            [np.stack(t, axis=1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))], axis=0
-        )
+        k = np.argmax(lengths, axis=1)
+        rows = np.arange(len(tri))
+        a, b, c = tri[rows, k], tri[rows, (k + 1) % 3], tri[rows, (k + 2) % 3]
+        m = (a + b) / 2
+        tri = np.concatenate([np.stack([a, m, c], axis=1), np.stack([m, b, c], axis=1)])
     out.append(tri)
     return np.concatenate(out, axis=0)
 
@@ -93,61 +91,6 @@ def _inside_points(corners: np.ndarray, n: int, rng: np.random.Generator) -> np.
     if len(pts) < 8:  # flat geometry: the corners themselves
         pts = corners
     return pts[:n]
-
-
-def _kmeans(points: np.ndarray, k: int, rng: np.random.Generator, iters: int = 25) -> np.ndarray:
-    centers = [points[rng.integers(len(points))]]
-    for _ in range(1, k):  # k-means++
-        d2 = np.min(((points[:, None] - np.array(centers)[None]) ** 2).sum(-1), axis=1)
-        total = d2.sum()
-        centers.append(
-            points[rng.choice(len(points), p=d2 / total)] if total > 0 else points[rng.integers(len(points))]
-        )
-    c = np.array(centers)
-    for _ in range(iters):
-        lab = np.argmin(((points[:, None] - c[None]) ** 2).sum(-1), axis=1)
-        for j in range(k):
-            sel = points[lab == j]
-            if len(sel):
-                c[j] = sel.mean(axis=0)
-    return c
-
-
-def _reach(tri: np.ndarray, centers: np.ndarray) -> np.ndarray:
-    """``(T, K)``: the radius sphere ``k`` needs to hold triangle ``t`` (its farthest corner)."""
-    return np.linalg.norm(tri[:, :, None, :] - centers[None, None], axis=3).max(axis=1)
-
-
-def _assign(tri, centers, iters):
-    """Each triangle to the centre nearest its centroid (a Voronoi cell of the surface per sphere); radius = the
-    farthest corner of its triangles. Then each centre moves to the approximate smallest ball around its cell's
-    corners where that makes the union smaller (sum of r^3). Returns centres and radii (empty cells dropped)."""
-    K = len(centers)
-    mid = tri.mean(axis=1)
-    lab = np.argmin(((mid[:, None] - centers[None]) ** 2).sum(-1), axis=1)
-    rows = np.arange(len(tri))
-
-    def radii_of(c):
-        r = np.zeros(K)
-        np.maximum.at(r, lab, _reach(tri, c)[rows, lab])
-        return r
-
-    radii = radii_of(centers)
-    moved = centers.copy()
-    for j in range(K):  # centre = approximate smallest ball around its cell's corners (Badoiu-Clarkson)
-        pts = np.unique(tri[lab == j].reshape(-1, 3), axis=0)
-        if not len(pts):
-            continue
-        c = moved[j].copy()
-        for i in range(iters):
-            far = pts[np.argmax(((pts - c) ** 2).sum(-1))]
-            c += (far - c) / (i + 2)
-        moved[j] = c
-    r_moved = radii_of(moved)
-    if (r_moved**3).sum() < (radii**3).sum():
-        centers, radii = moved, r_moved
-    keep = radii > 0
-    return centers[keep], radii[keep]
 
 
 def _fibonacci(n: int) -> np.ndarray:
@@ -195,11 +138,50 @@ def _volume(tri: np.ndarray) -> float:
     return v if 0.3 * hull <= v <= hull * (1 + 1e-9) else hull  # an open or inconsistently oriented surface
 
 
+def _greedy_cover(corners, faces, inside, depth, reach, max_spheres):
+    """Spheres ``(centres, radii)`` holding every triangle ``corners[faces]``: candidates ``inside`` with radius
+    ``depth + reach``; greedily the one holding the most triangles not yet held; triangles no candidate holds go
+    to the chosen sphere that grows least for them; then each radius shrinks to its own triangles' farthest
+    corner. None when more than ``max_spheres`` are needed."""
+    radii = depth + reach
+    held_v = np.empty((len(inside), len(corners)), dtype=bool)
+    sq = (corners**2).sum(-1)
+    for s in range(0, len(inside), 256):
+        c = inside[s : s + 256]
+        d2 = (c**2).sum(-1)[:, None] - 2.0 * c @ corners.T + sq[None]  # float64: well below the sizes here
+        held_v[s : s + 256] = d2 <= (radii[s : s + 256, None] ** 2) * (1 - 1e-9)
+    held = held_v[:, faces].all(axis=2)  # (C, T)
+    open_ = np.ones(faces.shape[0], dtype=bool)
+    chosen = []
+    while open_.any():
+        gain = held[:, open_].sum(axis=1)
+        best = int(np.argmax(gain))
+        if gain[best] == 0:
+            break
+        chosen.append(best)
+        open_ &= ~held[best]
+        if len(chosen) > max_spheres:
+            return None
+    if not chosen:
+        chosen = [int(np.argmax(depth))]
+    centers = inside[chosen].copy()
+    tri = corners[faces]
+    need = np.linalg.norm(tri[:, :, None, :] - centers[None, None], axis=3).max(axis=1)  # (T, K)
+    # each triangle to a chosen sphere that holds it (the one that holds it with most room), else the one
+    # needing the least radius for it
+    room = need - radii[chosen][None]
+    lab = np.argmin(room, axis=1)
+    out = np.zeros(len(chosen))
+    np.maximum.at(out, lab, need[np.arange(len(tri)), lab])
+    keep = out > 0
+    return centers[keep], out[keep]
+
+
 def fit_spheres(
     triangles: np.ndarray,
     *,
     tolerance: float = 0.01,
-    max_spheres: int = 12,
+    max_spheres: int = 16,
     max_edge: float | None = None,
     volume: float | None = None,
     seed: int = 0,
@@ -207,37 +189,34 @@ def fit_spheres(
     """Spheres whose union holds every point of the surface ``triangles: (T, 3, 3)`` (metres, body frame).
 
     Args:
-        tolerance: stop adding spheres once they overreach the surface by at most this (metres).
+        tolerance: the overreach aimed at (metres): candidate spheres reach this far past the nearest surface
+            point; grown by half (and so on) until ``max_spheres`` suffice.
         max_spheres: at most this many spheres.
-        max_edge: triangles are split until no edge is longer (default: the body's largest extent / 10,
-            at least 2 mm).
+        max_edge: triangles are split until no edge is longer (default: ``tolerance``, at least the body's
+            largest extent / 30).
         volume: the geometry's volume (m^3) for the reported ratio; default from the triangles.
-        seed: k-means and Monte Carlo seed.
+        seed: seed of the candidate centres and of the Monte Carlo volume.
     """
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     if not len(tri) or not np.isfinite(tri).all():
         raise ValueError("fit_spheres: expected finite triangles (T, 3, 3) with T >= 1")
-    corners = tri.reshape(-1, 3)
-    extent = float((corners.max(axis=0) - corners.min(axis=0)).max())
-    edge = max(extent / 10.0, 0.002) if max_edge is None else float(max_edge)
+    flat = tri.reshape(-1, 3)
+    extent = float((flat.max(axis=0) - flat.min(axis=0)).max())
+    edge = max(float(tolerance), extent / 30.0, 1e-4) if max_edge is None else float(max_edge)
     fine = subdivide(tri, edge) if extent > 0 else tri
-    surface = np.unique(fine.reshape(-1, 3).round(9), axis=0)
-    if len(surface) > 4000:
-        surface = surface[np.random.default_rng(seed).choice(len(surface), 4000, replace=False)]
+    corners, faces = np.unique(fine.reshape(-1, 3).round(12), axis=0, return_inverse=True)
+    faces = faces.reshape(-1, 3)
     volume = _volume(tri) if volume is None else float(volume)
     rng = np.random.default_rng(seed)
-    inside = _inside_points(corners, 3000, rng)
-    best = None
-    counts = [k for k in (1, 2, 3, 4, 6, 8, 10, 12, 16, 20, 24, 32) if k < max_spheres] + [int(max_spheres)]
-    for k in counts:
-        centers = _kmeans(inside, min(k, len(inside)), np.random.default_rng(seed + k))
-        c, r = _assign(fine, centers, iters=30)
-        gap = _gap(c, r, surface)
-        ratio = _volume_ratio(c, r, volume, np.random.default_rng(seed))
-        score = ratio + SPHERE_PENALTY * len(r)
-        if best is None or score < best[0]:
-            best = (score, c, r, gap, ratio)
-        if gap <= tolerance:
-            break
-    _, c, r, gap, ratio = best
-    return SphereFit(c, r, gap, ratio)
+    inside = np.concatenate([_inside_points(flat, 1000, rng), corners[rng.choice(len(corners), 100)]])
+    sq = (corners**2).sum(-1)
+    d2 = (inside**2).sum(-1)[:, None] - 2.0 * inside @ corners.T + sq[None]
+    depth = np.sqrt(np.maximum(d2.min(axis=1), 0.0))
+    reach = max(float(tolerance), 1e-4)
+    found = None
+    while found is None:
+        found = _greedy_cover(corners, faces, inside, depth, reach, int(max_spheres))
+        reach *= 1.5
+    c, r = found
+    surface = corners if len(corners) <= 4000 else corners[rng.choice(len(corners), 4000, replace=False)]
+    return SphereFit(c, r, _gap(c, r, surface), _volume_ratio(c, r, volume, np.random.default_rng(seed)))

@@ -19,17 +19,19 @@ class MeshCheck:
 
     Attributes:
         links: link names with geometry.
-        pairs: ``(a, b)`` index pairs checked: every pair but links on the same frame and adjacent links
-            (parent and child), as nik's model before sampling; :meth:`drop_always` removes the pairs in contact
-            in every configuration given.
+        pairs: ``(a, b)`` index pairs checked: every pair but links on the same frame, adjacent links (parent
+            and child) and the ``skip`` pairs of link names (e.g. those an SRDF disables), as nik's model before
+            sampling; :meth:`drop_always` removes the pairs in contact in every configuration given.
     """
 
-    def __init__(self, robot, urdf):
+    def __init__(self, robot, urdf, *, skip=()):
         try:
             import coal
         except ImportError as err:
             raise ImportError("the mesh check needs coal: pip install 'nik[collision-check]'") from err
         from nik.collision.urdf import urdf_bodies
+
+        skip = {tuple(sorted(p)) for p in skip}
 
         self._coal = coal
         self.robot = robot
@@ -53,6 +55,7 @@ class MeshCheck:
             if bodies[a].frame != bodies[b].frame
             and bodies[a].parent != bodies[b].name
             and bodies[b].parent != bodies[a].name
+            and tuple(sorted((bodies[a].name, bodies[b].name))) not in skip
         ]
 
     def _transforms(self, q):

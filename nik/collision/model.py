@@ -13,7 +13,8 @@ Where the spheres come from (choices):
 
 Which pairs are checked, as MoveIt's setup assistant decides (each left-out pair keeps its reason in
 :attr:`CollisionModel.left_out`): links on the same frame (they never move relative to each other), adjacent
-links (parent and child: a joint between them), then on ``samples`` seeded configurations within the limits,
+links (parent and child: a joint between them), the pairs a MoveIt SRDF beside the URDF disables (``srdf=True``),
+then on ``samples`` seeded configurations within the limits,
 pairs whose spheres touch in every one ("always") and pairs never closer than ``never_clearance`` metres
 ("never"; ``never_clearance=None`` keeps them). :meth:`CollisionModel.with_pairs` adds or removes pairs.
 
@@ -285,6 +286,12 @@ def _urdf_of(robot) -> Path | None:
     return None
 
 
+def model_source_is_urdf(robot, source) -> bool:
+    """True when :func:`collision_model` fits the URDF's geometry (not capsules) for these arguments."""
+    urdf = _urdf_of(robot)
+    return source in (None, "urdf") and urdf is not None and _has_collision(urdf)
+
+
 def _has_collision(path: Path) -> bool:
     return b"<collision" in path.read_bytes()
 
@@ -309,20 +316,50 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
     return bodies, spheres, gaps, [float("nan")] * len(bodies), "capsules"
 
 
-def _find_pairs(robot, model: CollisionModel, bodies, samples: int, never_clearance, seed: int):
+def srdf_of(urdf: Path | None) -> Path | None:
+    """MoveIt's SRDF for a URDF: ``NAME.srdf`` beside it or in a sibling ``srdf`` folder; None where absent."""
+    if urdf is None:
+        return None
+    for cand in (urdf.with_suffix(".srdf"), urdf.parent.parent / "srdf" / f"{urdf.stem}.srdf"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
+    """``{(a, b): reason}`` of an SRDF's ``<disable_collisions link1 link2 reason>`` (names sorted per pair)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(path.read_bytes())
+    except (OSError, ET.ParseError) as err:
+        raise ValueError(f"{path}: not a readable SRDF ({err})") from None
+    out = {}
+    for el in root.iter("disable_collisions"):
+        a, b = el.get("link1"), el.get("link2")
+        if a and b:
+            out[tuple(sorted((a, b)))] = el.get("reason") or "disabled"
+    return out
+
+
+def _find_pairs(robot, model: CollisionModel, bodies, samples: int, never_clearance, seed: int, srdf=None):
     """Active pairs and the reasons of the others (module docstring)."""
     from nik.collision.distance import self_distances, sphere_centers
 
     L = len(bodies)
     names = [b.name for b in bodies]
+    disabled = srdf_disabled(srdf) if srdf is not None else {}
     left, candidates = {}, []
     for a in range(L):
         for b in range(a + 1, L):
             key = f"{names[a]}|{names[b]}"
+            declared = disabled.get(tuple(sorted((names[a], names[b]))))
             if bodies[a].frame == bodies[b].frame:
                 left[key] = "same frame"
             elif bodies[a].parent == names[b] or bodies[b].parent == names[a]:
                 left[key] = "adjacent"
+            elif declared is not None:
+                left[key] = f"srdf: {declared}"
             else:
                 candidates.append((a, b))
     model.pairs = np.array(candidates, dtype=np.int64).reshape(-1, 2)
@@ -353,9 +390,10 @@ _DEFAULT_KEY = json.dumps(
         "source": None,
         "radius": 0.05,
         "tolerance": 0.01,
-        "max_spheres": 12,
+        "max_spheres": 16,
         "samples": 1000,
         "never_clearance": 0.02,
+        "srdf": True,
         "seed": 0,
     },
     sort_keys=True,
@@ -393,9 +431,10 @@ def collision_model(
     source: str | None = None,
     radius=0.05,
     tolerance: float = 0.01,
-    max_spheres: int = 12,
+    max_spheres: int = 16,
     samples: int = 1000,
     never_clearance: float | None = 0.02,
+    srdf: bool = True,
     seed: int = 0,
     cache: bool = True,
 ) -> CollisionModel:
@@ -410,6 +449,8 @@ def collision_model(
         samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
             but the same-frame and adjacent ones).
         never_clearance: a pair never closer than this (metres) in every sample is left out; None keeps them.
+        srdf: honour MoveIt's SRDF of a URDF robot (``NAME.srdf`` beside the URDF or in ``../srdf/``): the link
+            pairs it disables are left out (reason ``"srdf: Default"``, ...), as MoveIt would.
         seed: seed of the fitting and the sampling.
         cache: read and write nik's cache folder.
     """
@@ -420,6 +461,7 @@ def collision_model(
         "max_spheres": int(max_spheres),
         "samples": int(samples),
         "never_clearance": never_clearance,
+        "srdf": bool(srdf),
         "seed": int(seed),
     }
     memo = robot.__dict__.setdefault("_collision_models", {})
@@ -437,6 +479,9 @@ def collision_model(
     h = hashlib.sha256(f"{robot.definition_hash}|{memo_key}|{COLLISION_FORMAT}".encode())
     if urdf is not None:
         h.update(urdf.read_bytes())
+    srdf_path = srdf_of(urdf) if srdf and model_source_is_urdf(robot, source) else None
+    if srdf_path is not None:
+        h.update(srdf_path.read_bytes())
     key = h.hexdigest()
     path = _cache_path(key)
     model = None
@@ -459,7 +504,7 @@ def collision_model(
             source=src,
             options=options,
         )
-        _find_pairs(robot, model, bodies, samples, never_clearance, seed)
+        _find_pairs(robot, model, bodies, samples, never_clearance, seed, srdf_path if src != "capsules" else None)
         if cache:
             with contextlib.suppress(OSError):
                 path.parent.mkdir(parents=True, exist_ok=True)
