@@ -78,8 +78,8 @@ def test_spheres_hold_every_surface_point_of_a_box():
 
 def test_spheres_hold_every_surface_point_of_a_cylinder():
     rng = np.random.default_rng(1)
-    r, length = 0.05, 0.4
-    fit = fit_spheres(cylinder_triangles(r, length), seed=0)
+    r, length = 0.05, 0.2
+    fit = fit_spheres(cylinder_triangles(r, length), tolerance=0.02, seed=0)
     a = rng.uniform(0, 2 * math.pi, 20000)
     z = rng.uniform(-length / 2, length / 2, 20000)
     side = np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
@@ -109,6 +109,18 @@ def test_adjacent_and_same_frame_pairs_are_left_out(prims):
     assert model.left_out["l1|l2"] == "adjacent"
     names = model.pair_names()
     assert all(b not in ("l1",) or a != "base" for a, b in names)
+
+
+def test_pairs_an_srdf_disables_are_left_out(prims):
+    robot, path = prims
+    assert ("base", "l3") in robot.collision_spheres().pair_names()
+    path.with_suffix(".srdf").write_text(
+        '<robot name="prims"><disable_collisions link1="l3" link2="base" reason="Never"/></robot>'
+    )
+    fresh = nik.load_robot(path, end_link="l3")
+    model = fresh.collision_spheres()
+    assert ("base", "l3") not in model.pair_names() and model.left_out["base|l3"] == "srdf: Never"
+    assert ("base", "l3") in collision_model(fresh, srdf=False).pair_names()
 
 
 def test_always_and_never_pairs_hold_on_fresh_samples():
@@ -186,7 +198,7 @@ def test_compiled_jacobian_matches_finite_differences():
 
 def test_torch_gradient_matches_finite_differences():
     robot = nik.load_robot("ur5")
-    q = _q(robot, 4, 5).requires_grad_(True)
+    q = _q(robot, 2, 5).requires_grad_(True)
     world = _world()
     rows = signed_distances(robot, q, world)
     finite = torch.isfinite(rows)

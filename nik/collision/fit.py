@@ -151,10 +151,11 @@ def _greedy_cover(corners, faces, inside, depth, reach, max_spheres):
         d2 = (c**2).sum(-1)[:, None] - 2.0 * c @ corners.T + sq[None]  # float64: well below the sizes here
         held_v[s : s + 256] = d2 <= (radii[s : s + 256, None] ** 2) * (1 - 1e-9)
     held = held_v[:, faces].all(axis=2)  # (C, T)
+    counts = held.astype(np.float32)
     open_ = np.ones(faces.shape[0], dtype=bool)
     chosen = []
     while open_.any():
-        gain = held[:, open_].sum(axis=1)
+        gain = counts @ open_.astype(np.float32)  # triangles each candidate would newly hold (exact below 2^24)
         best = int(np.argmax(gain))
         if gain[best] == 0:
             break
@@ -192,8 +193,8 @@ def fit_spheres(
         tolerance: the overreach aimed at (metres): candidate spheres reach this far past the nearest surface
             point; grown by half (and so on) until ``max_spheres`` suffice.
         max_spheres: at most this many spheres.
-        max_edge: triangles are split until no edge is longer (default: ``tolerance``, at least the body's
-            largest extent / 30).
+        max_edge: triangles are split until no edge is longer (default: twice ``tolerance``, at least the body's
+            largest extent / 20).
         volume: the geometry's volume (m^3) for the reported ratio; default from the triangles.
         seed: seed of the candidate centres and of the Monte Carlo volume.
     """
@@ -202,13 +203,13 @@ def fit_spheres(
         raise ValueError("fit_spheres: expected finite triangles (T, 3, 3) with T >= 1")
     flat = tri.reshape(-1, 3)
     extent = float((flat.max(axis=0) - flat.min(axis=0)).max())
-    edge = max(float(tolerance), extent / 30.0, 1e-4) if max_edge is None else float(max_edge)
+    edge = max(2.0 * float(tolerance), extent / 20.0, 1e-4) if max_edge is None else float(max_edge)
     fine = subdivide(tri, edge) if extent > 0 else tri
     corners, faces = np.unique(fine.reshape(-1, 3).round(12), axis=0, return_inverse=True)
     faces = faces.reshape(-1, 3)
     volume = _volume(tri) if volume is None else float(volume)
     rng = np.random.default_rng(seed)
-    inside = np.concatenate([_inside_points(flat, 1000, rng), corners[rng.choice(len(corners), 100)]])
+    inside = np.concatenate([_inside_points(flat, 800, rng), corners[rng.choice(len(corners), 80)]])
     sq = (corners**2).sum(-1)
     d2 = (inside**2).sum(-1)[:, None] - 2.0 * inside @ corners.T + sq[None]
     depth = np.sqrt(np.maximum(d2.min(axis=1), 0.0))

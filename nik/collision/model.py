@@ -55,7 +55,10 @@ class CollisionModel:
         radii: (S,) metres.
         body_start: (L + 1,) int, link ``l``'s spheres are ``body_start[l]:body_start[l + 1]``.
         pairs: (P, 2) int, the link pairs checked (indices into ``links``, first < second).
-        left_out: ``{"a|b": reason}`` for the pairs not checked (same frame, adjacent, always, never, removed).
+        left_out: ``{"a|b": reason}`` for the pairs not checked (same frame, adjacent, srdf: ..., always, never,
+            removed).
+        parents: (L,) the nearest link with geometry above each link (URDF), or the previous capsule; None at the
+            root.
         gaps: (L,) metres, how far each link's spheres overreach its geometry (module docstring).
         volume_ratios: (L,) sphere volume over geometry volume per link.
         source: ``"urdf:PATH"`` or ``"capsules"``.
@@ -70,6 +73,7 @@ class CollisionModel:
     body_start: np.ndarray
     pairs: np.ndarray
     left_out: dict = field(default_factory=dict)
+    parents: list | None = None
     gaps: np.ndarray | None = None
     volume_ratios: np.ndarray | None = None
     source: str = ""
@@ -173,6 +177,7 @@ class CollisionModel:
             "body_start": np.asarray(self.body_start).tolist(),
             "pairs": np.asarray(self.pairs).tolist(),
             "left_out": dict(self.left_out),
+            "parents": None if self.parents is None else list(self.parents),
             "gaps": None if self.gaps is None else np.asarray(self.gaps).tolist(),
             "volume_ratios": None if self.volume_ratios is None else np.asarray(self.volume_ratios).tolist(),
             "source": self.source,
@@ -193,6 +198,7 @@ class CollisionModel:
                 body_start=np.asarray(d["body_start"], dtype=np.int64),
                 pairs=np.asarray(d["pairs"], dtype=np.int64).reshape(-1, 2),
                 left_out=dict(d.get("left_out") or {}),
+                parents=None if d.get("parents") is None else list(d["parents"]),
                 gaps=None if d.get("gaps") is None else np.asarray(d["gaps"], dtype=np.float64),
                 volume_ratios=None if d.get("volume_ratios") is None else np.asarray(d["volume_ratios"]),
                 source=str(d.get("source", "")),
@@ -342,21 +348,23 @@ def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
     return out
 
 
-def _find_pairs(robot, model: CollisionModel, bodies, samples: int, never_clearance, seed: int, srdf=None):
+def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None):
     """Active pairs and the reasons of the others (module docstring)."""
     from nik.collision.distance import self_distances, sphere_centers
 
-    L = len(bodies)
-    names = [b.name for b in bodies]
+    L = len(model.links)
+    names = list(model.links)
+    frames = np.asarray(model.frames)
+    parents = model.parents or [None] * L
     disabled = srdf_disabled(srdf) if srdf is not None else {}
     left, candidates = {}, []
     for a in range(L):
         for b in range(a + 1, L):
             key = f"{names[a]}|{names[b]}"
             declared = disabled.get(tuple(sorted((names[a], names[b]))))
-            if bodies[a].frame == bodies[b].frame:
+            if frames[a] == frames[b]:
                 left[key] = "same frame"
-            elif bodies[a].parent == names[b] or bodies[b].parent == names[a]:
+            elif parents[a] == names[b] or parents[b] == names[a]:
                 left[key] = "adjacent"
             elif declared is not None:
                 left[key] = f"srdf: {declared}"
@@ -398,6 +406,40 @@ _DEFAULT_KEY = json.dumps(
     },
     sort_keys=True,
 )
+
+
+def _cached(path: Path, robot) -> CollisionModel | None:
+    if not path.is_file():
+        return None
+    try:
+        return CollisionModel.load(path, robot)
+    except ValueError:
+        return None
+
+
+def _store(model: CollisionModel, path: Path) -> None:
+    with contextlib.suppress(OSError):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        model.save(path)
+
+
+def _fitted(robot, source, radius, tolerance, max_spheres, seed) -> CollisionModel:
+    """The spheres of every link (no pairs yet)."""
+    bodies, spheres, gaps, ratios, src = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed)
+    counts = [len(r) for _, r in spheres]
+    return CollisionModel(
+        robot_hash=robot.definition_hash,
+        links=[b.name for b in bodies],
+        frames=np.array([b.frame for b in bodies], dtype=np.int64),
+        centers=np.concatenate([c for c, _ in spheres]).reshape(-1, 3),
+        radii=np.concatenate([r for _, r in spheres]),
+        body_start=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        pairs=np.zeros((0, 2), dtype=np.int64),
+        parents=[b.parent for b in bodies],
+        gaps=np.asarray(gaps, dtype=float),
+        volume_ratios=np.asarray(ratios, dtype=float),
+        source=src,
+    )
 
 
 def _cache_path(key: str) -> Path:
@@ -476,38 +518,27 @@ def collision_model(
         memo[memo_key] = model
         return model
     urdf = _urdf_of(robot)
-    h = hashlib.sha256(f"{robot.definition_hash}|{memo_key}|{COLLISION_FORMAT}".encode())
+    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed")}
+    h = hashlib.sha256(f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}".encode())
     if urdf is not None:
         h.update(urdf.read_bytes())
+    fit_path = _cache_path("spheres-" + h.hexdigest())
     srdf_path = srdf_of(urdf) if srdf and model_source_is_urdf(robot, source) else None
+    h.update(memo_key.encode())
     if srdf_path is not None:
         h.update(srdf_path.read_bytes())
-    key = h.hexdigest()
-    path = _cache_path(key)
-    model = None
-    if cache and path.is_file():
-        with contextlib.suppress(ValueError):
-            model = CollisionModel.load(path, robot)
+    path = _cache_path(h.hexdigest())
+    model = _cached(path, robot) if cache else None
     if model is None:
-        bodies, spheres, gaps, ratios, src = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed)
-        counts = [len(r) for _, r in spheres]
-        model = CollisionModel(
-            robot_hash=robot.definition_hash,
-            links=[b.name for b in bodies],
-            frames=np.array([b.frame for b in bodies], dtype=np.int64),
-            centers=np.concatenate([c for c, _ in spheres]).reshape(-1, 3),
-            radii=np.concatenate([r for _, r in spheres]),
-            body_start=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
-            pairs=np.zeros((0, 2), dtype=np.int64),
-            gaps=np.asarray(gaps, dtype=float),
-            volume_ratios=np.asarray(ratios, dtype=float),
-            source=src,
-            options=options,
-        )
-        _find_pairs(robot, model, bodies, samples, never_clearance, seed, srdf_path if src != "capsules" else None)
+        spheres = _cached(fit_path, robot) if cache else None
+        if spheres is None:
+            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed)
+            if cache:
+                _store(spheres, fit_path)
+        model = CollisionModel(**{**spheres.__dict__, "options": options})
+        model.__dict__.pop("_sphere_pairs", None)
+        _find_pairs(robot, model, samples, never_clearance, seed, srdf_path)
         if cache:
-            with contextlib.suppress(OSError):
-                path.parent.mkdir(parents=True, exist_ok=True)
-                model.save(path)
+            _store(model, path)
     memo[memo_key] = model
     return model

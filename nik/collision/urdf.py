@@ -42,7 +42,7 @@ class Body:
         name: link name.
         frame: index of the robot's frame carrying it (0 = base, k = after joint k).
         triangles: (T, 3, 3) metres, in that frame, a closed surface holding the geometry.
-        parent: name of the URDF parent link (None for the root or a capsule body).
+        parent: the nearest link above it with geometry (None for the root); for capsules the previous one.
     """
 
     name: str
@@ -279,6 +279,11 @@ def urdf_bodies(robot, path: str | Path) -> list[Body]:
         k = frame0[name]
         X = np.linalg.inv(F0[k]) @ B @ pose0[name]  # link frame -> frame k (constant)
         tri = np.concatenate(tris)
-        parent = by_child[name].parent if name in by_child else None
-        bodies.append(Body(name, k, tri @ X[:3, :3].T + X[:3, 3], parent))
+        bodies.append(Body(name, k, tri @ X[:3, :3].T + X[:3, 3]))
+    with_geometry = {b.name for b in bodies}
+    for b in bodies:  # the nearest link above with geometry (MoveIt's adjacency skips links without any)
+        up = by_child[b.name].parent if b.name in by_child else None
+        while up is not None and up not in with_geometry:
+            up = by_child[up].parent if up in by_child else None
+        b.parent = up
     return bodies
