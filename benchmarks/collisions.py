@@ -112,6 +112,25 @@ def main(argv=None) -> None:
     print()
     for note in notes:
         print(note)
+    # one LM residual evaluation (rows and Jacobian) for one configuration, what the pipeline will call
+    from nik.collision.compiled import kernel_arguments
+    from nik.kernels.collision import collision_residual
+
+    (G, joints), rest = kernel_arguments(robot, model, world)
+    R = len(model.pairs) + len(model.links)
+    r, J = np.empty(R), np.empty((R, robot.dof))
+    collision_residual(G, joints, Q[0], *rest, 0.01, r, J)
+    times = []
+    for _ in range(5):
+        t = time.perf_counter()
+        for q in Q[:500]:
+            collision_residual(G, joints, q, *rest, 0.01, r, J)
+        times.append((time.perf_counter() - t) / 500)
+    print(
+        f"LM residual rows + Jacobian ({R} rows: {len(model.pairs)} pairs + {len(model.links)} links; "
+        f"{len(model.radii)} spheres, scene of {sum(world.counts())} obstacles), one configuration: "
+        f"median {1e6 * float(np.median(times)):.1f} us"
+    )
 
 
 if __name__ == "__main__":

@@ -101,32 +101,32 @@ def _obstacle(x, y, z, w_spheres, w_boxes, w_capsules, g):
                 g[0], g[1], g[2] = dx / n, dy / n, dz / n
             else:
                 g[0], g[1], g[2] = 0.0, 0.0, 1.0
-    loc = np.empty(3)
-    qd = np.empty(3)
-    gl = np.empty(3)
     for o in range(w_boxes.shape[0]):
-        px, py, pz = x - w_boxes[o, 9], y - w_boxes[o, 10], z - w_boxes[o, 11]
-        for j in range(3):  # R^T (p - c)
-            loc[j] = w_boxes[o, j] * px + w_boxes[o, 3 + j] * py + w_boxes[o, 6 + j] * pz
-            qd[j] = abs(loc[j]) - w_boxes[o, 12 + j]
-        qmax = max(qd[0], max(qd[1], qd[2]))
+        b = w_boxes[o]
+        px, py, pz = x - b[9], y - b[10], z - b[11]
+        lx = b[0] * px + b[3] * py + b[6] * pz  # R^T (p - c)
+        ly = b[1] * px + b[4] * py + b[7] * pz
+        lz = b[2] * px + b[5] * py + b[8] * pz
+        qx, qy, qz = abs(lx) - b[12], abs(ly) - b[13], abs(lz) - b[14]
+        qmax = max(qx, max(qy, qz))
         if qmax > 0:
-            s = 0.0
-            for j in range(3):
-                w = max(qd[j], 0.0)
-                s += w * w
-            d = math.sqrt(s)
-            for j in range(3):
-                gl[j] = (math.copysign(1.0, loc[j]) * max(qd[j], 0.0) / d) if d > 0 else 0.0
+            wx, wy, wz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+            d = math.sqrt(wx * wx + wy * wy + wz * wz)
+            gx, gy, gz = math.copysign(wx / d, lx), math.copysign(wy / d, ly), math.copysign(wz / d, lz)
         else:
             d = qmax
-            a = 0 if qd[0] >= qd[1] and qd[0] >= qd[2] else (1 if qd[1] >= qd[2] else 2)
-            for j in range(3):
-                gl[j] = math.copysign(1.0, loc[j]) if j == a else 0.0
+            gx, gy, gz = 0.0, 0.0, 0.0
+            if qx >= qy and qx >= qz:
+                gx = math.copysign(1.0, lx)
+            elif qy >= qz:
+                gy = math.copysign(1.0, ly)
+            else:
+                gz = math.copysign(1.0, lz)
         if d < best:
             best = d
-            for i in range(3):
-                g[i] = w_boxes[o, 3 * i] * gl[0] + w_boxes[o, 3 * i + 1] * gl[1] + w_boxes[o, 3 * i + 2] * gl[2]
+            g[0] = b[0] * gx + b[1] * gy + b[2] * gz
+            g[1] = b[3] * gx + b[4] * gy + b[5] * gz
+            g[2] = b[6] * gx + b[7] * gy + b[8] * gz
     return best
 
 
