@@ -11,7 +11,15 @@ import pytest
 import torch
 
 import nik
-from nik.collision import CollisionModel, World, collides, collision_model, set_collision_model, signed_distances
+from nik.collision import (
+    CollisionModel,
+    World,
+    collides,
+    colliding_links,
+    collision_model,
+    set_collision_model,
+    signed_distances,
+)
 from nik.collision.compiled import kernel_arguments, signed_distances_compiled
 from nik.collision.fit import fit_spheres
 from nik.collision.shapes import box_triangles, cylinder_triangles
@@ -166,6 +174,14 @@ def test_compiled_rows_match_torch_and_collides_agrees():
     hit = collides(robot, q.numpy(), world)
     np.testing.assert_array_equal(hit, collides(robot, q, world, compiled=False).numpy())
     np.testing.assert_array_equal(hit, (d_torch < 0).any(axis=1))
+    links = colliding_links(robot, q, world)
+    np.testing.assert_array_equal(links.any(axis=1), hit)
+    model = robot.collision_spheres()
+    np.testing.assert_array_equal(
+        links[:, 3],
+        (d_torch[:, len(model.pairs) + 3] < 0)
+        | np.array([any(d_torch[i, p] < 0 for p, pair in enumerate(model.pairs) if 3 in pair) for i in range(len(q))]),
+    )
 
 
 def test_compiled_jacobian_matches_finite_differences():

@@ -13,6 +13,7 @@ Importing this room loads neither numba nor trimesh (the kernels and the mesh re
 
 from nik.collision.distance import (
     collides,
+    colliding_links,
     collision_residual,
     link_frames,
     self_distances,
@@ -29,6 +30,7 @@ register_collision_model(collision_model)
 __all__ = [
     "CollisionModel",
     "World",
+    "colliding_links",
     "collides",
     "collision_model",
     "collision_residual",

@@ -9,8 +9,8 @@ For ``q: (B, dof)`` the spheres of a :class:`nik.collision.CollisionModel` are p
   boxes and capsules: ``(B, L)`` (``inf`` for an empty world);
 - :func:`signed_distances` both, ``(B, P + L)``: the rows of :func:`collision_residual`
   ``max(0, margin - d)``, one LM residual per row (a pair or a link; the row count does not depend on the world);
-- :func:`collides`: ``(B,)`` bool, some row below ``-margin``... i.e. ``d < margin`` (``margin=0``: touching
-  counts as free, overlapping as colliding).
+- :func:`collides`: ``(B,)`` bool, some row below ``margin`` (``margin=0``: touching counts as free, overlapping
+  as colliding); :func:`colliding_links`: ``(B, L)`` bool, which links take part (for drawing them in colour).
 
 Gradients flow to ``q`` through the minimum's arguments (torch's ``amin`` scatter splits ties evenly). The
 compiled kernels (:mod:`nik.kernels.collision`) compute the same rows and their Jacobians; the tests compare them.
@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 __all__ = [
+    "colliding_links",
     "collides",
     "collision_residual",
     "link_frames",
@@ -160,3 +161,22 @@ def collides(
         d = signed_distances(robot, qt, world, model=model, self_collision=self_collision)
     hit = (d < margin).any(dim=1)
     return hit.numpy() if as_numpy else hit
+
+
+def colliding_links(
+    robot, q, world=None, *, margin: float = 0.0, model=None, self_collision: bool = True
+) -> np.ndarray:
+    """``(B, L)`` bool for ``q: (B, dof)``: link ``l`` is in a pair closer than ``margin`` or closer than ``margin``
+    to the world (the links of ``model.links``; what a viewer draws in another colour)."""
+    model = robot.collision_spheres() if model is None else model
+    qt = torch.as_tensor(np.asarray(q.detach() if isinstance(q, torch.Tensor) else q), dtype=torch.float64)
+    qt = qt.reshape(-1, robot.dof)
+    with torch.no_grad():
+        d = signed_distances(robot, qt, world, model=model, self_collision=self_collision).numpy()
+    P = len(model.pairs)
+    hit = d[:, P:] < margin
+    for p, (a, b) in enumerate(np.asarray(model.pairs).reshape(-1, 2)):
+        close = d[:, p] < margin
+        hit[:, a] |= close
+        hit[:, b] |= close
+    return hit
