@@ -15,7 +15,8 @@ import torch
 from nik.kinematics import FKKernel, chain_jacobian, to_homogeneous
 from nik.poses import validate_joints
 
-__all__ = ["Robot", "NormalFormBuilder", "register_collision_model", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
+__all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
+__all__ += ["register_collision_model"]  # nik.collision registers the builder of Robot.collision_spheres
 
 
 # ---------------------------------------------------------------------------
