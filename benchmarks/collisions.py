@@ -1,6 +1,6 @@
 """nik's sphere verdicts against the real collision meshes (coal) on sampled panda configurations.
 
-    python benchmarks/collisions.py [--samples 2000] [--seed 0]
+    python benchmarks/collisions.py [--samples 2000] [--seed 0] [--tolerance 0.01] [--max-spheres 16]
 
 The panda of example-robot-data (its URDF with collision meshes, arm + hand + fingers; extra ``collision-check``
 for coal and ``bench``/``urdf-tests`` for the URDF). Prints, for random configurations within the joint limits
@@ -67,6 +67,8 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--tolerance", type=float, default=0.01, help="sphere fitting tolerance, metres")
+    ap.add_argument("--max-spheres", type=int, default=16, help="at most this many spheres per link")
     args = ap.parse_args(argv)
     urdf = panda_urdf()
     with warnings.catch_warnings():
@@ -85,7 +87,7 @@ def main(argv=None) -> None:
     notes = []
     for use_srdf in (False, True):
         t = time.perf_counter()
-        model = collision_model(robot, srdf=use_srdf)
+        model = collision_model(robot, srdf=use_srdf, tolerance=args.tolerance, max_spheres=args.max_spheres)
         built = time.perf_counter() - t
         skip = list(srdf_disabled(srdf)) if use_srdf and srdf is not None else []
         mesh = MeshCheck(robot, urdf, skip=skip)

@@ -298,6 +298,19 @@ def test_model_saved_beside_the_robot_is_loaded_and_checked(prims, tmp_path):
         CollisionModel.load(saved, nik.load_robot("ur5"))
 
 
+def test_a_urdf_that_is_not_the_robots_is_refused(prims, tmp_path):
+    from nik.collision.urdf import urdf_bodies
+
+    robot, _ = prims
+    other = tmp_path / "other.urdf"
+    other.write_text(
+        URDF.replace('<origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>', '<origin xyz="0 0 0.5"/><axis xyz="0 1 0"/>')
+    )
+    with pytest.raises(ValueError, match="do not move as this robot's frames") as err:
+        urdf_bodies(robot, other)
+    assert "\n" not in str(err.value)
+
+
 def test_a_mesh_that_cannot_be_read_is_one_line(tmp_path):
     path = tmp_path / "bad.urdf"
     path.write_text(URDF.replace('<sphere radius="0.05"/>', '<mesh filename="missing.stl"/>'))
