@@ -236,8 +236,8 @@ class CollisionModel:
 # building
 # ---------------------------------------------------------------------------
 def link_capsule_bodies(robot, radius) -> list:
-    """Bodies (:class:`nik.collision.urdf.Body`) of capsules along the links (module docstring); ``radius``
-    metres, one number or one per frame (``dof + 1``). The triangles hold ``(segment p0, p1, radius)``."""
+    """Bodies (:class:`nik.collision.urdf.Body`) of capsules along the links (module docstring): their segments
+    ``(m, 2, 3)`` and ``radius`` (metres; one number, or one per frame: ``dof + 1``)."""
     from nik.collision.urdf import Body
 
     radii = np.broadcast_to(np.asarray(radius, dtype=np.float64), (robot.dof + 1,))
@@ -252,9 +252,7 @@ def link_capsule_bodies(robot, radius) -> list:
         if k >= 1 and bool(robot.prismatic[k - 1]):
             lo, hi = lim[k - 1] + off[k - 1]
             segments.append((np.array([0.0, 0.0, min(0.0, -hi)]), np.array([0.0, 0.0, max(0.0, -lo)])))
-        bodies.append(Body(f"link{k}", k, np.array([seg for seg in segments]), f"link{k - 1}" if k else None))
-    for b in bodies:
-        b.radius = float(radii[b.frame])
+        bodies.append(Body(f"link{k}", k, np.array(segments), f"link{k - 1}" if k else None, float(radii[k])))
     return bodies
 
 

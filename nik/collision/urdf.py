@@ -41,14 +41,17 @@ class Body:
     Attributes:
         name: link name.
         frame: index of the robot's frame carrying it (0 = base, k = after joint k).
-        triangles: (T, 3, 3) metres, in that frame, a closed surface holding the geometry.
+        triangles: (T, 3, 3) metres, in that frame, a closed surface holding the geometry; for a capsule body
+            (``radius`` set) its segments ``(m, 2, 3)`` instead.
         parent: the nearest link above it with geometry (None for the root); for capsules the previous one.
+        radius: the capsules' radius (metres), or None for a surface.
     """
 
     name: str
     frame: int
     triangles: np.ndarray
     parent: str | None = None
+    radius: float | None = None
 
 
 def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path | None:
