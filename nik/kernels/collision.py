@@ -16,6 +16,10 @@ sphere and obstacle): ``n . (dc_i/dq - dc_j/dq)``, with ``dc/dq`` column ``m`` e
 (revolute) or ``z_m`` (prismatic) for the joints before the sphere's frame and 0 after.
 :func:`collision_residual` turns them into LM rows ``max(0, margin - d)`` and ``-dd/dq`` where active.
 
+A broad phase skips the sphere-by-sphere minimum of a row whose lower bound (from a bounding sphere per link,
+placed with the link) is above the cutoff: ``margin`` in :func:`collision_residual` and :func:`collides_batch`,
+none (exact rows) in :func:`collision_distances` and :func:`collision_distances_batch`.
+
 The reference is :mod:`nik.collision.distance` (torch); the tests compare the two and check the Jacobians
 by finite differences.
 """
@@ -132,8 +136,24 @@ def _obstacle(x, y, z, w_spheres, w_boxes, w_capsules, g):
 
 @kernel
 def _rows(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J, want_jacobian
+    G,
+    joints,
+    q,
+    spheres,
+    sphere_frame,
+    body_start,
+    pairs,
+    w_spheres,
+    w_boxes,
+    w_capsules,
+    self_on,
+    d,
+    J,
+    want_jacobian,
+    cutoff,
 ):
+    """The rows (module docstring). Broad phase: a row whose lower bound from the links' bounding spheres exceeds
+    ``cutoff`` is that bound (Jacobian row 0) instead of the exact minimum."""
     n = q.shape[0]
     S = spheres.shape[0]
     P = pairs.shape[0]
@@ -142,6 +162,19 @@ def _rows(
     X = np.empty((S, 3))
     _frames(G, joints, q, F)
     _place(F, spheres, sphere_frame, X)
+    Bc = np.zeros((L, 3))  # each link's bounding sphere: the mean of its centres, reaching all its spheres
+    Br = np.zeros(L)
+    for link in range(L):
+        s0, s1 = body_start[link], body_start[link + 1]
+        if s1 > s0:
+            for s in range(s0, s1):
+                for r in range(3):
+                    Bc[link, r] += X[s, r]
+            for r in range(3):
+                Bc[link, r] /= s1 - s0
+            for s in range(s0, s1):
+                dx, dy, dz = X[s, 0] - Bc[link, 0], X[s, 1] - Bc[link, 1], X[s, 2] - Bc[link, 2]
+                Br[link] = max(Br[link], math.sqrt(dx * dx + dy * dy + dz * dz) + spheres[s, 3])
     if want_jacobian:
         for r in range(P + L):
             for m in range(n):
@@ -150,6 +183,11 @@ def _rows(
         best, bi, bj = np.inf, -1, -1
         if self_on:
             a, b = pairs[p, 0], pairs[p, 1]
+            dx, dy, dz = Bc[a, 0] - Bc[b, 0], Bc[a, 1] - Bc[b, 1], Bc[a, 2] - Bc[b, 2]
+            bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Br[a] - Br[b]
+            if bound > cutoff:
+                d[p] = bound
+                continue
             for i in range(body_start[a], body_start[a + 1]):
                 for j in range(body_start[b], body_start[b + 1]):
                     dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
@@ -171,6 +209,10 @@ def _rows(
         if body_start[link] < body_start[link + 1] and sphere_frame[body_start[link]] == 0:
             d[P + link] = np.inf  # the base's links never move: their contacts with the world are the user's set-up
             continue
+        bound = _obstacle(Bc[link, 0], Bc[link, 1], Bc[link, 2], w_spheres, w_boxes, w_capsules, g) - Br[link]
+        if bound > cutoff:  # signed distances are 1-Lipschitz: no sphere of the link is nearer than this
+            d[P + link] = bound
+            continue
         for s in range(body_start[link], body_start[link + 1]):
             dist = _obstacle(X[s, 0], X[s, 1], X[s, 2], w_spheres, w_boxes, w_capsules, g) - spheres[s, 3]
             if dist < best:
@@ -188,7 +230,23 @@ def collision_distances(
     G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J
 ):
     """Rows ``d (P + L,)`` (metres) and their Jacobian ``J (P + L, n)`` for ``q: (n,)`` (module docstring)."""
-    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J, True)
+    _rows(
+        G,
+        joints,
+        q,
+        spheres,
+        sphere_frame,
+        body_start,
+        pairs,
+        w_spheres,
+        w_boxes,
+        w_capsules,
+        self_on,
+        d,
+        J,
+        True,
+        np.inf,
+    )
 
 
 @kernel
@@ -196,8 +254,26 @@ def collision_residual(
     G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr
 ):
     """LM rows ``r = max(0, margin - d)`` ``(P + L,)`` and ``Jr = dr/dq`` ``(P + L, n)`` for ``q: (n,)``; returns
-    the smallest distance ``d`` (metres; ``inf`` when there is nothing to check)."""
-    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr, True)
+    the smallest distance ``d`` where it is at most ``margin`` (metres), else a lower bound above ``margin``
+    (``inf`` when there is nothing to check). Rows whose links' bounding spheres are farther than ``margin``
+    apart are not computed sphere by sphere (their residual is 0 either way)."""
+    _rows(
+        G,
+        joints,
+        q,
+        spheres,
+        sphere_frame,
+        body_start,
+        pairs,
+        w_spheres,
+        w_boxes,
+        w_capsules,
+        self_on,
+        r,
+        Jr,
+        True,
+        margin,
+    )
     smallest = np.inf
     for k in range(r.shape[0]):
         dist = r[k]
@@ -235,6 +311,7 @@ def collision_distances_batch(
             D[b],
             J,
             False,
+            np.inf,
         )
 
 
@@ -262,6 +339,7 @@ def collides_batch(
             d,
             J,
             False,
+            margin,
         )
         hit = False
         for k in range(R):
