@@ -3,10 +3,11 @@
 The guarantee is exact, not sampled: a ball is convex, so a triangle whose three corners lie inside a ball lies
 inside it entirely. The body's surface is cut into small triangles (no edge longer than ``max_edge``) and every
 triangle is *assigned* to one sphere whose radius reaches all three of its corners; the union of the spheres
-therefore holds every surface point of the geometry (and, for a closed surface, the whole solid: a point inside
-that no sphere held would have a ray to infinity crossing the surface outside every sphere, which cannot be).
-Curved primitives are first replaced by polyhedra that contain them (:mod:`nik.collision.shapes`), so the same
-argument covers them.
+therefore holds every surface point of the geometry. (The inside is held where the spheres reach it, which the
+candidates below, centred inside, usually do; an obstacle wholly inside a link and touching none of its surface
+is the one case a surface cover cannot promise, as for checkers that test mesh surfaces.) Curved primitives
+are first replaced by polyhedra that contain them (:mod:`nik.collision.shapes`), so the same argument covers
+them.
 
 How the spheres are placed (choices): candidate centres are seeded points inside the body's convex hull (and
 on its surface), each with the radius that reaches ``tolerance`` past its nearest surface point (so a sphere
@@ -20,7 +21,8 @@ geometry's surface (metres, measured on 96 points per sphere against the subdivi
 ``volume_ratio`` the union's volume over the geometry's (Monte Carlo, seeded; the convex hull's volume where the
 surface is not closed).
 
-Only numpy here; :mod:`nik.collision.shapes` turns URDF geometry (and meshes, through trimesh) into triangles.
+numpy, and scipy's convex hull where installed (for the candidate centres and the volume; the bounding box
+without it); :mod:`nik.collision.shapes` turns URDF geometry (and meshes, through trimesh) into triangles.
 """
 
 from __future__ import annotations

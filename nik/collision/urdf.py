@@ -28,7 +28,7 @@ from nik.collision.shapes import (
     sphere_triangles,
 )
 
-__all__ = ["Body", "frames_at", "resolve_mesh_path", "urdf_bodies"]
+__all__ = ["Body", "frames_at", "resolve_mesh_path", "rpy_matrix", "urdf_bodies"]
 
 #: agreement needed between the URDF walk and nik's frames (metres and rotation-matrix entries)
 MATCH_TOL = 1e-5
@@ -84,7 +84,8 @@ def _floats(text: str | None, n: int, default: float, where: str) -> np.ndarray:
     return v
 
 
-def _rpy(r, p, y) -> np.ndarray:
+def rpy_matrix(r, p, y) -> np.ndarray:
+    """The URDF rotation ``Rz(y) Ry(p) Rx(r)`` (radians), 3x3."""
     cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
     return np.array(
         [
@@ -99,7 +100,7 @@ def _origin(el, where: str) -> np.ndarray:
     T = np.eye(4)
     o = el.find("origin") if el is not None else None
     if o is not None:
-        T[:3, :3] = _rpy(*_floats(o.get("rpy"), 3, 0.0, f"{where} origin rpy"))
+        T[:3, :3] = rpy_matrix(*_floats(o.get("rpy"), 3, 0.0, f"{where} origin rpy"))
         T[:3, 3] = _floats(o.get("xyz"), 3, 0.0, f"{where} origin xyz")
     return T
 

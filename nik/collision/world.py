@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nik.collision.urdf import rpy_matrix
+
 __all__ = ["World"]
 
 
@@ -47,17 +49,6 @@ def _positive(value, what: str) -> float:
     if not (math.isfinite(v) and v > 0):
         raise ValueError(f"{what}: must be positive (metres), got {value!r}")
     return v
-
-
-def _rpy(r: float, p: float, y: float) -> np.ndarray:
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
 
 
 def _pose(value, what: str) -> np.ndarray:
@@ -203,7 +194,7 @@ class World:
                         else:
                             pose = _pose(item["center"], "box center")
                             if "rpy" in item:
-                                pose[:3, :3] = _rpy(*_vec(item["rpy"], 3, "box rpy"))
+                                pose[:3, :3] = rpy_matrix(*_vec(item["rpy"], 3, "box rpy"))
                         world.add_box(pose, item["size"])
                 except KeyError as err:
                     raise ValueError(f"{where}: missing {err.args[0]!r}") from None
