@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 
+from nik.collision import World  # also registers Robot.collision_spheres' builder
 from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError, RobotDefinitionWarning
 
 __version__ = "0.1.0"
@@ -16,6 +17,7 @@ __version__ = "0.1.0"
 _SUBMODULES = {
     "analytic",
     "cli",
+    "collision",
     "data",
     "evaluate",
     "ik",
@@ -52,6 +54,7 @@ __all__ = [
     "Robot",
     "RobotDefinitionError",
     "RobotDefinitionWarning",
+    "World",
     "__version__",
     "builtin_robots",
     "load_robot",

@@ -16,6 +16,7 @@ from nik.kinematics import FKKernel, chain_jacobian, to_homogeneous
 from nik.poses import validate_joints
 
 __all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
+__all__ += ["register_collision_model"]  # nik.collision registers the builder of Robot.collision_spheres
 
 
 # ---------------------------------------------------------------------------
@@ -182,6 +183,17 @@ def _chain_kernels():
             warnings.warn(f"compiled kernels unavailable ({err}); using the torch path", RuntimeWarning, stacklevel=3)
             _chain_module = False
     return _chain_module or None
+
+
+#: the builder of :meth:`Robot.collision_spheres`, registered by :mod:`nik.collision` (a room above this one,
+#: imported by ``import nik``), so that this room imports nothing of it
+_collision_model_builder = None
+
+
+def register_collision_model(builder) -> None:
+    """Register ``builder(robot, **options) -> CollisionModel`` (done by :mod:`nik.collision` on import)."""
+    global _collision_model_builder
+    _collision_model_builder = builder
 
 
 # ---------------------------------------------------------------------------
@@ -422,6 +434,15 @@ class Robot:
             validate_joints(q, dof)  # raises the usual message
         T = _from_numpy(out[0] if len(shape) == 1 else out.reshape(*shape[:-1], 4, 4))
         return T if dtype is _F64 else T.to(dtype)
+
+    def collision_spheres(self, **options):
+        """The arm's sphere model, a :class:`nik.collision.CollisionModel`: per link, sphere centres ``(k, 3)``
+        in the frame of the joint carrying the link (metres) and radii ``(k,)`` (``.per_link``), and the link
+        pairs checked. Fitted to the URDF's collision geometry, else capsules along the links; cached per robot.
+        ``options``: those of :func:`nik.collision.collision_model` (``radius=`` the capsules' radius, ...)."""
+        if _collision_model_builder is None:
+            raise RuntimeError("collision models need nik.collision (import nik loads it)")
+        return _collision_model_builder(self, **options)
 
     def fk_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """FK and geometric Jacobian in the base frame.

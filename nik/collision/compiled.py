@@ -1,0 +1,35 @@
+"""The compiled path of the distances (:mod:`nik.kernels.collision`): the arrays it takes, and batched calls.
+
+:func:`kernel_arguments` gives, for a robot, its model and a world, the tuple that follows ``q`` in every kernel
+of :mod:`nik.kernels.collision` (``G, joints`` first): what the LM pipeline passes per call. The world's arrays
+come from :meth:`nik.collision.World.packed` (rebuilt only after a change), so a changed world costs nothing here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["kernel_arguments", "signed_distances_compiled"]
+
+_EMPTY = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
+
+
+def kernel_arguments(robot, model, world=None, *, self_collision: bool = True):
+    """``(G, joints), (spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on)``:
+    the model arrays before ``q`` and the collision arrays after it."""
+    G, joints = robot.chain_arrays()
+    spheres, frames, start, pairs = model.arrays()
+    world_arrays = world.packed() if world is not None else _EMPTY
+    return (G, joints), (spheres, frames, start, pairs, *world_arrays, bool(self_collision))
+
+
+def signed_distances_compiled(robot, q, world=None, *, model=None, self_collision: bool = True) -> np.ndarray:
+    """``(B, P + L)`` rows of :func:`nik.collision.signed_distances` for ``q: (B, dof)`` (numpy), compiled."""
+    from nik.kernels.collision import collision_distances_batch
+
+    model = robot.collision_spheres() if model is None else model
+    Q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, robot.dof))
+    (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
+    D = np.empty((len(Q), len(model.pairs) + len(model.links)))
+    collision_distances_batch(G, joints, Q, *rest, D)
+    return D

@@ -1,0 +1,120 @@
+"""The independent check: a URDF's real collision meshes tested by coal (hpp-fcl's successor), an optional extra.
+
+:class:`MeshCheck` places every link's collision geometry (:func:`nik.collision.urdf.urdf_bodies`; meshes as
+they are, curved primitives by the polyhedra around them) with nik's frames and asks coal, pair by pair and
+against the world's spheres, boxes and capsules, whether anything overlaps. It shares no distance code with
+the sphere model, so tests and ``benchmarks/collisions.py`` compare the two verdicts. ``pip install
+'nik[collision-check]'`` (coal); without it, constructing one is a one-line ``ImportError``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["MeshCheck"]
+
+
+class MeshCheck:
+    """Mesh-level collision verdicts for ``robot`` (loaded from the URDF ``urdf``).
+
+    Attributes:
+        links: link names with geometry.
+        pairs: ``(a, b)`` index pairs checked: every pair but links on the same frame, adjacent links (parent
+            and child) and the ``skip`` pairs of link names (e.g. those an SRDF disables), as nik's model before
+            sampling; :meth:`drop_always` removes the pairs in contact in every configuration given.
+    """
+
+    def __init__(self, robot, urdf, *, skip=()):
+        try:
+            import coal
+        except ImportError as err:
+            raise ImportError("the mesh check needs coal: pip install 'nik[collision-check]'") from err
+        from nik.collision.urdf import urdf_bodies
+
+        skip = {tuple(sorted(p)) for p in skip}
+
+        self._coal = coal
+        self.robot = robot
+        bodies = urdf_bodies(robot, urdf)
+        self.links = [b.name for b in bodies]
+        self.frames = [b.frame for b in bodies]
+        self._geoms = []
+        for b in bodies:
+            v = b.triangles.reshape(-1, 3)
+            f = np.arange(len(v), dtype=np.int64).reshape(-1, 3)
+            m = coal.BVHModelOBBRSS()
+            m.beginModel(len(f), len(v))
+            m.addVertices(v)
+            m.addTriangles(f)
+            m.endModel()
+            self._geoms.append(m)
+        self.pairs = [
+            (a, b)
+            for a in range(len(bodies))
+            for b in range(a + 1, len(bodies))
+            if bodies[a].frame != bodies[b].frame
+            and bodies[a].parent != bodies[b].name
+            and bodies[b].parent != bodies[a].name
+            and tuple(sorted((bodies[a].name, bodies[b].name))) not in skip
+        ]
+
+    def _transforms(self, q):
+        from nik.collision.urdf import frames_at
+
+        F = frames_at(self.robot, np.asarray(q, dtype=np.float64))
+        return [self._coal.Transform3s(F[k][:3, :3].copy(), F[k][:3, 3].copy()) for k in self.frames]
+
+    def _hit(self, g1, t1, g2, t2) -> bool:
+        res = self._coal.CollisionResult()
+        return bool(self._coal.collide(g1, t1, g2, t2, self._coal.CollisionRequest(), res))
+
+    def colliding_pairs(self, q) -> np.ndarray:
+        """``(len(pairs),)`` bool for one configuration ``q: (dof,)``."""
+        tf = self._transforms(q)
+        return np.array([self._hit(self._geoms[a], tf[a], self._geoms[b], tf[b]) for a, b in self.pairs], dtype=bool)
+
+    def drop_always(self, Q) -> list[tuple[str, str]]:
+        """Stop checking the pairs in contact in every configuration of ``Q: (B, dof)``; returns their names."""
+        hits = np.array([self.colliding_pairs(q) for q in Q])
+        always = hits.all(axis=0) if len(hits) else np.zeros(len(self.pairs), bool)
+        dropped = [(self.links[a], self.links[b]) for (a, b), x in zip(self.pairs, always, strict=True) if x]
+        self.pairs = [p for p, x in zip(self.pairs, always, strict=True) if not x]
+        return dropped
+
+    def _world_geoms(self, world):
+        coal = self._coal
+        out = []
+        spheres, boxes, caps = world.packed()
+        for s in spheres:
+            out.append((coal.Sphere(float(s[3])), coal.Transform3s(np.eye(3), s[:3].copy())))
+        for b in boxes:
+            out.append((coal.Box(*(2 * b[12:15])), coal.Transform3s(b[:9].reshape(3, 3).copy(), b[9:12].copy())))
+        for c in caps:
+            a, e, r = c[:3], c[3:6], float(c[6])
+            axis = e - a
+            L = float(np.linalg.norm(axis))
+            z = axis / L if L > 0 else np.array([0.0, 0.0, 1.0])
+            h = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+            x = np.cross(h, z)
+            x /= np.linalg.norm(x)
+            R = np.stack([x, np.cross(z, x), z], axis=1)
+            out.append((coal.Capsule(r, L), coal.Transform3s(R, (a + e) / 2)))
+        return out
+
+    def collides(self, Q, world=None, *, self_collision: bool = True) -> np.ndarray:
+        """``(B,)`` bool for ``Q: (B, dof)``: some checked pair, or some link and an obstacle, overlap."""
+        Q = np.asarray(Q, dtype=np.float64).reshape(-1, self.robot.dof)
+        obstacles = self._world_geoms(world) if world is not None else []
+        out = np.zeros(len(Q), dtype=bool)
+        for i, q in enumerate(Q):
+            tf = self._transforms(q)
+            hit = self_collision and any(self._hit(self._geoms[a], tf[a], self._geoms[b], tf[b]) for a, b in self.pairs)
+            if not hit:
+                hit = any(
+                    self._hit(g, tf[k], og, ot)
+                    for k, g in enumerate(self._geoms)
+                    if self.frames[k] > 0  # the fixed base: as nik's model
+                    for og, ot in obstacles
+                )
+            out[i] = hit
+        return out

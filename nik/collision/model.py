@@ -1,0 +1,542 @@
+"""The arm's collision model: spheres per link and the link pairs worth checking (:func:`collision_model`).
+
+Where the spheres come from (choices):
+
+- a robot loaded from a URDF with ``<collision>`` geometry (meshes, boxes, cylinders, spheres, capsules): one
+  body per link that has some, riding on the frame of its joint (:mod:`nik.collision.urdf`), covered by spheres
+  fitted by :func:`nik.collision.fit.fit_spheres` (conservative: every surface point is inside; the overreach
+  per link is reported in :attr:`CollisionModel.gaps` and :attr:`CollisionModel.volume_ratios`);
+- otherwise (DH / MDH / screw-axis files, or a URDF without collision geometry): a capsule of ``radius`` metres
+  along each link, from one joint's origin to the next (the last to the tool point; frame 0 from the base to
+  joint 1), covered exactly by spheres of radius ``sqrt(r^2 + (s/2)^2)`` spaced ``s = radius`` along it. A
+  prismatic joint's travel is covered by a capsule in its frame over the whole stroke.
+
+Which pairs are checked, as MoveIt's setup assistant decides (each left-out pair keeps its reason in
+:attr:`CollisionModel.left_out`): links on the same frame (they never move relative to each other), adjacent
+links (parent and child: a joint between them), the pairs a MoveIt SRDF beside the URDF disables (``srdf=True``),
+then on ``samples`` seeded configurations within the limits,
+pairs whose spheres touch in every one ("always") and pairs never closer than ``never_clearance`` metres
+("never"; ``never_clearance=None`` keeps them). :meth:`CollisionModel.with_pairs` adds or removes pairs.
+
+Cached per robot, like the kernels: ``$XDG_CACHE_HOME/nik/collision/KEY.json`` keyed by the robot's definition
+hash, the URDF's bytes and the options; a file ``NAME.collision.json`` beside the robot's file (URDF or YAML)
+is used instead where present. :meth:`CollisionModel.save` / :meth:`CollisionModel.load` write and read such a
+file; loading refuses a model made for another robot (definition hash) with one line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+__all__ = ["COLLISION_FORMAT", "CollisionModel", "collision_model", "link_capsule_bodies", "set_collision_model"]
+
+#: version of the saved model (bump when the fitting or the pair rules change)
+COLLISION_FORMAT = 1
+
+
+@dataclass
+class CollisionModel:
+    """Spheres per link (in the frame of the joint carrying the link) and the active link pairs.
+
+    Attributes:
+        robot_hash: :attr:`nik.Robot.definition_hash` of the robot it was made for.
+        links: (L,) link names.
+        frames: (L,) int, the robot frame carrying each link (0 = base, k = after joint k).
+        centers: (S, 3) metres, sphere centres in their link's frame; spheres grouped by link.
+        radii: (S,) metres.
+        body_start: (L + 1,) int, link ``l``'s spheres are ``body_start[l]:body_start[l + 1]``.
+        pairs: (P, 2) int, the link pairs checked (indices into ``links``, first < second).
+        left_out: ``{"a|b": reason}`` for the pairs not checked (same frame, adjacent, srdf: ..., always, never,
+            removed).
+        parents: (L,) the nearest link with geometry above each link (URDF), or the previous capsule; None at the
+            root.
+        gaps: (L,) metres, how far each link's spheres overreach its geometry (module docstring).
+        volume_ratios: (L,) sphere volume over geometry volume per link.
+        source: ``"urdf:PATH"`` or ``"capsules"``.
+        options: the options it was built with.
+    """
+
+    robot_hash: str
+    links: list[str]
+    frames: np.ndarray
+    centers: np.ndarray
+    radii: np.ndarray
+    body_start: np.ndarray
+    pairs: np.ndarray
+    left_out: dict = field(default_factory=dict)
+    parents: list | None = None
+    gaps: np.ndarray | None = None
+    volume_ratios: np.ndarray | None = None
+    source: str = ""
+    options: dict = field(default_factory=dict)
+
+    # -- views ------------------------------------------------------------------
+    @property
+    def sphere_body(self) -> np.ndarray:
+        """(S,) int: the link of each sphere."""
+        return np.repeat(np.arange(len(self.links)), np.diff(self.body_start))
+
+    @property
+    def sphere_frame(self) -> np.ndarray:
+        """(S,) int: the robot frame of each sphere."""
+        return np.asarray(self.frames)[self.sphere_body]
+
+    def spheres(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """Centres ``(k, 3)`` (the link's frame, metres) and radii ``(k,)`` of one link."""
+        if link not in self.links:
+            raise ValueError(f"unknown link {link!r} (links: {', '.join(self.links)})")
+        i = self.links.index(link)
+        a, b = self.body_start[i], self.body_start[i + 1]
+        return self.centers[a:b], self.radii[a:b]
+
+    @property
+    def per_link(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """``{link: (centres (k, 3), radii (k,))}``."""
+        return {name: self.spheres(name) for name in self.links}
+
+    def pair_names(self) -> list[tuple[str, str]]:
+        """The active pairs as link names."""
+        return [(self.links[a], self.links[b]) for a, b in self.pairs]
+
+    def sphere_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(i, j, pair)``: every sphere pair of the active link pairs, as ``(M,)`` int arrays."""
+        cached = self.__dict__.get("_sphere_pairs")
+        if cached is not None and cached[0] is self.pairs:
+            return cached[1]
+        ii, jj, pp = [], [], []
+        for p, (a, b) in enumerate(self.pairs):
+            sa = np.arange(self.body_start[a], self.body_start[a + 1])
+            sb = np.arange(self.body_start[b], self.body_start[b + 1])
+            ii.append(np.repeat(sa, len(sb)))
+            jj.append(np.tile(sb, len(sa)))
+            pp.append(np.full(len(sa) * len(sb), p))
+        out = tuple(np.concatenate(x).astype(np.int64) if x else np.zeros(0, np.int64) for x in (ii, jj, pp))
+        self.__dict__["_sphere_pairs"] = (self.pairs, out)
+        return out
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The model as the compiled kernels take it (:mod:`nik.kernels.collision`): ``spheres (S, 4)`` (centre in
+        its frame, radius), ``sphere_frame (S,)`` int64, ``body_start (L + 1,)`` int64, ``pairs (P, 2)`` int64."""
+        spheres = np.ascontiguousarray(np.concatenate([self.centers, self.radii[:, None]], axis=1), dtype=np.float64)
+        return (
+            spheres,
+            np.ascontiguousarray(self.sphere_frame, dtype=np.int64),
+            np.ascontiguousarray(self.body_start, dtype=np.int64),
+            np.ascontiguousarray(np.asarray(self.pairs, dtype=np.int64).reshape(-1, 2)),
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"CollisionModel({len(self.links)} links, {len(self.radii)} spheres, {len(self.pairs)} pairs, "
+            f"source={self.source!r})"
+        )
+
+    # -- pairs --------------------------------------------------------------------
+    def with_pairs(self, *, add=(), remove=()) -> CollisionModel:
+        """A copy checking also the link pairs ``add`` and not ``remove`` (each a sequence of ``(link, link)``)."""
+        current = {tuple(sorted((int(a), int(b)))) for a, b in self.pairs}
+        left = dict(self.left_out)
+        for names, on in ((add, True), (remove, False)):
+            for a, b in names:
+                for name in (a, b):
+                    if name not in self.links:
+                        raise ValueError(f"pair ({a!r}, {b!r}): unknown link {name!r} (links: {', '.join(self.links)})")
+                if a == b:
+                    raise ValueError(f"pair ({a!r}, {b!r}): a link with itself")
+                key = tuple(sorted((self.links.index(a), self.links.index(b))))
+                name = "|".join(self.links[k] for k in key)
+                if on:
+                    current.add(key)
+                    left.pop(name, None)
+                else:
+                    current.discard(key)
+                    left[name] = "removed"
+        pairs = np.array(sorted(current), dtype=np.int64).reshape(-1, 2)
+        copy = CollisionModel(**{**self.__dict__, "pairs": pairs, "left_out": left})
+        copy.__dict__.pop("_sphere_pairs", None)
+        return copy
+
+    # -- files ---------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        return {
+            "format": COLLISION_FORMAT,
+            "robot_hash": self.robot_hash,
+            "links": list(self.links),
+            "frames": np.asarray(self.frames).tolist(),
+            "centers": np.asarray(self.centers).tolist(),
+            "radii": np.asarray(self.radii).tolist(),
+            "body_start": np.asarray(self.body_start).tolist(),
+            "pairs": np.asarray(self.pairs).tolist(),
+            "left_out": dict(self.left_out),
+            "parents": None if self.parents is None else list(self.parents),
+            "gaps": None if self.gaps is None else np.asarray(self.gaps).tolist(),
+            "volume_ratios": None if self.volume_ratios is None else np.asarray(self.volume_ratios).tolist(),
+            "source": self.source,
+            "options": dict(self.options),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "collision model") -> CollisionModel:
+        try:
+            if d.get("format") != COLLISION_FORMAT:
+                raise ValueError(f"format {d.get('format')!r}, expected {COLLISION_FORMAT}")
+            return cls(
+                robot_hash=str(d["robot_hash"]),
+                links=list(d["links"]),
+                frames=np.asarray(d["frames"], dtype=np.int64),
+                centers=np.asarray(d["centers"], dtype=np.float64).reshape(-1, 3),
+                radii=np.asarray(d["radii"], dtype=np.float64),
+                body_start=np.asarray(d["body_start"], dtype=np.int64),
+                pairs=np.asarray(d["pairs"], dtype=np.int64).reshape(-1, 2),
+                left_out=dict(d.get("left_out") or {}),
+                parents=None if d.get("parents") is None else list(d["parents"]),
+                gaps=None if d.get("gaps") is None else np.asarray(d["gaps"], dtype=np.float64),
+                volume_ratios=None if d.get("volume_ratios") is None else np.asarray(d["volume_ratios"]),
+                source=str(d.get("source", "")),
+                options=dict(d.get("options") or {}),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError) as err:
+            raise ValueError(f"{source}: not a nik collision model ({err})") from None
+
+    def save(self, path: str | Path) -> Path:
+        """Write the model as JSON (temporary name, then rename). Returns the path."""
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(self.to_dict()))
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path, robot=None) -> CollisionModel:
+        """Read a saved model; with ``robot``, refuse one made for another robot (definition hash)."""
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text())
+        except (OSError, ValueError) as err:
+            raise ValueError(f"collision model {path}: cannot be read ({err})") from None
+        model = cls.from_dict(d, source=f"collision model {path}")
+        if robot is not None and model.robot_hash != robot.definition_hash:
+            raise ValueError(
+                f"collision model {path}: made for robot hash {model.robot_hash}, not {robot.name!r} "
+                f"(hash {robot.definition_hash})"
+            )
+        return model
+
+
+# ---------------------------------------------------------------------------
+# building
+# ---------------------------------------------------------------------------
+def link_capsule_bodies(robot, radius) -> list:
+    """Bodies (:class:`nik.collision.urdf.Body`) of capsules along the links (module docstring): their segments
+    ``(m, 2, 3)`` and ``radius`` (metres; one number, or one per frame: ``dof + 1``)."""
+    from nik.collision.urdf import Body
+
+    radii = np.broadcast_to(np.asarray(radius, dtype=np.float64), (robot.dof + 1,))
+    if not (np.isfinite(radii).all() and (radii > 0).all()):
+        raise ValueError(f"capsule radius must be positive (metres), got {np.asarray(radius).tolist()}")
+    G = robot.G.numpy()
+    lim = robot.limits.numpy()
+    off = robot.offsets.numpy()
+    bodies = []
+    for k in range(robot.dof + 1):
+        segments = [(np.zeros(3), G[k, :3, 3].copy())]
+        if k >= 1 and bool(robot.prismatic[k - 1]):
+            lo, hi = lim[k - 1] + off[k - 1]
+            segments.append((np.array([0.0, 0.0, min(0.0, -hi)]), np.array([0.0, 0.0, max(0.0, -lo)])))
+        bodies.append(Body(f"link{k}", k, np.array(segments), f"link{k - 1}" if k else None, float(radii[k])))
+    return bodies
+
+
+def _capsule_spheres(segments: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray]:
+    """Spheres holding capsules ``segments: (m, 2, 3)`` of radius ``r``: spacing ``s = r``, radius
+    ``sqrt(r^2 + (s/2)^2)`` (a point of the capsule is within ``r`` of a segment point, which is within ``s/2``
+    of a sphere centre on the segment)."""
+    centers = []
+    for a, b in segments:
+        L = float(np.linalg.norm(b - a))
+        n = max(1, math.ceil(L / r)) + 1 if L > 0 else 1
+        t = np.linspace(0.0, 1.0, n)[:, None]
+        centers.append(a + t * (b - a))
+    c = np.concatenate(centers)
+    s = max((float(np.linalg.norm(b - a)) / max(1, math.ceil(float(np.linalg.norm(b - a)) / r))) for a, b in segments)
+    return c, np.full(len(c), math.sqrt(r * r + (s / 2) ** 2))
+
+
+def _urdf_of(robot) -> Path | None:
+    src = getattr(robot, "source", None)
+    if not src:
+        return None
+    p = Path(src)
+    if p.suffix.lower() == ".urdf":
+        return p if p.is_file() else None
+    if p.suffix.lower() in (".yaml", ".yml") and p.is_file():
+        import yaml
+
+        with contextlib.suppress(Exception):
+            data = yaml.safe_load(p.read_text())
+            if isinstance(data, dict) and data.get("urdf"):
+                u = Path(data["urdf"])
+                u = u if u.is_absolute() else p.parent / u
+                return u if u.is_file() else None
+    return None
+
+
+def model_source_is_urdf(robot, source) -> bool:
+    """True when :func:`collision_model` fits the URDF's geometry (not capsules) for these arguments."""
+    urdf = _urdf_of(robot)
+    return source in (None, "urdf") and urdf is not None and _has_collision(urdf)
+
+
+def _has_collision(path: Path) -> bool:
+    return b"<collision" in path.read_bytes()
+
+
+def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
+    urdf = _urdf_of(robot) if source in (None, "urdf") else None
+    if source == "urdf" and (urdf is None or not _has_collision(urdf)):
+        raise ValueError(f"robot {robot.name!r}: no URDF with <collision> geometry to fit spheres to")
+    if urdf is not None and _has_collision(urdf):
+        from nik.collision.fit import fit_spheres
+        from nik.collision.urdf import urdf_bodies
+
+        bodies = urdf_bodies(robot, urdf)
+        fits = [fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed) for b in bodies]
+        spheres = [(f.centers, f.radii) for f in fits]
+        return bodies, spheres, [f.gap for f in fits], [f.volume_ratio for f in fits], f"urdf:{urdf}"
+    if source not in (None, "capsules"):
+        raise ValueError(f"collision source must be 'urdf', 'capsules' or None, got {source!r}")
+    bodies = link_capsule_bodies(robot, radius)
+    spheres = [_capsule_spheres(b.triangles, b.radius) for b in bodies]
+    gaps = [float(r[0] - b.radius) for b, (_, r) in zip(bodies, spheres, strict=True)]
+    return bodies, spheres, gaps, [float("nan")] * len(bodies), "capsules"
+
+
+def srdf_of(urdf: Path | None) -> Path | None:
+    """MoveIt's SRDF for a URDF: ``NAME.srdf`` beside it or in a sibling ``srdf`` folder; None where absent."""
+    if urdf is None:
+        return None
+    for cand in (urdf.with_suffix(".srdf"), urdf.parent.parent / "srdf" / f"{urdf.stem}.srdf"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
+    """``{(a, b): reason}`` of an SRDF's ``<disable_collisions link1 link2 reason>`` (names sorted per pair)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(path.read_bytes())
+    except (OSError, ET.ParseError) as err:
+        raise ValueError(f"{path}: not a readable SRDF ({err})") from None
+    out = {}
+    for el in root.iter("disable_collisions"):
+        a, b = el.get("link1"), el.get("link2")
+        if a and b:
+            out[tuple(sorted((a, b)))] = el.get("reason") or "disabled"
+    return out
+
+
+def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None):
+    """Active pairs and the reasons of the others (module docstring)."""
+    from nik.collision.distance import self_distances, sphere_centers
+
+    L = len(model.links)
+    names = list(model.links)
+    frames = np.asarray(model.frames)
+    parents = model.parents or [None] * L
+    disabled = srdf_disabled(srdf) if srdf is not None else {}
+    left, candidates = {}, []
+    for a in range(L):
+        for b in range(a + 1, L):
+            key = f"{names[a]}|{names[b]}"
+            declared = disabled.get(tuple(sorted((names[a], names[b]))))
+            if frames[a] == frames[b]:
+                left[key] = "same frame"
+            elif parents[a] == names[b] or parents[b] == names[a]:
+                left[key] = "adjacent"
+            elif declared is not None:
+                left[key] = f"srdf: {declared}"
+            else:
+                candidates.append((a, b))
+    model.pairs = np.array(candidates, dtype=np.int64).reshape(-1, 2)
+    model.__dict__.pop("_sphere_pairs", None)
+    if len(candidates) and samples > 0:
+        g = torch.Generator().manual_seed(seed)
+        q = robot.sample(int(samples), generator=g, dtype=torch.float64)
+        with torch.no_grad():
+            d = self_distances(model, sphere_centers(model, robot, q))
+        always = (d < 0).all(dim=0).numpy()
+        never = (d > never_clearance).all(dim=0).numpy() if never_clearance is not None else np.zeros(len(d[0]), bool)
+        keep = []
+        for p, (a, b) in enumerate(candidates):
+            key = f"{names[a]}|{names[b]}"
+            if always[p]:
+                left[key] = "always"
+            elif never[p]:
+                left[key] = "never"
+            else:
+                keep.append((a, b))
+        model.pairs = np.array(keep, dtype=np.int64).reshape(-1, 2)
+        model.__dict__.pop("_sphere_pairs", None)
+    model.left_out = left
+
+
+_DEFAULT_KEY = json.dumps(
+    {
+        "source": None,
+        "radius": 0.05,
+        "tolerance": 0.01,
+        "max_spheres": 16,
+        "samples": 1000,
+        "never_clearance": 0.02,
+        "srdf": True,
+        "seed": 0,
+    },
+    sort_keys=True,
+)
+
+
+def _cached(path: Path, robot) -> CollisionModel | None:
+    if not path.is_file():
+        return None
+    try:
+        return CollisionModel.load(path, robot)
+    except ValueError:
+        return None
+
+
+def _store(model: CollisionModel, path: Path) -> None:
+    with contextlib.suppress(OSError):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        model.save(path)
+
+
+def _fitted(robot, source, radius, tolerance, max_spheres, seed) -> CollisionModel:
+    """The spheres of every link (no pairs yet)."""
+    bodies, spheres, gaps, ratios, src = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed)
+    counts = [len(r) for _, r in spheres]
+    return CollisionModel(
+        robot_hash=robot.definition_hash,
+        links=[b.name for b in bodies],
+        frames=np.array([b.frame for b in bodies], dtype=np.int64),
+        centers=np.concatenate([c for c, _ in spheres]).reshape(-1, 3),
+        radii=np.concatenate([r for _, r in spheres]),
+        body_start=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        pairs=np.zeros((0, 2), dtype=np.int64),
+        parents=[b.parent for b in bodies],
+        gaps=np.asarray(gaps, dtype=float),
+        volume_ratios=np.asarray(ratios, dtype=float),
+        source=src,
+    )
+
+
+def _cache_path(key: str) -> Path:
+    from nik.kernels.cache import cache_home
+
+    return cache_home() / "collision" / f"{key[:32]}.json"
+
+
+def _beside(robot) -> Path | None:
+    src = getattr(robot, "source", None)
+    if not src:
+        return None
+    p = Path(src)
+    return p.with_name(f"{p.stem}.collision.json")
+
+
+def set_collision_model(robot, model: CollisionModel | None) -> None:
+    """Make ``model`` (e.g. one with pairs added or removed, or loaded from a file) the one
+    :meth:`nik.Robot.collision_spheres` returns for ``robot``; None restores the automatic one. A model made for
+    another robot is refused (definition hash)."""
+    if model is not None and model.robot_hash != robot.definition_hash:
+        raise ValueError(
+            f"collision model made for robot hash {model.robot_hash}, not {robot.name!r} (hash {robot.definition_hash})"
+        )
+    robot.__dict__["_collision_model"] = model
+
+
+def collision_model(
+    robot,
+    *,
+    source: str | None = None,
+    radius=0.05,
+    tolerance: float = 0.01,
+    max_spheres: int = 16,
+    samples: int = 1000,
+    never_clearance: float | None = 0.02,
+    srdf: bool = True,
+    seed: int = 0,
+    cache: bool = True,
+) -> CollisionModel:
+    """The collision model of ``robot`` (module docstring), from a file beside the robot's, nik's cache, or built.
+
+    Args:
+        source: ``"urdf"`` (fit spheres to the URDF's collision geometry), ``"capsules"`` (capsules along the
+            links), or None: the URDF's geometry where the robot has it, else capsules.
+        radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base).
+        tolerance: sphere fitting stops once a link's spheres overreach it by at most this (metres).
+        max_spheres: at most this many spheres per link.
+        samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
+            but the same-frame and adjacent ones).
+        never_clearance: a pair never closer than this (metres) in every sample is left out; None keeps them.
+        srdf: honour MoveIt's SRDF of a URDF robot (``NAME.srdf`` beside the URDF or in ``../srdf/``): the link
+            pairs it disables are left out (reason ``"srdf: Default"``, ...), as MoveIt would.
+        seed: seed of the fitting and the sampling.
+        cache: read and write nik's cache folder.
+    """
+    options = {
+        "source": source,
+        "radius": np.asarray(radius, dtype=float).tolist(),
+        "tolerance": float(tolerance),
+        "max_spheres": int(max_spheres),
+        "samples": int(samples),
+        "never_clearance": never_clearance,
+        "srdf": bool(srdf),
+        "seed": int(seed),
+    }
+    memo = robot.__dict__.setdefault("_collision_models", {})
+    memo_key = json.dumps(options, sort_keys=True)
+    if memo_key == _DEFAULT_KEY and robot.__dict__.get("_collision_model") is not None:
+        return robot.__dict__["_collision_model"]
+    if memo_key in memo:
+        return memo[memo_key]
+    beside = _beside(robot)
+    if cache and beside is not None and beside.is_file():
+        model = CollisionModel.load(beside, robot)
+        memo[memo_key] = model
+        return model
+    urdf = _urdf_of(robot)
+    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed")}
+    h = hashlib.sha256(f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}".encode())
+    if urdf is not None:
+        h.update(urdf.read_bytes())
+    fit_path = _cache_path("spheres-" + h.hexdigest())
+    srdf_path = srdf_of(urdf) if srdf and model_source_is_urdf(robot, source) else None
+    h.update(memo_key.encode())
+    if srdf_path is not None:
+        h.update(srdf_path.read_bytes())
+    path = _cache_path(h.hexdigest())
+    model = _cached(path, robot) if cache else None
+    if model is None:
+        spheres = _cached(fit_path, robot) if cache else None
+        if spheres is None:
+            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed)
+            if cache:
+                _store(spheres, fit_path)
+        model = CollisionModel(**{**spheres.__dict__, "options": options})
+        model.__dict__.pop("_sphere_pairs", None)
+        _find_pairs(robot, model, samples, never_clearance, seed, srdf_path)
+        if cache:
+            _store(model, path)
+    memo[memo_key] = model
+    return model

@@ -1,0 +1,335 @@
+"""nik.collision: conservative spheres, pairs, the world, distances (torch vs compiled, finite differences), files,
+and the mesh check (coal) on a small URDF of primitives."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.collision import (
+    CollisionModel,
+    World,
+    collides,
+    colliding_links,
+    collision_model,
+    set_collision_model,
+    signed_distances,
+)
+from nik.collision.compiled import kernel_arguments, signed_distances_compiled
+from nik.collision.fit import fit_spheres
+from nik.collision.shapes import box_triangles, cylinder_triangles
+
+URDF = """<?xml version="1.0"?>
+<robot name="prims">
+  <link name="base"><collision><origin xyz="0 0 0.05"/><geometry><box size="0.2 0.2 0.1"/></geometry></collision></link>
+  <link name="l1"><collision><origin xyz="0 0 0.1"/><geometry><cylinder radius="0.04" length="0.2"/></geometry>
+  </collision></link>
+  <link name="l2"><collision><origin xyz="0 0 0.15"/><geometry><box size="0.05 0.05 0.3"/></geometry></collision></link>
+  <link name="l3"><collision><origin xyz="0 0 0.1"/><geometry><sphere radius="0.05"/></geometry></collision>
+    <collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.03" length="0.1"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>
+    <limit lower="-2.8" upper="2.8" effort="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>
+    <limit lower="-2.9" upper="2.9" effort="1" velocity="1"/></joint>
+</robot>
+"""
+
+
+@pytest.fixture(autouse=True)
+def _own_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+
+
+@pytest.fixture
+def prims(tmp_path):
+    path = tmp_path / "prims.urdf"
+    path.write_text(URDF)
+    return nik.load_robot(path, end_link="l3"), path
+
+
+def _world():
+    return (
+        World()
+        .add_sphere([0.3, 0.0, 0.3], 0.1)
+        .add_box(np.array([0.5, 0.1, 0.2, 0.9, 0.2, 0.1, 0.3]), [0.2, 0.3, 0.1])
+        .add_capsule([0.0, 0.5, 0.0], [0.0, 0.5, 1.0], 0.05)
+    )
+
+
+def _q(robot, n, seed):
+    return robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+
+
+# -- the spheres are conservative ---------------------------------------------------
+def _inside(points, fit):
+    d = np.linalg.norm(points[:, None] - fit.centers[None], axis=2) - fit.radii[None]
+    return (d <= 1e-12).any(axis=1)
+
+
+def test_spheres_hold_every_surface_point_of_a_box():
+    rng = np.random.default_rng(0)
+    size = np.array([0.3, 0.1, 0.05])
+    fit = fit_spheres(box_triangles(size), seed=0)
+    p = rng.uniform(-size / 2, size / 2, size=(20000, 3))
+    face = rng.integers(3, size=len(p))
+    p[np.arange(len(p)), face] = np.sign(rng.normal(size=len(p))) * size[face] / 2  # on the faces
+    assert _inside(p, fit).all()
+    assert fit.gap > 0 and fit.volume_ratio >= 1.0
+
+
+def test_spheres_hold_every_surface_point_of_a_cylinder():
+    rng = np.random.default_rng(1)
+    r, length = 0.05, 0.2
+    fit = fit_spheres(cylinder_triangles(r, length), tolerance=0.02, seed=0)
+    a = rng.uniform(0, 2 * math.pi, 20000)
+    z = rng.uniform(-length / 2, length / 2, 20000)
+    side = np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
+    assert _inside(side, fit).all()
+
+
+def test_capsule_model_holds_the_capsules(prims):
+    robot = nik.load_robot("ur5")
+    model = collision_model(robot, radius=0.04)
+    rng = np.random.default_rng(2)
+    G = robot.G.numpy()
+    for link, frame in zip(model.links, model.frames, strict=True):
+        c, rad = model.spheres(link)
+        end = G[frame, :3, 3]
+        t = rng.uniform(size=(3000, 1))
+        n = rng.normal(size=(3000, 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        pts = t * end + 0.04 * n  # points of the capsule's surface (and the caps)
+        assert ((np.linalg.norm(pts[:, None] - c[None], axis=2) - rad[None]) <= 1e-12).any(axis=1).all()
+
+
+# -- pairs --------------------------------------------------------------------
+def test_adjacent_and_same_frame_pairs_are_left_out(prims):
+    robot, _ = prims
+    model = robot.collision_spheres()
+    assert model.left_out["base|l1"] == "adjacent"
+    assert model.left_out["l1|l2"] == "adjacent"
+    names = model.pair_names()
+    assert all(b not in ("l1",) or a != "base" for a, b in names)
+
+
+def test_pairs_an_srdf_disables_are_left_out(prims):
+    robot, path = prims
+    assert ("base", "l3") in robot.collision_spheres().pair_names()
+    path.with_suffix(".srdf").write_text(
+        '<robot name="prims"><disable_collisions link1="l3" link2="base" reason="Never"/></robot>'
+    )
+    fresh = nik.load_robot(path, end_link="l3")
+    model = fresh.collision_spheres()
+    assert ("base", "l3") not in model.pair_names() and model.left_out["base|l3"] == "srdf: Never"
+    assert ("base", "l3") in collision_model(fresh, srdf=False).pair_names()
+
+
+def test_always_and_never_pairs_hold_on_fresh_samples():
+    robot = nik.load_robot("ur5")
+    model = collision_model(robot, samples=400, seed=0)
+    full = collision_model(robot, samples=0)
+    q = _q(robot, 300, 7)
+    d = signed_distances(robot, q, model=full)[:, : len(full.pairs)]
+    for p, (a, b) in enumerate(full.pair_names()):
+        reason = model.left_out.get(f"{a}|{b}")
+        if reason == "always":
+            assert (d[:, p] < 0).float().mean() > 0.9
+        elif reason == "never":
+            assert (d[:, p] > 0).all()
+    assert "always" in model.left_out.values()
+
+
+def test_pairs_can_be_added_and_removed():
+    robot = nik.load_robot("ur5")
+    model = robot.collision_spheres()
+    a, b = model.pair_names()[0]
+    fewer = model.with_pairs(remove=[(a, b)])
+    assert (a, b) not in fewer.pair_names() and fewer.left_out[f"{a}|{b}"] == "removed"
+    back = fewer.with_pairs(add=[(a, b)])
+    assert (a, b) in back.pair_names()
+    with pytest.raises(ValueError, match="unknown link 'nope'"):
+        model.with_pairs(add=[("nope", a)])
+    set_collision_model(robot, fewer)
+    assert robot.collision_spheres() is fewer
+
+
+# -- distances ------------------------------------------------------------------
+def test_compiled_rows_match_torch_and_collides_agrees():
+    robot = nik.load_robot("ur5")
+    q = _q(robot, 200, 0)
+    world = _world()
+    d_torch = signed_distances(robot, q, world).numpy()
+    d_comp = signed_distances_compiled(robot, q.numpy(), world)
+    np.testing.assert_allclose(d_comp, d_torch, atol=1e-12)
+    hit = collides(robot, q.numpy(), world, self_collision=False)
+    assert hit.dtype == bool and 0 < hit.sum() < len(hit)
+    np.testing.assert_array_equal(hit, collides(robot, q, world, self_collision=False, compiled=False).numpy())
+    hit = collides(robot, q.numpy(), world)
+    np.testing.assert_array_equal(hit, collides(robot, q, world, compiled=False).numpy())
+    np.testing.assert_array_equal(hit, (d_torch < 0).any(axis=1))
+    links = colliding_links(robot, q, world)
+    np.testing.assert_array_equal(links.any(axis=1), hit)
+    model = robot.collision_spheres()
+    np.testing.assert_array_equal(
+        links[:, 3],
+        (d_torch[:, len(model.pairs) + 3] < 0)
+        | np.array([any(d_torch[i, p] < 0 for p, pair in enumerate(model.pairs) if 3 in pair) for i in range(len(q))]),
+    )
+
+
+def test_compiled_jacobian_matches_finite_differences():
+    from nik.kernels.collision import collision_distances, collision_residual
+
+    robot = nik.load_robot("ur5")
+    model = robot.collision_spheres()
+    (G, joints), rest = kernel_arguments(robot, model, _world())
+    R = len(model.pairs) + len(model.links)
+    for q0 in _q(robot, 5, 3).numpy():
+        d, J = np.empty(R), np.empty((R, robot.dof))
+        collision_distances(G, joints, q0, *rest, d, J)
+        Jn = np.empty_like(J)
+        for k in range(robot.dof):
+            dp, dm, scratch = np.empty(R), np.empty(R), np.empty((R, robot.dof))
+            e = np.zeros(robot.dof)
+            e[k] = 1e-6
+            collision_distances(G, joints, q0 + e, *rest, dp, scratch)
+            collision_distances(G, joints, q0 - e, *rest, dm, scratch)
+            with np.errstate(invalid="ignore"):  # inf - inf on the rows with nothing to check
+                Jn[:, k] = (dp - dm) / 2e-6
+        finite = np.isfinite(d)
+        np.testing.assert_allclose(J[finite], Jn[finite], atol=1e-6)
+        r, Jr = np.empty(R), np.empty((R, robot.dof))
+        smallest = collision_residual(G, joints, q0, *rest, 0.05, r, Jr)
+        assert smallest == pytest.approx(d.min()) if d.min() <= 0.05 else smallest > 0.05
+        np.testing.assert_allclose(r, np.maximum(0.0, 0.05 - d))
+        np.testing.assert_allclose(Jr, np.where((0.05 - d > 0)[:, None], -J, 0.0))
+
+
+def test_torch_gradient_matches_finite_differences():
+    robot = nik.load_robot("ur5")
+    q = _q(robot, 2, 5).requires_grad_(True)
+    world = _world()
+    rows = signed_distances(robot, q, world)
+    finite = torch.isfinite(rows)
+    total = rows[finite].sum()
+    (grad,) = torch.autograd.grad(total, q)
+    num = torch.zeros_like(q)
+    with torch.no_grad():
+        for k in range(robot.dof):
+            e = torch.zeros_like(q)
+            e[:, k] = 1e-6
+            dp = signed_distances(robot, q + e, world)
+            dm = signed_distances(robot, q - e, world)
+            num[:, k] = torch.where(finite, (dp - dm) / 2e-6, 0.0).sum(dim=1)
+    torch.testing.assert_close(grad, num, atol=1e-5, rtol=0)
+
+
+# -- the world ------------------------------------------------------------------------
+def test_world_changes_between_calls_without_rebuilding(prims):
+    robot = nik.load_robot("ur5")
+    q = _q(robot, 50, 1).numpy()
+    world = World()
+    free = collides(robot, q, world, self_collision=False)
+    assert not free.any()
+    v0, packed = world.version, world.packed()
+    assert world.packed() is packed  # nothing changed: the same arrays
+    world.add_sphere([0.0, 0.0, 0.3], 0.3)
+    assert world.version == v0 + 1 and world.packed() is not packed
+    assert collides(robot, q, world, self_collision=False).all()
+    world.clear()
+    assert not collides(robot, q, world, self_collision=False).any()
+
+
+def test_scene_files_yaml_and_json(tmp_path):
+    scene = {
+        "spheres": [{"center": [0.3, 0, 0.3], "radius": 0.1}],
+        "boxes": [{"center": [0.5, 0, 0], "size": [1, 1, 0.1], "rpy": [0, 0, 0.3]}],
+        "capsules": [{"p0": [0, 0.5, 0], "p1": [0, 0.5, 1], "radius": 0.05}],
+        "points": [{"xyz": [[1, 1, 1], [1, 1, 1.1]], "radius": 0.02}],
+    }
+    (tmp_path / "s.json").write_text(json.dumps(scene))
+    import yaml
+
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(scene))
+    a, b = World.from_file(tmp_path / "s.json"), World.from_file(tmp_path / "s.yaml")
+    assert a.counts() == (3, 1, 1)
+    for x, y in zip(a.packed(), b.packed(), strict=True):
+        np.testing.assert_allclose(x, y)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("", "is empty"),
+        ("spheres: [", "not valid YAML"),
+        ("walls: []", "unknown key 'walls'"),
+        ("spheres: [{center: [0, 0, 0], radius: -1}]", "must be positive"),
+        ("boxes: [{center: [0, 0, 0], size: [1, -1, 1]}]", "must be positive"),
+        ("spheres: [{center: [0, 0], radius: 1}]", "expected 3 finite numbers"),
+        ("capsules: [{p0: [0, 0, 0], radius: 1}]", "missing 'p1'"),
+    ],
+)
+def test_bad_scene_files_are_one_line_errors(tmp_path, text, message):
+    path = tmp_path / "scene.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message) as err:
+        World.from_file(path)
+    assert "\n" not in str(err.value)
+
+
+# -- files ---------------------------------------------------------------------------
+def test_model_saved_beside_the_robot_is_loaded_and_checked(prims, tmp_path):
+    robot, path = prims
+    model = robot.collision_spheres()
+    saved = model.save(tmp_path / "prims.collision.json")
+    again = CollisionModel.load(saved, robot)
+    np.testing.assert_array_equal(again.radii, model.radii)
+    assert again.pair_names() == model.pair_names()
+    fresh = nik.load_robot(path, end_link="l3")
+    assert collision_model(fresh).robot_hash == robot.definition_hash
+    with pytest.raises(ValueError, match="made for robot hash"):
+        CollisionModel.load(saved, nik.load_robot("ur5"))
+
+
+def test_a_urdf_that_is_not_the_robots_is_refused(prims, tmp_path):
+    from nik.collision.urdf import urdf_bodies
+
+    robot, _ = prims
+    other = tmp_path / "other.urdf"
+    other.write_text(
+        URDF.replace('<origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>', '<origin xyz="0 0 0.5"/><axis xyz="0 1 0"/>')
+    )
+    with pytest.raises(ValueError, match="do not move as this robot's frames") as err:
+        urdf_bodies(robot, other)
+    assert "\n" not in str(err.value)
+
+
+def test_a_mesh_that_cannot_be_read_is_one_line(tmp_path):
+    path = tmp_path / "bad.urdf"
+    path.write_text(URDF.replace('<sphere radius="0.05"/>', '<mesh filename="missing.stl"/>'))
+    robot = nik.load_robot(path, end_link="l3")
+    with pytest.raises(ValueError, match="mesh file not found: missing.stl"):
+        robot.collision_spheres()
+
+
+# -- the independent check ---------------------------------------------------------
+def test_spheres_never_call_free_what_the_meshes_call_colliding(prims):
+    pytest.importorskip("coal", reason="the mesh check needs coal (extra collision-check)")
+    from nik.collision.meshcheck import MeshCheck
+
+    robot, path = prims
+    mesh = MeshCheck(robot, path)
+    q = _q(robot, 400, 11).numpy()
+    world = World().add_box([0.25, 0.0, 0.4], [0.1, 0.4, 0.1]).add_sphere([-0.2, 0.1, 0.5], 0.06)
+    for w in (None, world):
+        theirs = mesh.collides(q, w)
+        ours = collides(robot, q, w)
+        assert theirs.any()
+        assert not (theirs & ~ours).any()
