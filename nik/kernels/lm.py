@@ -137,8 +137,8 @@ def seed_state(seed: int) -> np.ndarray:
 
 @kernel
 def _work_size(n):
-    """Length of :func:`lm_solve`'s scratch for ``n`` joints: ``36 + 12 n + n^2 + 5 n`` float64."""
-    return 36 + 12 * n + n * n + 5 * n
+    """Length of :func:`lm_solve`'s scratch for ``n`` joints: ``42 + 12 n + n^2 + 5 n`` float64."""
+    return 42 + 12 * n + n * n + 5 * n
 
 
 # ---------------------------------------------------------------------------
@@ -528,7 +528,8 @@ def _lm_one_bounded(G, joints, Tt, q0, bnd, mode, opts, iopts, restarts, rng, q,
     best_q = work[o : o + n]
     o += n
     cand = work[o : o + n]
-    d = np.empty(6)
+    o += n
+    d = work[o : o + 6]
 
     if iopts[FIRST_STARTS] > 0:
         _best_uniform(G, joints, Tt, rw, bnd, mode, iopts[FIRST_STARTS], rng, q, cand, T, e, d)
