@@ -55,6 +55,7 @@ from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain, _chain_jacobian
 
 __all__ = [
     "bounded_errors",
+    "bounded_residuals",
     "lm_options",
     "lm_solve",
     "lm_solve_bounded",
@@ -643,6 +644,17 @@ def bounded_errors(G, joints, Tt, q, modes, d):
     for b in range(q.shape[0]):
         _chain(G, joints, q[b], T)
         _tool_error(Tt[b], T, modes[b], d[b])
+
+
+@kernel
+def bounded_residuals(G, joints, Tt, q, bounds, modes, rw, e, J):
+    """LM's bounded residual and Jacobian of configurations ``q: (B, n)`` against ``Tt: (B, 4, 4)``,
+    ``bounds: (B, 6)``, ``modes: (B,)``: ``e: (B, 6)`` out, minus the dead-zone residual (rotation rows times
+    ``rw``), ``J: (B, 6, n)`` out, the Jacobian of the error (rotation rows times ``rw``, free rows zero)."""
+    T = np.empty((3, 4))
+    d = np.empty(6)
+    for b in range(q.shape[0]):
+        _bounded_evaluate(G, joints, q[b], Tt[b], rw, bounds[b], modes[b], T, J[b], e[b], d)
 
 
 def rotation_modes(bounds: np.ndarray) -> np.ndarray:
