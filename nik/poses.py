@@ -255,7 +255,8 @@ def _swing(v: torch.Tensor, k: int) -> torch.Tensor:
     """Swing vector ``(..., 3)`` (component ``k`` zero) turning the tool axis ``e_k`` onto ``v: (..., 3)``.
 
     ``s = phi / sin(phi) * (e_k x v)`` with ``sin(phi) = |e_k x v|``, ``phi = atan2(|e_k x v|, v_k)``: the angle
-    between the axes on the axis perpendicular to both (the limit ``f = 1`` when they are parallel).
+    between the axes on the axis perpendicular to both (the limit ``f = 1`` when they are parallel; a half turn
+    about axis ``i`` when they are opposite).
     """
     i, j = (k + 1) % 3, (k + 2) % 3
     vi, vj, vk = v[..., i], v[..., j], v[..., k]
@@ -263,8 +264,11 @@ def _swing(v: torch.Tensor, k: int) -> torch.Tensor:
     small = s2 < 1e-14
     sn = torch.sqrt(torch.where(small, torch.ones_like(s2), s2))
     f = torch.where(small, torch.ones_like(s2), torch.atan2(sn, vk) / sn)
+    flip = small & (vk < 0)  # the axis turned over: a half turn about an axis of its own choosing
     out = [None, None, None]
-    out[i], out[j], out[k] = -f * vj, f * vi, torch.zeros_like(vk)
+    out[i] = torch.where(flip, torch.full_like(vk, math.pi), -f * vj)
+    out[j] = torch.where(flip, torch.zeros_like(vk), f * vi)
+    out[k] = torch.zeros_like(vk)
     return torch.stack(out, dim=-1)
 
 

@@ -147,6 +147,23 @@ def test_a_free_axis_measures_the_tilt_of_that_axis_whatever_the_twist(k):
     assert not bool(within_bounds(Tt, T, bounds.clone().fill_(0.14).index_fill(0, torch.tensor([3 + k]), INF)).any())
 
 
+@pytest.mark.parametrize("mode", [-1, 2])
+def test_a_half_turn_is_never_inside_small_bounds(mode):
+    """At a half turn the rotation vector's antisymmetric part vanishes and the swing's axis is undefined: both
+    errors must still say pi, in torch and in the kernel."""
+    lm = _kernels()
+    robot = nik.load_robot("ur5")
+    G, joints = robot.chain_arrays()
+    q = torch.zeros(1, 6, dtype=torch.float64)
+    T = robot.fk(q)
+    Tt = T @ _rot(0, torch.tensor([math.pi], dtype=torch.float64))
+    d_t = tool_error(Tt, T, torch.tensor([mode]))
+    d_k = np.empty((1, 6))
+    lm.bounded_errors(G, joints, Tt.numpy(), q.numpy(), np.array([mode], dtype=np.int64), d_k)
+    for d in (d_t[0, 3:].numpy(), d_k[0, 3:]):
+        assert np.linalg.norm(np.delete(d, 2) if mode == 2 else d) == pytest.approx(math.pi, abs=1e-6)
+
+
 def test_bounded_error_is_the_excess_beyond_each_bound_and_zero_on_free_axes():
     Tt = torch.eye(4, dtype=torch.float64)[None]
     T = Tt.clone()
