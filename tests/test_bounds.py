@@ -103,7 +103,8 @@ def test_cli_bounds_are_millimetres_and_degrees_and_the_options_exclude_one_anot
         ({"free_axis": "w"}, "expected x, y or z"),
         ({"bounds": ["1"] * 5}, "expected 6 values"),
         ({"bounds": ["1", "1", "1", "1", "1", "lots"]}, "rz = 'lots' is not a number"),
-        ({"bounds": ["-1", "1", "1", "1", "1", "1"]}, "is negative"),
+        ({"bounds": ["-1", "1", "1", "1", "1", "1"]}, "x = -1 mm: expected a half-width >= 0"),
+        ({"bounds": ["1", "1", "1", "1", "nan", "1"]}, "ry = nan deg"),
     ]:
         with pytest.raises(ValueError, match=match):
             bounds_from_cli(**kwargs)

@@ -190,6 +190,9 @@ def _cli_number(text: str, scale: float, name: str) -> float:
         value = float(text)
     except ValueError:
         raise ValueError(f"--bounds: {name} = {text!r} is not a number (or 'free')") from None
+    if not value >= 0:  # NaN too
+        unit = "mm" if scale < 1e-2 else "deg"
+        raise ValueError(f"--bounds: {name} = {text} {unit}: expected a half-width >= 0 (or 'free')")
     return value * scale
 
 

@@ -465,9 +465,18 @@ def _score(Tt, T, rw, bnd, mode, e, d):
     if mode == CLASSIC:
         E, _, _ = _residual(Tt, T, rw, e)
         return E
-    _tool_error(Tt, T, mode, d)
-    E, _ = _dead_zone(d, bnd, rw, e)
+    E, _, _, _ = _bounded_check(Tt, T, bnd, mode, rw, e, d)
     return E
+
+
+@kernel
+def _bounded_check(Tt, T, bnd, mode, rw, e, d):
+    """Ranking and final check of the pose ``T (3, 4)`` against a tolerant goal (for drivers that rank
+    hypotheses): ``(E, inside, pos, rot)``: the dead-zone ``|e|^2``, every axis inside its bound, the position
+    error (m) and the geodesic angle (rad). Scratch ``e, d: (6,)``."""
+    pos, rot = _tool_error(Tt, T, mode, d)
+    E, inside = _dead_zone(d, bnd, rw, e)
+    return E, inside, pos, rot
 
 
 @kernel
