@@ -59,6 +59,8 @@ def test_shorthands_free_their_axes_and_keep_the_tolerances_as_norms():
 def test_six_numbers_are_one_goal_and_a_b_by_6_array_one_per_target():
     one = parse_bounds((1e-3, 1e-3, 1e-3, 0.01, 0.01, INF), batch=4)
     assert not one.per_target and one.expand(4).shape == (4, 6) and int(one.modes(4)[2]) == 2
+    t = one.as_tensor(4, like=torch.zeros(1, dtype=torch.float32))
+    assert t.dtype == torch.float32 and t.shape == (4, 6) and rotation_modes(t).tolist() == [2] * 4
     rows = torch.tensor([[1e-3] * 6, [1e-3] * 3 + [INF] * 3, [1e-3] * 5 + [INF]], dtype=torch.float64)
     per = parse_bounds(rows, batch=3)
     assert per.per_target and per.modes(3).tolist() == [-1, 3, 2]

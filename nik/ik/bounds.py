@@ -80,6 +80,13 @@ class Bounds:
             return np.ascontiguousarray(self.half)
         return np.ascontiguousarray(np.repeat(self.half, batch, axis=0))
 
+    def as_tensor(self, batch: int, like=None):
+        """``(batch, 6)`` torch tensor of :meth:`expand`, in the dtype/device of ``like`` (default float64 CPU)."""
+        import torch
+
+        t = torch.from_numpy(self.expand(batch))
+        return t if like is None else t.to(dtype=like.dtype, device=like.device)
+
     def modes(self, batch: int) -> np.ndarray:
         """``(batch,)`` int64 rotation modes (see ``rot_mode``)."""
         return np.ascontiguousarray(np.broadcast_to(self.rot_mode, (batch,)) if not self.per_target else self.rot_mode)
