@@ -338,6 +338,17 @@ def test_a_pose_out_of_reach_at_its_orientation_is_solved_with_the_tool_axis_fre
     goal = torch.from_numpy(parse_bounds("axis_z").half[0])
     assert bool(within_bounds(T[out_of_reach], robot.fk(res.q), goal).all())
     assert bool(res.valid.any(-1).all()) and bool((res.gamma.abs() > 0).all())
+    # the compiled bounded LM (no closed form, uniform starts) finds them feasible too
+    lm = _kernels()
+    G, joints = robot.chain_arrays()
+    m = int(out_of_reach.sum())
+    half = parse_bounds("axis_z").expand(m)
+    opts, iopts = lm.lm_options(first_starts=8)
+    out = [np.empty((m, 6)), np.empty(m, np.int64), np.empty(m, bool), np.empty(m), np.empty(m)]
+    Tn = np.ascontiguousarray(T[out_of_reach].numpy())
+    lm.lm_solve_bounded(G, joints, Tn, np.zeros((m, 6)), half, lm.rotation_modes(half), opts, iopts,
+                        np.full(m, 200), lm.seed_state(0), *out)  # fmt: skip
+    assert bool(within_bounds(T[out_of_reach], robot.fk(torch.from_numpy(out[0])), goal).all())
     # one sample (the given orientation): nothing closed-form; the bounded LM from the clamped candidates serves
     res1 = closed_form_free_axis(robot, T[out_of_reach][:5], samples=1)
     assert bool(res1.refined.all()) and bool(res1.success.all())
