@@ -35,6 +35,11 @@ __all__ = [
     "make_pose",
     "rotation_angle",
     "pose_error",
+    "rotation_vector",
+    "rotation_modes",
+    "tool_error",
+    "bounded_error",
+    "within_bounds",
     "validate_pose",
     "validate_joints",
     "validate_quaternion",
@@ -212,6 +217,112 @@ def pose_error(T_target: torch.Tensor, T: torch.Tensor) -> tuple[torch.Tensor, t
     pos_err = torch.linalg.vector_norm(T[..., :3, 3] - T_target[..., :3, 3], dim=-1)
     R_rel = T_target[..., :3, :3].transpose(-1, -2) @ T[..., :3, :3]
     return pos_err, rotation_angle(R_rel)
+
+
+def rotation_vector(R: torch.Tensor) -> torch.Tensor:
+    """Rotation vector ``(..., 3)`` (unit axis times the angle in [0, pi]) of ``R: (..., 3, 3)``; differentiable.
+
+    Through the unit quaternion (Shepperd's method, ``w >= 0``): ``2 atan2(|v|, w) v / |v|``, with the limit
+    ``2 v / w`` near the identity (where the gradient is finite too); accurate at every angle, pi included.
+    """
+    quat = matrix_to_quaternion(R)
+    w, v = quat[..., :1], quat[..., 1:]
+    nv2 = (v * v).sum(-1, keepdim=True)
+    small = nv2 < 1e-14
+    nv = torch.sqrt(torch.where(small, torch.ones_like(nv2), nv2))
+    scale = torch.where(small, 2.0 / w.clamp_min(1e-12), 2.0 * torch.atan2(nv, w) / nv)
+    return v * scale
+
+
+#: :func:`rotation_modes` codes: no rotation axis free; (0, 1, 2: rotation about that tool axis free); all free.
+ROT_BOUNDED, ROT_FREE = -1, 3
+
+
+def rotation_modes(bounds: torch.Tensor) -> torch.Tensor:
+    """Which rotation a row of ``bounds: (..., 6)`` leaves free (``inf`` entries 3..5): ``(...,)`` long.
+
+    ``-1``: none (the rotation vector is bounded per axis); ``0, 1, 2``: rotation about that tool axis;
+    ``3``: all rotation (two or three free axes: rotations about two tool axes compose every orientation, so a
+    bound left on the third one could never bind; :func:`nik.ik.bounds.parse_bounds` refuses that case).
+    """
+    free = torch.isinf(bounds[..., 3:])
+    n = free.sum(-1)
+    k = free.to(torch.long).argmax(-1)
+    return torch.where(n == 0, ROT_BOUNDED, torch.where(n == 1, k, ROT_FREE))
+
+
+def _swing(v: torch.Tensor, k: int) -> torch.Tensor:
+    """Swing vector ``(..., 3)`` (component ``k`` zero) turning the tool axis ``e_k`` onto ``v: (..., 3)``.
+
+    ``s = phi / sin(phi) * (e_k x v)`` with ``sin(phi) = |e_k x v|``, ``phi = atan2(|e_k x v|, v_k)``: the angle
+    between the axes on the axis perpendicular to both (the limit ``f = 1`` when they are parallel; a half turn
+    about axis ``i`` when they are opposite).
+    """
+    i, j = (k + 1) % 3, (k + 2) % 3
+    vi, vj, vk = v[..., i], v[..., j], v[..., k]
+    s2 = vi * vi + vj * vj
+    small = s2 < 1e-14
+    sn = torch.sqrt(torch.where(small, torch.ones_like(s2), s2))
+    f = torch.where(small, torch.ones_like(s2), torch.atan2(sn, vk) / sn)
+    flip = small & (vk < 0)  # the axis turned over: a half turn about an axis of its own choosing
+    out = [None, None, None]
+    out[i] = torch.where(flip, torch.full_like(vk, math.pi), -f * vj)
+    out[j] = torch.where(flip, torch.zeros_like(vk), f * vi)
+    out[k] = torch.zeros_like(vk)
+    return torch.stack(out, dim=-1)
+
+
+def tool_error(T_target: torch.Tensor, T: torch.Tensor, modes: torch.Tensor | None = None) -> torch.Tensor:
+    """The error of ``T`` against ``T_target`` per axis of the target's tool frame, TRAC-IK's convention: ``(..., 6)``.
+
+    Position ``R_t^T (p - p_t)`` (metres, along the target tool's x, y, z), then the rotation (radians):
+
+    - ``modes`` -1 (or None): the rotation vector of ``R_t^T R`` (TRAC-IK's ``diffRelative``), per tool axis;
+    - ``modes`` k in 0, 1, 2 (rotation about tool axis k free): the *swing* of tool axis k, the rotation vector of
+      the shortest rotation taking the target's axis k onto the reached one (its angle is the angle between the
+      two axes; component k zero), and in entry k the *twist* about that axis (``R_t^T R = swing * Rk(twist)``).
+      A free axis needs this: the rotation vector's components mix twist and tilt (``Rz(a) Rx(b)`` has
+      ``x, y`` components that depend on ``a``, and they jump where ``a`` passes pi), so dropping its ``z``
+      component neither measures the tilt of the tool axis nor lets the twist go free;
+    - ``modes`` 3: zeros (every rotation axis is free: nothing is measured).
+
+    ``T_target, T: (..., 4, 4)`` (or ``(..., 3, 4)``; broadcast); ``modes: (...,)`` long (:func:`rotation_modes`).
+    Differentiable.
+    """
+    Rt = T_target[..., :3, :3]
+    Rt_T = Rt.transpose(-1, -2)
+    dp = (Rt_T @ (T[..., :3, 3] - T_target[..., :3, 3]).unsqueeze(-1)).squeeze(-1)
+    R_rel = Rt_T @ T[..., :3, :3]
+    rot = rotation_vector(R_rel)
+    if modes is not None and bool((modes >= 0).any()):
+        quat = matrix_to_quaternion(R_rel)
+        for k in range(3):
+            sel = (modes == k).unsqueeze(-1)
+            if not bool(sel.any()):
+                continue
+            twist = 2.0 * torch.atan2(quat[..., 1 + k], quat[..., 0])
+            twist = torch.remainder(twist + math.pi, 2 * math.pi) - math.pi
+            sw = _swing(R_rel[..., :, k], k)
+            sw = torch.cat([sw[..., :k], twist.unsqueeze(-1), sw[..., k + 1 :]], dim=-1)
+            rot = torch.where(sel, sw, rot)
+        rot = torch.where((modes == ROT_FREE).unsqueeze(-1), torch.zeros_like(rot), rot)
+    return torch.cat([dp, rot], dim=-1)
+
+
+def bounded_error(T_target: torch.Tensor, T: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
+    """Excess of :func:`tool_error` beyond ``bounds: (..., 6)`` (half-widths, metres then radians; ``inf`` = free):
+    ``(..., 6)``, ``sign(d) * max(|d| - bound, 0)``, zero inside. Differentiable (a dead zone)."""
+    b = bounds.to(dtype=T.dtype, device=T.device)
+    d = tool_error(T_target, T, rotation_modes(b))
+    out = torch.where(d.abs() > b, d - torch.copysign(torch.where(torch.isinf(b), 0.0, b), d), 0.0)
+    return torch.where(torch.isinf(b), 0.0, out)
+
+
+def within_bounds(T_target: torch.Tensor, T: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
+    """``(...,)`` bool: every axis of :func:`tool_error` inside its bound (``|d_i| <= bounds_i``; ``inf`` = free)."""
+    b = bounds.to(dtype=T.dtype, device=T.device)
+    d = tool_error(T_target, T, rotation_modes(b))
+    return (d.abs() <= b).all(-1)
 
 
 def _fail(name: str, what: str) -> ValueError:

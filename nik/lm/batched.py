@@ -31,6 +31,13 @@ Per-target work (:func:`lm_solve`, :func:`lm_run`):
 The answer of a target is its converged start with the lowest error, or else the start with the
 lowest error it saw (best effort). Random starts come from one ``torch.Generator``: same seed,
 same result.
+
+Tolerant goals (``bounds=``: ``(B, 6)`` half-widths per target along the target's tool axes, ``inf`` = free;
+:mod:`nik.ik.bounds`): the error is :func:`bounded_residual`, the compiled kernel's
+(:mod:`nik.kernels.lm`, module docstring): TRAC-IK's error in the target's tool frame (the swing of a free
+tool axis), a dead-zone residual at half of each bound, the exact Jacobian of the error with the rows of free
+axes zero; a target converges when every axis lies inside its bound, and a step that gets there is kept even if
+the dead-zone error grew.
 """
 
 from __future__ import annotations
@@ -42,13 +49,16 @@ from functools import partial
 import torch
 
 from nik.kinematics import chain_jacobian
-from nik.poses import matrix_to_quaternion
+from nik.poses import ROT_FREE, matrix_to_quaternion, rotation_angle, rotation_modes, tool_error
 from nik.robots.joints import wrap_into, wrap_mask
 from nik.robots.model import Robot
 from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
-__all__ = ["LMCfg", "LMRun", "lm_run", "lm_solve", "so3_log"]
+__all__ = ["DEAD_ZONE", "LMCfg", "LMRun", "bounded_residual", "lm_run", "lm_solve", "so3_log"]
+
+#: The dead zone of the bounded residual, as a fraction of each bound (the compiled kernel's).
+DEAD_ZONE = 0.5
 
 
 @dataclass
@@ -109,6 +119,92 @@ def _residual(Tt: torch.Tensor, T: torch.Tensor, rw: float):
     pos2 = (dp * dp).sum(-1)
     E = pos2 + (rw * theta) ** 2
     return torch.cat([dp, w], dim=-1), E, pos2.sqrt(), theta
+
+
+def _skew(v: torch.Tensor) -> torch.Tensor:
+    """``[v]x: (..., 3, 3)`` of ``v: (..., 3)``."""
+    z = torch.zeros_like(v[..., 0])
+    x, y, w = v.unbind(-1)
+    return torch.stack([z, -w, y, w, z, -x, -y, x, z], dim=-1).reshape(*v.shape, 3)
+
+
+def _rotation_rows(d_rot: torch.Tensor, R_rel: torch.Tensor, modes: torch.Tensor) -> torch.Tensor:
+    """``M: (..., 3, 3)`` with ``d(rotation rows) = M a``, ``a = R_t^T omega`` (the angular velocity in the target
+    frame): ``J_l^-1`` of the rotation vector (mode -1), the swing's ``-(ds/dv) [v]x`` (mode k, row k zero), 0."""
+    th2 = (d_rot * d_rot).sum(-1)
+    th = th2.sqrt()
+    small = th < 1e-4
+    h = 0.5 * torch.where(small, torch.ones_like(th), th)
+    cc = torch.where(small, torch.full_like(th, 1.0 / 12.0), (1.0 - h * torch.cos(h) / torch.sin(h)) / (4 * h * h))
+    S = _skew(d_rot)
+    eye = torch.eye(3, dtype=d_rot.dtype, device=d_rot.device)
+    M = eye - 0.5 * S + cc[..., None, None] * (S @ S)
+    M = torch.where((modes == ROT_FREE)[..., None, None], torch.zeros_like(M), M)
+    for k in range(3):
+        sel = modes == k
+        if not bool(sel.any()):
+            continue
+        v = R_rel[..., :, k]
+        ek = torch.zeros_like(v)
+        ek[..., k] = 1.0
+        vk = v[..., k]
+        s2 = (v * v).sum(-1) - vk * vk
+        n2 = s2 + vk * vk
+        tiny = s2 < 1e-8
+        sg = torch.where(tiny, torch.ones_like(s2), s2).sqrt()
+        phi = torch.atan2(sg, vk)
+        f = torch.where(tiny, torch.ones_like(s2), phi / sg)
+        gs = torch.where(tiny, torch.full_like(s2, -2.0 / 3.0), (vk * sg / n2 - phi) / (s2 * sg))
+        grad_f = gs[..., None] * (v - vk[..., None] * ek) + (-1.0 / n2)[..., None] * ek
+        u = torch.linalg.cross(ek, v, dim=-1)
+        dsdv = u[..., :, None] * grad_f[..., None, :] + f[..., None, None] * _skew(ek)
+        Mk = -(dsdv @ _skew(v))
+        M = torch.where(sel[..., None, None], Mk, M)
+    return M
+
+
+def _dead_zone(d: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
+    """``sign(d) max(|d| - DEAD_ZONE * bound, 0)`` per entry of ``d: (..., 6)``; 0 on free axes."""
+    finite = torch.isfinite(bounds)
+    z = DEAD_ZONE * torch.where(finite, bounds, torch.zeros_like(bounds))
+    return torch.where(finite & (d.abs() > z), d - torch.copysign(z, d), torch.zeros_like(d))
+
+
+def bounded_residual(Tt: torch.Tensor, T: torch.Tensor, J: torch.Tensor, bounds: torch.Tensor, rw: float):
+    """The bounded error of LM and its Jacobian, for poses ``T: (..., 3, 4)`` with geometric Jacobians
+    ``J: (..., 6, n)`` (base frame, rows linear then angular velocity) against ``Tt: (..., 3|4, 4)`` and
+    ``bounds: (..., 6)`` (``inf`` = free).
+
+    Returns ``(e, Jr, E, pos, rot, inside)``: ``e = -r (..., 6)`` with ``r`` the dead-zone residual of
+    :func:`nik.poses.tool_error` (rotation rows times ``rw``), ``Jr (..., 6, n)`` the Jacobian of that error
+    (``d(tool_error)/dq``, rotation rows times ``rw``, rows of free axes zero), ``E = |e|^2``, the position
+    error (m) and geodesic angle (rad) of ``T``, and ``inside``: every axis within its bound.
+    """
+    modes = rotation_modes(bounds)
+    d = tool_error(Tt, T, modes)
+    finite = torch.isfinite(bounds)
+    b = torch.where(finite, bounds, torch.zeros_like(bounds))
+    r = _dead_zone(d, bounds)
+    w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=T.dtype, device=T.device)
+    r = r * w
+    inside = ((d.abs() <= b) | ~finite).all(-1)
+    Rt_T = Tt[..., :3, :3].transpose(-1, -2)
+    R_rel = Rt_T @ T[..., :3, :3]
+    Jp = Rt_T @ J[..., :3, :]
+    M = _rotation_rows(d[..., 3:], R_rel, modes)
+    Jw = M @ (Rt_T @ J[..., 3:, :])
+    Jr = torch.cat([Jp, Jw], dim=-2) * (w * finite.to(T.dtype))[..., :, None]
+    pos = torch.linalg.vector_norm(T[..., :3, 3] - Tt[..., :3, 3], dim=-1)
+    rot = rotation_angle(R_rel)
+    return -r, Jr, (r * r).sum(-1), pos, rot, inside
+
+
+def _evaluate_bounded(q, Tt, bounds, G, offsets, rw: float, **kw):
+    """FK, Jacobian and bounded error of ``q: (B, K, n)`` against ``Tt: (B, 1, 3, 4)``, ``bounds: (B, 1, 6)``:
+    ``e (B, K, 6)``, ``J (B, K, 6, n)``, ``E, pos, rot, inside (B, K)``."""
+    B, K, n = q.shape
+    T, J = chain_jacobian(q.reshape(-1, n), G, offsets, **kw)
+    return bounded_residual(Tt, T.reshape(B, K, 3, 4), J.reshape(B, K, 6, n), bounds, rw)
 
 
 def _evaluate_eager(q, Tt, G, offsets, row_w, rw: float, **kw):
@@ -180,6 +276,7 @@ def lm_run(
     sampler=None,
     reachable: torch.Tensor | None = None,
     prismatic: torch.Tensor | None = None,
+    bounds: torch.Tensor | None = None,
 ) -> LMRun:
     """Levenberg-Marquardt from ``q0: (B, K, dof)`` towards ``T_target: (B, 3|4, 4)``, restarting in place.
 
@@ -193,7 +290,8 @@ def lm_run(
 
     ``G, offsets`` are the normal form (:mod:`nik.kinematics`) in the dtype/device of ``T_target``;
     ``lo, hi: (dof,)`` limits, ``wrap: (dof,)`` bool; ``prismatic`` (None: all revolute) is passed to
-    the kernel when some joint is prismatic.
+    the kernel when some joint is prismatic. ``bounds: (B, 6)`` (None: the tolerances): tolerant goals
+    (:func:`bounded_residual`; ``tol_pos, tol_rot`` then unused).
     """
     B, K, n = q0.shape
     dtype, device = T_target.dtype, T_target.device
@@ -205,21 +303,27 @@ def lm_run(
     if sampler is None:
         restarts = 0
 
-    def bounds(q):
+    def clamp(q):
         if any_wrap:
             q = torch.where(wrap, wrap_into(q, lo, hi), q)
         return torch.minimum(torch.maximum(q, lo), hi)
 
     kernel = _evaluator(cfg.compiled and not kw)
+    tolerant = bounds is not None
+    bnd = bounds.to(dtype=dtype, device=device)[:, None, :] if tolerant else torch.zeros(B, 1, 0, device=device)
 
-    def evaluate(q, Tt):
+    def evaluate(q, Tt, bnd):
+        if tolerant:
+            return _evaluate_bounded(q, Tt, bnd, G, offsets, rw, **kw)
         if kw:
-            return _evaluate_eager(q, Tt, G, offsets, row_w, rw, **kw)
-        return kernel(q, Tt, G, offsets, row_w, rw)
+            e, J, E, pos, rot = _evaluate_eager(q, Tt, G, offsets, row_w, rw, **kw)
+        else:
+            e, J, E, pos, rot = kernel(q, Tt, G, offsets, row_w, rw)
+        return e, J, E, pos, rot, (pos <= tol_pos) & (rot <= tol_rot)
 
     Tt = T_target[:, None, :3, :]
-    q = bounds(q0)
-    e, J, E, pos, rot = evaluate(q, Tt)
+    q = clamp(q0)
+    e, J, E, pos, rot, ok = evaluate(q, Tt, bnd)
     lam = torch.full((B, K), cfg.lambda0, dtype=dtype, device=device)
     stall = torch.zeros((B, K), dtype=torch.int32, device=device)
     # the starts given run first_iters iterations at most, fresh ones iters
@@ -238,7 +342,7 @@ def lm_run(
 
     def finish(rows):
         """Write the answers of the targets ``rows`` (indices into the active batch)."""
-        q_, E_, conv_ = q[rows], E[rows], ((pos <= tol_pos) & (rot <= tol_rot))[rows]
+        q_, E_, conv_ = q[rows], E[rows], ok[rows]
         bq, bE = best_q[rows], best_E[rows]
         better = (E_ < bE) | conv_
         q_ = torch.where(better[..., None], q_, bq)
@@ -253,7 +357,7 @@ def lm_run(
         out_conv[tgt] = anyc
 
     for it in range(total + 1):
-        conv = (pos <= tol_pos) & (rot <= tol_rot)
+        conv = ok
         spent = (stall >= cfg.stall_iters) | (age >= iters)
         # rows to restart: spent, target not converged, restarts left (drawn in row order)
         want = spent & ~conv.any(1, keepdim=True)
@@ -271,9 +375,9 @@ def lm_run(
             if bool(done.all()):
                 break
             keep = (~done).nonzero().squeeze(1)
-            active, q, e, J, E, pos, rot, lam, stall, age, left, best_q, best_E, restart, Tt = (
+            active, q, e, J, E, pos, rot, ok, lam, stall, age, left, best_q, best_E, restart, Tt, bnd = (
                 t.index_select(0, keep)
-                for t in (active, q, e, J, E, pos, rot, lam, stall, age, left, best_q, best_E, restart, Tt)
+                for t in (active, q, e, J, E, pos, rot, ok, lam, stall, age, left, best_q, best_E, restart, Tt, bnd)
             )
         A = (J[..., :, :, None] * J[..., :, None, :]).sum(-3)  # J^T J by broadcasting: faster than bmm here
         g = (J * e[..., :, None]).sum(-2).unsqueeze(-1)
@@ -287,11 +391,10 @@ def lm_run(
         A = A + (lam[..., None] * (torch.diagonal(A, dim1=-2, dim2=-1) + cfg.eps)).diag_embed() + eye_eps
         L, info = torch.linalg.cholesky_ex(A)
         dq = torch.cholesky_solve(g, L).squeeze(-1)
-        ok = info == 0
         big = dq.abs().amax(dim=-1, keepdim=True)
         dq = dq * torch.clamp(cfg.max_step / big.clamp_min(1e-30), max=1.0)
-        dq = torch.where(ok[..., None] & torch.isfinite(dq), dq, torch.zeros_like(dq))
-        qc = bounds(q + dq)
+        dq = torch.where((info == 0)[..., None] & torch.isfinite(dq), dq, torch.zeros_like(dq))
+        qc = clamp(q + dq)
         n_restart = int(restart.sum())
         if n_restart:
             # remember the best of the spent start, then put a fresh start in its place
@@ -302,8 +405,11 @@ def lm_run(
             fresh[restart] = sampler(n_restart).to(dtype=dtype, device=device)
             qc = torch.where(restart[..., None], fresh, qc)
             left = left - restart.sum(1, dtype=torch.int32)
-        ec, Jc, Ec, posc, rotc = evaluate(qc, Tt)
-        acc = ((Ec < E) & ok) | restart
+        ec, Jc, Ec, posc, rotc, okc = evaluate(qc, Tt, bnd)
+        good = info == 0
+        acc = ((Ec < E) & good) | restart
+        if tolerant:  # a step that reaches every bound is kept (the compiled kernel's rule)
+            acc = acc | (okc & good)
         gain = torch.where(acc, E - Ec, torch.zeros_like(E))
         stall = torch.where((gain >= cfg.stall_rel * E) | restart, torch.zeros_like(stall), stall + 1)
         age = torch.where(restart, torch.zeros_like(age), age + 1)
@@ -314,6 +420,7 @@ def lm_run(
         E = torch.where(acc, Ec, E)
         pos = torch.where(acc, posc, pos)
         rot = torch.where(acc, rotc, rot)
+        ok = torch.where(acc, okc, ok)
         lam = torch.where(acc, lam * cfg.lambda_down, lam * cfg.lambda_up).clamp(cfg.lambda_min, cfg.lambda_max)
         if n_restart:
             lam = torch.where(restart, torch.full_like(lam, cfg.lambda0), lam)
@@ -333,6 +440,7 @@ def lm_solve(
     restarts: int | None = None,
     generator: torch.Generator | None = None,
     reachable: torch.Tensor | None = None,
+    bounds: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Levenberg-Marquardt from guesses, with restarts only for the targets that fail.
 
@@ -346,6 +454,10 @@ def lm_solve(
         generator: source of the random starts (default: a generator seeded with 0).
         reachable: (B,) bool, targets allowed to restart (default :func:`nik.robots.reach.within_reach`):
             a provably unreachable target gets its first start only (best effort, success False).
+        bounds: (B, 6) tolerant goals per target (half-widths along the target's tool axes, metres then
+            radians, ``inf`` = free; :meth:`nik.ik.bounds.Bounds.expand`), or None for ``tol_pos, tol_rot``.
+            Targets stop when inside every bound; the reach test (a bound on the position only, never looser) is
+            skipped when a position axis is free.
 
     Returns:
         ``q: (B, dof)`` inside the limits, and ``iterations: (B,)`` long.
@@ -361,11 +473,15 @@ def lm_solve(
     lo, hi = robot.limits_as(T_target)
     wrap = wrap_mask(robot.limits, prismatic=robot.prismatic).to(device)
     prismatic = robot.prismatic.to(device)
+    if bounds is not None:
+        bounds = torch.as_tensor(bounds, dtype=dtype, device=device).expand(T_target.shape[0], 6)
     if q0 is None:
-        q0 = _best_of_uniform(robot, T_target, cfg.first_starts, generator)
+        q0 = _best_of_uniform(robot, T_target, cfg.first_starts, generator, bounds)
     q0 = (q0 if q0.ndim == 3 else q0.unsqueeze(1)).to(dtype=dtype, device=device)
     if n_restarts > 0 and reachable is None:
         reachable = within_reach(robot, T_target) if T_target.shape[-2] == 4 else None
+        if reachable is not None and bounds is not None:  # a free position axis widens the reach
+            reachable = reachable | torch.isinf(bounds[:, :3]).any(-1)
     run_from = partial(
         lm_run,
         G=G,
@@ -380,7 +496,9 @@ def lm_solve(
         sampler=lambda m: robot.sample(m, generator=generator, dtype=dtype, device=device),
         prismatic=prismatic,
     )
-    run = run_from(T_target[..., :3, :], q0, first_iters=first_iters, restarts=n_restarts, reachable=reachable)
+    run = run_from(
+        T_target[..., :3, :], q0, first_iters=first_iters, restarts=n_restarts, reachable=reachable, bounds=bounds
+    )
     q, it = run.q, run.iterations
     todo = ~run.converged
     if reachable is not None:
@@ -390,21 +508,34 @@ def lm_solve(
         # the few hard targets left: many starts side by side (few sequential iterations)
         S = cfg.tail_starts
         starts = robot.sample(todo.numel() * S, generator=generator, dtype=dtype, device=device)
-        tail = run_from(T_target[todo][..., :3, :], starts.reshape(-1, S, robot.dof), restarts=cfg.tail_restarts)
+        tail = run_from(
+            T_target[todo][..., :3, :],
+            starts.reshape(-1, S, robot.dof),
+            restarts=cfg.tail_restarts,
+            bounds=None if bounds is None else bounds[todo],
+        )
         better = tail.converged | (tail.E < run.E[todo])
         q[todo[better]] = tail.q[better]
         it[todo] += tail.iterations
     return q, it
 
 
-def _best_of_uniform(robot: Robot, T_target: torch.Tensor, m: int, generator: torch.Generator) -> torch.Tensor:
-    """``(B, 1, dof)``: per target, the one of ``m`` uniform configurations with the lowest pose error."""
+def _best_of_uniform(
+    robot: Robot, T_target: torch.Tensor, m: int, generator: torch.Generator, bounds: torch.Tensor | None = None
+) -> torch.Tensor:
+    """``(B, 1, dof)``: per target, the one of ``m`` uniform configurations with the lowest pose error (the
+    bounded error with ``bounds: (B, 6)``)."""
     B, n = T_target.shape[0], robot.dof
     q = robot.sample(B * m, generator=generator, dtype=T_target.dtype, device=T_target.device)
     if m == 1:
         return q.reshape(B, 1, n)
     q = q.reshape(B, m, n)
     T = robot.fk(q.reshape(-1, n), check=False).reshape(B, m, 4, 4)
-    _, E, _, _ = _residual(T_target[:, None, :3, :], T[..., :3, :], LMCfg.rot_weight)
+    if bounds is None:
+        _, E, _, _ = _residual(T_target[:, None, :3, :], T[..., :3, :], LMCfg.rot_weight)
+    else:
+        e = _dead_zone(tool_error(T_target[:, None], T, rotation_modes(bounds[:, None])), bounds[:, None])
+        w = torch.tensor([1.0, 1.0, 1.0] + [LMCfg.rot_weight] * 3, dtype=e.dtype, device=e.device)
+        E = ((e * w) ** 2).sum(-1)
     i = E.argmin(dim=1)
     return torch.gather(q, 1, i[:, None, None].expand(-1, 1, n))
