@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 #: Version of the cached parse results (bump when the conversion to the normal form changes).
-URDF_CACHE_FORMAT = 3  # 3: the default tool link prefers conventional names and leaves grippers out
+URDF_CACHE_FORMAT = 4  # 3: the default tool link prefers conventional names and leaves grippers out; 4: vel_limits
 
 #: joint types of the URDF format; floating and planar joints are kept as fixed (an error only on the arm's chain)
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
@@ -306,6 +306,11 @@ def load_urdf(
     prismatic joint of the robot (its value in metres along its axis, limits from the file, which
     must give them); fixed joints are merged into the constant transforms.
 
+    :attr:`Robot.vel_limits` are the arm joints' ``<limit velocity=...>`` (rad/s, m/s) when every arm joint gives a
+    positive one (a missing or zero velocity, a common placeholder, means unknown: then None); a negative or
+    non-finite velocity is a :class:`RobotDefinitionError` naming the joint. URDF has no acceleration limit:
+    :attr:`Robot.acc_limits` is None (a YAML robot file pointing at the URDF may give both, :mod:`nik.robots.config`).
+
     The result is kept in nik's user cache folder (``$XDG_CACHE_HOME/nik/robots``, default
     ``~/.cache/nik/robots``) under the SHA-256 of the file's bytes, these arguments, the installed
     pytorch-kinematics and :data:`URDF_CACHE_FORMAT`, with a checksum verified on load: importing
@@ -356,6 +361,7 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
             f"{path}: joint {on_chain[0]!r} is floating or planar; nik models revolute and prismatic joints only"
         )
     urdf = _parse_urdf(text) if origins == "float64" else None
+    speeds = _joint_speeds(tree, str(path))
     builder = NormalFormBuilder()
     names, limits = [], []
     for frame in serial._serial_frames[1:]:
@@ -385,6 +391,7 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         raise RobotDefinitionError(f"{path}: no revolute or prismatic joint between the root and {end_link!r}")
     if name is None:
         name = tree.get("name") or path.stem
+    vel = [speeds.get(n) for n in names]
     robot = Robot(
         name,
         builder.finish(),
@@ -394,8 +401,32 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         end_link=end_link,
         source=str(path),
         prismatic=builder.prismatic,
+        vel_limits=None if None in vel else vel,
     )
     return robot, choice
+
+
+def _joint_speeds(tree: ET.Element, source: str) -> dict[str, float]:
+    """``{joint name: <limit velocity>}`` of the reduced tree's joints that give a positive one (rad/s, m/s);
+    a missing or zero velocity is left out (unknown), a negative or non-finite one is an error naming the joint."""
+    speeds = {}
+    for joint in tree.iter("joint"):
+        limit = joint.find("limit")
+        text = limit.get("velocity", "0") if limit is not None else "0"
+        try:
+            v = float(text)
+        except ValueError:
+            raise RobotDefinitionError(
+                f"{source}: joint {joint.get('name')!r}: <limit velocity={text!r}> is not a number"
+            ) from None
+        if not math.isfinite(v) or v < 0:
+            raise RobotDefinitionError(
+                f"{source}: joint {joint.get('name')!r}: <limit velocity={text!r}> must be a finite number >= 0 "
+                "(rad/s, m/s; 0: unknown)"
+            )
+        if v > 0:
+            speeds[joint.get("name")] = v
+    return speeds
 
 
 # ---------------------------------------------------------------------------
@@ -438,6 +469,8 @@ def _cached_robot(key: str, path: Path) -> tuple[Robot, EndLinkChoice | None] | 
             end_link=d.get("end_link"),
             source=str(path),
             prismatic=d.get("prismatic"),
+            vel_limits=d.get("vel_limits"),
+            acc_limits=d.get("acc_limits"),
         )
         c = doc.get("choice")
         if c is not None:
@@ -451,6 +484,10 @@ def _store_robot(key: str, robot: Robot, choice: EndLinkChoice | None) -> None:
     """Write ``robot``'s definition and how its default tool link was chosen under ``key`` (temporary name, then
     rename); silently skipped when the folder is not writable."""
     d = robot.to_definition()
+    for rate in ("vel_limits", "acc_limits"):  # outside the definition (not kinematics); cached with it
+        value = getattr(robot, rate)
+        if value is not None:
+            d[rate] = value.tolist()
     c = None if choice is None else dataclasses.asdict(choice)
     body = json.dumps([d, c], sort_keys=True)
     sha = hashlib.sha256(body.encode()).hexdigest()
