@@ -50,10 +50,12 @@ import torch
 from nik.robots.rates import check_rates
 
 __all__ = [
+    "CHECK_DT",
     "CHECK_POINTS",
     "DEFAULT_ACC_PER_VEL",
+    "GRID_ERR",
+    "GRID_MAX",
     "GRID_MIN",
-    "LEFT_GAP",
     "RATE_RTOL",
     "TIME_COLUMN",
     "Timing",
@@ -67,10 +69,14 @@ __all__ = [
 DEFAULT_ACC_PER_VEL = 10.0
 #: Least number of grid intervals of toppra's discretisation (every waypoint is a gridpoint; steps cut evenly).
 GRID_MIN = 400
-#: Where the path's second derivative jumps (PCHIP), an extra gridpoint this fraction of a piece before each waypoint.
-LEFT_GAP = 1e-3
+#: Largest chord error (radians; metres for prismatic joints) of a grid interval: bends get a denser grid.
+GRID_ERR = 1e-4
+#: Most grid intervals (the refinement by GRID_ERR stops before).
+GRID_MAX = 20_000
 #: Instants checked in every interval between gridpoints (its two ends included).
-CHECK_POINTS = 9
+CHECK_POINTS = 17
+#: Sampling period of the final check (seconds): a controller's.
+CHECK_DT = 1e-3
 #: Relative excess over a limit taken as float rounding of toppra's solver (not slowed for).
 RATE_RTOL = 1e-9
 #: Name of the time column of the path CSV (seconds).
@@ -126,13 +132,9 @@ class Timing:
             q0 = np.broadcast_to(self.path(self.s[:1])[0], (t.size, dof)).copy()
             return q0, np.zeros((t.size, dof)), np.zeros((t.size, dof))
         k = self.stretch
-        ts, ss, sd, u = self._knots
-        i = np.clip(np.searchsorted(ts, t / k, side="right") - 1, 0, len(u) - 1)
-        tau = t / k - ts[i]
-        s = np.clip(ss[i] + sd[i] * tau + 0.5 * u[i] * tau**2, ss[0], ss[-1])
-        v = sd[i] + u[i] * tau
+        s, v, a = _state(self.path, self._knots, t / k)
         d1 = self.path(s, 1)
-        return self.path(s), d1 * v[:, None] / k, (self.path(s, 2) * v[:, None] ** 2 + d1 * u[i, None]) / k**2
+        return self.path(s), d1 * v[:, None] / k, (self.path(s, 2) * v[:, None] ** 2 + d1 * a[:, None]) / k**2
 
     def sample(self, dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The trajectory every ``dt`` seconds (default 1 ms, a controller's period) and at its end:
@@ -219,14 +221,15 @@ def time_path(
                       interpolation="cubic", gridpoints=s_u.copy(), path=path, **common)  # fmt: skip
 
     interpolation, path = "cubic", toppra.SplineInterpolator(s_u, q_u)
-    grid, at_waypoint = _grid(s_u)
-    if robot is not None and not _path_within_limits(path, grid, robot):
-        interpolation, path = "pchip", _pchip_path(toppra, s_u, q_u)
-        grid, at_waypoint = _grid(s_u, left=True)
+    grid, at_waypoint = _grid(s_u, path)
     constraints = [
         toppra.constraint.JointVelocityConstraint(vel),
         toppra.constraint.JointAccelerationConstraint(acc),
     ]
+    if robot is not None and not _path_within_limits(path, grid, robot):
+        interpolation, path = "pchip", _pchip_path(toppra, s_u, q_u)
+        grid, at_waypoint = _grid(s_u, path)
+        constraints.append(_LeftAcceleration(toppra, acc, path, s_u[1:]))
     if tool_speed is not None:
         constraints.append(_tool_speed_constraint(toppra, robot, tool_speed))
     algo = toppra.algorithm.TOPPRA(
@@ -289,25 +292,26 @@ def _check_within_limits(q: np.ndarray, robot) -> None:
         )
 
 
-def _grid(s: np.ndarray, *, left: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """toppra's gridpoints ``(G,)``: every ``s`` and each step cut evenly into ``ceil(ds / h)`` pieces with
-    ``h = s[-1] / GRID_MIN``; and the index of each ``s`` in the grid.
+def _grid(s: np.ndarray, path) -> tuple[np.ndarray, np.ndarray]:
+    """toppra's gridpoints ``(G,)`` and the index of each ``s`` among them.
 
-    ``left``: a gridpoint also just before every inner ``s`` (:data:`LEFT_GAP` of its piece), so that toppra sees
-    both sides of a path whose second derivative jumps there (PCHIP): the acceleration on either side is kept.
+    Every ``s``; each step cut evenly into ``ceil(ds / h)`` pieces with ``h = s[-1] / GRID_MIN``; then, as
+    toppra's ``propose_gridpoints`` does, a piece is halved while the error of a straight chord across it,
+    ``0.5 max_j |q_j''(mid)| h^2``, is above :data:`GRID_ERR` (at most :data:`GRID_MAX` intervals): where the path
+    bends, toppra's constraints are checked more densely.
     """
     ds = np.diff(s)
     pieces = np.maximum(1, np.ceil(ds / (s[-1] / GRID_MIN) - 1e-9)).astype(int)
-    parts = []
-    for i in range(len(ds)):
-        w = np.arange(pieces[i]) / pieces[i]
-        if left and i + 1 < len(ds):
-            w = np.append(w, 1.0 - LEFT_GAP / pieces[i])
-        parts.append(s[i] + ds[i] * w)
-    grid = np.concatenate([*parts, s[-1:]])
-    at = np.concatenate([[0], np.cumsum([len(p) for p in parts])])
-    grid[at] = s  # exactly the waypoints' s
-    return grid, at
+    grid = np.concatenate([s[i] + ds[i] * np.arange(pieces[i]) / pieces[i] for i in range(len(ds))] + [s[-1:]])
+    grid[np.concatenate([[0], np.cumsum(pieces)])] = s  # exactly the waypoints' s
+    for _ in range(32):
+        h = np.diff(grid)
+        mid = grid[:-1] + 0.5 * h
+        split = 0.5 * np.abs(path(mid, 2)).max(axis=1) * h**2 > GRID_ERR
+        if not split.any() or len(grid) + int(split.sum()) > GRID_MAX + 1:
+            break
+        grid = np.sort(np.concatenate([grid, mid[split]]))
+    return grid, np.searchsorted(grid, s)
 
 
 def _dense(grid: np.ndarray) -> np.ndarray:
@@ -349,6 +353,28 @@ def _pchip_path(toppra, s: np.ndarray, q: np.ndarray):
     return PchipPath()
 
 
+def _LeftAcceleration(toppra, acc: np.ndarray, path, knots: np.ndarray):
+    """toppra's joint acceleration constraint with ``q''`` taken from the left at ``knots`` (PCHIP's inner
+    waypoints, where ``q''`` jumps): toppra evaluates a path at a gridpoint from the right, so with this second
+    constraint the acceleration at the end of the interval before a waypoint is kept too."""
+
+    class LeftPath(toppra.interpolator.AbstractGeometricPath):
+        def __call__(self, path_positions, order=0):
+            x = np.asarray(path_positions, dtype=np.float64)
+            if order == 2:
+                x = np.where(np.isin(x, knots), np.nextafter(x, -np.inf), x)
+            return path(x, order)
+
+        dof = property(lambda self: path.dof)
+        path_interval = property(lambda self: path.path_interval)
+
+    class LeftAcceleration(toppra.constraint.JointAccelerationConstraint):
+        def compute_constraint_params(self, _path, gridpoints, *args, **kwargs):
+            return super().compute_constraint_params(LeftPath(), gridpoints, *args, **kwargs)
+
+    return LeftAcceleration(acc)
+
+
 def _tool_linear_rate(robot, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
     """``|J_v(q) dq|`` for ``q, dq: (M, dof)``: the tool's linear speed per unit of ``dq`` (metres)."""
     _, J = robot.fk_and_jacobian(torch.from_numpy(np.ascontiguousarray(q)))
@@ -373,24 +399,49 @@ def _tool_speed_constraint(toppra, robot, speed: float):
     return ToolSpeedConstraint()
 
 
+def _state(path, knots, t: np.ndarray):
+    """Path parameter ``s: (M,)``, path speed ``sd: (M,)``, path acceleration ``u: (M,)`` at toppra's times
+    ``t: (M,)`` (as ``ParametrizeConstAccel`` evaluates them)."""
+    ts, ss, sd, u = knots
+    i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(u) - 1)
+    tau = t - ts[i]
+    s = np.clip(ss[i] + sd[i] * tau + 0.5 * u[i] * tau**2, ss[0], ss[-1])
+    return s, sd[i] + u[i] * tau, u[i]
+
+
+def _worst(path, s, v, a, vel, acc, robot, tool_speed) -> float:
+    """The largest ratio of a speed to its limit, or of the square root of an acceleration to its limit's, at path
+    parameters ``s: (M,)`` with path speeds ``v`` and path accelerations ``a``."""
+    d1 = path(s, 1)
+    ratio = max(
+        float(np.max(np.abs(d1 * v[:, None]) / vel)),
+        math.sqrt(float(np.max(np.abs(path(s, 2) * v[:, None] ** 2 + d1 * a[:, None]) / acc))),
+    )
+    if tool_speed is not None:
+        ratio = max(ratio, float(np.max(_tool_linear_rate(robot, path(s), d1) * v)) / tool_speed)
+    return ratio
+
+
 def _stretch(path, knots, vel, acc, robot, tool_speed) -> float:
-    """The least uniform slow-down ``k >= 1`` that keeps every sampled speed and acceleration within its limit
-    (:data:`CHECK_POINTS` per grid interval, both ends with that interval's acceleration)."""
+    """The least uniform slow-down ``k >= 1`` that keeps every speed and acceleration within its limit where
+    checked: :data:`CHECK_POINTS` instants per grid interval (both ends with that interval's acceleration), then
+    the stretched trajectory every :data:`CHECK_DT` (a controller's 1 ms), slowed again until no sample passes."""
     ts, ss, sd, u = knots
     tau = np.diff(ts)[:, None] * np.linspace(0.0, 1.0, CHECK_POINTS)
     s = np.clip(ss[:-1, None] + sd[:-1, None] * tau + 0.5 * u[:, None] * tau**2, ss[:-1, None], ss[1:, None])
     s[:, -1] = np.nextafter(ss[1:], -np.inf)  # the interval's end seen from inside it (a jump of q'' there)
-    s = s.reshape(-1)
-    v = (sd[:-1, None] + u[:, None] * tau).reshape(-1, 1)
-    a = np.repeat(u, CHECK_POINTS)[:, None]
-    d1 = path(s, 1)
-    ratio = max(
-        float(np.max(np.abs(d1 * v) / vel)),
-        math.sqrt(float(np.max(np.abs(path(s, 2) * v**2 + d1 * a) / acc))),
-    )
-    if tool_speed is not None:
-        ratio = max(ratio, float(np.max(_tool_linear_rate(robot, path(s), d1) * v[:, 0])) / tool_speed)
-    return ratio if ratio > 1 + RATE_RTOL else 1.0
+    v = sd[:-1, None] + u[:, None] * tau
+    ratio = _worst(path, s.reshape(-1), v.reshape(-1), np.repeat(u, CHECK_POINTS), vel, acc, robot, tool_speed)
+    k = ratio if ratio > 1 + RATE_RTOL else 1.0
+    for _ in range(8):
+        duration = float(ts[-1] * k)  # as Timing.sample takes the samples
+        t = np.append(np.arange(0.0, duration, CHECK_DT), duration) / k
+        s, v, a = _state(path, knots, t)
+        ratio = _worst(path, s, v / k, a / k**2, vel, acc, robot, tool_speed)
+        if ratio <= 1 + RATE_RTOL:
+            break
+        k *= ratio
+    return k
 
 
 # ---------------------------------------------------------------------------
