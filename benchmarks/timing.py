@@ -1,12 +1,14 @@
 """Timing of IK paths by toppra (nik.ik.timing.time_path): limits kept at 1 ms, duration against toppra's own
 defaults, the check's stretch and the time per call.
 
-For each arm, Cartesian lines and circles (radius 5-15 cm, seeded) are solved by ``IKSolver.solve_path`` and
-their joint paths timed with the arm's limits (``robot.vel_limits`` / ``acc_limits``; ur5: accelerations assumed,
-10 x the speed limits) and again with a tool speed of 0.25 m/s. Columns: paths timed, the largest joint speed and
-acceleration over their limits when sampled every 1 ms (<= 1 is kept), the largest stretch of the check, the
-largest relative difference of the duration from toppra called with its own grid (``propose_gridpoints``) and
-output spline on the same joint path, the median duration and the median milliseconds per ``time_path`` call.
+For each arm, Cartesian lines and circles (radius 5-15 cm, seeded) are solved by ``IKSolver.solve_path``; the
+paths it follows (every waypoint reached, no reconfiguration) are timed with the arm's limits (``robot.vel_limits``
+/ ``acc_limits``; ur5 and xarm7: accelerations assumed, 10 x the speed limits) and again with a tool speed of
+0.25 m/s. Columns: paths followed and timed, the largest joint speed and acceleration over their limits when
+sampled every 1 ms (<= 1 is kept), the largest stretch of the check, the largest relative difference of the
+duration from toppra called with its own grid (``propose_gridpoints``) and output spline on the same joint path
+and the largest acceleration over its limit of that answer sampled every 1 ms (toppra's defaults check the limits
+at their gridpoints only), the median duration and the median milliseconds per ``time_path`` call.
 
     python benchmarks/timing.py                 # ur5, panda, xarm7; 8 paths each of 60 and 1,000 waypoints
     python benchmarks/timing.py --quick         # 3 paths each
@@ -52,8 +54,8 @@ def run(names, n_paths: int, sizes) -> None:
     import toppra.constraint
 
     print("| arm | waypoints | tool m/s | paths | max qd/limit | max qdd/limit | stretch | vs toppra defaults | "
-          "duration s (median) | ms per call (median) |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "toppra defaults: max qdd/limit | duration s (median) | ms per call (median) |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in names:
         robot = nik.load_robot(name)
         solver = nik.IKSolver(robot)
@@ -63,9 +65,13 @@ def run(names, n_paths: int, sizes) -> None:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     res = solver.solve_path(T, seed=0)
-                joint_paths.append(res.q.double().numpy())
+                if bool(res.success.all()) and int(res.path.reconfigurations.sum()) == 0:  # followed paths only
+                    joint_paths.append(res.q.double().numpy())
+            if not joint_paths:
+                print(f"| {name} | {n} | - | 0 | | | | | | | |")
+                continue
             for tool in (None, 0.25):
-                vr, ar, stretch, diff, dur, ms = [], [], [], [], [], []
+                vr, ar, stretch, diff, own_ar, dur, ms = [], [], [], [], [], [], []
                 for q in joint_paths:
                     t0 = time.perf_counter()
                     tim = time_path(q, robot=robot, tool_speed=tool)
@@ -88,9 +94,12 @@ def run(names, n_paths: int, sizes) -> None:
                         )
                         own = toppra.algorithm.TOPPRA(cons, path, solver_wrapper="seidel").compute_trajectory()
                         diff.append(abs(tim.duration / own.duration - 1))
+                        t = np.append(np.arange(0.0, own.duration, 1e-3), own.duration)
+                        own_ar.append(float(np.max(np.abs(own(t, 2)) / tim.acc_limits)))
                 print(
-                    f"| {name} | {n} | {tool or '-'} | {len(joint_paths)} | {max(vr):.6f} | {max(ar):.6f} | "
-                    f"{max(stretch):.6f} | {f'{max(diff):.1e}' if diff else '-'} | {statistics.median(dur):.3f} | "
+                    f"| {name} | {n} | {tool or '-'} | {len(joint_paths)} | {max(vr):.9f} | {max(ar):.9f} | "
+                    f"{max(stretch):.4f} | {f'{max(diff):.1e}' if diff else '-'} | "
+                    f"{f'{max(own_ar):.3f}' if own_ar else '-'} | {statistics.median(dur):.3f} | "
                     f"{statistics.median(ms):.1f} |"
                 )
 

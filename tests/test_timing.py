@@ -177,6 +177,8 @@ def test_a_path_that_does_not_move_takes_no_time():
     q = np.tile(_smooth_path(robot)[:1], (4, 1))
     tim = T.time_path(q, robot=robot)
     assert tim.duration == 0.0 and (tim.t == 0).all() and (tim.qd == 0).all()
+    t, qs, qd, _ = tim.sample()
+    assert t.tolist() == [0.0] and np.array_equal(qs, q[:1]) and not qd.any()
 
 
 # ---------------------------------------------------------------------------
