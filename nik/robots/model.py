@@ -14,6 +14,7 @@ import torch
 
 from nik.kinematics import FKKernel, chain_jacobian, to_homogeneous
 from nik.poses import validate_joints
+from nik.robots.rates import check_rates
 
 __all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
 
@@ -262,8 +263,6 @@ class Robot:
 
     @vel_limits.setter
     def vel_limits(self, values) -> None:
-        from nik.robots.rates import check_rates
-
         self._vel_limits = check_rates(values, self.dof, what="vel_limits", names=self.joint_names, where=self.name)
 
     @property
@@ -273,8 +272,6 @@ class Robot:
 
     @acc_limits.setter
     def acc_limits(self, values) -> None:
-        from nik.robots.rates import check_rates
-
         self._acc_limits = check_rates(values, self.dof, what="acc_limits", names=self.joint_names, where=self.name)
 
     # -- identity -------------------------------------------------------
