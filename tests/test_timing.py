@@ -210,10 +210,13 @@ def test_timing_without_speed_limits_or_with_bad_options_says_what_is_missing():
     q = _smooth_path(robot, n=5)
     with pytest.raises(ValueError, match="timing needs joint speed limits: kuka_kr has none"):
         T.time_path(q, robot=robot)
-    with pytest.raises(ValueError, match=r"--vel-scale: must be a number in \(0, 1\], got 1.5"):
+    with pytest.raises(ValueError, match=r"^vel_scale: must be a number in \(0, 1\], got 1.5$"):
         T.time_path(q, np.ones(6), robot=robot, vel_scale=1.5)
-    with pytest.raises(ValueError, match=r"--acc-scale: must be a number in \(0, 1\], got 0"):
-        T.scale_limits(np.ones(6), 0, what="--acc-scale")
+    with pytest.raises(ValueError, match=r"^acc_scale: must be a number in \(0, 1\], got -0.5$"):
+        T.time_path(q, np.ones(6), robot=robot, acc_scale=-0.5)
+    with pytest.raises(ValueError, match=r"^--acc-scale: must be a number in \(0, 1\], got 0$"):
+        T.check_scale(0, "--acc-scale")
+    assert T.check_scale(1, "--vel-scale") == 1.0
     with pytest.raises(ValueError, match="tool_speed needs robot="):
         T.time_path(q, np.ones(6), tool_speed=0.1)
     with pytest.raises(ValueError, match="q has 6 columns"):

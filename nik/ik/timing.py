@@ -63,6 +63,7 @@ __all__ = [
     "RATE_RTOL",
     "TIME_COLUMN",
     "Timing",
+    "check_scale",
     "read_time_column",
     "scale_limits",
     "time_cells",
@@ -149,12 +150,17 @@ class Timing:
         return (t, *self.at(t))
 
 
-def scale_limits(limits, scale: float, *, what: str = "--vel-scale") -> np.ndarray:
-    """``limits: (dof,)`` times ``scale`` (0 < scale <= 1: a fraction of the robot's limits, as ``nik path
-    --vel-scale S`` / ``--acc-scale S`` give it); ValueError naming ``what`` otherwise."""
+def check_scale(scale, what: str = "vel_scale") -> float:
+    """``scale`` as a float when ``0 < scale <= 1`` (a fraction of the robot's limits, as ``nik path --vel-scale S``
+    / ``--acc-scale S`` give it); else ValueError, one line naming ``what`` (the CLI passes its option's name)."""
     if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 < scale <= 1:
         raise ValueError(f"{what}: must be a number in (0, 1], got {scale!r}")
-    return np.asarray(limits, dtype=np.float64) * float(scale)
+    return float(scale)
+
+
+def scale_limits(limits, scale: float, *, what: str = "vel_scale") -> np.ndarray:
+    """``limits: (dof,)`` times ``scale`` (checked by :func:`check_scale`), as float64."""
+    return np.asarray(limits, dtype=np.float64) * check_scale(scale, what)
 
 
 def time_path(
@@ -202,7 +208,7 @@ def time_path(
     vel = scale_limits(check_rates(vel_limits, dof, what="vel_limits", names=names).numpy(), vel_scale)
     acc_assumed = acc_limits is None
     acc = vel * DEFAULT_ACC_PER_VEL if acc_assumed else check_rates(acc_limits, dof, what="acc_limits", names=names)
-    acc = scale_limits(np.asarray(acc), acc_scale, what="--acc-scale")
+    acc = scale_limits(np.asarray(acc), acc_scale, what="acc_scale")
     if tool_speed is not None:
         if robot is None:
             raise ValueError("tool_speed needs robot= (the tool's speed comes from the arm's Jacobian)")
