@@ -361,7 +361,6 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
             f"{path}: joint {on_chain[0]!r} is floating or planar; nik models revolute and prismatic joints only"
         )
     urdf = _parse_urdf(text) if origins == "float64" else None
-    speeds = _joint_speeds(tree, str(path))
     builder = NormalFormBuilder()
     names, limits = [], []
     for frame in serial._serial_frames[1:]:
@@ -391,7 +390,6 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         raise RobotDefinitionError(f"{path}: no revolute or prismatic joint between the root and {end_link!r}")
     if name is None:
         name = tree.get("name") or path.stem
-    vel = [speeds.get(n) for n in names]
     robot = Robot(
         name,
         builder.finish(),
@@ -401,32 +399,32 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         end_link=end_link,
         source=str(path),
         prismatic=builder.prismatic,
-        vel_limits=None if None in vel else vel,
+        vel_limits=_joint_speeds(tree, names, str(path)),
     )
     return robot, choice
 
 
-def _joint_speeds(tree: ET.Element, source: str) -> dict[str, float]:
-    """``{joint name: <limit velocity>}`` of the reduced tree's joints that give a positive one (rad/s, m/s);
-    a missing or zero velocity is left out (unknown), a negative or non-finite one is an error naming the joint."""
-    speeds = {}
+def _joint_speeds(tree: ET.Element, names: list[str], source: str) -> list[float] | None:
+    """The ``<limit velocity>`` of the joints ``names`` (rad/s, m/s), or None when one of them gives none or 0
+    (unknown); a negative or non-finite velocity of one of them is an error naming the joint."""
+    given = {}
     for joint in tree.iter("joint"):
         limit = joint.find("limit")
-        text = limit.get("velocity", "0") if limit is not None else "0"
+        given[joint.get("name")] = limit.get("velocity", "0") if limit is not None else "0"
+    speeds = []
+    for name in names:
+        text = given.get(name, "0")
         try:
             v = float(text)
         except ValueError:
-            raise RobotDefinitionError(
-                f"{source}: joint {joint.get('name')!r}: <limit velocity={text!r}> is not a number"
-            ) from None
+            v = math.nan
         if not math.isfinite(v) or v < 0:
             raise RobotDefinitionError(
-                f"{source}: joint {joint.get('name')!r}: <limit velocity={text!r}> must be a finite number >= 0 "
-                "(rad/s, m/s; 0: unknown)"
+                f"{source}: joint {name!r}: <limit velocity={text!r}> must be a finite number >= 0 (rad/s, m/s; "
+                "0: unknown)"
             )
-        if v > 0:
-            speeds[joint.get("name")] = v
-    return speeds
+        speeds.append(v)
+    return speeds if all(v > 0 for v in speeds) else None
 
 
 # ---------------------------------------------------------------------------
