@@ -17,6 +17,8 @@ YAML schema (see ``shared/spec/interface.md``)::
       - {axis: [0, 0, 1], point: [0, 0, 0], limits: [-180, 180]}            # poe, revolute
       - {type: prismatic, axis: [0, 0, 1], limits: [0, 500]}                 # poe, prismatic
     home: {position: [x, y, z], rotation: [[...], [...], [...]]}           # poe only
+    vel_limits: [v1, v2, ...]   # optional, one per joint: largest joint speeds (file's units per second)
+    acc_limits: [a1, a2, ...]   # optional: largest joint accelerations (file's units per second squared)
 
 Joint fields:
 
@@ -33,6 +35,13 @@ Joint fields:
   (required: a slide has no natural default range), which bound ``q``. ``theta`` (dh, mdh; file's
   angle unit, default 0) is the joint's constant DH angle. In poe, ``point`` may be given and plays
   no part (a translation has no axis position).
+- ``vel``, ``acc`` (optional, > 0): the joint's largest speed and acceleration in the file's units per second
+  (per second squared): ``angles: deg`` means deg/s (deg/s^2) for a revolute joint, ``unit: mm`` means mm/s
+  (mm/s^2) for a prismatic one. Give them for every joint or for none; they become :attr:`Robot.vel_limits` /
+  :attr:`Robot.acc_limits` (SI). The top-level ``vel_limits`` / ``acc_limits`` lists say the same in one line
+  (not both ways in one file); in a file pointing at a URDF they replace the URDF's ``<limit velocity>``
+  (a URDF has no acceleration limit). Zero, negative or non-finite values are errors naming the joint; none
+  of this changes the kinematics or the definition hash.
 
 or, for an arm described by a URDF: ``{name: ..., urdf: path/relative/to/this/file.urdf,
 end_link: ..., root_link: ..., base: ..., tool: ...}``. Unknown keys are errors, so a typo never goes unnoticed.
@@ -65,6 +74,7 @@ from nik.errors import RobotDefinitionError
 from nik.poses import rpy_to_matrix
 from nik.robots.frames import as_frame, with_frames
 from nik.robots.model import Robot, dh_chain, mdh_chain, poe_chain
+from nik.robots.rates import check_rates
 
 __all__ = ["BUILTIN_DIR", "builtin_robots", "load_robot", "robot_from_config"]
 
@@ -85,9 +95,11 @@ _TOP_KEYS = {
     "root_link",
     "description",
     "flange",
+    "vel_limits",
+    "acc_limits",
 }
-_DH_KEYS = {"alpha", "a", "d", "offset", "limits", "name", "theta", "type"}
-_POE_KEYS = {"axis", "point", "offset", "limits", "name", "type"}
+_DH_KEYS = {"alpha", "a", "d", "offset", "limits", "name", "theta", "type", "vel", "acc"}
+_POE_KEYS = {"axis", "point", "offset", "limits", "name", "type", "vel", "acc"}
 _JOINT_TYPES = ("revolute", "prismatic")
 
 
@@ -264,6 +276,37 @@ def robot_from_config(
         robot = with_frames(_chain_from_config(data, source, length, angle), **frames)
     if flange is not None:
         robot.flange_link, robot.flange = flange_link, torch.from_numpy(flange)
+    return _with_rates(robot, data, source, length, angle)
+
+
+def _with_rates(robot: Robot, data: dict, source: str, length: float, angle: float) -> Robot:
+    """``robot`` with the file's joint speed and acceleration limits (``vel`` / ``acc`` per joint or the top-level
+    ``vel_limits`` / ``acc_limits``, file's units per second), in SI; the robot as it is where the file gives none."""
+    joints = data.get("joints") if isinstance(data.get("joints"), list) else []
+    per_unit = np.array([length if p else angle for p in robot.prismatic.tolist()])
+    for key, field in (("vel_limits", "vel"), ("acc_limits", "acc")):
+        given = [j.get(field) if isinstance(j, dict) else None for j in joints]
+        per_joint = any(v is not None for v in given)
+        if per_joint and key in data:
+            raise RobotDefinitionError(f"{source}: give '{key}' or '{field}' per joint, not both")
+        if per_joint:
+            missing = [i for i, v in enumerate(given) if v is None]
+            if missing:
+                i = missing[0]
+                raise RobotDefinitionError(
+                    f"{source}: joints[{i}] ({robot.joint_names[i]}): missing '{field}' (give it for every joint or "
+                    "none)"
+                )
+            values = given
+        elif key in data:
+            values = data[key]
+        else:
+            continue
+        try:
+            raw = check_rates(values, robot.dof, what=key if not per_joint else field, names=robot.joint_names)
+        except ValueError as err:
+            raise RobotDefinitionError(f"{source}: {err}") from None
+        setattr(robot, key, raw * torch.from_numpy(per_unit))
     return robot
 
 

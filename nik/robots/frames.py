@@ -100,6 +100,8 @@ def with_frames(robot, *, base=None, tool=None):
         end_link=robot.end_link,
         source=robot.source,
         prismatic=robot.prismatic,
+        vel_limits=robot.vel_limits,
+        acc_limits=robot.acc_limits,
     )
     out.flange_link, out.flange = robot.flange_link, robot.flange
     out.base = _compose(B, robot.base, left=True)

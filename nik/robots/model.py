@@ -14,6 +14,7 @@ import torch
 
 from nik.kinematics import FKKernel, chain_jacobian, to_homogeneous
 from nik.poses import validate_joints
+from nik.robots.rates import check_rates
 
 __all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
 __all__ += ["register_collision_model"]  # nik.collision registers the builder of Robot.collision_spheres
@@ -215,6 +216,10 @@ class Robot:
         end_link: tool link name for URDF arms, else None (with a ``tool`` frame, FK is at that link times it).
         base, tool: (4, 4) float64 base and tool (TCP) frames already folded into ``G`` (``T = base @ ... @ tool``),
             or None; see :mod:`nik.robots.frames`.
+        vel_limits, acc_limits: (dof,) float64 tensors, the largest joint speed (rad/s; m/s for prismatic
+            joints) and acceleration (rad/s^2; m/s^2), or None where unknown; assignable, checked by
+            :func:`nik.robots.rates.check_rates`. Not part of the kinematics: neither :meth:`to_definition` nor
+            :attr:`definition_hash` holds them.
         G: (dof + 1, 4, 4) float64 normal-form transforms (see :mod:`nik.kinematics`).
         offsets: (dof,) float64, ``theta = q + offset`` (revolute) or ``d = q + offset`` (prismatic).
     """
@@ -230,6 +235,8 @@ class Robot:
         end_link: str | None = None,
         source: str | None = None,
         prismatic: Sequence[bool] | torch.Tensor | None = None,
+        vel_limits=None,
+        acc_limits=None,
     ):
         self.G = torch.as_tensor(np.asarray(G, dtype=float), dtype=torch.float64)
         n = self.G.shape[0] - 1
@@ -250,6 +257,8 @@ class Robot:
             self.prismatic = flags
         self.end_link = end_link
         self.source = source
+        self.vel_limits = vel_limits
+        self.acc_limits = acc_limits
         #: base and tool frames folded into ``G`` by :func:`nik.robots.frames.with_frames` ((4, 4) float64,
         #: metres), recorded for reports; None when the definition has none of its own.
         self.base: torch.Tensor | None = None
@@ -262,6 +271,25 @@ class Robot:
         self._kernel: FKKernel | None = None
         self._arrays: tuple[np.ndarray, np.ndarray] | None = None
         self._arm: Robot | None = None  # the arm without base/tool frames (set by nik.robots.frames.with_frames)
+
+    # -- rate limits (not kinematics: outside the definition and its hash) --
+    @property
+    def vel_limits(self) -> torch.Tensor | None:
+        """(dof,) float64 largest joint speeds, rad/s (m/s for prismatic joints), or None where unknown."""
+        return self._vel_limits
+
+    @vel_limits.setter
+    def vel_limits(self, values) -> None:
+        self._vel_limits = check_rates(values, self.dof, what="vel_limits", names=self.joint_names, where=self.name)
+
+    @property
+    def acc_limits(self) -> torch.Tensor | None:
+        """(dof,) float64 largest joint accelerations, rad/s^2 (m/s^2 for prismatic joints), or None."""
+        return self._acc_limits
+
+    @acc_limits.setter
+    def acc_limits(self, values) -> None:
+        self._acc_limits = check_rates(values, self.dof, what="acc_limits", names=self.joint_names, where=self.name)
 
     # -- identity -------------------------------------------------------
     @property

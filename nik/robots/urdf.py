@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 #: Version of the cached parse results (bump when the conversion to the normal form changes).
-URDF_CACHE_FORMAT = 4  # 3: conventional names preferred, grippers left out; 4: a hand link (Baxter's) is one
+URDF_CACHE_FORMAT = 5  # 3: conventional names preferred, grippers left out; 4: a hand link (Baxter's) is one; 5: vel_limits
 
 #: joint types of the URDF format; floating and planar joints are kept as fixed (an error only on the arm's chain)
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
@@ -322,6 +322,11 @@ def load_urdf(
     prismatic joint of the robot (its value in metres along its axis, limits from the file, which
     must give them); fixed joints are merged into the constant transforms.
 
+    :attr:`Robot.vel_limits` are the arm joints' ``<limit velocity=...>`` (rad/s, m/s) when every arm joint gives a
+    positive one (a missing or zero velocity, a common placeholder, means unknown: then None); a negative or
+    non-finite velocity is a :class:`RobotDefinitionError` naming the joint. URDF has no acceleration limit:
+    :attr:`Robot.acc_limits` is None (a YAML robot file pointing at the URDF may give both, :mod:`nik.robots.config`).
+
     The result is kept in nik's user cache folder (``$XDG_CACHE_HOME/nik/robots``, default
     ``~/.cache/nik/robots``) under the SHA-256 of the file's bytes, these arguments, the installed
     pytorch-kinematics and :data:`URDF_CACHE_FORMAT`, with a checksum verified on load: importing
@@ -410,8 +415,32 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
         end_link=end_link,
         source=str(path),
         prismatic=builder.prismatic,
+        vel_limits=_joint_speeds(tree, names, str(path)),
     )
     return robot, choice
+
+
+def _joint_speeds(tree: ET.Element, names: list[str], source: str) -> list[float] | None:
+    """The ``<limit velocity>`` of the joints ``names`` (rad/s, m/s), or None when one of them gives none or 0
+    (unknown); a negative or non-finite velocity of one of them is an error naming the joint."""
+    given = {}
+    for joint in tree.iter("joint"):
+        limit = joint.find("limit")
+        given[joint.get("name")] = limit.get("velocity", "0") if limit is not None else "0"
+    speeds = []
+    for name in names:
+        text = given.get(name, "0")
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if not math.isfinite(v) or v < 0:
+            raise RobotDefinitionError(
+                f"{source}: joint {name!r}: <limit velocity={text!r}> must be a finite number >= 0 (rad/s, m/s; "
+                "0: unknown)"
+            )
+        speeds.append(v)
+    return speeds if all(v > 0 for v in speeds) else None
 
 
 # ---------------------------------------------------------------------------
@@ -454,6 +483,8 @@ def _cached_robot(key: str, path: Path) -> tuple[Robot, EndLinkChoice | None] | 
             end_link=d.get("end_link"),
             source=str(path),
             prismatic=d.get("prismatic"),
+            vel_limits=d.get("vel_limits"),
+            acc_limits=d.get("acc_limits"),
         )
         c = doc.get("choice")
         if c is not None:
@@ -467,6 +498,10 @@ def _store_robot(key: str, robot: Robot, choice: EndLinkChoice | None) -> None:
     """Write ``robot``'s definition and how its default tool link was chosen under ``key`` (temporary name, then
     rename); silently skipped when the folder is not writable."""
     d = robot.to_definition()
+    for rate in ("vel_limits", "acc_limits"):  # outside the definition (not kinematics); cached with it
+        value = getattr(robot, rate)
+        if value is not None:
+            d[rate] = value.tolist()
     c = None if choice is None else dataclasses.asdict(choice)
     body = json.dumps([d, c], sort_keys=True)
     sha = hashlib.sha256(body.encode()).hexdigest()
