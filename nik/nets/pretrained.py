@@ -96,7 +96,10 @@ def save(
 def load(robot, directory: str | Path | None = None):
     """The network for ``robot`` (a :class:`nik.Robot`, built-in name or robot file), eval mode: the pair
     in ``directory`` (default: the user folder, then the shipped one; :mod:`nik.nets.registry`) whose
-    recorded robot hash is the robot's definition hash, whatever its name. Its weights' SHA-256 is checked.
+    recorded robot hash is the robot's definition hash, else that of its bare arm (:attr:`nik.Robot.arm`: base and
+    tool frames left out, so the built-in arms' flanges keep their networks), whatever its name. Its weights' SHA-256
+    is checked. A network found for the bare arm guesses in the bare arm's frame (its ``robot`` is ``robot.arm``):
+    for a robot with frames, give it ``base^-1 @ T @ tool^-1`` (:class:`nik.IKSolver` does).
 
     Raises:
         CheckpointError: no network for this robot's definition (the message names the robots that have
@@ -106,6 +109,10 @@ def load(robot, directory: str | Path | None = None):
         robot = load_robot(robot)
     dirs = [Path(directory)] if directory is not None else None
     path = find_network(robot, dirs)
+    if path is None and robot.arm is not robot:
+        path = find_network(robot.arm, dirs)
+        if path is not None:
+            robot = robot.arm
     if path is None:
         have = sorted({st.stem for st, _ in index(dirs)})
         same_name = [st for st, h in index(dirs) if st.stem == robot.name]
