@@ -27,7 +27,7 @@ from numba.core import config as _numba_config
 
 from nik.kernels.cache import choose_cache, user_cache_folder
 
-__all__ = ["CACHE", "kernel"]
+__all__ = ["CACHE", "entry_point", "kernel"]
 
 #: The cache location chosen once, when the kernels room is first imported.
 CACHE = choose_cache()
@@ -97,3 +97,18 @@ def kernel(fn=None, *, fastmath=False):
         return _cached_loads_without_refresh(
             numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath)(fn)
         )
+
+
+def entry_point(dispatcher, *args):
+    """The compiled function behind ``dispatcher`` for the numba types of ``args`` (loaded or compiled now), or
+    ``dispatcher`` itself where numba offers none (``NUMBA_DISABLE_JIT``, another numba).
+
+    Calling it skips numba's dispatch (the type of every argument, the choice of an overload: 0.3-0.5 us of the
+    1 us a small kernel call costs), so it serves calls of a microsecond. The caller must pass arguments of
+    exactly these types (an array of another dtype, number of dimensions or layout is read as if it were one of
+    these): a hot path that builds its arguments itself, e.g. :meth:`nik.Robot.fk` of one configuration."""
+    try:
+        found = dispatcher.compile(tuple(dispatcher.typeof_pyval(arg) for arg in args))
+    except Exception:  # noqa: BLE001 - numba's dispatch still answers
+        return dispatcher
+    return found if callable(found) else dispatcher
