@@ -486,16 +486,19 @@ class Robot:
         T = _from_numpy(out[0] if len(shape) == 1 else out.reshape(*shape[:-1], 4, 4))
         return T if dtype is _F64 else T.to(dtype)
 
-    def fk_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def fk_and_jacobian(self, q):
         """FK and geometric Jacobian in the base frame.
 
         Args:
-            q: (..., dof) radians (metres for prismatic joints).
+            q: (..., dof) radians (metres for prismatic joints); a tensor, or a numpy array (or a list).
 
         Returns:
             ``T: (..., 4, 4)`` and ``J: (..., 6, dof)`` (rows: linear then angular velocity; a prismatic
-            joint's column is its unit axis, then zeros).
+            joint's column is its unit axis, then zeros); numpy arrays for a numpy ``q`` (as :meth:`fk`).
         """
+        if not isinstance(q, _Tensor):
+            T, J = self.fk_and_jacobian(_tensor_of(_joint_array(q)))
+            return T.numpy(), J.numpy()
         validate_joints(q, self.dof)
         G, off = self._params(q)
         batch = q.shape[:-1]
@@ -543,12 +546,18 @@ class Robot:
         hi = torch.where(hi.double() > lim[:, 1], torch.nextafter(hi, lo), hi)
         return lo, hi
 
-    def within_limits(self, q: torch.Tensor, *, atol: float = 0.0) -> torch.Tensor:
-        """``(...,)`` bool: every joint of ``q: (..., dof)`` inside ``[lower - atol, upper + atol]``."""
+    def within_limits(self, q, *, atol: float = 0.0):
+        """``(...,)`` bool: every joint of ``q: (..., dof)`` inside ``[lower - atol, upper + atol]`` (a numpy bool
+        array for a numpy ``q``)."""
+        if not isinstance(q, _Tensor):
+            return self.within_limits(_tensor_of(_joint_array(q)), atol=atol).numpy()
         lo, hi = self.limits_as(q)
         return ((q >= lo - atol) & (q <= hi + atol)).all(dim=-1)
 
-    def clamp(self, q: torch.Tensor) -> torch.Tensor:
-        """``q: (..., dof)`` clamped into the joint limits."""
+    def clamp(self, q):
+        """``q: (..., dof)`` clamped into the joint limits (a numpy array for a numpy ``q``, float32 kept, float64
+        for any other dtype)."""
+        if not isinstance(q, _Tensor):
+            return self.clamp(_tensor_of(_joint_array(q))).numpy()
         lo, hi = self.limits_as(q)
         return torch.minimum(torch.maximum(q, lo), hi)
