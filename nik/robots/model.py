@@ -367,7 +367,9 @@ class Robot:
             self._cache[key] = (self.G.to(like.device, like.dtype), self.offsets.to(like.device, like.dtype))
         return self._cache[key]
 
-    def fk(self, q, *, compiled: bool = False, check: bool = True):
+    def fk(
+        self, q: torch.Tensor | np.ndarray, *, compiled: bool = False, check: bool = True
+    ) -> torch.Tensor | np.ndarray:
         """Forward kinematics.
 
         Args:
@@ -486,7 +488,9 @@ class Robot:
         T = _from_numpy(out[0] if len(shape) == 1 else out.reshape(*shape[:-1], 4, 4))
         return T if dtype is _F64 else T.to(dtype)
 
-    def fk_and_jacobian(self, q):
+    def fk_and_jacobian(
+        self, q: torch.Tensor | np.ndarray
+    ) -> tuple[torch.Tensor, torch.Tensor] | tuple[np.ndarray, np.ndarray]:
         """FK and geometric Jacobian in the base frame.
 
         Args:
@@ -546,7 +550,7 @@ class Robot:
         hi = torch.where(hi.double() > lim[:, 1], torch.nextafter(hi, lo), hi)
         return lo, hi
 
-    def within_limits(self, q, *, atol: float = 0.0):
+    def within_limits(self, q: torch.Tensor | np.ndarray, *, atol: float = 0.0) -> torch.Tensor | np.ndarray:
         """``(...,)`` bool: every joint of ``q: (..., dof)`` inside ``[lower - atol, upper + atol]`` (a numpy bool
         array for a numpy ``q``)."""
         if not isinstance(q, _Tensor):
@@ -554,7 +558,7 @@ class Robot:
         lo, hi = self.limits_as(q)
         return ((q >= lo - atol) & (q <= hi + atol)).all(dim=-1)
 
-    def clamp(self, q):
+    def clamp(self, q: torch.Tensor | np.ndarray) -> torch.Tensor | np.ndarray:
         """``q: (..., dof)`` clamped into the joint limits (a numpy array for a numpy ``q``, float32 kept, float64
         for any other dtype)."""
         if not isinstance(q, _Tensor):
