@@ -1,16 +1,15 @@
 """From a fresh process to the first one-pose solve, against ``python -c "import torch"``.
 
-Each round starts, in turn, a process that only imports torch and one that runs the whole first solve
-(``import nik``, ``load_robot``, ``IKSolver``, ``solve`` of one pose), the two interleaved; each is timed from
-its start to the moment it is done (torch imported; the pose solved), not to its exit, by the wall clock and by
-the CPU time the process used (the column to read on a machine shared with other work: waiting for a core does
-not count). The table gives medians
-over the rounds and the difference. The solve process also reports where its time went, and the
-cost of a second ``IKSolver`` of the same robot; numba's import and the import of the kernel modules are
-timed apart (the first solve would do both), and ``second solve`` is a warm call for comparison. Caches are
-warm (the compiled kernels and the parsed URDF from an earlier run: the first round after a change is left
-out), and so is Python's bytecode: the processes run without ``PYTHONDONTWRITEBYTECODE`` (with it, each one
-compiles nik's sources again, 0.1-0.2 s, which no installed copy does).
+Each round starts, in turn, a process that only imports torch and one that runs the whole first solve (``import
+nik``, ``load_robot``, ``IKSolver``, ``solve`` of one pose), the two interleaved; each is timed from its start to
+the moment it is done (torch imported; the pose solved), not to its exit, by the wall clock and by the CPU time the
+process used (the column to read on a machine shared with other work: waiting for a core does not count). The table
+gives medians over the rounds and the difference. The solve process also reports where its time went, and the cost
+of a second ``IKSolver`` of the same robot; numba's import and the import of the kernel modules are timed apart (the
+first solve would do both), and ``second solve`` is a warm call for comparison. Caches are warm (the compiled
+kernels and the parsed URDF from an earlier run: the first round after a change is left out), and so is Python's
+bytecode: the processes run without ``PYTHONDONTWRITEBYTECODE`` (with it, each one compiles nik's sources again,
+0.1-0.2 s, which no installed copy does).
 
     python benchmarks/startup.py                 # panda, 7 rounds
     python benchmarks/startup.py --robot ur5 --rounds 11
