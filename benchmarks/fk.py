@@ -5,10 +5,10 @@ Both run in this process, on the same joint samples; the table gives configurati
 second and the ratio nik / pytorch-kinematics.
 
 The second table (skipped when Pinocchio is not installed: ``pip install pin``) times one configuration per
-call, float64: ``robot.fk(q)`` (a tensor in, a tensor out) against Pinocchio's ``forwardKinematics`` +
-``updateFramePlacements`` on the same URDF (the joints nik does not model, e.g. the Panda's fingers, locked
-at 0), the two interleaved by blocks of calls over the same 64 configurations; medians over the blocks (and
-the ratio of the fastest blocks).
+call, float64: ``robot.fk(q)`` with a tensor in and out, and with a numpy array in and out (as Pinocchio takes and
+gives), against Pinocchio's ``forwardKinematics`` + ``updateFramePlacements`` on the same URDF (the joints nik
+does not model, e.g. the Panda's fingers, locked at 0), the three interleaved by blocks of calls over the same 64
+configurations; medians over the blocks (and the ratios of the fastest blocks).
 
     python benchmarks/fk.py            # panda (7-DOF) and ur5 (6-DOF), batch 1 / 1,000 / 100,000, float32 / float64
     python benchmarks/fk.py --quick    # smaller batches, fewer repeats
@@ -68,8 +68,8 @@ def pinocchio_model(robot):
 
 
 def time_one_configuration(robot, blocks: int, calls: int) -> dict[str, list[float]]:
-    """Microseconds per call of ``robot.fk(q)`` and of Pinocchio's FK + frame update, one block of ``calls``
-    configurations after the other, ``blocks`` times each, interleaved."""
+    """Microseconds per call of ``robot.fk(q)`` (a tensor, then a numpy array) and of Pinocchio's FK + frame update,
+    one block of ``calls`` configurations after the other, ``blocks`` times each, interleaved."""
     import pinocchio as pin
 
     model, data, _ = pinocchio_model(robot)
@@ -81,16 +81,22 @@ def time_one_configuration(robot, blocks: int, calls: int) -> dict[str, list[flo
         for q in qs:
             fk(q)
 
+    def run_numpy():
+        for q in qn:
+            fk(q)
+
     def run_pin():
         for q in qn:
             forward(model, data, q)
             frames(model, data)
 
-    times = {"nik": [], "pin": []}
+    times = {"nik": [], "numpy": [], "pin": []}
+    runs = (("nik", run_nik), ("numpy", run_numpy), ("pin", run_pin))
     for _ in range(3):
-        run_nik(), run_pin()
+        for _, run in runs:
+            run()
     for _ in range(blocks):
-        for key, run in (("nik", run_nik), ("pin", run_pin)):
+        for key, run in runs:
             start = time.perf_counter()
             run()
             times[key].append((time.perf_counter() - start) / calls * 1e6)
@@ -103,12 +109,19 @@ def one_configuration(robots, blocks: int, calls: int = 64) -> None:
         print("\nPinocchio is not installed (pip install pin): one-configuration comparison skipped")
         return
     print(f"\none configuration per call, float64, {blocks} blocks of {calls} calls each, interleaved; microseconds")
-    print("\n| robot | nik robot.fk | Pinocchio FK + frames | nik / Pinocchio | best block nik / Pinocchio |")
-    print("|---|---:|---:|---:|---:|")
+    print(
+        "\n| robot | nik robot.fk, tensor | nik robot.fk, numpy | Pinocchio FK + frames | tensor / Pinocchio "
+        "| numpy / Pinocchio | best blocks, tensor / numpy / Pinocchio |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---|")
     for name in robots:
         times = time_one_configuration(nik.load_robot(name), blocks, calls)
-        a, b = statistics.median(times["nik"]), statistics.median(times["pin"])
-        print(f"| {name} | {a:.2f} | {b:.2f} | {a / b:.2f}x | {min(times['nik']) / min(times['pin']):.2f}x |")
+        a, n, b = (statistics.median(times[key]) for key in ("nik", "numpy", "pin"))
+        best = [min(times[key]) for key in ("nik", "numpy", "pin")]
+        print(
+            f"| {name} | {a:.2f} | {n:.2f} | {b:.2f} | {a / b:.2f}x | {n / b:.2f}x "
+            f"| {best[0] / best[2]:.2f}x / {best[1] / best[2]:.2f}x |"
+        )
 
 
 def main() -> None:

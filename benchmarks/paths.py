@@ -11,7 +11,8 @@ Per path, in one process, the solvers interleaved (the order rotates from path t
   ``solve_path(T, q_start=q0)`` from the configuration the path was made from;
 - ``chain``: the hand-made chain ``solve(T[0])`` (or ``q_near=q0``), then ``solve(T[i], q_near=q[i-1])``;
 - ``rtb``: Robotics Toolbox ``ik_LM`` seeded with the previous waypoint's answer (from ``q0``), joint limits on,
-  ``tol=1e-10`` as in ``benchmarks/peers.py``; its model is built from nik's own normal form (the same FK).
+  nik's tolerance as in ``benchmarks/peers.py`` (``RTB_TOL``, ``RTB_MASK``); its model is built from nik's own normal
+  form (the same FK).
 
 Closed-form arms (ur5, kuka_kr): the exhaustive check takes all 8 branches of every waypoint (the torch closed
 form, ``nik.analytic.solve``, not the compiled one solve_path uses) and finds the smallest largest step any branch
@@ -27,6 +28,7 @@ Speed: median time per waypoint over the paths (each path timed once per solver)
 over solve_path's (from q0).
 
     python benchmarks/paths.py                 # 40 lines + 40 circles per arm (a few minutes)
+    python benchmarks/paths.py --out benchmarks/results/paths   # also writes the table to paths.md
     python benchmarks/paths.py --paths 5       # a smoke run
 """
 
@@ -36,6 +38,7 @@ import argparse
 import io
 import itertools
 import math
+import os
 import statistics
 import sys
 import time
@@ -52,6 +55,9 @@ sys.path.insert(0, str(ROOT))
 import nik  # noqa: E402
 from nik.analytic import solve as closed_form_solutions  # noqa: E402
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from peers import RTB_MASK, RTB_TOL  # noqa: E402  (ik_LM given nik's tolerance)
 
 ARMS = ("ur5", "kuka_kr", "panda", "xarm7")
 N_WAYPOINTS = 60
@@ -189,7 +195,7 @@ def run_rtb(ets, T, q0):
     prev = q0.numpy()
     t = time.perf_counter()
     for i in range(Tn.shape[0]):
-        prev = q[i] = ets.ik_LM(Tn[i], q0=prev, tol=1e-10, joint_limits=True).q
+        prev = q[i] = ets.ik_LM(Tn[i], q0=prev, tol=RTB_TOL, mask=RTB_MASK, joint_limits=True).q
     return q, time.perf_counter() - t
 
 
@@ -262,13 +268,20 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--paths", type=int, default=40, help="lines and as many circles per arm (default 40)")
     parser.add_argument("--arms", default=",".join(ARMS), help="comma-separated arms")
+    parser.add_argument("--out", default=None, help="also write the table to OUT.md, with the command that made it")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    print(
+    lines = []
+
+    def say(line: str) -> None:
+        print(line, flush=True)
+        lines.append(line)
+
+    say(
         "| arm | paths | feasible | goal met: solve_path | hand-made chain | rtb ik_LM | "
         "us/waypoint: solve_path from q_start (no q_start) | chain | rtb | rtb / solve_path | chain / solve_path |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    say("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.arms.split(","):
         for kind, row in bench_arm(name, args.paths).items():
             med = {k: statistics.median(v) * 1e6 for k, v in row["times"].items()}
@@ -281,11 +294,19 @@ def main(argv=None) -> int:
             else:
                 met = (m.get("solve_path (q_start)", 0), m.get("chain (q_near)", 0), m.get("rtb", "n/a"))
             met = [f"{v} / {f}" if isinstance(v, int) else v for v in met]
-            print(
+            say(
                 f"| {name} {kind}s | {row['paths']} | {f} | {met[0]} | {met[1]} | {met[2]} | {sp:.1f}{free} | "
-                f"{chain:.1f} | {rtb:.1f} | {rtb / sp:.1f}x | {chain / sp:.1f}x |",
-                flush=True,
+                f"{chain:.1f} | {rtb:.1f} | {rtb / sp:.1f}x | {chain / sp:.1f}x |"
             )
+    if args.out:
+        command = "python benchmarks/paths.py " + " ".join(sys.argv[1:] if argv is None else argv)
+        text = (
+            f"`{command.strip()}` (one process, one thread; see the script's docstring)\n\n" + "\n".join(lines) + "\n"
+        )
+        path = Path(args.out).with_suffix(".md")
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)  # written whole, then renamed
     return 0
 
 

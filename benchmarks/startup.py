@@ -1,14 +1,15 @@
 """From a fresh process to the first one-pose solve, against ``python -c "import torch"``.
 
-Each round starts, in turn, a process that only imports torch and one that runs the whole first solve
-(``import nik``, ``load_robot``, ``IKSolver``, ``solve`` of one pose), the two interleaved; each is timed from
-its start to the moment it is done (torch imported; the pose solved), not to its exit. The table gives medians
-over the rounds and the difference. The solve process also reports where its time went, and the
-cost of a second ``IKSolver`` of the same robot; numba's import and the import of the kernel modules are
-timed apart (the first solve would do both), and ``second solve`` is a warm call for comparison. Caches are
-warm (the compiled kernels and the parsed URDF from an earlier run: the first round after a change is left
-out), and so is Python's bytecode: the processes run without ``PYTHONDONTWRITEBYTECODE`` (with it, each one
-compiles nik's sources again, 0.1-0.2 s, which no installed copy does).
+Each round starts, in turn, a process that only imports torch and one that runs the whole first solve (``import
+nik``, ``load_robot``, ``IKSolver``, ``solve`` of one pose), the two interleaved; each is timed from its start to
+the moment it is done (torch imported; the pose solved), not to its exit, by the wall clock and by the CPU time the
+process used (the column to read on a machine shared with other work: waiting for a core does not count). The table
+gives medians over the rounds and the difference. The solve process also reports where its time went, and the cost
+of a second ``IKSolver`` of the same robot; numba's import and the import of the kernel modules are timed apart (the
+first solve would do both), and ``second solve`` is a warm call for comparison. Caches are warm (the compiled
+kernels and the parsed URDF from an earlier run: the first round after a change is left out), and so is Python's
+bytecode: the processes run without ``PYTHONDONTWRITEBYTECODE`` (with it, each one compiles nik's sources again,
+0.1-0.2 s, which no installed copy does).
 
     python benchmarks/startup.py                 # panda, 7 rounds
     python benchmarks/startup.py --robot ur5 --rounds 11
@@ -27,7 +28,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-_TORCH = "import time\nimport torch\nprint(time.time())"
+_TORCH = "import time\nimport torch\nprint(time.process_time())\nprint(time.time())"
 
 _SOLVE = """
 import json, time
@@ -47,7 +48,7 @@ t6 = time.perf_counter()
 T = torch.tensor({pose!r}, dtype=torch.float64)
 res = solver.solve(T)
 t7 = time.perf_counter()
-done = time.time()
+done, cpu = time.time(), time.process_time()
 solver.solve(T, seed=1)
 t8 = time.perf_counter()
 nik.IKSolver(robot)
@@ -55,13 +56,14 @@ t9 = time.perf_counter()
 print(json.dumps({{"import torch": t1 - t0, "import nik": t2 - t1, "load_robot": t3 - t2, "IKSolver": t4 - t3,
                   "import numba": t5 - t4, "kernel modules": t6 - t5, "first solve": t7 - t6,
                   "second solve": t8 - t7, "second IKSolver": t9 - t8, "success": bool(res.success.all()),
-                  "source": res.source, "done": done}}))
+                  "source": res.source, "done": done, "cpu": cpu}}))
 """
 
 
 def run(code: str) -> tuple[float, str]:
     """Seconds from starting the process to the moment it reports (its last line: a wall-clock time, or JSON
-    with ``done``), so that the process's exit is not counted; and its output."""
+    with ``done``), so that the process's exit is not counted; and its output (whose line before a wall-clock time,
+    or whose JSON's ``cpu``, is the CPU time the process had used by then)."""
     start = time.time()
     env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
@@ -84,17 +86,20 @@ def main() -> None:
     pose = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(5), dtype=torch.float64))[0].tolist()
     code = _SOLVE.format(robot=args.robot, pose=pose)
     run(code)  # warms the caches (kernels, URDF) if a change left them cold
-    base, full, parts = [], [], []
+    base, full, parts, base_cpu = [], [], [], []
     for _ in range(args.rounds):
-        base.append(run(_TORCH)[0])
+        dt, out = run(_TORCH)
+        base.append(dt)
+        base_cpu.append(float(out.strip().splitlines()[-2]))
         dt, out = run(code)
         full.append(dt)
         parts.append(json.loads(out.strip().splitlines()[-1]))
     b, f = statistics.median(base), statistics.median(full)
-    print(f"{args.robot}, {args.rounds} rounds, medians (s):")
-    print(f"  start to torch imported             {b:.3f}")
-    print(f"  fresh process to first solve        {f:.3f}")
-    print(f"  difference                          {f - b:.3f}")
+    bc, fc = statistics.median(base_cpu), statistics.median(p["cpu"] for p in parts)
+    print(f"{args.robot}, {args.rounds} rounds, medians (s):      wall    CPU")
+    print(f"  start to torch imported             {b:.3f}  {bc:.3f}")
+    print(f"  fresh process to first solve        {f:.3f}  {fc:.3f}")
+    print(f"  difference                          {f - b:.3f}  {fc - bc:.3f}")
     print("  inside the solve process:")
     keys = ("import torch", "import nik", "load_robot", "IKSolver", "import numba", "kernel modules", "first solve")
     for key in keys + ("second solve", "second IKSolver"):

@@ -253,6 +253,73 @@ def test_fk_rejects_nan_and_wrong_last_dimension():
         robot.fk(torch.zeros(2, 7))
 
 
+@pytest.mark.parametrize("name", ["panda", "stanford"])
+def test_fk_of_numpy_joints_is_numpy_equal_to_the_torch_fk(name):
+    robot = nik.load_robot(name)
+    q = random_q(robot, 6, seed=3)
+    reference = robot.fk(q, check=True)
+    strided = np.stack([q.numpy(), -q.numpy()], axis=-1)[..., 0]  # q's values, not contiguous
+    readonly = q.numpy().copy()
+    readonly.flags.writeable = False
+    for given, expected in (
+        (q[0].numpy(), reference[0]),
+        (q.numpy(), reference),
+        (q.numpy().reshape(2, 3, robot.dof), reference.reshape(2, 3, 4, 4)),
+        (strided[2], reference[2]),
+        (readonly, reference),
+        (q[1].tolist(), reference[1]),
+    ):
+        T = robot.fk(given)
+        assert isinstance(T, np.ndarray) and T.dtype == np.float64 and T.shape == expected.shape
+        np.testing.assert_allclose(T, expected.numpy(), atol=1e-12, rtol=0)
+    T32 = robot.fk(q.numpy().astype(np.float32))
+    assert T32.dtype == np.float32
+    np.testing.assert_allclose(T32, reference.numpy(), atol=2e-6, rtol=0)
+    zeros = robot.fk(np.zeros(robot.dof, dtype=int))  # integers are radians (metres) too
+    np.testing.assert_allclose(zeros, robot.fk(torch.zeros(robot.dof, dtype=torch.float64)).numpy(), atol=0, rtol=0)
+
+
+def test_fk_of_numpy_joints_refuses_what_the_torch_fk_refuses():
+    robot = nik.load_robot("ur5")
+    bad = np.zeros(6)
+    bad[3] = np.inf
+    for given, match in ((bad, "NaN or inf"), (np.zeros((2, 5)), r"\(\.\.\., 6\)"), (["a"] * 6, "joint values")):
+        with pytest.raises(ValueError, match=match):
+            robot.fk(given)
+
+
+def test_fk_of_one_configuration_equals_the_batched_torch_fk_and_keeps_gradients():
+    robot = nik.load_robot("panda")
+    q = random_q(robot, 600, seed=4)  # over FK_COMPILED_MAX: the batch runs through torch
+    batched = robot.fk(q)
+    single = torch.stack([robot.fk(qi) for qi in q[:50]])
+    assert_close(single, batched[:50], atol=1e-12, rtol=0)
+    one = q[7].clone().requires_grad_(True)
+    T = robot.fk(one)  # a tensor that requires grad keeps the torch path
+    assert T.requires_grad and T.grad_fn is not None
+    assert_close(T.detach(), single[7], atol=1e-12, rtol=0)
+    T[:3, 3].sum().backward()
+    _, J = robot.fk_and_jacobian(q[7])
+    assert_close(one.grad, J[:3].sum(dim=0), atol=1e-12, rtol=0)
+
+
+def test_clamp_within_limits_and_jacobian_take_numpy_and_answer_numpy():
+    robot = nik.load_robot("stanford")
+    q = random_q(robot, 4, seed=5) * 3.0  # some joints past their limits
+    clamped = robot.clamp(q.numpy())
+    assert isinstance(clamped, np.ndarray)
+    np.testing.assert_array_equal(clamped, robot.clamp(q).numpy())
+    inside = robot.within_limits(q.numpy())
+    assert isinstance(inside, np.ndarray) and inside.dtype == bool
+    np.testing.assert_array_equal(inside, robot.within_limits(q).numpy())
+    assert not inside.all() and robot.within_limits(clamped).all()
+    T, J = robot.fk_and_jacobian(q[0].numpy())
+    T_ref, J_ref = robot.fk_and_jacobian(q[0])
+    assert isinstance(T, np.ndarray) and isinstance(J, np.ndarray)
+    np.testing.assert_allclose(T, T_ref.numpy(), atol=1e-12, rtol=0)
+    np.testing.assert_allclose(J, J_ref.numpy(), atol=1e-12, rtol=0)
+
+
 # ---------------------------------------------------------------------------
 # Prismatic joints
 # ---------------------------------------------------------------------------

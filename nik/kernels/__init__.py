@@ -36,6 +36,7 @@ _NAMES = {
     "chain_model": "nik.kernels.chain",
     "fk": "nik.kernels.chain",
     "fk_at": "nik.kernels.chain",
+    "fk_one_at": "nik.kernels.chain",
     "fk_batch": "nik.kernels.chain",
     "fk_jacobian": "nik.kernels.chain",
     "lm_options": "nik.kernels.lm",

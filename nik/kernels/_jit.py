@@ -12,6 +12,13 @@ runtime (NRT, a few milliseconds). nik's kernels therefore load their cached cod
 goes through numba's compiler, which refreshes the target itself. Should a load fail that way, or should
 numba's private cache API differ from the one expected, numba's own load runs.
 
+The cached code also records an "environment" per compiled function (the globals of the module that defined it,
+its constants), and numba rebuilds one by importing that module: for a kernel that allocates an array, numba's
+``numba.np.arrayobj`` and with it its unicode, hashing and charseq implementations (25-30 ms of CPU in a fresh
+process). Compiled nopython code never reads those globals (only object mode does), so while nik loads a kernel,
+the environment of a numba module not yet imported keeps the module's name in place of its globals
+(:func:`_rebuild_env_without_import`); a module already imported gives its globals as numba's own rebuild does.
+
 Building blocks (functions whose name starts with ``_``) are compiled into the kernels that call them, whose
 cached code holds them, so they are not cached on their own: each cached function costs numba a probe of
 its cache folder when it is decorated (a temporary file) and an index to read when it is first called.
@@ -20,6 +27,8 @@ its cache folder when it is decorated (a temporary file) and an index to read wh
 from __future__ import annotations
 
 import contextlib
+import importlib
+import sys
 import warnings
 
 import numba
@@ -27,7 +36,7 @@ from numba.core import config as _numba_config
 
 from nik.kernels.cache import choose_cache, user_cache_folder
 
-__all__ = ["CACHE", "kernel"]
+__all__ = ["CACHE", "entry_point", "kernel"]
 
 #: The cache location chosen once, when the kernels room is first imported.
 CACHE = choose_cache()
@@ -70,17 +79,41 @@ def _cached_loads_without_refresh(dispatcher):
     def load_overload(sig, target_context):
         found = None
         try:
+            from numba.core import environment
             from numba.core.runtime import nrt
 
             nrt.rtsys.initialize(target_context)  # what the loaded code calls (allocation, reference counts)
-            with cache._guard_against_spurious_io_errors():
-                found = cache._load_overload(sig, target_context)
+            rebuild = environment._rebuild_env  # what the pickled environments call (by name) as they are read
+            environment._rebuild_env = _rebuild_env_without_import
+            try:
+                with cache._guard_against_spurious_io_errors():
+                    found = cache._load_overload(sig, target_context)
+            finally:
+                environment._rebuild_env = rebuild
         except Exception:  # noqa: BLE001 - numba's own load below decides
             found = None
         return found if found is not None else numba_load(sig, target_context)
 
     cache.load_overload = load_overload
     return dispatcher
+
+
+def _rebuild_env_without_import(modname, consts, env_name):
+    """numba's ``environment._rebuild_env`` (read from a cache file), except that a numba module not yet imported
+    is not imported for its globals: the environment gets ``{"__name__": modname}`` (see the module docstring)."""
+    from numba.core import environment
+
+    env = environment.lookup_environment(env_name)
+    if env is not None:
+        return env
+    module = sys.modules.get(modname)
+    if module is None and not modname.startswith("numba."):
+        module = importlib.import_module(modname)
+    env = environment.Environment(module.__dict__ if module is not None else {"__name__": modname})
+    env.consts[:] = consts
+    env.env_name = env_name
+    environment.Environment._memo[env_name] = env
+    return env
 
 
 def kernel(fn=None, *, fastmath=False):
@@ -97,3 +130,18 @@ def kernel(fn=None, *, fastmath=False):
         return _cached_loads_without_refresh(
             numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath)(fn)
         )
+
+
+def entry_point(dispatcher, *args):
+    """The compiled function behind ``dispatcher`` for the numba types of ``args`` (loaded or compiled now), or
+    ``dispatcher`` itself where numba offers none (``NUMBA_DISABLE_JIT``, another numba).
+
+    Calling it skips numba's dispatch (the type of every argument, the choice of an overload: 0.15 us of the 0.6 us
+    a call with four arguments costs), for calls of a microsecond. The caller must pass arguments of
+    exactly these types (an array of another dtype, number of dimensions or layout is read as if it were one of
+    these): a hot path that builds its arguments itself, e.g. :meth:`nik.Robot.fk` of one configuration."""
+    try:
+        found = dispatcher.compile(tuple(dispatcher.typeof_pyval(arg) for arg in args))
+    except Exception:  # noqa: BLE001 - numba's dispatch still answers
+        return dispatcher
+    return found if callable(found) else dispatcher

@@ -40,6 +40,7 @@ __all__ = [
     "fk_at",
     "fk_batch",
     "fk_jacobian",
+    "fk_one_at",
 ]
 
 #: Columns of the ``joints`` table.
@@ -211,6 +212,17 @@ def fk_at(G, joints, address, T):
         _bottom_row(T[b])
         finite = finite and _finite(q[b])
     return finite
+
+
+@kernel
+def fk_one_at(G, joints, address, T):
+    """FK of the one configuration ``(n,)`` stored contiguously as float64 at ``address`` -> ``T: (4, 4)`` (written
+    in place). Returns True when every joint value is finite. As :func:`fk_at` for one configuration, without the
+    batch axis (:meth:`nik.Robot.fk` of one configuration returns ``T`` as it is)."""
+    q = carray(_float64_at(address), (joints.shape[0],))
+    _chain(G, joints, q, T)
+    _bottom_row(T)
+    return _finite(q)
 
 
 @kernel

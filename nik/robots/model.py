@@ -160,7 +160,7 @@ def poe_chain(axes, points, home: np.ndarray, *, prismatic=None) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------
-# the compiled path of Robot.fk
+# the compiled path of Robot.fk, and joint vectors given as numpy arrays
 # ---------------------------------------------------------------------------
 #: :meth:`Robot.fk` runs the compiled kernel for at most this many CPU configurations (float32/float64, no
 #: gradient wanted): measured one thread, panda and ur5, the kernel is 20x faster for one configuration, 3x for
@@ -168,8 +168,18 @@ def poe_chain(axes, points, home: np.ndarray, *, prismatic=None) -> np.ndarray:
 FK_COMPILED_MAX = 512
 
 _chain_module = None
+#: FK of one configuration, compiled entry points without numba's dispatch (see :func:`_fk_one_kernels`): of a
+#: tensor's address (:func:`nik.kernels.chain.fk_one_at`) and of a numpy array (:func:`nik.kernels.chain.fk`);
+#: None until the first call, False when the kernels are unavailable.
+_fk_one = _fk_one_np = None
 _Tensor, _F64, _F32 = torch.Tensor, torch.float64, torch.float32
-_grad_enabled, _from_numpy = torch.is_grad_enabled, torch.from_numpy
+_grad_enabled, _from_numpy, _empty, _ndarray, _NP_F64 = (
+    torch.is_grad_enabled,
+    torch.from_numpy,
+    np.empty,
+    np.ndarray,
+    np.dtype(np.float64),
+)
 
 
 def _chain_kernels():
@@ -195,6 +205,41 @@ def register_collision_model(builder) -> None:
     """Register ``builder(robot, **options) -> CollisionModel`` (done by :mod:`nik.collision` on import)."""
     global _collision_model_builder
     _collision_model_builder = builder
+
+
+def _fk_one_kernels(G: np.ndarray, joints: np.ndarray) -> None:
+    """Set ``_fk_one`` and ``_fk_one_np`` on first use: the entry points of ``fk_one_at`` for (``G``, ``joints``, an
+    address, a (4, 4) float64 array) and of ``fk`` for (``G``, ``joints``, a (dof,) float64 array, a (4, 4) float64
+    array); False without the kernels."""
+    global _fk_one, _fk_one_np
+    chain = _chain_kernels()
+    if chain is None:
+        _fk_one = _fk_one_np = False
+        return
+    from nik.kernels._jit import entry_point
+
+    T = _empty((4, 4))
+    _fk_one = entry_point(chain.fk_one_at, G, joints, 0, T)
+    _fk_one_np = entry_point(chain.fk, G, joints, _empty(len(joints)), T)
+
+
+def _joint_array(q) -> np.ndarray:
+    """A joint vector that is not a tensor (numpy array, list, tuple) as a numpy array: float32 and float64 kept,
+    anything else (integers, bools, nested lists) as float64."""
+    a = np.asarray(q)
+    if a.dtype != np.float64 and a.dtype != np.float32:
+        try:
+            a = a.astype(np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"q: expected joint values (radians), got an array of {a.dtype}") from None
+    return a
+
+
+def _tensor_of(a: np.ndarray) -> torch.Tensor:
+    """``a`` as a CPU tensor sharing its memory where torch allows (a copy when it is read-only or strided
+    backwards)."""
+    a = np.ascontiguousarray(a)
+    return _from_numpy(a if a.flags.writeable else a.copy())
 
 
 # ---------------------------------------------------------------------------
@@ -271,6 +316,7 @@ class Robot:
         self._kernel: FKKernel | None = None
         self._arrays: tuple[np.ndarray, np.ndarray] | None = None
         self._arm: Robot | None = None  # the arm without base/tool frames (set by nik.robots.frames.with_frames)
+        self._one_shape, self._one_tuple = torch.Size([n]), (n,)  # the shape of one configuration (fk's fast paths)
 
     # -- rate limits (not kinematics: outside the definition and its hash) --
     @property
@@ -392,26 +438,52 @@ class Robot:
             self._cache[key] = (self.G.to(like.device, like.dtype), self.offsets.to(like.device, like.dtype))
         return self._cache[key]
 
-    def fk(self, q: torch.Tensor, *, compiled: bool = False, check: bool = True) -> torch.Tensor:
+    def fk(
+        self, q: torch.Tensor | np.ndarray, *, compiled: bool = False, check: bool = True
+    ) -> torch.Tensor | np.ndarray:
         """Forward kinematics.
 
         Args:
             q: (..., dof) joint values (radians; metres for prismatic joints); any leading batch shape,
-                any float dtype/device.
+                any float dtype/device; or a numpy array (or a list) of them.
             compiled: run the ``torch.compile``'d kernel (fast for large batches; the first call compiles).
             check: validate ``q`` (shape, NaN/inf); hot loops that built ``q`` themselves pass False.
 
         Returns:
-            (..., 4, 4) tool poses in the base frame, metres, in q's dtype and device;
-            differentiable with respect to ``q``.
+            (..., 4, 4) tool poses in the base frame, metres, in q's dtype and device; differentiable with
+            respect to ``q``. A numpy ``q`` gives a numpy array (float32 kept, float64 for any other dtype).
 
         Up to :data:`FK_COMPILED_MAX` configurations on the CPU in float32/float64, when no gradient is
         wanted, run through the compiled kernel of :mod:`nik.kernels.chain` (microseconds instead of the
-        fraction of a millisecond torch's per-op overhead costs; float64 inside, cast to q's dtype).
+        fraction of a millisecond torch's per-op overhead costs; float64 inside, cast to q's dtype); one
+        contiguous float64 configuration ``(dof,)`` through that kernel's entry point (no numba dispatch: a
+        microsecond, ``benchmarks/fk.py --pinocchio-only``).
         """
-        # a CPU tensor and no gradient wanted (shape and dtype: _fk_compiled), by the cheapest checks torch offers
-        # (under 0.1 us each; q.device.type alone costs 0.5 us)
-        if not compiled and isinstance(q, _Tensor) and q.is_cpu and not (q.requires_grad and _grad_enabled()):
+        if not isinstance(q, _Tensor):
+            if type(q) is _ndarray and q.dtype is _NP_F64 and q.shape == self._one_tuple and not compiled:
+                flags = q.flags  # the exact array type of the entry point: (dof,) float64, C order, aligned, writeable
+                if flags.c_contiguous and flags.aligned and flags.writeable:
+                    G, joints = self._arrays or self.chain_arrays()
+                    if _fk_one_np is None:
+                        _fk_one_kernels(G, joints)
+                    if _fk_one_np:
+                        T = _empty((4, 4))
+                        if not _fk_one_np(G, joints, q, T) and check:
+                            validate_joints(_tensor_of(q), self.dof)  # raises the usual message
+                        return T
+            return self._fk_numpy(q, compiled, check)
+        # a CPU tensor and no gradient wanted, by the cheapest checks torch offers (under 0.1 us each;
+        # q.device.type alone costs 0.5 us)
+        if not compiled and q.is_cpu and not (q.requires_grad and _grad_enabled()):
+            if q.dtype is _F64 and q.shape == self._one_shape and q.is_contiguous():
+                G, joints = self._arrays or self.chain_arrays()
+                if _fk_one is None:
+                    _fk_one_kernels(G, joints)
+                if _fk_one:
+                    T = _empty((4, 4))
+                    if not _fk_one(G, joints, q.data_ptr(), T) and check:
+                        validate_joints(q, self.dof)  # raises the usual message
+                    return _from_numpy(T)
             T = self._fk_compiled(q, check)
             if T is not None:
                 return T
@@ -420,6 +492,30 @@ class Robot:
         if self._kernel is None:
             self._kernel = FKKernel(self.G.numpy(), self.offsets.numpy(), prismatic=self.prismatic.tolist())
         return self._kernel(q.reshape(-1, self.dof), compiled=compiled).reshape(*q.shape[:-1], 4, 4)
+
+    def _fk_numpy(self, q, compiled: bool, check: bool) -> np.ndarray:
+        """:meth:`fk` of a joint vector that is not a tensor: the compiled kernel straight from the array where
+        :meth:`fk` would run it, else the torch path; a numpy array back."""
+        a = _joint_array(q)
+        shape, dof = a.shape, self.dof
+        B = a.size // dof if shape and shape[-1] == dof else 0
+        chain = None if compiled or not 0 < B <= FK_COMPILED_MAX else _chain_module or _chain_kernels()
+        if chain is None:
+            return self.fk(_tensor_of(a), compiled=compiled, check=check).numpy()
+        G, joints = self._arrays or self.chain_arrays()
+        q64 = np.ascontiguousarray(a, dtype=np.float64)
+        if not q64.flags.writeable:  # a read-only array is another numba type: one compiled signature serves
+            q64 = q64.copy()
+        if len(shape) == 1:
+            T = _empty((4, 4))
+            finite = chain.fk(G, joints, q64, T)
+        else:
+            T = _empty((B, 4, 4))
+            finite = chain.fk_batch(G, joints, q64.reshape(B, dof), T)
+            T = T.reshape(*shape[:-1], 4, 4)
+        if check and not finite:
+            validate_joints(_tensor_of(a), dof)  # raises the usual message
+        return T if a.dtype == np.float64 else T.astype(a.dtype)
 
     def chain_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """The model arrays of the compiled kernels (:func:`nik.kernels.chain.chain_model`): ``G: (dof + 1, 4, 4)``
@@ -472,16 +568,21 @@ class Robot:
             raise RuntimeError("collision models need nik.collision (import nik loads it)")
         return _collision_model_builder(self, **options)
 
-    def fk_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def fk_and_jacobian(
+        self, q: torch.Tensor | np.ndarray
+    ) -> tuple[torch.Tensor, torch.Tensor] | tuple[np.ndarray, np.ndarray]:
         """FK and geometric Jacobian in the base frame.
 
         Args:
-            q: (..., dof) radians (metres for prismatic joints).
+            q: (..., dof) radians (metres for prismatic joints); a tensor, or a numpy array (or a list).
 
         Returns:
             ``T: (..., 4, 4)`` and ``J: (..., 6, dof)`` (rows: linear then angular velocity; a prismatic
-            joint's column is its unit axis, then zeros).
+            joint's column is its unit axis, then zeros); numpy arrays for a numpy ``q`` (as :meth:`fk`).
         """
+        if not isinstance(q, _Tensor):
+            T, J = self.fk_and_jacobian(_tensor_of(_joint_array(q)))
+            return T.numpy(), J.numpy()
         validate_joints(q, self.dof)
         G, off = self._params(q)
         batch = q.shape[:-1]
@@ -529,12 +630,18 @@ class Robot:
         hi = torch.where(hi.double() > lim[:, 1], torch.nextafter(hi, lo), hi)
         return lo, hi
 
-    def within_limits(self, q: torch.Tensor, *, atol: float = 0.0) -> torch.Tensor:
-        """``(...,)`` bool: every joint of ``q: (..., dof)`` inside ``[lower - atol, upper + atol]``."""
+    def within_limits(self, q: torch.Tensor | np.ndarray, *, atol: float = 0.0) -> torch.Tensor | np.ndarray:
+        """``(...,)`` bool: every joint of ``q: (..., dof)`` inside ``[lower - atol, upper + atol]`` (a numpy bool
+        array for a numpy ``q``)."""
+        if not isinstance(q, _Tensor):
+            return self.within_limits(_tensor_of(_joint_array(q)), atol=atol).numpy()
         lo, hi = self.limits_as(q)
         return ((q >= lo - atol) & (q <= hi + atol)).all(dim=-1)
 
-    def clamp(self, q: torch.Tensor) -> torch.Tensor:
-        """``q: (..., dof)`` clamped into the joint limits."""
+    def clamp(self, q: torch.Tensor | np.ndarray) -> torch.Tensor | np.ndarray:
+        """``q: (..., dof)`` clamped into the joint limits (a numpy array for a numpy ``q``, float32 kept, float64
+        for any other dtype)."""
+        if not isinstance(q, _Tensor):
+            return self.clamp(_tensor_of(_joint_array(q))).numpy()
         lo, hi = self.limits_as(q)
         return torch.minimum(torch.maximum(q, lo), hi)

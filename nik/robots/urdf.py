@@ -45,7 +45,8 @@ __all__ = [
 ]
 
 #: Version of the cached parse results (bump when the conversion to the normal form changes).
-URDF_CACHE_FORMAT = 5  # 3: conventional names preferred, grippers left out; 4: a hand link (Baxter's) is one; 5: vel_limits
+#: 3: conventional names preferred, grippers left out; 4: a hand link (Baxter's) is one; 5: the joints' speed limits
+URDF_CACHE_FORMAT = 5
 
 #: joint types of the URDF format; floating and planar joints are kept as fixed (an error only on the arm's chain)
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
