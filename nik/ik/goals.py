@@ -230,6 +230,13 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
         return e, Jr, inside & within_bounds(T, Tq, half)
 
     e, J, _ = task(q)
+    if half is None:
+        live = torch.full_like(s, 6.0)
+    else:
+        live = torch.isfinite(half[:, :3]).sum(-1).to(q) + torch.isfinite(half[:, 3:]).any(-1).to(q) * (
+            3 - torch.isinf(half[:, 3:]).sum(-1).to(q).clamp(max=1)
+        )
+    s = torch.where(live < q.shape[1], s, torch.zeros_like(s))  # no null space: nothing to move
     dist = (q - qr).square().sum(-1)
     for _ in range(REST_ITERS):
         if not bool((s >= 1.0 / 64.0).any()):

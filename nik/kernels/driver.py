@@ -338,7 +338,8 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     bounded one of ``half[b]``, whose free rows vanish and so leave more room) is held (to first order) while the rest
     of the motion goes to ``q_rest``. The step is kept only where FK of the result is still within tolerance (the
     tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved (from 1; stop below
-    1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s).
+    1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s). A target whose task has
+    as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space and is left as it is.
     """
     B, n = q.shape
     rw, tol_pos, tol_rot, max_step = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT], opts[MAX_STEP]
@@ -348,10 +349,16 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     A = np.empty((6, 6))
     z, qc, dq = np.empty(n), np.empty(n), np.empty(n)
     for b in range(B):
-        if not ok[b]:
-            continue
         mode = modes[b]
         bnd = half[b]
+        live = 6
+        if mode != CLASSIC:
+            live = 3 if mode == 3 else (5 if mode >= 0 else 6)
+            for r in range(3):
+                if not bnd[r] < math.inf:
+                    live -= 1
+        if not ok[b] or n <= live:  # no null space: nothing to move
+            continue
         _, p, r, done = _eval(G, joints, q[b], T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, J, e, dd)
         if not done:
             continue
