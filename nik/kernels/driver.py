@@ -337,8 +337,8 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     q)``: the task residual ``e`` (and its Jacobian ``J``: the classic error where ``modes[b] == CLASSIC``, else the
     bounded one of ``half[b]``, whose free rows vanish and so leave more room) is held (to first order) while the rest
     of the motion goes to ``q_rest``. The step is kept only where FK of the result is still within tolerance (the
-    tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved (from 1; stop below
-    1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s). A target whose task has
+    tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved (from 1; doubled after a kept one;
+    stop below 1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s). A target whose task has
     as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space and is left as it is.
     """
     B, n = q.shape
@@ -404,6 +404,7 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
                 _copy(Jc.ravel(), J.ravel())
                 _copy(ec, e)
                 dist, p, r = dc, pc, rc
+                s = min(1.0, 2.0 * s)
                 if big < 1e-9:
                     break
             else:
