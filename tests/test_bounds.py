@@ -444,8 +444,15 @@ def test_solve_all_with_a_free_axis_gives_distinct_solutions_inside_the_bounds()
         assert bool(robot.within_limits(every).all())
 
 
-@pytest.mark.parametrize("bounds,match", [((1, 1, 1, -1, 1, 1), "negative"), ((1, 1, 1, math.nan, 1, 1), "NaN"),
-                                          ("axis_w", "unknown shorthand"), ((1, 1, 1, INF, INF, 1), "two axes")])  # fmt: skip
+@pytest.mark.parametrize(
+    "bounds,match",
+    [
+        ((1, 1, 1, -1, 1, 1), "negative"),
+        ((1, 1, 1, math.nan, 1, 1), "NaN"),
+        ("axis_w", "unknown shorthand"),
+        ((1, 1, 1, INF, INF, 1), "two axes"),
+    ],
+)
 def test_solve_refuses_bad_bounds_in_one_line(bounds, match):
     solver = nik.IKSolver("ur5")
     T = solver.robot.fk(torch.zeros(1, 6, dtype=torch.float64))

@@ -24,7 +24,8 @@ the bounds and measured again after rounding.
 succeeded moves towards ``q_rest`` in the null space of its task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
 ``z = s * rest_weight * (q_rest - q)`` (``e, J``: the task's residual and Jacobian, classic or bounded, the rows of
 free axes zero, so a free axis adds a direction of the null space), kept only where FK of the result is still within
-tolerance (the stages' tolerance: nothing is lost) and nearer ``q_rest``; a refused step halves ``s``, a kept one doubles it (at most 1)
+tolerance (the stages' tolerance: nothing is lost) and nearer ``q_rest``; a refused step halves ``s``,
+a kept one doubles it (at most 1)
 (:func:`nik.kernels.driver.rest_posture`; torch: :func:`rest_torch`, the same steps batched). ``q_rest="mid"`` is
 the middle of the joint ranges (distance from the limits). A 6-joint arm without a free axis has no null space: its
 answers do not move (to rounding; the residual step only polishes them). :data:`REST_ITERS` steps at most.
@@ -165,7 +166,7 @@ def solve_torch(backend, robot, plan, T_target, q_near, representation) -> IKRes
     from nik.poses import pose_error, tool_error, within_bounds
 
     job = backend.job(robot, plan, T_target, q_near, representation, stacklevel=5)
-    T, B, dof = job.T, job.size, robot.dof
+    T, B = job.T, job.size
     float32 = T.dtype == torch.float32
     half = torch.from_numpy(plan.bounds.expand(B)).to(T)
     stage_half = half * (plan.float32_margin if float32 else 1.0)
@@ -186,8 +187,17 @@ def solve_torch(backend, robot, plan, T_target, q_near, representation) -> IKRes
         q0 = torch.where(bad, fill, q0)
     else:
         q0 = None
-    q, it = lm_solve(robot, T, q0, cfg=plan.lm_cfg, max_iters=plan.max_iters, generator=g, reachable=reachable,
-                     bounds=stage_half, restarts=None if plan.restarts or plan.source != "multistart" else 0)  # fmt: skip
+    q, it = lm_solve(
+        robot,
+        T,
+        q0,
+        cfg=plan.lm_cfg,
+        max_iters=plan.max_iters,
+        generator=g,
+        reachable=reachable,
+        bounds=stage_half,
+        restarts=None if plan.restarts or plan.source != "multistart" else 0,
+    )
     q = robot.clamp(q).to(T.dtype)
     if plan.q_rest is not None:
         ok = within_bounds(T, robot.fk(q), stage_half)
@@ -213,7 +223,7 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
     from nik.lm.batched import _residual, bounded_residual
     from nik.poses import pose_error, within_bounds
 
-    rw = (plan.lm_cfg.rot_weight if plan.lm_cfg is not None and hasattr(plan.lm_cfg, "rot_weight") else 0.5)
+    rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None and hasattr(plan.lm_cfg, "rot_weight") else 0.5
     qr = torch.from_numpy(rest_target(robot, plan.q_rest, q.shape[0])).to(q)
     q = q.clone()
     s = torch.where(ok, 1.0, 0.0).to(q)

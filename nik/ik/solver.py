@@ -285,8 +285,9 @@ class IKSolver:
         multi-head one; the guess of a plain network) and then ``n_starts`` uniform starts; the
         successful ones (within ``tol_pos`` metres / ``tol_rot`` radians) are de-duplicated
         (two solutions are the same when no joint differs by more than ``dedupe_tol`` radians,
-        modulo 2 pi). With ``bounds`` (:mod:`nik.ik.goals`): on a closed-form arm with one free rotation axis the valid
-        closed-form solutions over 36 free angles, else LM towards the bounds from the same starts. For a redundant arm (7 joints) the solutions form a continuum; K is then
+        modulo 2 pi). With ``bounds`` (:mod:`nik.ik.goals`): on a closed-form arm with one free rotation axis the
+        valid closed-form solutions over 36 free angles, else LM towards the bounds from the same starts. For a
+        redundant arm (7 joints) the solutions form a continuum; K is then
         simply how many distinct samples of it the starts found.
         Cost: on the CPU the LM runs compiled from each start; panda and xarm7 with 256 starts take 50-100 ms a
         pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the

@@ -20,8 +20,8 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.closed import guess as closed_guess
 from nik.kernels.chain import _chain
+from nik.kernels.closed import guess as closed_guess
 from nik.kernels.lm import (
     _STREAM,
     CLASSIC,
@@ -252,7 +252,9 @@ def solve(
 
 
 @kernel
-def solve_bounded(G, joints, T, starts, half, modes, opts, iopts, iopts_multi, budget, seed, q, ok, iterations, pos, rot, d):
+def solve_bounded(
+    G, joints, T, starts, half, modes, opts, iopts, iopts_multi, budget, seed, q, ok, iterations, pos, rot, d
+):
     """One call towards tolerant goals (:mod:`nik.ik.bounds`) on ``T: (B, 4, 4)`` float64 targets.
 
     Per target ``b``: its starts ``starts[b]: (K, n)`` (the network's hypotheses, the closed-form solutions, ``q_near``;
@@ -264,7 +266,8 @@ def solve_bounded(G, joints, T, starts, half, modes, opts, iopts, iopts_multi, b
 
     Args:
         half: (B, 6) half-widths (m, rad, ``inf`` = free); modes: (B,) rotation modes
-            (:func:`nik.kernels.lm.rotation_modes`); opts, iopts, iopts_multi: LM options (:func:`nik.kernels.lm.lm_options`);
+            (:func:`nik.kernels.lm.rotation_modes`); opts, iopts, iopts_multi: LM options
+            (:func:`nik.kernels.lm.lm_options`);
         budget: (B,) int64; seed: (1,) uint64 (target ``b`` draws from its own stream).
 
     Outputs ``q (B, n)`` inside the limits, ``ok (B,)`` (FK of ``q`` inside every bound), ``iterations (B,)``,
@@ -299,7 +302,9 @@ def solve_bounded(G, joints, T, starts, half, modes, opts, iopts, iopts_multi, b
             if score[k] == math.inf:
                 break
             score[k] = math.inf
-            it, conv, _, _ = _lm_one_bounded(G, joints, T[b], starts[b, k], half[b], modes[b], opts, iopts, 0, rng, cand, work)
+            it, conv, _, _ = _lm_one_bounded(
+                G, joints, T[b], starts[b, k], half[b], modes[b], opts, iopts, 0, rng, cand, work
+            )
             total += it
             _chain(G, joints, cand, Tc)
             E, _, _, _ = _bounded_check(T[b], Tc, half[b], modes[b], rw, e, ds)
@@ -337,9 +342,10 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     q)``: the task residual ``e`` (and its Jacobian ``J``: the classic error where ``modes[b] == CLASSIC``, else the
     bounded one of ``half[b]``, whose free rows vanish and so leave more room) is held (to first order) while the rest
     of the motion goes to ``q_rest``. The step is kept only where FK of the result is still within tolerance (the
-    tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved (from 1; doubled after a kept one;
-    stop below 1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s). A target whose task has
-    as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space and is left as it is.
+    tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved (from 1; doubled
+    after a kept one; stop below 1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s).
+    A target whose task has as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space
+    and is left as it is.
     """
     B, n = q.shape
     rw, tol_pos, tol_rot, max_step = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT], opts[MAX_STEP]
