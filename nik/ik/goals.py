@@ -17,8 +17,8 @@ error:
 Then LM towards the bounds from each start in turn until one lands inside (compiled:
 :func:`nik.kernels.driver.solve_bounded`; torch: :func:`nik.lm.lm_solve` with ``bounds``, the starts side by side),
 and for the targets still outside, LM from uniform starts with the restart budget (none for a target proven out of
-reach; a free position axis lifts the reach test). Float32 targets are refined to the plan's float32 margin of
-the bounds and measured again after rounding.
+reach, a free position axis lifting the reach test; none at all where the plan has neither restarts nor a
+fallback). Float32 targets are refined to the plan's float32 margin of the bounds and measured again after rounding.
 
 **Preferred postures** (``q_rest``, ``rest_weight``; the plan's). After the answer is found, each target that
 succeeded moves towards ``q_rest`` in the null space of its task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
@@ -124,7 +124,7 @@ def solve_compiled(backend, robot, plan, T_target, q_near, representation) -> IK
     lmod = model.lm
     opts, iopts = lmod.options(job.tol_pos, job.tol_rot, plan.max_iters)
     _, iopts_multi = lmod.options(job.tol_pos, job.tol_rot, plan.max_iters, multistart=True)
-    budget = np.where(reachable, lmod.budget if plan.restarts or plan.source != "multistart" else 0, 0)
+    budget = np.where(reachable, lmod.budget if plan.restarts or plan.fallback != "none" else 0, 0)
     q, ok, it = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
     pos, rot, d = np.empty(B), np.empty(B), np.empty((B, 6))
     seed = lm.seed_state(plan.seed)
@@ -196,7 +196,7 @@ def solve_torch(backend, robot, plan, T_target, q_near, representation) -> IKRes
         generator=g,
         reachable=reachable,
         bounds=stage_half,
-        restarts=None if plan.restarts or plan.source != "multistart" else 0,
+        restarts=None if plan.restarts or plan.fallback != "none" else 0,
     )
     q = robot.clamp(q).to(T.dtype)
     if plan.q_rest is not None:
@@ -303,9 +303,10 @@ def all_solutions_bounded(plan, job, *, closed_form: bool, n_starts: int = 256, 
         g = torch.Generator(device=T.device).manual_seed(int(plan.seed))
         starts = robot.sample(n_starts, generator=g, dtype=T.dtype, device=T.device)
         if plan.net is not None:
-            from nik.ik.stages import _arm_targets
-
-            Tn = _arm_targets(robot, T) if plan.net_in_arm_frame else T
+            Tn = T
+            if plan.net_in_arm_frame:  # the bare arm's frame: base^-1 @ T @ tool^-1
+                Tn = Tn if robot.base is None else torch.linalg.inv(robot.base.to(T)) @ Tn
+                Tn = Tn if robot.tool is None else Tn @ torch.linalg.inv(robot.tool.to(T))
             hyp = plan.net.hypotheses(Tn)[0] if hasattr(plan.net, "hypotheses") else plan.net.predict(Tn)
             starts = torch.cat([robot.clamp(hyp).to(T), starts])
         Tk = T.expand(starts.shape[0], 4, 4)

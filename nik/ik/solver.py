@@ -218,7 +218,6 @@ class IKSolver:
         max_iters: int | None = None,
         representation: str | None = None,
         plan: Plan | None = None,
-        *,
         bounds=None,
         q_rest=None,
         rest_weight: float = 0.1,
