@@ -9,8 +9,8 @@ error:
 
 - a network: all its hypotheses;
 - an arm with a closed form: its solutions of the pose as given (they meet any goal where they exist), and with one
-  rotation axis free the closed form at the free angle of :func:`nik.ik.free_axis.closed_form_free_axis` (36
-  angles searched); with the orientation free (``"position"``) the closed form has no angle to search: LM does the
+  rotation axis free, for the targets none of those reach, the closed form at the free angle of
+  :func:`nik.ik.free_axis.closed_form_free_axis` (36 angles searched); with the orientation free (``"position"``) the closed form has no angle to search: LM does the
   rest from those starts and uniform ones;
 - ``q_near`` when given (an extra start; no second refinement).
 
@@ -92,9 +92,14 @@ def _closed_starts(robot, model, plan, T: np.ndarray) -> list[np.ndarray]:
     if ((modes >= 0) & (modes <= 2)).all() and len(set(modes.tolist())) == 1:
         from nik.ik.free_axis import closed_form_free_axis
 
-        fa = closed_form_free_axis(robot, torch.from_numpy(T), bounds=plan.bounds, refine=False)
-        found = ~torch.isnan(fa.gamma)
-        out.insert(0, np.where(found.numpy()[:, None, None], fa.q.double().numpy()[:, None], np.nan))
+        todo = np.flatnonzero(~valid.any(1))  # a valid solution of the pose as given meets the goal already
+        extra = np.full((T.shape[0], 1, q.shape[-1]), np.nan)
+        if todo.size:
+            bounds = plan.bounds if not plan.bounds.per_target else plan.bounds.expand(T.shape[0])[todo]
+            fa = closed_form_free_axis(robot, torch.from_numpy(T[todo]), bounds=bounds, refine=False)
+            found = ~torch.isnan(fa.gamma).numpy()
+            extra[todo[found], 0] = fa.q.double().numpy()[found]
+        out.insert(0, extra)
     return out
 
 
