@@ -549,3 +549,32 @@ def test_a_rest_posture_changes_nothing_on_a_six_joint_arm_without_a_free_axis(b
     _honest(robot, T, free_rest, parse_bounds("axis_z").half[0])
     rest = torch.from_numpy(rest_target(robot, "mid", 20))
     assert float((free_rest.q - rest).norm(dim=-1).mean()) < float((free.q - rest).norm(dim=-1).mean())
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_per_target_bounds_and_float32_tensors_are_measured_against_the_asked_bounds(backend):
+    robot = nik.load_robot("ur5")
+    g = torch.Generator().manual_seed(9)
+    T = robot.fk(robot.sample(6, generator=g, dtype=torch.float64))
+    T = T @ _rot(0, torch.full((6,), 0.5, dtype=torch.float64))  # turned about x: only the free-x rows allow it
+    half = np.tile(np.array([1e-4, 1e-4, 1e-4, 1e-3, 1e-3, 1e-3]), (6, 1))
+    half[::2, 3] = INF
+    solver = nik.IKSolver(robot, backend=backend)
+    res = solver.solve(T.float(), bounds=half)
+    assert isinstance(res.q, torch.Tensor) and res.q.dtype == torch.float32
+    ok = within_bounds(T, robot.fk(res.q.double()), torch.from_numpy(half))
+    assert ok.tolist() == res.success.tolist()
+    assert bool(res.success[::2].all())  # the free-x targets: solved
+    with pytest.raises(ValueError, match="rows for 6 targets"):
+        solver.solve(T, bounds=half[:4])
+
+
+def test_bad_q_rest_is_a_one_line_error():
+    solver = nik.IKSolver("panda")
+    T = solver.robot.fk(torch.zeros(1, 7, dtype=torch.float64))
+    for q_rest, match in (("middle", "'mid'"), ([0.0] * 6, "shape"), ([math.nan] * 7, "NaN")):
+        with pytest.raises(ValueError, match=match) as err:
+            solver.solve(T, q_rest=q_rest)
+        assert "\n" not in str(err.value)
+    with pytest.raises(ValueError, match="rest_weight"):
+        solver.solve(T, q_rest="mid", rest_weight=0.0)
