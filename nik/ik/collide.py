@@ -48,7 +48,7 @@ class CollideCfg:
     weight: float = 1.0
     iters: int = 30
     stall_iters: int = 5
-    restarts: int = 32
+    restarts: int = 16
     tries: int = 16
 
 
