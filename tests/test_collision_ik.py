@@ -131,3 +131,19 @@ def test_answers_called_free_never_collide_with_the_meshes():
     res = nik.IKSolver(robot, world=world, self_collision=True).solve(T)
     assert res.collision_free.any()
     assert not mesh.collides(res.q[res.collision_free], world).any()
+
+
+def test_solve_path_calls_a_colliding_waypoint_infeasible():
+    robot = nik.load_robot("ur5")
+    q = np.linspace([0.1, -1.2, 1.2, -1.5, -1.5, 0.2], [0.5, -1.0, 1.0, -1.4, -1.5, 0.4], 8)
+    T = np.ascontiguousarray(robot.fk(q))
+    free = nik.IKSolver(robot).solve_path(T)
+    assert free.success.all() and free.collision_free is None
+    tool = T[5, :3, 3]
+    world = nik.World().add_sphere(tool, 0.02)  # on the tool at waypoint 5
+    with pytest.warns(UserWarning, match="colliding"):
+        res = nik.IKSolver(robot).solve_path(T, world=world)
+    hit = collides(robot, np.asarray(res.q), world, self_collision=False)
+    assert hit[5] and not res.success[5] and res.path.reasons[5] == "colliding"
+    assert [r == "colliding" for r in res.path.reasons] == hit.tolist()
+    np.testing.assert_array_equal(res.collision_free.numpy(), ~hit)

@@ -36,7 +36,16 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["CollideCfg", "Setup", "after_solve", "attached_model", "free_solutions", "resolve", "setup"]
+__all__ = [
+    "CollideCfg",
+    "Setup",
+    "after_solve",
+    "attached_model",
+    "free_solutions",
+    "path_waypoints",
+    "resolve",
+    "setup",
+]
 
 
 @dataclass(frozen=True)
@@ -86,9 +95,10 @@ def check_self_collision(value):
     return value
 
 
-def after_solve(solver, plan, T_target, representation, world, res):
-    """:meth:`nik.IKSolver.solve`'s last stage: ``res`` through :func:`resolve` where a check is active (the call's
-    ``world``, else the solver's), else ``res`` itself (``collision_free`` None)."""
+def after_solve(solver, backend, plan, T_target, q_near, representation, world):
+    """:meth:`nik.IKSolver.solve` on ``backend``, then :func:`resolve` where a check is active (the call's
+    ``world``, else the solver's); without one the backend's result itself (``collision_free`` None)."""
+    res = backend.solve(solver.robot, plan, T_target, q_near, representation)
     s = setup(solver.robot, solver.world if world is None else world, solver.self_collision)
     if s is None:
         return res
@@ -187,6 +197,22 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     out.iterations, out.success = _like(it, res.iterations), _like(success & free, res.success)
     out.collision_free = _like(free, res.success)
     return out
+
+
+def path_waypoints(solver, q: np.ndarray, world, success: np.ndarray):
+    """For :func:`nik.ik.paths.solve_path`: ``(success & free, free, reasons)`` for the trajectory ``q: (N, dof)``
+    under the call's check (``world``, else the solver's; the rule of :func:`setup`): ``free (N,)`` bool and
+    ``reasons`` (N strings, ``"colliding"`` where the answer collides, else ``""``); without a check
+    ``(success, None, ["", ...])``."""
+    s = setup(solver.robot, solver.world if world is None else world, solver.self_collision)
+    if s is None:
+        return success, None, [""] * len(success)
+    from nik.kernels.collision import collides_batch
+
+    (G, joints), rest = s.arguments(solver.robot)
+    hit = np.empty(len(q), dtype=bool)
+    collides_batch(G, joints, np.ascontiguousarray(q, dtype=np.float64), *rest, 0.0, hit)
+    return success & ~hit, ~hit, ["colliding" if h else "" for h in hit]
 
 
 def free_solutions(solver, Q: torch.Tensor) -> torch.Tensor:

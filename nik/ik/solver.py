@@ -265,8 +265,7 @@ class IKSolver:
         be = backends.choose(self, T_target)
         if plan is None:
             plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
-        res = be.solve(self.robot, plan, T_target, q_near, representation)
-        return collide.after_solve(self, plan, T_target, representation, world, res)
+        return collide.after_solve(self, be, plan, T_target, q_near, representation, world)
 
     def solve_all(
         self,
@@ -313,6 +312,7 @@ class IKSolver:
         seed: int = 0,
         representation: str | None = None,
         max_step: float | None = None,
+        world=None,
     ) -> IKResult:
         """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.ik.paths`).
 
@@ -325,6 +325,8 @@ class IKSolver:
             representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
             max_step: a step (largest joint motion between waypoints) above it is a reconfiguration, reported and
                 warned about; radians, default :data:`nik.ik.paths.PATH_MAX_STEP` (10 degrees).
+            world: a :class:`nik.World` for this call (else the solver's): a waypoint whose answer collides is
+                infeasible, its ``res.path.reasons`` entry ``"colliding"``; ``res.collision_free`` per waypoint.
 
         Returns:
             :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,
@@ -339,5 +341,5 @@ class IKSolver:
         step = paths.PATH_MAX_STEP if max_step is None else max_step
         return paths.solve_path(
             self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
-            max_step=step,
+            max_step=step, world=world,
         )  # fmt: skip
