@@ -20,7 +20,8 @@ other hypotheses or the closed form's other branches); a given start after the f
 before any iteration (a colliding hypothesis mostly lands on a colliding answer; LM from it would spend the
 budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the first collision-free
 draw among ``tries`` (a draw that collides is dropped before any iteration). The first start that is done ends
-the target; otherwise the answer is the start with the lowest sum (``free`` False or the pose not reached).
+the target; otherwise the answer is the start with the lowest sum (a pose reached with the spheres overlapping by
+millimetres beats a free configuration far from the pose).
 Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
 """
 
@@ -210,11 +211,10 @@ def collision_lm(
                     lam = min(lam * lam_up, lam_max)
                 if stall >= stall_limit:
                     break
-            is_free = near >= 0.0
-            # the best so far: done first, then free, then the lowest sum
-            better = done or (is_free and not best_free) or (is_free == best_free and S < best_S)
-            if better and not best_done:
-                best_S, best_free, best_done, best_pos, best_rot = S, is_free, done, p_e, r_e
+            # the best so far: done, else the lowest sum (a reached pose that collides by millimetres beats a free
+            # configuration far from the pose: the best effort a user can look at)
+            if done or S < best_S:
+                best_S, best_free, best_done, best_pos, best_rot = S, near >= 0.0, done, p_e, r_e
                 _copy(qs, best_q)
             if done:
                 break
