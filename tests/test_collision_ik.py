@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -147,3 +148,32 @@ def test_solve_path_calls_a_colliding_waypoint_infeasible():
     assert hit[5] and not res.success[5] and res.path.reasons[5] == "colliding"
     assert [r == "colliding" for r in res.path.reasons] == hit.tolist()
     np.testing.assert_array_equal(res.collision_free.numpy(), ~hit)
+
+
+def test_viewer_draws_obstacles_and_colours_the_colliding_links():
+    pytest.importorskip("viser", reason="the viewer needs viser (pip install 'nik[view]')")
+    from nik.view import Viewer, ViewerCfg
+
+    robot = nik.load_robot("ur5")
+    q = np.array([0.3, -1.2, 1.3, -1.6, -1.5, 0.2])
+    T = torch.from_numpy(robot.fk(q))
+    elbow = link_frames(robot, torch.as_tensor(q[None]))[0, 3, :3, 3].numpy()
+    world = nik.World().add_box([0, 0, -0.05], [1, 1, 0.1]).add_capsule([0.6, 0, 0], [0.6, 0, 0.5], 0.02)
+    solver = nik.IKSolver(robot, world=world, self_collision=False)
+    with Viewer(solver, cfg=ViewerCfg(port=0, ghosts=False, meshes=False)) as viewer:
+        shown = viewer.set_target(T)
+        assert shown.collision_free and "collisions: collision-free" in viewer._status.content
+        assert viewer.colliding_links(viewer.joints) == []
+        world.add_sphere(elbow, 0.04)  # the world changes under the page: the shown joints now collide
+        names = viewer.colliding_links(torch.as_tensor(q))
+        assert names and all(n in solver.robot.collision_spheres().links for n in names)
+        viewer._show(dataclasses.replace(viewer._shown, q=torch.as_tensor(q)))
+        assert "COLLIDING" in viewer._status.content
+        red = [red.visible for _, red in viewer._sphere_nodes]
+        body = solver.robot.collision_spheres().sphere_body
+        links = solver.robot.collision_spheres().links
+        assert red == [links[body[k]] in names for k in range(len(red))]
+        assert not any(plain.visible for plain, _ in viewer._sphere_nodes)  # the check box is off
+        viewer._sphere_box.value = True
+        viewer._show_collisions(torch.as_tensor(q))
+        assert all(p.visible or r.visible for p, r in viewer._sphere_nodes)
