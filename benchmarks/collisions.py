@@ -1,7 +1,7 @@
 """nik's sphere verdicts against the real collision meshes (coal) on sampled panda configurations; collision-free IK.
 
     python benchmarks/collisions.py [--samples 2000] [--seed 0] [--tolerance 0.01] [--max-spheres 16]
-    python benchmarks/collisions.py --ik [--targets 1000] [--seed 0]
+    python benchmarks/collisions.py --ik [--targets 1000] [--seed 0] [--tolerance 0.01] [--max-spheres 16]
 
 ``--ik`` (issue 28's goals for collision-free IK, :mod:`nik.ik.collide`): the same panda and scene; targets are
 the poses of random configurations that the meshes call free (MoveIt's pairs, and the scene); the solver with
@@ -152,6 +152,8 @@ def ik_main(args) -> None:
     srdf = srdf_of(urdf)
     mesh = MeshCheck(robot, urdf, skip=list(srdf_disabled(srdf)) if srdf is not None else [])
     world = scene(args.seed)
+    model = collision_model(robot, tolerance=args.tolerance, max_spheres=args.max_spheres)
+    nik.collision.set_collision_model(robot, model)  # the model every check below uses
     g = torch.Generator().manual_seed(args.seed)
     Q = np.ascontiguousarray(robot.sample(4 * args.targets, generator=g, dtype=torch.float64).numpy())
     free = ~mesh.collides(Q, world)
@@ -159,7 +161,7 @@ def ik_main(args) -> None:
     plain = nik.IKSolver(robot, self_collision=False)
     safe = nik.IKSolver(robot, world=world, self_collision=True)
     print(f"panda (example-robot-data, arm + hand + fingers), {len(T)} targets from configurations the meshes call")
-    print(f"free in a scene of {sum(world.counts())} obstacles (table + 10), seed {args.seed}; {safe.robot.name}")
+    print(f"free in a scene of {sum(world.counts())} obstacles (table + 10), seed {args.seed}; model: {model}")
     plain.solve(T[:4]), safe.solve(T[:4])  # compile / load the kernels before timing
     times = {"plain": [], "safe": []}
     for _ in range(3):
@@ -183,7 +185,7 @@ def ik_main(args) -> None:
         f"| {mesh.collides(np.asarray(r1.q), world).mean():.1%} | {1e6 * t1:.0f} |"
     )
     print(f"time ratio collision-free / plain: {t1 / t0:.2f}x")
-    own = ~collides(robot, Q[free][: args.targets], world, model=safe.robot.collision_spheres())
+    own = ~collides(robot, Q[free][: args.targets], world, model=model)
     ok = np.asarray(r1.success)
     print(
         f"targets whose configuration the spheres also call free: {own.mean():.1%}; success on those "
@@ -215,6 +217,8 @@ if __name__ == "__main__":
         ap.add_argument("--ik", action="store_true")
         ap.add_argument("--targets", type=int, default=1000)
         ap.add_argument("--seed", type=int, default=0)
+        ap.add_argument("--tolerance", type=float, default=0.01, help="sphere fitting tolerance, metres")
+        ap.add_argument("--max-spheres", type=int, default=16, help="at most this many spheres per link")
         ik_main(ap.parse_args())
     else:
         main()

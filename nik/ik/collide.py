@@ -26,7 +26,8 @@ answer called free is free on the meshes (docs/collisions.md measures it); ``suc
 
 Choices (:class:`CollideCfg`): margin 5 mm (the rows push the spheres that far apart, the verdict needs 0), weight
 1 (a millimetre of penetration costs as much as a millimetre of pose error), 30 iterations per start,
-:attr:`CollideCfg.restarts` uniform starts, each the first collision-free draw of :attr:`CollideCfg.tries`.
+:attr:`CollideCfg.restarts` uniform starts, each the collision-free draw nearest the pose among
+:attr:`CollideCfg.tries`. A solver takes other settings as ``solver.collide_cfg = CollideCfg(...)``.
 """
 
 from __future__ import annotations
@@ -104,7 +105,7 @@ def after_solve(solver, backend, plan, T_target, q_near, representation, world):
         return res
     from nik.ik.targets import as_poses
 
-    return resolve(solver.robot, plan, as_poses(T_target, representation), res, s)
+    return resolve(solver.robot, plan, as_poses(T_target, representation), res, s, getattr(solver, "collide_cfg", None))
 
 
 def setup(robot, world, self_collision) -> Setup | None:

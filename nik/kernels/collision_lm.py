@@ -18,10 +18,10 @@ tolerance; the path to it passes through done points.
 Starts, per target, in order: the ``n_starts[b]`` given ones (the answer that collided, then the network's
 other hypotheses or the closed form's other branches); a given start after the first that collides is dropped
 before any iteration (a colliding hypothesis mostly lands on a colliding answer; LM from it would spend the
-budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the first collision-free
-draw among ``tries`` (a draw that collides is dropped before any iteration). The first start that is done ends
-the target; otherwise the answer is the start with the lowest sum (a pose reached with the spheres overlapping by
-millimetres beats a free configuration far from the pose).
+budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the collision-free draw
+nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before any iteration).
+The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
+reached with the spheres overlapping by millimetres beats a free configuration far from the pose).
 Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
 """
 
@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import LOWER, UPPER
+from nik.kernels.chain import LOWER, UPPER, _chain
 from nik.kernels.collision import collision_residual
 from nik.kernels.lm import (
     _STREAM,
@@ -54,6 +54,7 @@ from nik.kernels.lm import (
     _copy,
     _draw,
     _eval,
+    _score,
 )
 
 __all__ = ["collision_lm"]
@@ -163,15 +164,18 @@ def collision_lm(
                 if s > 0 and collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs,
                                                 w_spheres, w_boxes, w_capsules, self_on, 0.0, r, Jr) < 0.0:  # fmt: skip
                     continue  # a colliding hypothesis: dropped early
-            else:
-                ok = False
+            else:  # the free draw nearest the pose (by its error) among `tries`
+                best_draw = math.inf
                 for _ in range(tries):
-                    _draw(joints, rng, qs)
-                    if collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs,
-                                          w_spheres, w_boxes, w_capsules, self_on, 0.0, r, Jr) >= 0.0:  # fmt: skip
-                        ok = True
-                        break
-                if not ok:
+                    _draw(joints, rng, qc)
+                    _chain(G, joints, qc, Tc)
+                    Ed = _score(Tt[b], Tc, rw, bnd, mode, ec, d)
+                    if Ed < best_draw and collision_residual(G, joints, qc, spheres, sphere_frame, body_start, pairs,
+                                                             w_spheres, w_boxes, w_capsules, self_on, 0.0, r,
+                                                             Jr) >= 0.0:  # fmt: skip
+                        best_draw = Ed
+                        _copy(qc, qs)
+                if best_draw == math.inf:
                     continue
             E, p_e, r_e, reached = _eval(G, joints, qs, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
             near = collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
