@@ -191,7 +191,9 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
                      seed_state(plan.seed), *rest, cfg.margin, cfg.weight, qk, free, done, itk, pk, rk)  # fmt: skip
         q[idx], pos[idx], rot[idx], it[idx] = qk, pk, rk, it[idx] + itk
         success[idx] = (pk <= plan.tol_pos) & (rk <= plan.tol_rot)
-    collides_batch(G, joints, q, *rest, 0.0, hit)  # the verdict of the returned answers
+        again = np.empty(idx.size, dtype=bool)
+        collides_batch(G, joints, np.ascontiguousarray(q[idx]), *rest, 0.0, again)  # the verdict of the new answers
+        hit[idx] = again  # (the other rows are unchanged: their verdict stands)
     free = ~hit
     out = type(res)(**{**res.__dict__})
     out.q, out.pos_err, out.rot_err = _like(q, res.q), _like(pos, res.pos_err), _like(rot, res.rot_err)
