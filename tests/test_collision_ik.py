@@ -177,3 +177,30 @@ def test_viewer_draws_obstacles_and_colours_the_colliding_links():
         viewer._sphere_box.value = True
         viewer._show_collisions(torch.as_tensor(q))
         assert all(p.visible or r.visible for p, r in viewer._sphere_nodes)
+
+
+def _orange(path) -> int:
+    """Pixels of the obstacles' colour (#e07b1a and its translucent shades: red well above blue)."""
+    from PIL import Image
+
+    img = np.asarray(Image.open(path).convert("RGB")).astype(int)
+    return int(((img[..., 0] > img[..., 2] + 90) & (img[..., 1] > img[..., 2] + 20)).sum())
+
+
+def test_nik_solve_scene_avoids_the_obstacles_and_the_plot_draws_them(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from nik.cli import main
+
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("boxes: [{center: [0.0, 0.0, -0.05], size: [1.0, 1.0, 0.1]}]\n")
+    pose = ["0.4", "0.1", "0.3", "0", "1", "0", "0"]
+    plain, with_scene = tmp_path / "plain.png", tmp_path / "scene.png"
+    assert main(["solve", "--robot", "ur5", "--pose", *pose, "--plot", str(plain)]) == 0
+    assert main(["solve", "--robot", "ur5", "--pose", *pose, "--scene", str(scene), "--plot", str(with_scene)]) == 0
+    capsys.readouterr()
+    assert _orange(with_scene) > 20 * max(_orange(plain), 1)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("boxes: [{center: [0, 0, 0], size: [1, -1, 1]}]\n")
+    assert main(["solve", "--robot", "ur5", "--pose", *pose, "--scene", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("nik solve: error: scene file") and "\n" not in err

@@ -1,7 +1,7 @@
 """``--scene FILE``: obstacles for ``nik solve`` and ``nik path`` (a :class:`nik.World` from a YAML/JSON scene file).
 
 The option and its reading live here so the commands each add one argument and one call; a bad file is a one-line
-``ValueError`` (:meth:`nik.World.from_file`), which the CLI prints as ``nik: error: ...`` (exit 2).
+``ValueError`` (:meth:`nik.World.from_file`), which the CLI prints as ``nik solve: error: ...`` (exit 2).
 """
 
 from __future__ import annotations
