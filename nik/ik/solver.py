@@ -94,8 +94,8 @@ class IKSolver:
             one call); a world always turns the collision check on.
         self_collision: None (default): checked where the robot has a collision model attached (a
             ``NAME.collision.json`` beside its file, or :func:`nik.collision.set_collision_model`), not otherwise (a
-            conservative sphere model calls 5-33 % of free configurations colliding: on by default, reachable
-            targets solved today would fail); True: checked, the model built (fitted, cached) if needed; False:
+            conservative sphere model calls 5-33 % of free configurations colliding; on by default, it would fail
+            reachable targets solved today); True: checked, the model built (fitted, cached) if needed; False:
             never. Where a check is active, colliding answers are solved again and ``res.collision_free`` is set
             (:mod:`nik.ik.collide`).
     """
