@@ -1,0 +1,149 @@
+"""Whole-trajectory optimisation of a joint path: :func:`optimise_path`, and :func:`polish_path`, the path stage that
+uses it where the waypoint chain falls short and keeps its answer only when nothing gets worse.
+
+Waypoint-by-waypoint seeding cannot look ahead: on a redundant arm a chain drifts into a limit and must jump, or
+misses a waypoint near a singularity. Here the whole trajectory ``Q: (N, dof)`` is one least-squares problem: every
+waypoint's pose error (weighted as nik's LM weighs it, rotation by ``rot_weight``), joint velocity and acceleration
+by finite differences (small weights), a hinge on every step above a fraction of ``max_step``, and a barrier near
+the joint limits; steps are clamped into the limits, so the limits always hold. The normal matrix is
+block-pentadiagonal, solved by a banded Cholesky in ``O(N dof^3)`` (:mod:`nik.kernels.trajopt`, compiled).
+
+Choices (the defaults of :class:`TrajCfg`, for metres and radians): ``w_vel = 1e-4`` and ``w_acc = 1e-3`` keep
+the pose error they cost at a few micrometres (a pose row has weight 1); the step hinge ``w_step = 1e-2`` starts at
+``0.8 max_step``; the limit barrier ``w_lim = 1e-3`` acts within 2 % of each joint's range. A waypoint's pose counts
+as reached inside the call's tolerances (``tol_pos``, ``tol_rot``), as everywhere in nik.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["TrajCfg", "TrajResult", "optimise_path", "polish_path", "residual_count", "trajopt_options"]
+
+
+#: The second stage of :func:`optimise_path` scales the shape weights by this: the poses are brought inside their
+#: tolerance from the shape the first stage found (on a redundant arm the self-motion stays where it is).
+FINISH = 1e-3
+
+
+@dataclass(frozen=True)
+class TrajCfg:
+    """Weights and LM settings of :func:`optimise_path` (metres, radians; see the module docstring)."""
+
+    rot_weight: float = 0.5
+    w_vel: float = 1e-4
+    w_acc: float = 1e-3
+    w_step: float = 1e-2
+    step_frac: float = 0.8
+    w_lim: float = 1e-3
+    margin: float = 0.02
+    lambda0: float = 1e-3
+    max_step_lm: float = 0.3
+    eps: float = 1e-9
+    stall_rel: float = 1e-7
+    iters: int = 100
+
+
+@dataclass
+class TrajResult:
+    """``q: (N, dof)`` the optimised path, ``pos_err, rot_err: (N,)`` (m, rad), ``iterations`` (factorisations)."""
+
+    q: np.ndarray
+    pos_err: np.ndarray
+    rot_err: np.ndarray
+    iterations: int
+
+
+def trajopt_options(cfg: TrajCfg, max_step: float) -> np.ndarray:
+    """``opts`` of :func:`nik.kernels.trajopt.trajopt` for ``cfg`` and the path's ``max_step`` (radians)."""
+    from nik.kernels import trajopt as k
+
+    opts = np.empty(k.OPTS)
+    opts[k.ROT_WEIGHT], opts[k.W_VEL], opts[k.W_ACC] = cfg.rot_weight, cfg.w_vel, cfg.w_acc
+    opts[k.W_STEP], opts[k.STEP_CAP] = cfg.w_step, cfg.step_frac * max_step
+    opts[k.W_LIM], opts[k.MARGIN], opts[k.LAMBDA0] = cfg.w_lim, cfg.margin, cfg.lambda0
+    opts[k.MAX_STEP_LM], opts[k.EPS], opts[k.STALL_REL] = cfg.max_step_lm, cfg.eps, cfg.stall_rel
+    return opts
+
+
+def residual_count(N: int, dof: int, has_start: bool) -> int:
+    """Rows of the residual of :func:`nik.kernels.trajopt.residuals`: pose, velocity + step cap, acceleration,
+    limits."""
+    steps = N - 1 + int(has_start)
+    return 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N
+
+
+def optimise_path(
+    model,
+    T: np.ndarray,
+    Q0: np.ndarray,
+    *,
+    q_start: np.ndarray | None = None,
+    max_step: float = math.radians(10.0),
+    cfg: TrajCfg | None = None,
+) -> TrajResult:
+    """The joint path ``Q0: (N, dof)`` optimised as one problem towards the poses ``T: (N, 4, 4)`` (float64, metres).
+
+    ``model``: anything with the chain model ``G, joints`` (:func:`nik.ik.model.model_of`). ``q_start: (dof,)``: the
+    joints before the path (its first step counts). ``Q0`` is clamped into the limits first; the answer is inside
+    them."""
+    from nik.kernels.trajopt import trajopt
+
+    cfg = TrajCfg() if cfg is None else cfg
+    G, joints = model.G, model.joints
+    T = np.ascontiguousarray(T, dtype=np.float64)
+    Q = np.clip(np.array(Q0, dtype=np.float64), joints[:, 1], joints[:, 2])
+    N, n = Q.shape
+    if T.shape != (N, 4, 4):
+        raise ValueError(f"optimise_path: T must have shape ({N}, 4, 4) for Q0 of shape {Q.shape}, got {T.shape}")
+    qs = np.zeros(n) if q_start is None else np.ascontiguousarray(q_start, dtype=np.float64)
+    pos, rot = np.empty(N), np.empty(N)
+    opts = trajopt_options(cfg, max_step)
+    its, _ = trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
+    from nik.kernels import trajopt as k
+
+    opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM]] *= FINISH  # the finish: the poses first, the shape kept
+    more, _ = trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
+    return TrajResult(Q, pos, rot, int(its + more))
+
+
+def _largest_step(Q: np.ndarray, q_start: np.ndarray | None) -> float:
+    prev = np.concatenate([Q[:1] if q_start is None else q_start[None], Q[:-1]])
+    return float(np.abs(Q - prev).max())
+
+
+def polish_path(
+    model,
+    T: np.ndarray,
+    Q: np.ndarray,
+    q_start: np.ndarray | None,
+    *,
+    tol_pos: float,
+    tol_rot: float,
+    max_step: float,
+    always: bool = False,
+    cfg: TrajCfg | None = None,
+) -> np.ndarray:
+    """The path stage: ``Q: (N, dof)`` optimised by :func:`optimise_path` where some waypoint misses the tolerance
+    or some step exceeds ``max_step`` (every path with ``always``), kept only when it is no worse: every waypoint
+    that was within tolerance still is, no more waypoints miss it, and the largest step does not grow. Else ``Q``
+    as it came (the same array)."""
+    from nik.kernels.lm import pose_errors
+
+    Q = np.ascontiguousarray(Q, dtype=np.float64)
+    N = Q.shape[0]
+    pos, rot = np.empty(N), np.empty(N)
+    pose_errors(model.G, model.joints, T, Q, pos, rot)
+    ok = (pos <= tol_pos) & (rot <= tol_rot)
+    step = _largest_step(Q, q_start)
+    if not always and ok.all() and step <= max_step:
+        return Q
+    res = optimise_path(model, T, Q, q_start=q_start, max_step=max_step, cfg=cfg)
+    pose_errors(model.G, model.joints, T, res.q, pos, rot)  # the honest check, by FK
+    ok_new = (pos <= tol_pos) & (rot <= tol_rot)
+    inside = bool(((res.q >= model.joints[:, 1]) & (res.q <= model.joints[:, 2])).all())
+    better = inside and bool(ok_new[ok].all()) and ok_new.sum() >= ok.sum() and _largest_step(res.q, q_start) <= step
+    return res.q if better else Q
