@@ -143,7 +143,9 @@ def test_polish_never_worsens_a_feasible_path(name):
         if trial % 2:
             noisy[rng.integers(0, 40, size=3)] += rng.normal(scale=1e-3, size=(3, robot.dof))
             noisy = np.clip(noisy, m.lo, m.hi)
-        out = polish_path(m, T, noisy, None, tol_pos=TOL_POS, tol_rot=TOL_ROT, max_step=math.radians(10), always=True)
+        out, pe, re = polish_path(
+            m, T, noisy, None, tol_pos=TOL_POS, tol_rot=TOL_ROT, max_step=math.radians(10), always=True
+        )
         pos, rot = (x.numpy() for x in nik.pose_error(torch.from_numpy(T), robot.fk(torch.from_numpy(noisy))))
         pos2, rot2 = (x.numpy() for x in nik.pose_error(torch.from_numpy(T), robot.fk(torch.from_numpy(out))))
         was = (pos <= TOL_POS) & (rot <= TOL_ROT)
@@ -151,3 +153,5 @@ def test_polish_never_worsens_a_feasible_path(name):
         assert now[was].all() and now.sum() >= was.sum()
         assert np.abs(np.diff(out, axis=0)).max() <= np.abs(np.diff(noisy, axis=0)).max()
         assert ((out >= m.lo) & (out <= m.hi)).all()
+        np.testing.assert_allclose(pe, pos2, atol=1e-12)  # the errors returned are those of the path returned
+        np.testing.assert_allclose(re, rot2, atol=1e-12)

@@ -110,11 +110,6 @@ def optimise_path(
     return TrajResult(Q, pos, rot, int(its + more))
 
 
-def _largest_step(Q: np.ndarray, q_start: np.ndarray | None) -> float:
-    prev = np.concatenate([Q[:1] if q_start is None else q_start[None], Q[:-1]])
-    return float(np.abs(Q - prev).max())
-
-
 def polish_path(
     model,
     T: np.ndarray,
@@ -126,24 +121,28 @@ def polish_path(
     max_step: float,
     always: bool = False,
     cfg: TrajCfg | None = None,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The path stage: ``Q: (N, dof)`` optimised by :func:`optimise_path` where some waypoint misses the tolerance
     or some step exceeds ``max_step`` (every path with ``always``), kept only when it is no worse: every waypoint
-    that was within tolerance still is, no more waypoints miss it, and the largest step does not grow. Else ``Q``
-    as it came (the same array)."""
-    from nik.kernels.lm import pose_errors
+    that was within tolerance still is, and the largest step (from ``q_start`` when given) does not grow. Else
+    ``Q`` as it came. Returns ``(Q, pos_err (N,), rot_err (N,))``, the errors re-checked by FK (metres, radians):
+    one compiled call (:func:`nik.kernels.trajopt.path_check`) where nothing needs optimising."""
+    from nik.kernels.trajopt import path_check
 
     Q = np.ascontiguousarray(Q, dtype=np.float64)
+    T = np.ascontiguousarray(T, dtype=np.float64)
     N = Q.shape[0]
+    has_start = q_start is not None
+    qs = np.ascontiguousarray(q_start, dtype=np.float64) if has_start else Q[0]
     pos, rot = np.empty(N), np.empty(N)
-    pose_errors(model.G, model.joints, T, Q, pos, rot)
-    ok = (pos <= tol_pos) & (rot <= tol_rot)
-    step = _largest_step(Q, q_start)
-    if not always and ok.all() and step <= max_step:
-        return Q
+    reached, step = path_check(model.G, model.joints, T, Q, qs, has_start, tol_pos, tol_rot, pos, rot)
+    if not always and reached == N and step <= max_step:
+        return Q, pos, rot
     res = optimise_path(model, T, Q, q_start=q_start, max_step=max_step, cfg=cfg)
-    pose_errors(model.G, model.joints, T, res.q, pos, rot)  # the honest check, by FK
-    ok_new = (pos <= tol_pos) & (rot <= tol_rot)
+    pos2, rot2 = np.empty(N), np.empty(N)
+    _, step2 = path_check(model.G, model.joints, T, res.q, qs, has_start, tol_pos, tol_rot, pos2, rot2)
+    ok, ok2 = (pos <= tol_pos) & (rot <= tol_rot), (pos2 <= tol_pos) & (rot2 <= tol_rot)
     inside = bool(((res.q >= model.joints[:, 1]) & (res.q <= model.joints[:, 2])).all())
-    better = inside and bool(ok_new[ok].all()) and ok_new.sum() >= ok.sum() and _largest_step(res.q, q_start) <= step
-    return res.q if better else Q
+    if inside and bool(ok2[ok].all()) and step2 <= step:
+        return res.q, pos2, rot2
+    return Q, pos, rot

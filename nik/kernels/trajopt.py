@@ -33,10 +33,10 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import LOWER, UPPER, _chain_jacobian
+from nik.kernels.chain import LOWER, UPPER, _chain, _chain_jacobian
 from nik.kernels.lm import _residual
 
-__all__ = ["band_cholesky", "band_solve", "normal_equations", "residuals", "trajopt"]
+__all__ = ["band_cholesky", "band_solve", "normal_equations", "path_check", "residuals", "trajopt"]
 
 ROT_WEIGHT, W_VEL, W_ACC, W_STEP, STEP_CAP, W_LIM, MARGIN, LAMBDA0, MAX_STEP_LM, EPS, STALL_REL = range(11)
 #: length of ``opts``
@@ -262,3 +262,26 @@ def trajopt(G, joints, T, Q, qs, has_start, opts, iters, pos, rot):
             if lam > 1e8:
                 break
     return it, cost
+
+
+@kernel
+def path_check(G, joints, T, Q, qs, has_start, tol_pos, tol_rot, pos, rot):
+    """The pose errors ``pos, rot: (N,)`` (out, metres and radians) of ``Q: (N, n)`` against ``T: (N, 4, 4)`` by FK,
+    in one call with what the polish asks: returns ``(waypoints within both tolerances, the largest step)`` (the
+    largest joint motion between consecutive rows, from ``qs`` when ``has_start``)."""
+    N, n = Q.shape
+    Tw = np.empty((3, 4))
+    e = np.empty(6)
+    reached = 0
+    step = 0.0
+    for i in range(N):
+        _chain(G, joints, Q[i], Tw)
+        _, pos[i], rot[i] = _residual(T[i], Tw, 1.0, e)
+        if pos[i] <= tol_pos and rot[i] <= tol_rot:
+            reached += 1
+        if i > 0 or has_start:
+            for j in range(n):
+                d = abs(Q[i, j] - (Q[i - 1, j] if i > 0 else qs[j]))
+                if d > step:
+                    step = d
+    return reached, step
