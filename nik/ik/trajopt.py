@@ -110,6 +110,25 @@ def optimise_path(
     return TrajResult(Q, pos, rot, int(its + more))
 
 
+def _turns_nearest(Q: np.ndarray, q_start: np.ndarray | None, joints: np.ndarray) -> np.ndarray:
+    """``Q: (N, dof)`` with each joint that turns past a full turn (``wraps``) moved by the whole turns that bring
+    it nearest the row before (from ``q_start`` when given), where that stays inside its limits: the waypoint chain
+    may answer a waypoint a whole turn away, which no local step undoes (the pose is the same)."""
+    from nik.kernels.chain import LOWER, UPPER, WRAPS
+
+    Q = Q.copy()
+    two_pi = 2.0 * math.pi
+    for j in np.nonzero(joints[:, WRAPS] != 0.0)[0]:
+        lo, hi = joints[j, LOWER], joints[j, UPPER]
+        prev = Q[0, j] if q_start is None else q_start[j]
+        for i in range(Q.shape[0]):
+            x = Q[i, j] + two_pi * np.round((prev - Q[i, j]) / two_pi)
+            if lo <= x <= hi:
+                Q[i, j] = x
+            prev = Q[i, j]
+    return Q
+
+
 def polish_path(
     model,
     T: np.ndarray,
@@ -138,7 +157,7 @@ def polish_path(
     reached, step = path_check(model.G, model.joints, T, Q, qs, has_start, tol_pos, tol_rot, pos, rot)
     if not always and reached == N and step <= max_step:
         return Q, pos, rot
-    res = optimise_path(model, T, Q, q_start=q_start, max_step=max_step, cfg=cfg)
+    res = optimise_path(model, T, _turns_nearest(Q, q_start, model.joints), q_start=q_start, max_step=max_step, cfg=cfg)
     pos2, rot2 = np.empty(N), np.empty(N)
     _, step2 = path_check(model.G, model.joints, T, res.q, qs, has_start, tol_pos, tol_rot, pos2, rot2)
     ok, ok2 = (pos <= tol_pos) & (rot <= tol_rot), (pos2 <= tol_pos) & (rot2 <= tol_rot)
