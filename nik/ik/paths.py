@@ -157,7 +157,9 @@ def solve_path(
         q, its, source = _chain_path(run)
         found = None
     if run.refine:  # whole-trajectory optimisation where a waypoint is missed or a step too large, kept if no worse
-        q, pos, rot = polish_path(model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step)
+        q, pos, rot = polish_path(
+            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
+        )
     else:
         pos, rot = _errors(model, Tn, q)
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)

@@ -57,8 +57,9 @@ class TrajResult:
     iterations: int
 
 
-def trajopt_options(cfg: TrajCfg, max_step: float) -> np.ndarray:
-    """``opts`` of :func:`nik.kernels.trajopt.trajopt` for ``cfg`` and the path's ``max_step`` (radians)."""
+def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot: float = 0.0) -> np.ndarray:
+    """``opts`` of :func:`nik.kernels.trajopt.trajopt` for ``cfg`` and the path's ``max_step`` (radians); with
+    ``tol_pos > 0`` the optimisation stops as soon as the path is feasible (within the tolerances and ``max_step``)."""
     from nik.kernels import trajopt as k
 
     opts = np.empty(k.OPTS)
@@ -66,6 +67,7 @@ def trajopt_options(cfg: TrajCfg, max_step: float) -> np.ndarray:
     opts[k.W_STEP], opts[k.STEP_CAP] = cfg.w_step, cfg.step_frac * max_step
     opts[k.W_LIM], opts[k.MARGIN], opts[k.LAMBDA0] = cfg.w_lim, cfg.margin, cfg.lambda0
     opts[k.MAX_STEP_LM], opts[k.EPS], opts[k.STALL_REL] = cfg.max_step_lm, cfg.eps, cfg.stall_rel
+    opts[k.TOL_POS], opts[k.TOL_ROT], opts[k.PATH_STEP] = tol_pos, tol_rot, max_step
     return opts
 
 
@@ -83,14 +85,17 @@ def optimise_path(
     *,
     q_start: np.ndarray | None = None,
     max_step: float = math.radians(10.0),
+    tol_pos: float = 0.0,
+    tol_rot: float = 0.0,
     cfg: TrajCfg | None = None,
 ) -> TrajResult:
     """The joint path ``Q0: (N, dof)`` optimised as one problem towards the poses ``T: (N, 4, 4)`` (float64, metres).
 
     ``model``: anything with the chain model ``G, joints`` (:func:`nik.ik.model.model_of`). ``q_start: (dof,)``: the
     joints before the path (its first step counts). ``Q0`` is clamped into the limits first; the answer is inside
-    them."""
-    from nik.kernels.trajopt import trajopt
+    them. With ``tol_pos > 0`` (and ``tol_rot``) each stage stops as soon as the path is feasible: every waypoint
+    within the tolerances, every step at most ``max_step``."""
+    from nik.kernels import trajopt as k
 
     cfg = TrajCfg() if cfg is None else cfg
     G, joints = model.G, model.joints
@@ -101,13 +106,19 @@ def optimise_path(
         raise ValueError(f"optimise_path: T must have shape ({N}, 4, 4) for Q0 of shape {Q.shape}, got {T.shape}")
     qs = np.zeros(n) if q_start is None else np.ascontiguousarray(q_start, dtype=np.float64)
     pos, rot = np.empty(N), np.empty(N)
-    opts = trajopt_options(cfg, max_step)
-    its, _ = trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
-    from nik.kernels import trajopt as k
-
+    opts = trajopt_options(cfg, max_step, tol_pos, tol_rot)
+    its, _ = k.trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
+    if tol_pos > 0.0 and (pos <= tol_pos).all() and (rot <= tol_rot).all() and _largest_step(Q, q_start) <= max_step:
+        return TrajResult(Q, pos, rot, int(its))  # feasible already
     opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM]] *= FINISH  # the finish: the poses first, the shape kept
-    more, _ = trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
+    more, _ = k.trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
     return TrajResult(Q, pos, rot, int(its + more))
+
+
+def _largest_step(Q: np.ndarray, q_start: np.ndarray | None) -> float:
+    """The largest joint motion between consecutive rows of ``Q: (N, dof)`` (the first from ``q_start`` if given)."""
+    prev = np.concatenate([Q[:1] if q_start is None else q_start[None], Q[:-1]])
+    return float(np.abs(Q - prev).max())
 
 
 def _turns_nearest(Q: np.ndarray, q_start: np.ndarray | None, joints: np.ndarray) -> np.ndarray:
@@ -138,11 +149,13 @@ def polish_path(
     tol_pos: float,
     tol_rot: float,
     max_step: float,
+    reachable: np.ndarray | None = None,
     always: bool = False,
     cfg: TrajCfg | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The path stage: ``Q: (N, dof)`` optimised by :func:`optimise_path` where some waypoint misses the tolerance
-    or some step exceeds ``max_step`` (every path with ``always``), kept only when it is no worse: every waypoint
+    or some step exceeds ``max_step`` (every path with ``always``; a waypoint proven out of reach, ``reachable (N,)``
+    False, does not count: no optimisation reaches it), kept only when it is no worse: every waypoint
     that was within tolerance still is, and the largest step (from ``q_start`` when given) does not grow. Else
     ``Q`` as it came. Returns ``(Q, pos_err (N,), rot_err (N,))``, the errors re-checked by FK (metres, radians):
     one compiled call (:func:`nik.kernels.trajopt.path_check`) where nothing needs optimising."""
@@ -155,9 +168,13 @@ def polish_path(
     qs = np.ascontiguousarray(q_start, dtype=np.float64) if has_start else Q[0]
     pos, rot = np.empty(N), np.empty(N)
     reached, step = path_check(model.G, model.joints, T, Q, qs, has_start, tol_pos, tol_rot, pos, rot)
-    if not always and reached == N and step <= max_step:
-        return Q, pos, rot
-    res = optimise_path(model, T, _turns_nearest(Q, q_start, model.joints), q_start=q_start, max_step=max_step, cfg=cfg)
+    if not always and step <= max_step:
+        if reached == N:  # the usual case: one compiled call, nothing else
+            return Q, pos, rot
+        if reachable is not None and not (((pos > tol_pos) | (rot > tol_rot)) & reachable).any():
+            return Q, pos, rot  # only waypoints out of reach are missed
+    Q1 = _turns_nearest(Q, q_start, model.joints)
+    res = optimise_path(model, T, Q1, q_start=q_start, max_step=max_step, tol_pos=tol_pos, tol_rot=tol_rot, cfg=cfg)
     pos2, rot2 = np.empty(N), np.empty(N)
     _, step2 = path_check(model.G, model.joints, T, res.q, qs, has_start, tol_pos, tol_rot, pos2, rot2)
     ok, ok2 = (pos <= tol_pos) & (rot <= tol_rot), (pos2 <= tol_pos) & (rot2 <= tol_rot)

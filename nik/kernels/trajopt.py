@@ -21,7 +21,9 @@ solved in ``O(M b^2) = O(N n^3)``: the cost is linear in the waypoints.
 The step is LM's: ``(A + lambda (diag(A) + eps)) dq = -J^T r``, scaled so that no joint moves more than
 ``max_step_lm``, then clamped into the limits (the limits always hold: a projected step); kept when the total
 cost ``|r|^2`` falls (lambda shrinks by 0.3), else lambda grows by 5 and the step is refactorised. It stops after
-``iters`` factorisations, or when a kept step lowers the cost by less than ``stall_rel`` of it.
+``iters`` factorisations, when a kept step lowers the cost by less than ``stall_rel`` of it, or as soon as the path
+is feasible (every waypoint within ``tol_pos`` and ``tol_rot``, every step at most ``path_step``; ``tol_pos <= 0``:
+never): the polish asks for a feasible path, not for the optimum of the weights.
 
 Options ``opts: (len OPTS,) float64`` (:func:`trajopt_options` in :mod:`nik.ik.trajopt` builds them); indices below.
 """
@@ -39,8 +41,9 @@ from nik.kernels.lm import _residual
 __all__ = ["band_cholesky", "band_solve", "normal_equations", "path_check", "residuals", "trajopt"]
 
 ROT_WEIGHT, W_VEL, W_ACC, W_STEP, STEP_CAP, W_LIM, MARGIN, LAMBDA0, MAX_STEP_LM, EPS, STALL_REL = range(11)
+TOL_POS, TOL_ROT, PATH_STEP = 11, 12, 13
 #: length of ``opts``
-OPTS = 11
+OPTS = 14
 
 
 @kernel
@@ -214,6 +217,22 @@ def normal_equations(G, joints, T, Q, qs, has_start, opts, H, g):
 
 
 @kernel
+def _feasible(Q, qs, has_start, opts, pos, rot):
+    """Every waypoint within ``TOL_POS`` / ``TOL_ROT`` (by ``pos, rot``) and every step at most ``PATH_STEP``."""
+    if not opts[TOL_POS] > 0.0:
+        return False
+    N, n = Q.shape
+    for i in range(N):
+        if pos[i] > opts[TOL_POS] or rot[i] > opts[TOL_ROT]:
+            return False
+        if i > 0 or has_start:
+            for j in range(n):
+                if abs(Q[i, j] - (Q[i - 1, j] if i > 0 else qs[j])) > opts[PATH_STEP]:
+                    return False
+    return True
+
+
+@kernel
 def trajopt(G, joints, T, Q, qs, has_start, opts, iters, pos, rot):
     """Optimise ``Q: (N, n)`` in place (inside the limits on entry and on return) towards the poses ``T: (N, 4, 4)``.
 
@@ -255,7 +274,7 @@ def trajopt(G, joints, T, Q, qs, has_start, opts, iters, pos, rot):
             drop = cost - new
             cost = _terms(G, joints, T, Q, qs, has_start, opts, True, H, g, none, pos, rot)
             lam = max(lam * 0.3, 1e-12)
-            if drop <= opts[STALL_REL] * cost:
+            if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, opts, pos, rot):
                 break
         else:
             lam *= 5.0
