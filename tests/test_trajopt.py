@@ -160,3 +160,10 @@ def test_polish_never_worsens_a_feasible_path(name):
         assert ((out >= m.lo) & (out <= m.hi)).all()
         np.testing.assert_allclose(pe, pos2, atol=1e-12)  # the errors returned are those of the path returned
         np.testing.assert_allclose(re, rot2, atol=1e-12)
+
+
+def test_optimise_path_refuses_poses_that_do_not_match_the_path():
+    robot = nik.load_robot("panda")
+    Q = np.zeros((4, robot.dof))
+    with pytest.raises(ValueError, match="T must have shape"):
+        optimise_path(model_of(robot), np.tile(np.eye(4), (3, 1, 1)), Q)

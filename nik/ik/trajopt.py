@@ -31,7 +31,8 @@ FINISH = 1e-3
 
 @dataclass(frozen=True)
 class TrajCfg:
-    """Weights and LM settings of :func:`optimise_path` (metres, radians; see the module docstring)."""
+    """Weights and LM settings of :func:`optimise_path` (metres, radians; see the module docstring). Without a
+    config, :func:`optimise_path` takes ``rot_weight`` from the model's LM (``LMCfg.rot_weight``)."""
 
     rot_weight: float = 0.5
     w_vel: float = 1e-4
@@ -97,7 +98,7 @@ def optimise_path(
     within the tolerances, every step at most ``max_step``."""
     from nik.kernels import trajopt as k
 
-    cfg = TrajCfg() if cfg is None else cfg
+    cfg = _default_cfg(model) if cfg is None else cfg
     G, joints = model.G, model.joints
     T = np.ascontiguousarray(T, dtype=np.float64)
     Q = np.clip(np.array(Q0, dtype=np.float64), joints[:, 1], joints[:, 2])
@@ -113,6 +114,16 @@ def optimise_path(
     opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM]] *= FINISH  # the finish: the poses first, the shape kept
     more, _ = k.trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
     return TrajResult(Q, pos, rot, int(its + more))
+
+
+def _default_cfg(model) -> TrajCfg:
+    """:class:`TrajCfg` with the rotation weight of the model's LM (``LMCfg.rot_weight``), where it has one."""
+    lm = getattr(model, "lm", None)
+    if lm is None:
+        return TrajCfg()
+    from nik.kernels.lm import ROT_WEIGHT
+
+    return TrajCfg(rot_weight=float(lm.opts[ROT_WEIGHT]))
 
 
 def _largest_step(Q: np.ndarray, q_start: np.ndarray | None) -> float:
