@@ -63,9 +63,10 @@ def test_normal_equations_match_finite_differences_of_the_residual():
     T = np.ascontiguousarray(robot.fk(torch.from_numpy(Q)).numpy())
     opts = trajopt_options(TrajCfg(w_vel=0.3, w_acc=0.2, w_step=0.5, w_lim=0.7), math.radians(10.0))
     qs = np.clip(Q[0] + 0.3, m.lo, m.hi)
-    R = residual_count(N, n, True)
+    qe = np.clip(Q[-1] - 0.3, m.lo, m.hi)
+    R = residual_count(N, n, True, True)
     r = np.empty(R)
-    cost = residuals(m.G, m.joints, T, Q, qs, True, opts, r)
+    cost = residuals(m.G, m.joints, T, Q, qs, True, qe, True, opts, r)
     assert cost == pytest.approx((r**2).sum())
     assert np.abs(r[: 6 * N]).max() < 1e-12 and np.abs(r[6 * N :]).max() > 0.1
     J = np.empty((R, N * n))
@@ -76,11 +77,11 @@ def test_normal_equations_match_finite_differences_of_the_residual():
             Qs = Q.copy()
             Qs.flat[f] += s
             rs = np.empty(R)
-            residuals(m.G, m.joints, T, Qs, qs, True, opts, rs)
+            residuals(m.G, m.joints, T, Qs, qs, True, qe, True, opts, rs)
             cols.append(rs)
         J[:, f] = (cols[0] - cols[1]) / (2 * h)
     H, g = np.empty((N * n, 3 * n)), np.empty(N * n)
-    assert normal_equations(m.G, m.joints, T, Q, qs, True, opts, H, g) == pytest.approx(cost)
+    assert normal_equations(m.G, m.joints, T, Q, qs, True, qe, True, opts, H, g) == pytest.approx(cost)
     np.testing.assert_allclose(_dense(H), J.T @ J, atol=1e-6)
     np.testing.assert_allclose(g, -J.T @ r, atol=1e-6)
 

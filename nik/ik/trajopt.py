@@ -27,6 +27,10 @@ __all__ = ["TrajCfg", "TrajResult", "optimise_path", "polish_path", "residual_co
 #: The second stage of :func:`optimise_path` scales the shape weights by this: the poses are brought inside their
 #: tolerance from the shape the first stage found (on a redundant arm the self-motion stays where it is).
 FINISH = 1e-3
+#: :func:`polish_path` optimises this many waypoints either side of each problem (a missed waypoint, a step above
+#: ``max_step``; windows that overlap merge), the rows outside fixed: a 60-waypoint path is one window, a long one
+#: costs in proportion to its problems.
+WINDOW = 40
 
 
 @dataclass(frozen=True)
@@ -72,10 +76,10 @@ def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot
     return opts
 
 
-def residual_count(N: int, dof: int, has_start: bool) -> int:
+def residual_count(N: int, dof: int, has_start: bool, has_end: bool = False) -> int:
     """Rows of the residual of :func:`nik.kernels.trajopt.residuals`: pose, velocity + step cap, acceleration,
     limits."""
-    steps = N - 1 + int(has_start)
+    steps = N - 1 + int(has_start) + int(has_end)
     return 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N
 
 
@@ -85,6 +89,7 @@ def optimise_path(
     Q0: np.ndarray,
     *,
     q_start: np.ndarray | None = None,
+    q_end: np.ndarray | None = None,
     max_step: float = math.radians(10.0),
     tol_pos: float = 0.0,
     tol_rot: float = 0.0,
@@ -93,7 +98,8 @@ def optimise_path(
     """The joint path ``Q0: (N, dof)`` optimised as one problem towards the poses ``T: (N, 4, 4)`` (float64, metres).
 
     ``model``: anything with the chain model ``G, joints`` (:func:`nik.ik.model.model_of`). ``q_start: (dof,)``: the
-    joints before the path (its first step counts). ``Q0`` is clamped into the limits first; the answer is inside
+    joints before the path (its first step counts); ``q_end: (dof,)`` those after it (the step to them counts: a
+    window of a longer path). ``Q0`` is clamped into the limits first; the answer is inside
     them. With ``tol_pos > 0`` (and ``tol_rot``) each stage stops as soon as the path is feasible: every waypoint
     within the tolerances, every step at most ``max_step``."""
     from nik.kernels import trajopt as k
@@ -106,13 +112,16 @@ def optimise_path(
     if T.shape != (N, 4, 4):
         raise ValueError(f"optimise_path: T must have shape ({N}, 4, 4) for Q0 of shape {Q.shape}, got {T.shape}")
     qs = np.zeros(n) if q_start is None else np.ascontiguousarray(q_start, dtype=np.float64)
+    qe = np.zeros(n) if q_end is None else np.ascontiguousarray(q_end, dtype=np.float64)
+    ends = (qs, q_start is not None, qe, q_end is not None)
     pos, rot = np.empty(N), np.empty(N)
     opts = trajopt_options(cfg, max_step, tol_pos, tol_rot)
-    its, _ = k.trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
-    if tol_pos > 0.0 and (pos <= tol_pos).all() and (rot <= tol_rot).all() and _largest_step(Q, q_start) <= max_step:
+    its, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, pos, rot)
+    feasible = (pos <= tol_pos).all() and (rot <= tol_rot).all() and _largest_step(Q, q_start, q_end) <= max_step
+    if tol_pos > 0.0 and feasible:
         return TrajResult(Q, pos, rot, int(its))  # feasible already
     opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM]] *= FINISH  # the finish: the poses first, the shape kept
-    more, _ = k.trajopt(G, joints, T, Q, qs, q_start is not None, opts, cfg.iters, pos, rot)
+    more, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, pos, rot)
     return TrajResult(Q, pos, rot, int(its + more))
 
 
@@ -126,10 +135,14 @@ def _default_cfg(model) -> TrajCfg:
     return TrajCfg(rot_weight=float(lm.opts[ROT_WEIGHT]))
 
 
-def _largest_step(Q: np.ndarray, q_start: np.ndarray | None) -> float:
-    """The largest joint motion between consecutive rows of ``Q: (N, dof)`` (the first from ``q_start`` if given)."""
-    prev = np.concatenate([Q[:1] if q_start is None else q_start[None], Q[:-1]])
-    return float(np.abs(Q - prev).max())
+def _largest_step(Q: np.ndarray, q_start: np.ndarray | None, q_end: np.ndarray | None = None) -> float:
+    """The largest joint motion between consecutive rows of ``Q: (N, dof)`` (the first from ``q_start``, the last
+    to ``q_end``, where given)."""
+    rows = [Q] if q_start is None else [q_start[None], Q]
+    if q_end is not None:
+        rows.append(q_end[None])
+    full = np.concatenate(rows)
+    return float(np.abs(np.diff(full, axis=0)).max())
 
 
 def _turns_nearest(Q: np.ndarray, q_start: np.ndarray | None, joints: np.ndarray) -> np.ndarray:
@@ -166,8 +179,9 @@ def polish_path(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The path stage: ``Q: (N, dof)`` optimised by :func:`optimise_path` where some waypoint misses the tolerance
     or some step exceeds ``max_step`` (every path with ``always``; a waypoint proven out of reach, ``reachable (N,)``
-    False, does not count: no optimisation reaches it), kept only when it is no worse: every waypoint
-    that was within tolerance still is, and the largest step (from ``q_start`` when given) does not grow. Else
+    False, does not count: no optimisation reaches it), in windows of :data:`WINDOW` waypoints either side of each
+    problem, each window kept only when it is no worse: every waypoint in it that was within tolerance still is,
+    and its largest step (from the row before, to the row after) does not grow; the whole path likewise, else
     ``Q`` as it came. Returns ``(Q, pos_err (N,), rot_err (N,))``, the errors re-checked by FK (metres, radians):
     one compiled call (:func:`nik.kernels.trajopt.path_check`) where nothing needs optimising."""
     from nik.kernels.trajopt import path_check
@@ -185,11 +199,46 @@ def polish_path(
         if reachable is not None and not (((pos > tol_pos) | (rot > tol_rot)) & reachable).any():
             return Q, pos, rot  # only waypoints out of reach are missed
     Q1 = _turns_nearest(Q, q_start, model.joints)
-    res = optimise_path(model, T, Q1, q_start=q_start, max_step=max_step, tol_pos=tol_pos, tol_rot=tol_rot, cfg=cfg)
+    ok = (pos <= tol_pos) & (rot <= tol_rot)
+    prev = np.concatenate([Q1[:1] if q_start is None else qs[None], Q1[:-1]])
+    bad = (np.abs(Q1 - prev).max(axis=1) > max_step) | ~ok
+    if reachable is not None:
+        bad &= reachable | (np.abs(Q1 - prev).max(axis=1) > max_step)
+    if always:
+        bad[:] = True
+    lo, hi = model.joints[:, 1], model.joints[:, 2]
+    for a, b in _windows(np.nonzero(bad)[0], N):
+        before = q_start if a == 0 else Q1[a - 1]
+        after = Q1[b] if b < N else None
+        res = optimise_path(
+            model, T[a:b], Q1[a:b], q_start=before, q_end=after, max_step=max_step, tol_pos=tol_pos, tol_rot=tol_rot,
+            cfg=cfg,
+        )  # fmt: skip
+        ok2 = (res.pos_err <= tol_pos) & (res.rot_err <= tol_rot)
+        inside = bool(((res.q >= lo) & (res.q <= hi)).all())
+        if (
+            inside
+            and ok2[ok[a:b]].all()
+            and _largest_step(res.q, before, after) <= _largest_step(Q1[a:b], before, after)
+        ):
+            Q1[a:b] = res.q  # this window is no worse: kept
     pos2, rot2 = np.empty(N), np.empty(N)
-    _, step2 = path_check(model.G, model.joints, T, res.q, qs, has_start, tol_pos, tol_rot, pos2, rot2)
-    ok, ok2 = (pos <= tol_pos) & (rot <= tol_rot), (pos2 <= tol_pos) & (rot2 <= tol_rot)
-    inside = bool(((res.q >= model.joints[:, 1]) & (res.q <= model.joints[:, 2])).all())
-    if inside and bool(ok2[ok].all()) and step2 <= step:
-        return res.q, pos2, rot2
+    _, step2 = path_check(model.G, model.joints, T, Q1, qs, has_start, tol_pos, tol_rot, pos2, rot2)
+    ok2 = (pos2 <= tol_pos) & (rot2 <= tol_rot)
+    if bool(ok2[ok].all()) and step2 <= step:
+        return Q1, pos2, rot2
     return Q, pos, rot
+
+
+def _windows(bad: np.ndarray, N: int) -> list[tuple[int, int]]:
+    """``[(a, b), ...]``: the rows ``a:b`` optimised around each problem waypoint of ``bad`` (indices, increasing),
+    :data:`WINDOW` rows either side, overlapping windows merged: the cost stays in proportion to the problems, not
+    to the path's length."""
+    out: list[tuple[int, int]] = []
+    for i in bad:
+        a, b = max(int(i) - WINDOW, 0), min(int(i) + WINDOW + 1, N)
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out

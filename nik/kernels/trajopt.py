@@ -6,7 +6,8 @@ residual stacks, for the poses ``T: (N, 4, 4)``:
 - **pose** (6 rows per waypoint): the LM's error ``-e`` of :func:`nik.kernels.lm._evaluate` (metres; rotation
   vector times ``rot_weight``), Jacobian the geometric one (rotation rows times ``rot_weight``; exact where the
   error vanishes, the Gauss-Newton model of the one-pose LM elsewhere);
-- **velocity** (``n`` rows per step): ``sqrt(w_vel) (q_i+1 - q_i)``, and from ``q_start`` to ``q_0`` when given;
+- **velocity** (``n`` rows per step): ``sqrt(w_vel) (q_i+1 - q_i)``, and from ``qs`` to ``q_0`` and from ``q_N-1``
+  to ``qe`` when given (``has_start``, ``has_end``: the fixed rows either side of a window of a longer path);
 - **acceleration** (``n`` rows per inner waypoint): ``sqrt(w_acc) (q_i-1 - 2 q_i + q_i+1)``;
 - **step cap** (``n`` rows per step): ``sqrt(w_step) sign(d) max(|d| - step_cap, 0)`` with ``d = q_i+1 - q_i``: a
   hinge that pushes every step under ``step_cap`` (a fraction of the path's ``max_step``);
@@ -97,7 +98,7 @@ def _pair(H, g, r, ia, ib, wa, wb, res):
 
 
 @kernel
-def _terms(G, joints, T, Q, qs, has_start, opts, build, H, g, r, pos, rot):
+def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, pos, rot):
     """The residual and, with ``build``, the band ``H = J^T J`` and ``g = -J^T r`` (zeroed here). ``r``: the residual
     vector written in the order of the module docstring when its length is > 0 (:func:`residuals`). Fills
     ``pos, rot: (N,)`` (metres, radians); returns the cost ``|r|^2``."""
@@ -157,6 +158,22 @@ def _terms(G, joints, T, Q, qs, has_start, opts, build, H, g, r, pos, rot):
             if keep:
                 r[at] = res
                 at += 1
+    if has_end:  # velocity and step cap from the last waypoint to the fixed qe
+        for j in range(n):
+            f = (N - 1) * n + j
+            d = qe[j] - Q[N - 1, j]
+            res = sv * d
+            cost += _pair(H, g, r, -1, f, 0.0, -sv, res) if build else res * res
+            if keep:
+                r[at] = res
+                at += 1
+            over = abs(d) - cap
+            res = (sh if d > 0.0 else -sh) * over if over > 0.0 else 0.0
+            if over > 0.0:
+                cost += _pair(H, g, r, -1, f, 0.0, -sh, res) if build else res * res
+            if keep:
+                r[at] = res
+                at += 1
     for i in range(1, N - 1):  # acceleration
         for j in range(n):
             res = sa * (Q[i - 1, j] - 2.0 * Q[i, j] + Q[i + 1, j])
@@ -198,26 +215,26 @@ def _terms(G, joints, T, Q, qs, has_start, opts, build, H, g, r, pos, rot):
 
 
 @kernel
-def residuals(G, joints, T, Q, qs, has_start, opts, r):
+def residuals(G, joints, T, Q, qs, has_start, qe, has_end, opts, r):
     """The residual vector ``r`` (its length: :func:`nik.ik.trajopt.residual_count`) of ``Q: (N, n)``; returns
     ``|r|^2`` (for tests: finite differences of it check :func:`normal_equations`)."""
     N = Q.shape[0]
     H = np.empty((1, 1))
     g = np.empty(1)
     pos, rot = np.empty(N), np.empty(N)
-    return _terms(G, joints, T, Q, qs, has_start, opts, False, H, g, r, pos, rot)
+    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, False, H, g, r, pos, rot)
 
 
 @kernel
-def normal_equations(G, joints, T, Q, qs, has_start, opts, H, g):
+def normal_equations(G, joints, T, Q, qs, has_start, qe, has_end, opts, H, g):
     """The band ``H: (N n, 3 n)`` of ``J^T J`` and ``g = -J^T r: (N n,)`` at ``Q``; returns ``|r|^2``."""
     N = Q.shape[0]
     pos, rot = np.empty(N), np.empty(N)
-    return _terms(G, joints, T, Q, qs, has_start, opts, True, H, g, np.empty(0), pos, rot)
+    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, np.empty(0), pos, rot)
 
 
 @kernel
-def _feasible(Q, qs, has_start, opts, pos, rot):
+def _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot):
     """Every waypoint within ``TOL_POS`` / ``TOL_ROT`` (by ``pos, rot``) and every step at most ``PATH_STEP``."""
     if not opts[TOL_POS] > 0.0:
         return False
@@ -229,14 +246,19 @@ def _feasible(Q, qs, has_start, opts, pos, rot):
             for j in range(n):
                 if abs(Q[i, j] - (Q[i - 1, j] if i > 0 else qs[j])) > opts[PATH_STEP]:
                     return False
+    if has_end:
+        for j in range(n):
+            if abs(qe[j] - Q[N - 1, j]) > opts[PATH_STEP]:
+                return False
     return True
 
 
 @kernel
-def trajopt(G, joints, T, Q, qs, has_start, opts, iters, pos, rot):
+def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, pos, rot):
     """Optimise ``Q: (N, n)`` in place (inside the limits on entry and on return) towards the poses ``T: (N, 4, 4)``.
 
-    ``qs: (n,)`` the joints before the path, counted when ``has_start``. ``pos, rot: (N,)`` out, the pose errors of
+    ``qs: (n,)`` the joints before the path, counted when ``has_start``; ``qe: (n,)`` those after it, counted when
+    ``has_end``. ``pos, rot: (N,)`` out, the pose errors of
     the returned ``Q`` (metres, radians). Returns ``(factorisations, final cost)``."""
     N, n = Q.shape
     M, b = N * n, 3 * n - 1
@@ -248,7 +270,7 @@ def trajopt(G, joints, T, Q, qs, has_start, opts, iters, pos, rot):
     pt, rt = np.empty(N), np.empty(N)
     none = np.empty(0)
     lam = opts[LAMBDA0]
-    cost = _terms(G, joints, T, Q, qs, has_start, opts, True, H, g, none, pos, rot)
+    cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot)
     it = 0
     while it < iters:
         it += 1
@@ -268,13 +290,13 @@ def trajopt(G, joints, T, Q, qs, has_start, opts, iters, pos, rot):
             for j in range(n):
                 x = Q[i, j] + scale * dq[i * n + j]
                 X[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
-        new = _terms(G, joints, T, X, qs, has_start, opts, False, H, g, none, pt, rt)
+        new = _terms(G, joints, T, X, qs, has_start, qe, has_end, opts, False, H, g, none, pt, rt)
         if new < cost:
             Q[:] = X
             drop = cost - new
-            cost = _terms(G, joints, T, Q, qs, has_start, opts, True, H, g, none, pos, rot)
+            cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot)
             lam = max(lam * 0.3, 1e-12)
-            if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, opts, pos, rot):
+            if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot):
                 break
         else:
             lam *= 5.0
