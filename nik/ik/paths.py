@@ -64,6 +64,7 @@ from nik.ik import collide
 from nik.ik.model import model_of
 from nik.ik.result import IKResult, PathReport
 from nik.ik.targets import check_tolerances, pose_array, q_near_array
+from nik.ik.trajopt import polish_path
 from nik.tolerances import score
 
 __all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
@@ -155,7 +156,12 @@ def solve_path(
     else:
         q, its, source = _chain_path(run)
         found = None
-    pos, rot = _errors(model, Tn, q)
+    if run.refine:  # whole-trajectory optimisation where a waypoint is missed or a step too large, kept if no worse
+        q, pos, rot = polish_path(
+            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
+        )
+    else:
+        pos, rot = _errors(model, Tn, q)
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
     success = (pos <= tol_pos) & (rot <= tol_rot) & inside
     success, free, colliding = collide.path_waypoints(solver, q, world, success)
