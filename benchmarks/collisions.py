@@ -1,6 +1,14 @@
-"""nik's sphere verdicts against the real collision meshes (coal) on sampled panda configurations.
+"""nik's sphere verdicts against the real collision meshes (coal) on sampled panda configurations; collision-free IK.
 
     python benchmarks/collisions.py [--samples 2000] [--seed 0] [--tolerance 0.01] [--max-spheres 16]
+    python benchmarks/collisions.py --ik [--targets 1000] [--seed 0] [--tolerance 0.01] [--max-spheres 16]
+
+``--ik`` (issue 28's goals for collision-free IK, :mod:`nik.ik.collide`): the same panda and scene; targets are
+the poses of random configurations that the meshes call free (MoveIt's pairs, and the scene); the solver with
+the scene and self-collision on against the same solver without a collision model (``self_collision=False``),
+interleaved, median of 3 runs: collision-free success, answers called free that collide with the meshes (must be
+0), time per target; then random reachable targets without a world: self-colliding answers (meshes) with the
+model off and on.
 
 The panda of example-robot-data (its URDF with collision meshes, arm + hand + fingers; extra ``collision-check``
 for coal and ``bench``/``urdf-tests`` for the URDF). Prints, for random configurations within the joint limits
@@ -135,5 +143,91 @@ def main(argv=None) -> None:
     )
 
 
+def ik_main(args) -> None:
+    """Collision-free IK on the panda in the scene (module docstring, ``--ik``)."""
+    urdf = panda_urdf()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = nik.load_robot(urdf, end_link="panda_hand")
+    srdf = srdf_of(urdf)
+    mesh = MeshCheck(robot, urdf, skip=list(srdf_disabled(srdf)) if srdf is not None else [])
+    world = scene(args.seed)
+    model = collision_model(robot, tolerance=args.tolerance, max_spheres=args.max_spheres)
+    nik.collision.set_collision_model(robot, model)  # the model every check below uses
+    g = torch.Generator().manual_seed(args.seed)
+    Q = np.ascontiguousarray(robot.sample(4 * args.targets, generator=g, dtype=torch.float64).numpy())
+    free = ~mesh.collides(Q, world)
+    T = np.ascontiguousarray(robot.fk(Q[free][: args.targets]))
+    plain = nik.IKSolver(robot, self_collision=False)
+    safe = nik.IKSolver(robot, world=world, self_collision=True)
+    print(f"panda (example-robot-data, arm + hand + fingers), {len(T)} targets from configurations the meshes call")
+    print(f"free in a scene of {sum(world.counts())} obstacles (table + 10), seed {args.seed}; model: {model}")
+    plain.solve(T[:4]), safe.solve(T[:4])  # compile / load the kernels before timing
+    times = {"plain": [], "safe": []}
+    cpu = {"plain": [], "safe": []}  # CPU time of this process: fair on a machine shared with other jobs
+    for _ in range(3):
+        for name, solver in (("plain", plain), ("safe", safe)):
+            t, c = time.perf_counter(), time.process_time()
+            res = solver.solve(T)
+            times[name].append((time.perf_counter() - t) / len(T))
+            cpu[name].append((time.process_time() - c) / len(T))
+            if name == "plain":
+                r0 = res
+            else:
+                r1 = res
+    called_free = np.asarray(r1.collision_free)
+    mesh_hit = mesh.collides(np.asarray(r1.q)[called_free], world)
+    plain_hit = mesh.collides(np.asarray(r0.q), world)
+    t0, t1 = (float(np.median(times[k])) for k in ("plain", "safe"))
+    c0, c1 = (float(np.median(cpu[k])) for k in ("plain", "safe"))
+    print(
+        "| solver | success | collision-free (spheres) | called free, mesh colliding | mesh colliding "
+        "| us/target (wall) | us/target (CPU) |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    print(
+        f"| no collision model | {np.mean(r0.success):.1%} | - | - | {plain_hit.mean():.1%} | {1e6 * t0:.0f} "
+        f"| {1e6 * c0:.0f} |"
+    )
+    print(
+        f"| scene + self (spheres) | {np.mean(r1.success):.1%} | {called_free.mean():.1%} | {int(mesh_hit.sum())} "
+        f"| {mesh.collides(np.asarray(r1.q), world).mean():.1%} | {1e6 * t1:.0f} | {1e6 * c1:.0f} |"
+    )
+    print(f"time ratio collision-free / plain: {t1 / t0:.2f}x wall, {c1 / c0:.2f}x CPU")
+    own = ~collides(robot, Q[free][: args.targets], world, model=model)
+    ok = np.asarray(r1.success)
+    print(
+        f"targets whose configuration the spheres also call free: {own.mean():.1%}; success on those "
+        f"{ok[own].mean():.1%}, on the others (the spheres' false alarms) {ok[~own].mean():.1%}"
+    )
+    # self-collision, no world: random reachable targets (poses of random configurations, colliding or not)
+    T2 = np.ascontiguousarray(robot.fk(Q[: args.targets]))
+    off = plain.solve(T2)
+    on = nik.IKSolver(robot, self_collision=True)
+    on.solve(T2[:4])
+    c = time.process_time()
+    r_on = on.solve(T2)
+    t_on = (time.process_time() - c) / len(T2)
+    hit_off = mesh.collides(np.asarray(off.q))
+    hit_on = mesh.collides(np.asarray(r_on.q))
+    print(f"\n{len(T2)} random reachable targets, no world (MoveIt's pairs):")
+    print("| self-collision model | success | self-colliding (meshes) | called free, mesh colliding | us/target, CPU |")
+    print("|---|---|---|---|---|")
+    print(f"| off | {np.mean(off.success):.1%} | {hit_off.mean():.1%} | - | - |")
+    miss = int((np.asarray(r_on.collision_free) & hit_on).sum())
+    print(f"| on | {np.mean(r_on.success):.1%} | {hit_on.mean():.1%} | {miss} | {1e6 * t_on:.0f} |")
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    if "--ik" in sys.argv:
+        ap = argparse.ArgumentParser(description="collision-free IK on the panda in a scene")
+        ap.add_argument("--ik", action="store_true")
+        ap.add_argument("--targets", type=int, default=1000)
+        ap.add_argument("--seed", type=int, default=0)
+        ap.add_argument("--tolerance", type=float, default=0.01, help="sphere fitting tolerance, metres")
+        ap.add_argument("--max-spheres", type=int, default=16, help="at most this many spheres per link")
+        ik_main(ap.parse_args())
+    else:
+        main()

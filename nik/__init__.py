@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import importlib
 
-from nik.collision import World  # also registers Robot.collision_spheres' builder
 from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError, RobotDefinitionWarning
 
 __version__ = "0.1.0"
@@ -37,6 +36,7 @@ _SUBMODULES = {
 # torch is imported with the first of these, not by ``import nik`` (``nik --help`` stays light)
 _LAZY = {
     "IKSolver": "nik.ik",
+    "World": "nik.collision",
     "IKResult": "nik.ik",
     "set_threads": "nik.threads",
     "pose_error": "nik.poses",

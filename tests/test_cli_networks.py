@@ -37,7 +37,7 @@ def test_nik_networks_lists_installs_and_removes(pair, capsys):
     assert all(r[5] == "shipped" for r in rows.values())
     assert str(user_dir()) in out
     panda = rows["panda"]
-    assert panda[1] == "panda" and panda[2] == nik.load_robot("panda").definition_hash and panda[3] == "multihead"
+    assert panda[1] == "panda" and panda[2] == nik.load_robot("panda").arm_hash and panda[3] == "multihead"
     assert panda[4].endswith(" deg") and " mm / " in panda[4]
 
     assert main(["networks", "install", str(pair), "--name", "mine"]) == 0

@@ -76,7 +76,7 @@ def test_an_approximate_closed_form_is_the_ideal_arms_checked_at_the_approximate
 
 
 def test_arm_targets_map_poses_into_the_bare_arms_frame_and_the_arm_hash_ignores_frames():
-    bare = nik.load_robot("panda")
+    bare = nik.load_robot("panda").arm  # the built-in panda without its flange (a tool frame)
     framed = nik.load_robot("panda", base=[0.1, -0.2, 0.8, 0.9238795, 0, 0, 0.3826834], tool=[0, 0, 0.1, 1, 0, 0, 0])
     assert framed.definition_hash != bare.definition_hash and framed.arm_hash == bare.definition_hash
     rebuilt = nik.Robot.from_definition(framed.to_definition())

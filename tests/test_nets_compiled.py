@@ -13,7 +13,7 @@ from nik.nets.compiled import pack
 
 @pytest.mark.parametrize("name", ["panda", "kuka_kr"])  # multihead; branch heads
 def test_packed_ranked_hypotheses_equal_the_torch_networks_within_float32_rounding(name):
-    robot = nik.load_robot(name)
+    robot = nik.load_robot(name).arm  # the arm the network was made for (the built-in panda: without its flange)
     net = load_pretrained(robot)
     packed = pack(net)
     assert packed is not None and packed.heads == net.n_hypotheses

@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+from nik.cli.scene import add_scene_argument, world_from_args
 from nik.cli.solve import _units, read_poses_csv
 from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
 
@@ -52,6 +53,7 @@ def register(sub) -> None:
         help=f"a step above this joint motion is reported as a reconfiguration (default {MAX_STEP_DEG:g} deg)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    add_scene_argument(p)
     p.set_defaults(func=_cmd_path)
 
 
@@ -75,7 +77,7 @@ def _cmd_path(args) -> int:
         if len(args.q_start) != robot.dof:
             raise ValueError(f"--q-start: {robot.name} has {robot.dof} joints, got {len(args.q_start)} values")
         q_start = torch.tensor([v / f for v, f in zip(args.q_start, factor, strict=True)], dtype=torch.float64)
-    solver = IKSolver(robot)
+    solver = IKSolver(robot, world=world_from_args(args))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         res = solver.solve_path(

@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+from nik.cli.scene import add_scene_argument, world_from_args
 from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
 
 __all__ = ["add_threads_argument", "register", "read_poses_csv", "write_solutions_csv"]
@@ -117,6 +118,7 @@ def register(sub) -> None:
         help="rotation about this tool axis free (a drill, a torch, a suction cup); once",
     )
     add_threads_argument(s)
+    add_scene_argument(s)
     s.set_defaults(func=_cmd_solve)
 
     e = sub.add_parser(
@@ -337,7 +339,7 @@ def _cmd_solve(args) -> int:
         q_near = torch.tensor([v / f for v, f in zip(args.q_near, factor, strict=True)], dtype=torch.float64)
     T = as_poses(poses, "quat", name="--pose" if args.pose is not None else str(args.poses))
     checkpoint = None if str(args.checkpoint).lower() == "none" else args.checkpoint
-    solver = IKSolver(robot, checkpoint=checkpoint, refine=args.refine, device=args.device)
+    solver = IKSolver(robot, checkpoint=checkpoint, refine=args.refine, device=args.device, world=world_from_args(args))
     with warnings.catch_warnings():  # the reach warning becomes the one line below
         warnings.simplefilter("ignore", UserWarning)
         res = solver.solve(
@@ -363,7 +365,7 @@ def _cmd_solve(args) -> int:
             for i in range(len(T))
         ]
     if args.plot:
-        _plot(robot, T, res, every, args.plot, tolerance=tolerance)
+        _plot(robot, T, res, every, args.plot, tolerance=tolerance, world=solver.world)
     hint = "pass --unit mm" if args.unit == "m" else ""
     msg = unreachable_message(robot, T, res.reachable, unit_hint=hint)
     if msg is not None:
@@ -449,7 +451,7 @@ def _print_every(robot, every, *, limit: int = 50) -> None:
             print("  " + "  ".join(f"{v * f:10.4f}" for v, f in zip(qk, factor, strict=True)))
 
 
-def _plot(robot, T, res, every, path, *, tolerance: str) -> None:
+def _plot(robot, T, res, every, path, *, tolerance: str, world=None) -> None:
     """``--plot``: the solutions of the first :data:`PLOT_MAX_POSES` poses, their targets, and ``--all``'s as
     ghosts: at most :data:`PLOT_MAX_GHOSTS` a pose (spread evenly over its list), said in the title and in a
     ``nik: note:`` line (a 7-joint arm has a continuum of solutions: 100 ghosts were a black blob)."""
@@ -475,7 +477,7 @@ def _plot(robot, T, res, every, path, *, tolerance: str) -> None:
             "spread over each pose's list; the output lists them all)",
             file=sys.stderr,
         )
-    plot_arm(robot, res.q[:n], path, ghosts=ghosts, T_target=T[:n], title=title)
+    plot_arm(robot, res.q[:n], path, ghosts=ghosts, T_target=T[:n], title=title, world=world)
 
 
 def _print_table(robot, res, *, tolerance: str, limit: int = 50) -> None:

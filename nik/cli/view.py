@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 from nik.cli.common import add_root_link_argument
+from nik.cli.scene import add_scene_argument, world_from_args
 from nik.cli.solve import read_poses_csv
 
 __all__ = ["register"]
@@ -36,6 +37,7 @@ def register(sub) -> None:
     v.add_argument("--port", type=int, default=8080, help="TCP port (default 8080; 0: any free port)")
     v.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     v.add_argument("--seed", type=int, default=0, help="random seed of the solver and the first pose (default 0)")
+    add_scene_argument(v)
     v.set_defaults(func=_cmd_view)
 
 
@@ -60,7 +62,8 @@ def _cmd_view(args) -> int:
 
     robot = robot_from_args(args)
     poses, path = targets(args.poses), targets(args.path)
-    solver = IKSolver(robot, checkpoint=None if str(args.checkpoint).lower() == "none" else args.checkpoint)
+    checkpoint = None if str(args.checkpoint).lower() == "none" else args.checkpoint
+    solver = IKSolver(robot, checkpoint=checkpoint, world=world_from_args(args))
     viewer = Viewer(solver, cfg=ViewerCfg(host=args.host, port=args.port, seed=args.seed), poses=poses, path=path)
     print(f"nik view: {robot.name}{tool_link_text(robot)} at {viewer.url} (Ctrl-C stops)", flush=True)
     try:

@@ -10,8 +10,8 @@ error:
 - a network: all its hypotheses;
 - an arm with a closed form: its solutions of the pose as given (they meet any goal where they exist), and with one
   rotation axis free, for the targets none of those reach, the closed form at the free angle of
-  :func:`nik.ik.free_axis.closed_form_free_axis` (36 angles searched); with the orientation free (``"position"``) the closed form has no angle to search: LM does the
-  rest from those starts and uniform ones;
+  :func:`nik.ik.free_axis.closed_form_free_axis` (36 angles searched); with the orientation free (``"position"``)
+  the closed form has no angle to search: LM does the rest from those starts and uniform ones;
 - ``q_near`` when given (an extra start; no second refinement).
 
 Then LM towards the bounds from each start in turn until one lands inside (compiled:

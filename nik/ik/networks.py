@@ -34,21 +34,20 @@ def _load_once(path: Path, robot, device, load: Callable[[], torch.nn.Module]) -
 
 
 def known_network(robot, device, *, single_pose: bool = False) -> tuple[torch.nn.Module | None, bool]:
-    """``(network, installed)``: the network known for ``robot``'s arm (:attr:`nik.Robot.arm_hash`: base and tool
-    frames left out, so a framed arm keeps it; whatever its name), one installed in the user folder, else the one
-    shipped (:func:`nik.nets.registry.find_network`), loaded on ``device`` once per process (SHA-256 checked), and
-    whether it is the user's (installed) rather than shipped; ``(None, False)`` when there is none.
-    ``single_pose=True``: the small network for single poses instead
+    """``(network, installed)``: the network known for ``robot`` (its definition hash, else its bare arm's
+    :attr:`nik.Robot.arm_hash`: base and tool frames left out, so a framed arm keeps it; whatever its name), one
+    installed in the user folder, else the one shipped (:func:`nik.nets.registry.find_network`), loaded on ``device``
+    once per process (SHA-256 checked), and whether it is the user's (installed) rather than shipped; ``(None,
+    False)`` when there is none. ``single_pose=True``: the small network for single poses instead
     (:func:`nik.nets.registry.find_single_pose_network`).
     """
     from nik.nets.pair import load_pair
     from nik.nets.registry import SHIPPED_DIR, find_network, find_single_pose_network
 
-    arm = robot.arm
-    path = (find_single_pose_network if single_pose else find_network)(arm)
+    path = (find_single_pose_network if single_pose else find_network)(robot)
     if path is None:
         return None, False
-    net = _load_once(path, arm, device, lambda: load_pair(path, robot=arm))
+    net = _load_once(path, robot, device, lambda: load_pair(path, robot=robot))
     return net, not path.resolve().is_relative_to(SHIPPED_DIR.resolve())
 
 

@@ -60,9 +60,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from nik.ik import collide
 from nik.ik.model import model_of
 from nik.ik.result import IKResult, PathReport
 from nik.ik.targets import check_tolerances, pose_array, q_near_array
+from nik.ik.trajopt import polish_path
 from nik.tolerances import score
 
 __all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
@@ -99,6 +101,7 @@ def solve_path(
     seed: int = 0,
     representation: str | None = None,
     max_step: float = PATH_MAX_STEP,
+    world=None,
 ) -> IKResult:
     """One continuous joint trajectory through the waypoints ``T_path`` (see :meth:`nik.IKSolver.solve_path`).
 
@@ -111,6 +114,9 @@ def solve_path(
         seed: seeds the uniform starts and restarts.
         representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
         max_step: steps above it are reconfigurations (reported, warned about), radians.
+        world: a :class:`nik.World` (else the solver's): a waypoint whose answer collides is infeasible, reason
+            ``"colliding"`` (:func:`nik.ik.collide.path_waypoints`; the trajectory itself is not re-planned around
+            obstacles).
 
     Returns:
         :class:`IKResult` of N rows (``q: (N, dof)``) with ``path``: a :class:`PathReport`.
@@ -150,13 +156,19 @@ def solve_path(
     else:
         q, its, source = _chain_path(run)
         found = None
-    pos, rot = _errors(model, Tn, q)
+    if run.refine:  # whole-trajectory optimisation where a waypoint is missed or a step too large, kept if no worse
+        q, pos, rot = polish_path(
+            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
+        )
+    else:
+        pos, rot = _errors(model, Tn, q)
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
     success = (pos <= tol_pos) & (rot <= tol_rot) & inside
+    success, free, colliding = collide.path_waypoints(solver, q, world, success)
     reasons = [""] * len(success)
     for i in np.nonzero(~success)[0]:
         why = "" if found is None else found[i]
-        reasons[i] = why or ("out of reach" if not reachable[i] else "not reached")
+        reasons[i] = why or colliding[i] or ("out of reach" if not reachable[i] else "not reached")
     report = _report(robot, q, q0, success, reasons, max_step, reach_note)
     if report.warning is not None:
         warnings.warn(report.warning, UserWarning, stacklevel=3)
@@ -170,6 +182,7 @@ def solve_path(
         source,
         reachable=torch.from_numpy(reachable).to(device),
         path=report,
+        collision_free=None if free is None else torch.from_numpy(free).to(device),
     )
 
 

@@ -30,7 +30,7 @@ from typing import Any
 
 from nik.lm.batched import LMCfg
 
-__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network", "in_arm_frame", "with_goal"]
+__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network", "in_arm_frame", "resolve_fallback", "with_goal"]
 
 #: Float32 targets are refined to this fraction of the asked tolerance (both backends; module docstring).
 FLOAT32_MARGIN = 0.5
@@ -132,3 +132,17 @@ def with_goal(plan: Plan, bounds=None, q_rest=None, rest_weight: float = 0.1, *,
     if not 0.0 < float(rest_weight) <= 1.0:
         raise ValueError(f"rest_weight: expected a share in (0, 1], got {rest_weight!r}")
     return replace(plan, bounds=goal, q_rest=q_rest, rest_weight=float(rest_weight))
+
+
+def resolve_fallback(fallback, closed_form: bool, name: str) -> str:
+    """``IKSolver(fallback=...)`` as the plan's ``analytic | multistart | none``: True is ``"auto"``, False ``"none"``;
+    ``"auto"`` is analytic on an arm with a closed form (``closed_form``), else multistart. Raises ``ValueError`` on
+    an unknown value and on ``"analytic"`` for an arm (``name``) without a closed form."""
+    fallback = {True: "auto", False: "none"}.get(fallback, fallback)
+    if fallback not in ("auto", "analytic", "multistart", "none"):
+        raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
+    if fallback == "analytic" and not closed_form:
+        raise ValueError(f"IKSolver: fallback='analytic' needs an arm with a closed form; {name} is not")
+    if fallback == "auto":
+        fallback = "analytic" if closed_form else "multistart"
+    return fallback

@@ -35,6 +35,9 @@ class IKResult:
             success is ``|axis_err| <= bounds`` (:mod:`nik.ik.goals`); None otherwise.
         path: for :meth:`IKSolver.solve_path`, how the trajectory follows its path (:class:`PathReport`:
             every step, the largest and where, reconfigurations, why a waypoint failed); None otherwise.
+        collision_free: (B,) bool where a collision model is active (a world, or self-collision:
+            :mod:`nik.ik.collide`): the returned ``q`` is free by the sphere check (conservative: free on the
+            meshes too); ``success`` requires it. None where no collision model is active.
     """
 
     q: torch.Tensor | np.ndarray
@@ -45,6 +48,7 @@ class IKResult:
     source: str = ""
     reachable: torch.Tensor | np.ndarray | None = None
     path: PathReport | None = None
+    collision_free: torch.Tensor | np.ndarray | None = None
     axis_err: torch.Tensor | np.ndarray | None = None
 
     def __len__(self) -> int:

@@ -149,8 +149,10 @@ def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
     Args:
         path: either file of the pair.
         robot: the arm it must belong to (object, built-in name or file), matched by definition hash, so the
-            same arm under another name gets it; the network's ``robot`` is then this one. None: the arm
-            stored in the JSON.
+            same arm under another name gets it; the network's ``robot`` is then this one. A robot with base or
+            tool frames also takes a network made for its bare arm (:attr:`nik.Robot.arm`), whose ``robot`` is then
+            that bare arm (it guesses in the arm's frame: ``base^-1 @ T @ tool^-1``). None: the arm stored in the
+            JSON.
 
     Raises:
         FileNotFoundError: no such file. CheckpointError: anything else wrong (module docstring), one line.
@@ -179,6 +181,8 @@ def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
         )
     if robot is not None:
         robot = robot if isinstance(robot, Robot) else load_robot(robot)
+        if robot.definition_hash != meta["robot_hash"] and robot.arm_hash == meta["robot_hash"]:
+            robot = robot.arm
         if robot.definition_hash != meta["robot_hash"]:
             raise CheckpointError(
                 f"{st} was trained for robot {meta.get('robot')!r} (definition hash {meta['robot_hash']}), "

@@ -109,10 +109,6 @@ def load(robot, directory: str | Path | None = None):
         robot = load_robot(robot)
     dirs = [Path(directory)] if directory is not None else None
     path = find_network(robot, dirs)
-    if path is None and robot.arm is not robot:
-        path = find_network(robot.arm, dirs)
-        if path is not None:
-            robot = robot.arm
     if path is None:
         have = sorted({st.stem for st, _ in index(dirs)})
         same_name = [st for st, h in index(dirs) if st.stem == robot.name]

@@ -9,8 +9,11 @@ Two folders hold network pairs (:mod:`nik.nets.pair`):
 
 :func:`find_network` picks, for a robot, the pair whose recorded ``robot_hash`` equals the robot's
 definition hash (the name does not matter: the same arm loaded from its URDF under another name gets the
-same network); the user folder comes first, so an installed network replaces a shipped one for its arm.
-Within a folder a pair named after the robot wins, then the newest. The index reads only the JSON files
+same network), else the definition hash of its bare arm (:attr:`nik.Robot.arm_hash`: base and tool frames left
+out, so a robot with frames, such as the built-in ur5 and panda with their vendors' flanges, keeps its arm's
+network; :func:`nik.nets.pair.load_pair` then builds it for the bare arm); the user folder comes first, so an
+installed network replaces a shipped one for its arm. Within a folder a pair made for the robot itself wins over
+one made for its bare arm, then a pair named after the robot, then the newest. The index reads only the JSON files
 (a few kB each) and is cached per file (path, size, modification time).
 
 A pair whose JSON says ``"role": "single_pose"`` is a small network made to guess poses cheaply on the CPU
@@ -136,16 +139,19 @@ def find_single_pose_network(robot, dirs: list[Path] | None = None) -> Path | No
 
 
 def _find(robot, dirs, role) -> Path | None:
-    target = robot.definition_hash
+    targets = [robot.definition_hash]
+    if robot.arm is not robot:
+        targets.append(robot.arm_hash)
     for d in search_dirs() if dirs is None else dirs:
         pairs = index([d])
-        hits = [st for st, h in pairs if h == target and role_of(st) == role]
         for st, h in pairs:
             if h is None and st.stem == robot.name:
                 read_pair_meta(st)  # raises the one-line reason
-        if hits:
-            hits.sort(key=lambda p: (p.stem != robot.name, -p.stat().st_mtime_ns))
-            return hits[0]
+        for target in targets:
+            hits = [st for st, h in pairs if h == target and role_of(st) == role]
+            if hits:
+                hits.sort(key=lambda p: (p.stem != robot.name, -p.stat().st_mtime_ns))
+                return hits[0]
     return None
 
 

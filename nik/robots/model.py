@@ -5,6 +5,7 @@ of :mod:`nik.kinematics`."""
 from __future__ import annotations
 
 import hashlib
+import importlib
 import math
 import warnings
 from collections.abc import Sequence
@@ -196,8 +197,8 @@ def _chain_kernels():
     return _chain_module or None
 
 
-#: the builder of :meth:`Robot.collision_spheres`, registered by :mod:`nik.collision` (a room above this one,
-#: imported by ``import nik``), so that this room imports nothing of it
+#: the builder of :meth:`Robot.collision_spheres`, registered by :mod:`nik.collision` (a room above this one) when
+#: it is first imported, so that this room does not depend on it
 _collision_model_builder = None
 
 
@@ -564,8 +565,8 @@ class Robot:
         in the frame of the joint carrying the link (metres) and radii ``(k,)`` (``.per_link``), and the link
         pairs checked. Fitted to the URDF's collision geometry, else capsules along the links; cached per robot.
         ``options``: those of :func:`nik.collision.collision_model` (``radius=`` the capsules' radius, ...)."""
-        if _collision_model_builder is None:
-            raise RuntimeError("collision models need nik.collision (import nik loads it)")
+        if _collision_model_builder is None:  # nik.collision registers its builder when first imported (a room
+            importlib.import_module("nik.collision")  # above this one: imported by name, not depended on)
         return _collision_model_builder(self, **options)
 
     def fk_and_jacobian(

@@ -2,7 +2,10 @@
 
 For docs and machines without a display: each arm is the polyline of :func:`nik.view.arm.arm_points`
 drawn with thick round-capped lines (capsules, seen from one side) and a dot at every joint; the target
-frames as red / green / blue axes (x, y, z); other solutions of the same pose as faint arms. Axes in mm.
+frames as red / green / blue axes (x, y, z); other solutions of the same pose as faint arms; the obstacles of a
+:class:`nik.World` (``world=``) in orange: spheres as wire balls (a large point cloud as dots), boxes as faces,
+capsules as thick segments; they do not change the view's extent (a table would shrink the arm): boxes and capsules
+are cut at the view's cube (matplotlib does not clip 3-D artists; a rotated box is cut corner by corner). Axes in mm.
 The file is written under a temporary name and then renamed.
 """
 
@@ -17,7 +20,7 @@ import torch
 from nik.poses import validate_pose
 from nik.view.arm import arm_points
 
-__all__ = ["plot_arm"]
+__all__ = ["draw_obstacles", "plot_arm"]
 
 _ARM = "#1f5fa8"
 _GHOST = "#7f7f7f"
@@ -33,6 +36,7 @@ def plot_arm(
     T_target=None,
     title: str | None = None,
     dpi: int = 110,
+    world=None,
 ) -> Path:
     """Draw the arm at ``q`` and write the picture to ``path`` (format from its suffix: ``.png``, ``.svg``, ...).
 
@@ -44,6 +48,7 @@ def plot_arm(
         T_target: optional ``(4, 4)`` or ``(B, 4, 4)`` target poses (metres), drawn as axes.
         title: the picture's title (default: the robot's name).
         dpi: resolution of raster formats.
+        world: optional :class:`nik.World`: its obstacles are drawn (module docstring).
 
     Returns:
         The path written.
@@ -90,6 +95,9 @@ def plot_arm(
             for k in range(3):
                 end = T[:3, 3] + size * T[:3, k]
                 ax.plot(*zip(T[:3, 3], end, strict=True), color=_AXES[k], linewidth=2.2)
+    if world is not None and not world.empty:
+        half = 0.55 * reach
+        draw_obstacles(ax, world, view=(mid - half, mid + half))
     _equal_axes(ax, mid, reach)
     ax.set_title(title or robot.name)
     ax.set_xlabel("x (mm)")
@@ -103,6 +111,37 @@ def plot_arm(
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+_OBSTACLE = "#e07b1a"
+
+
+def draw_obstacles(ax, world, *, scale: float = 1e3, view=None) -> None:
+    """The obstacles of ``world`` on a matplotlib 3-D axis, coordinates times ``scale`` (mm by default); ``view``:
+    ``(lo (3,), hi (3,))`` in drawn units, the cube the boxes and capsules are cut at (module docstring)."""
+    cut = (lambda p: p) if view is None else (lambda p: np.clip(p, view[0], view[1]))
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    spheres, boxes, capsules = (a * 1.0 for a in world.packed())
+    if len(spheres) > 200:  # a point cloud: dots
+        ax.scatter(*(spheres[:, :3] * scale).T, color=_OBSTACLE, s=4, alpha=0.6, depthshade=False)
+    else:
+        u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 16), np.linspace(0, np.pi, 9))
+        ball = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)])
+        for c in spheres:
+            x, y, z = (c[:3, None, None] + c[3] * ball) * scale
+            ax.plot_wireframe(x, y, z, color=_OBSTACLE, linewidth=0.6, alpha=0.8)
+    corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
+    faces = [[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]]
+    for b in boxes:
+        R, c, half = b[:9].reshape(3, 3), b[9:12], b[12:15]
+        pts = cut((c + (corners * half) @ R.T) * scale)
+        ax.add_collection3d(
+            Poly3DCollection([pts[f] for f in faces], facecolor=_OBSTACLE, edgecolor="#8a4a10", alpha=0.25)
+        )
+    for c in capsules:
+        a, b = cut(c[:3] * scale), cut(c[3:6] * scale)
+        ax.plot(*zip(a, b, strict=True), color=_OBSTACLE, linewidth=max(2.0, 0.5 * c[6] * scale / 5), alpha=0.7)
 
 
 def _draw(ax, pts, *, color: str, alpha: float, width: float) -> None:

@@ -10,7 +10,11 @@ What the page shows:
 - every solution of the pose (``IKSolver.solve_all``) as faint ghost arms (a check box), drawn when a drag
   ends;
 - with ``poses``: a slider over them; with ``path``: the path drawn, its joint trajectory
-  (:meth:`nik.IKSolver.solve_path`: continuous over the whole path) played back with a slider and a play button.
+  (:meth:`nik.IKSolver.solve_path`: continuous over the whole path) played back with a slider and a play button;
+- collisions (:mod:`nik.ik.collide`): the obstacles of the solver's world (orange: spheres, boxes, capsules; a
+  point cloud as points), the arm's collision spheres (a check box, off by default; the model is built when first
+  shown), and, where the solver checks collisions, the spheres of every colliding link in red (whatever the check
+  box says) with the verdict and the colliding links' names in the panel.
 
 Drags arrive on viser's thread pool; one worker thread solves the newest pose and drops the ones that a
 newer drag superseded, so the page never queues stale solves; the ghosts wait for the end of the drag.
@@ -42,6 +46,9 @@ _ARM_RGB = (40, 100, 180)
 _JOINT_RGB = (30, 30, 30)
 _GHOST_RGB = (175, 175, 185)
 _PATH_RGB = (230, 120, 20)
+_OBSTACLE_RGB = (235, 140, 40)
+_SPHERE_RGB = (60, 160, 230)
+_HIT_RGB = (220, 30, 30)
 
 
 class MissingExtraError(ImportError):
@@ -72,6 +79,7 @@ class ViewerCfg:
     link_radius: float | None = None  # metres, the capsules' radius; None: 2.5 % of the arm's size
     meshes: bool = True  # URDF meshes where the files are there (False: capsules always)
     play_rate: float = 10.0  # waypoints per second when a path plays
+    spheres: bool = False  # draw the arm's collision spheres (the check box's first state)
 
 
 @dataclass
@@ -86,6 +94,7 @@ class ViewState:
     rot_err: float  # radians
     source: str
     ms: float
+    collision_free: bool | None = None  # None where the solver checks no collisions
 
 
 class Viewer:
@@ -257,6 +266,7 @@ class Viewer:
         self._gizmo = server.scene.add_transform_controls("/target", scale=0.15 * self._size)
         server.scene.add_frame("/target/axes", axes_length=0.12 * self._size, axes_radius=0.004 * self._size)
 
+        self._collisions_build()
         gui = server.gui
         gui.add_markdown(f"**{robot.name}**, {robot.dof} joints{_tool_text(robot)}  \n{self._mesh_note}")
         self._status = gui.add_markdown("")
@@ -264,6 +274,8 @@ class Viewer:
         self._ghost_box = gui.add_checkbox("all solutions (faint)", cfg.ghosts)
         self._ghost_text = gui.add_markdown("")
         self._ghost_box.on_update(lambda _: self._locked(self._update_ghosts))
+        self._sphere_box = gui.add_checkbox("collision spheres", cfg.spheres)
+        self._sphere_box.on_update(lambda _: self._locked(lambda: self._show_collisions(self._shown.q)))
 
         self._gizmo.on_update(self._dragged)
 
@@ -344,6 +356,7 @@ class Viewer:
             float(res.rot_err[0]),
             res.source,
             ms,
+            None if res.collision_free is None else bool(res.collision_free[0]),
         )
 
     def _solve_path(self) -> None:
@@ -367,6 +380,7 @@ class Viewer:
                     float(res.rot_err[i]),
                     res.source,
                     ms,
+                    None if res.collision_free is None else bool(res.collision_free[i]),
                 )
             )
 
@@ -394,6 +408,86 @@ class Viewer:
             f"guess: {shown.source or '-'}, solved in {shown.ms:.1f} ms"
         )
         self._joint_text.content = joint_lines(self.robot, q)
+        self._show_collisions(q)
+
+    # -- collisions -----------------------------------------------------------------------------------
+    def _collisions_build(self) -> None:
+        """The world's obstacles (static) and the collision check of the solver (None: none)."""
+        from nik.ik import collide
+
+        self._check = collide.setup(self.robot, self.solver.world, self.solver.self_collision)
+        self._model, self._sphere_nodes = None, None
+        world = self.solver.world
+        if world is None or world.empty:
+            return
+        scene = self.server.scene
+        spheres, boxes, capsules = world.packed()
+        if len(spheres) > 200:  # a point cloud
+            scene.add_point_cloud("/world/points", spheres[:, :3].astype(np.float32), _OBSTACLE_RGB,
+                                  point_size=float(2 * np.median(spheres[:, 3])), point_shape="circle")  # fmt: skip
+        else:
+            for k, c in enumerate(spheres):
+                scene.add_icosphere(f"/world/sphere{k}", radius=float(c[3]), color=_OBSTACLE_RGB, opacity=0.6,
+                                    position=tuple(c[:3]))  # fmt: skip
+        for k, b in enumerate(boxes):
+            R = torch.as_tensor(b[:9].reshape(3, 3))
+            scene.add_box(f"/world/box{k}", _OBSTACLE_RGB, tuple(2 * b[12:15]), opacity=0.5, position=tuple(b[9:12]),
+                          wxyz=tuple(matrix_to_quaternion(R).tolist()))  # fmt: skip
+        for k, c in enumerate(capsules):
+            a, e, r = c[:3], c[3:6], float(c[6])
+            d = e - a
+            length = float(np.linalg.norm(d))
+            R = torch.as_tensor(axis_frame(d / length if length > 1e-12 else np.array([0.0, 0.0, 1.0]))[:3, :3])
+            wxyz = tuple(matrix_to_quaternion(R).tolist())
+            scene.add_cylinder(f"/world/capsule{k}", radius=r, height=max(length, 1e-6), color=_OBSTACLE_RGB,
+                               opacity=0.6, position=tuple(0.5 * (a + e)), wxyz=wxyz)  # fmt: skip
+            for j, p in enumerate((a, e)):
+                scene.add_icosphere(f"/world/capsule{k}/end{j}", radius=r, color=_OBSTACLE_RGB, opacity=0.6,
+                                    position=tuple(p))  # fmt: skip
+
+    def colliding_links(self, q: torch.Tensor) -> list[str]:
+        """Names of the links that collide at ``q (dof,)`` under the solver's check (empty without one)."""
+        if self._check is None:
+            return []
+        from nik.collision import colliding_links
+
+        model = self._check.model
+        hit = colliding_links(self.robot, q[None], self._check.world, model=model, self_collision=self._check.self_on)
+        return [name for name, h in zip(model.links, hit[0], strict=True) if h]
+
+    def _show_collisions(self, q: torch.Tensor) -> None:
+        """Place the arm's spheres: every one when the check box is ticked, those of colliding links in red; the
+        verdict in the panel."""
+        want = bool(self._sphere_box.value)
+        if self._check is None and not want and self._sphere_nodes is None:
+            return
+        if self._model is None:
+            self._model = self._check.model if self._check is not None else self.robot.collision_spheres()
+        model = self._model
+        hit_names = set(self.colliding_links(q))
+        if self._sphere_nodes is None:
+            scene = self.server.scene
+            self._sphere_nodes = [
+                (scene.add_icosphere(f"/spheres/s{k}", radius=float(r), color=_SPHERE_RGB, opacity=0.3,
+                                     subdivisions=2, visible=False),
+                 scene.add_icosphere(f"/spheres/hit{k}", radius=float(r), color=_HIT_RGB, opacity=0.7,
+                                     subdivisions=2, visible=False))
+                for k, r in enumerate(model.radii)
+            ]  # fmt: skip
+        from nik.collision import sphere_centers
+
+        centres = sphere_centers(model, self.robot, q[None].double())[0].numpy()
+        body = model.sphere_body
+        for k, (plain, red) in enumerate(self._sphere_nodes):
+            is_hit = model.links[body[k]] in hit_names
+            node = red if is_hit else plain
+            if is_hit or want:
+                node.position = tuple(centres[k])
+            node.visible = is_hit or want
+            (plain if is_hit else red).visible = False
+        if self._check is not None:
+            verdict = "collision-free" if not hit_names else "**COLLIDING**: " + ", ".join(sorted(hit_names))
+            self._status.content = self._status.content.split("  \ncollisions:")[0] + f"  \ncollisions: {verdict}"
 
     def _update_ghosts(self, *, skip: bool = False) -> None:
         """Solve every solution of the shown pose and draw up to ``max_ghosts`` of them as faint arms: one

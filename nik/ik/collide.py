@@ -1,0 +1,232 @@
+"""The collision stage of :class:`nik.IKSolver`: which collision model a call uses, and collision-free answers.
+
+**When collisions are checked** (``IKSolver(robot, world=None, self_collision=None)``, per call ``solve(world=)``):
+
+- ``self_collision=None`` (the default): self-collision is checked where the robot **has a collision model
+  attached**: a ``NAME.collision.json`` beside its URDF / YAML file (:func:`nik.collision.collision_model` loads
+  it) or one set by the user (:func:`nik.collision.set_collision_model`); otherwise it is off;
+- ``self_collision=True``: checked; the model is built if needed (fitted to the URDF's collision geometry, or
+  capsules along the links; cached, :meth:`nik.Robot.collision_spheres`);
+- ``self_collision=False``: never checked;
+- a ``world`` (on the solver or per call) is always checked, with self-collision by the same rule (the model is
+  built if needed to place the arm's spheres).
+
+Why not on by default for every arm: a sphere model is conservative (every surface point inside; it overreaches
+by 1.5-3.5 cm), so it calls 5-33 % of the panda's free configurations colliding (docs/collisions.md). Turned on
+silently, it would make random reachable targets fail that the same call solves today, and fit a model (seconds)
+inside a solve. A model the user attached is a decision the user made, so it is honoured by default.
+
+**What the stage does** (:func:`resolve`, after the main pipeline, both backends): every answer is checked
+(:func:`nik.kernels.collision.collides_batch`, margin 0); the ones that collide (within reach) are solved again by
+LM with collision rows (:mod:`nik.kernels.collision_lm`): from the answer, then the network's other hypotheses
+or the closed form's other branches (colliding ones dropped before any iteration), then uniform restarts drawn
+collision-free. The torch backend runs the same compiled kernel on the CPU (the answers go there and back). The
+final verdict ``res.collision_free`` is the sphere check of the returned ``q`` (margin 0): conservative, so an
+answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it.
+
+Choices (:class:`CollideCfg`): margin 5 mm (the rows push the spheres that far apart, the verdict needs 0), weight
+1 (a millimetre of penetration costs as much as a millimetre of pose error), 30 iterations per start,
+:attr:`CollideCfg.restarts` uniform starts, each the collision-free draw nearest the pose among
+:attr:`CollideCfg.tries`. A solver takes other settings as ``solver.collide_cfg = CollideCfg(...)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+__all__ = [
+    "CollideCfg",
+    "Setup",
+    "after_solve",
+    "attached_model",
+    "free_solutions",
+    "path_waypoints",
+    "resolve",
+    "setup",
+]
+
+
+@dataclass(frozen=True)
+class CollideCfg:
+    """Settings of the collision stage (module docstring): ``margin`` metres, ``weight`` of the collision rows,
+    ``iters`` / ``stall_iters`` per start, ``restarts`` uniform starts per target, ``tries`` draws per start."""
+
+    margin: float = 0.005
+    weight: float = 1.0
+    iters: int = 30
+    stall_iters: int = 5
+    restarts: int = 16
+    tries: int = 16
+
+
+@dataclass(frozen=True)
+class Setup:
+    """The collision check of one call: the arm's ``model``, the ``world`` (None: self only) and ``self_on``."""
+
+    model: object
+    world: object
+    self_on: bool
+
+    def arguments(self, robot):
+        """``(G, joints), rest``: :func:`nik.collision.compiled.kernel_arguments`."""
+        from nik.collision.compiled import kernel_arguments
+
+        return kernel_arguments(robot, self.model, self.world, self_collision=self.self_on)
+
+
+def attached_model(robot):
+    """The collision model attached to ``robot`` (set by the user, or a ``NAME.collision.json`` beside its file),
+    else None; never fits one."""
+    from nik.collision.model import _beside
+
+    model = robot.__dict__.get("_collision_model")
+    if model is not None:
+        return model
+    beside = _beside(robot)
+    return robot.collision_spheres() if beside is not None and beside.is_file() else None
+
+
+def check_self_collision(value):
+    """``value`` when it is None, True or False (one line otherwise)."""
+    if value is not None and not isinstance(value, bool):
+        raise ValueError(f"IKSolver: self_collision must be None, True or False, got {value!r}")
+    return value
+
+
+def after_solve(solver, backend, plan, T_target, q_near, representation, world):
+    """:meth:`nik.IKSolver.solve` on ``backend``, then :func:`resolve` where a check is active (the call's
+    ``world``, else the solver's); without one the backend's result itself (``collision_free`` None)."""
+    res = backend.solve(solver.robot, plan, T_target, q_near, representation)
+    s = setup(solver.robot, solver.world if world is None else world, solver.self_collision)
+    if s is None:
+        return res
+    from nik.ik.targets import as_poses
+
+    return resolve(solver.robot, plan, as_poses(T_target, representation), res, s, getattr(solver, "collide_cfg", None))
+
+
+def setup(robot, world, self_collision) -> Setup | None:
+    """The collision check of a call (module docstring), or None when nothing is checked."""
+    from nik.collision import World
+
+    if world is not None and not isinstance(world, World):
+        raise ValueError(f"IKSolver: world must be a nik.World, got {type(world).__name__}")
+    model = attached_model(robot) if self_collision is None else None
+    self_on = model is not None if self_collision is None else bool(self_collision)
+    if not self_on and (world is None or world.empty):
+        return None
+    if model is None:
+        model = robot.collision_spheres()
+    return Setup(model, world, self_on)
+
+
+def _numpy(x) -> np.ndarray:
+    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+
+
+def _like(x: np.ndarray, ref):
+    """``x`` as the kind of ``ref`` (a tensor of its dtype and device, or a numpy array of its dtype)."""
+    if isinstance(ref, torch.Tensor):
+        return torch.from_numpy(np.ascontiguousarray(x)).to(device=ref.device, dtype=ref.dtype)
+    return np.asarray(x, dtype=np.asarray(ref).dtype)
+
+
+def _starts(robot, plan, T: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(starts (k, H, n), n_starts (k,))``: the answer, then the closed form's valid branches (closed-form arms)
+    or the network's hypotheses."""
+    from nik.ik.model import model_of
+
+    k, n = q.shape
+    extra = np.zeros((k, 0, n))
+    count = np.zeros(k, dtype=np.int64)
+    model = model_of(robot, plan.lm_cfg)
+    if model.closed is not None:
+        sols, valid = model.closed_solutions(T)
+        order = np.argsort(~valid, axis=1, kind="stable")  # valid branches first
+        extra = np.take_along_axis(sols, order[:, :, None], axis=1)
+        count = valid.sum(1).astype(np.int64)
+    elif plan.net is not None and hasattr(plan.net, "hypotheses"):
+        Tn = model.arm_targets(T) if plan.net_in_arm_frame else T
+        with torch.no_grad():
+            extra = _numpy(plan.net.hypotheses(torch.from_numpy(np.ascontiguousarray(Tn)))).astype(np.float64)
+        count = np.full(k, extra.shape[1], dtype=np.int64)
+    starts = np.ascontiguousarray(np.concatenate([q[:, None, :], extra], axis=1))
+    return starts, count + 1
+
+
+def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None = None):
+    """``res`` with colliding answers solved again and ``collision_free`` set (module docstring); ``T: (B, 4, 4)``
+    the validated targets, ``res`` of either kind (numpy or tensors: the result keeps its kind)."""
+    from nik.ik.model import model_of
+    from nik.kernels.collision import collides_batch
+    from nik.kernels.collision_lm import collision_lm
+    from nik.kernels.lm import CLASSIC, ITERS, STALL_ITERS, seed_state
+
+    cfg = cfg or CollideCfg()
+    (G, joints), rest = s.arguments(robot)
+    q = np.ascontiguousarray(_numpy(res.q), dtype=np.float64)
+    B = q.shape[0]
+    hit = np.empty(B, dtype=bool)
+    collides_batch(G, joints, q, *rest, 0.0, hit)
+    reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
+    idx = np.nonzero(hit & reach)[0]
+    success = _numpy(res.success).astype(bool).copy()
+    pos, rot, it = (_numpy(x).copy() for x in (res.pos_err, res.rot_err, res.iterations))
+    if idx.size:
+        Tn = np.ascontiguousarray(_numpy(T)[idx], dtype=np.float64)
+        starts, n_starts = _starts(robot, plan, Tn, q[idx])
+        tol_pos, tol_rot = plan.stage_tolerances(T.dtype == torch.float32)
+        opts, iopts = model_of(robot, plan.lm_cfg).lm.options(tol_pos, tol_rot)
+        iopts = iopts.copy()
+        iopts[ITERS], iopts[STALL_ITERS] = cfg.iters, cfg.stall_iters
+        k, n = idx.size, q.shape[1]
+        bounds, modes = np.zeros((k, 6)), np.full(k, CLASSIC, dtype=np.int64)
+        restarts = np.full(k, cfg.restarts, dtype=np.int64)
+        qk, free, done = np.empty((k, n)), np.empty(k, dtype=bool), np.empty(k, dtype=bool)
+        itk, pk, rk = np.empty(k, dtype=np.int64), np.empty(k), np.empty(k)
+        collision_lm(G, joints, Tn, starts, n_starts, bounds, modes, opts, iopts, restarts, cfg.tries,
+                     seed_state(plan.seed), *rest, cfg.margin, cfg.weight, qk, free, done, itk, pk, rk)  # fmt: skip
+        q[idx], pos[idx], rot[idx], it[idx] = qk, pk, rk, it[idx] + itk
+        success[idx] = (pk <= plan.tol_pos) & (rk <= plan.tol_rot)
+        again = np.empty(idx.size, dtype=bool)
+        collides_batch(G, joints, np.ascontiguousarray(q[idx]), *rest, 0.0, again)  # the verdict of the new answers
+        hit[idx] = again  # (the other rows are unchanged: their verdict stands)
+    free = ~hit
+    out = type(res)(**{**res.__dict__})
+    out.q, out.pos_err, out.rot_err = _like(q, res.q), _like(pos, res.pos_err), _like(rot, res.rot_err)
+    out.iterations, out.success = _like(it, res.iterations), _like(success & free, res.success)
+    out.collision_free = _like(free, res.success)
+    return out
+
+
+def path_waypoints(solver, q: np.ndarray, world, success: np.ndarray):
+    """For :func:`nik.ik.paths.solve_path`: ``(success & free, free, reasons)`` for the trajectory ``q: (N, dof)``
+    under the call's check (``world``, else the solver's; the rule of :func:`setup`): ``free (N,)`` bool and
+    ``reasons`` (N strings, ``"colliding"`` where the answer collides, else ``""``); without a check
+    ``(success, None, ["", ...])``."""
+    s = setup(solver.robot, solver.world if world is None else world, solver.self_collision)
+    if s is None:
+        return success, None, [""] * len(success)
+    from nik.kernels.collision import collides_batch
+
+    (G, joints), rest = s.arguments(solver.robot)
+    hit = np.empty(len(q), dtype=bool)
+    collides_batch(G, joints, np.ascontiguousarray(q, dtype=np.float64), *rest, 0.0, hit)
+    return success & ~hit, ~hit, ["colliding" if h else "" for h in hit]
+
+
+def free_solutions(solver, Q: torch.Tensor) -> torch.Tensor:
+    """The rows of ``Q: (K, dof)`` that are collision-free under the solver's check (all without one)."""
+    robot = solver.robot
+    s = setup(robot, solver.world, solver.self_collision)
+    if s is None or Q.shape[0] == 0:
+        return Q
+    from nik.kernels.collision import collides_batch
+
+    (G, joints), rest = s.arguments(robot)
+    hit = np.empty(Q.shape[0], dtype=bool)
+    collides_batch(G, joints, np.ascontiguousarray(_numpy(Q), dtype=np.float64), *rest, 0.0, hit)
+    return Q[torch.from_numpy(~hit).to(Q.device)]

@@ -1,0 +1,252 @@
+"""Levenberg-Marquardt with collision rows: joints that reach a pose and keep the arm's spheres apart, compiled.
+
+The residual of a configuration stacks the pose error of :mod:`nik.kernels.lm` (6 rows, classic or a tolerant
+goal's dead zone) over the collision rows of :func:`nik.kernels.collision.collision_residual` (``R = P + L``
+rows ``max(0, margin - d)``: one per checked link pair and one per link against the world), the latter times
+``weight``::
+
+    minimise |e(q)|^2 + weight^2 |r(q)|^2
+
+The step is the damped Gauss-Newton step of :mod:`nik.kernels.lm` (Marquardt damping, the active set at the
+limits, steps capped at ``max_step`` and brought inside the limits) on the stacked rows. A candidate is kept when
+it lowers the sum, or when it is done: within the pose tolerances (or inside the bounds) **and** free (every
+row's distance ``d >= 0``, the verdict of :func:`nik.kernels.collision.collides_batch` with margin 0). Stopping
+at the first done candidate matters: the margin rows still pull when ``0 <= d < margin``, and where the goal
+needs the arm closer than the margin the minimum of the sum is a compromise whose pose error may exceed the
+tolerance; the path to it passes through done points.
+
+Starts, per target, in order: the ``n_starts[b]`` given ones (the answer that collided, then the network's
+other hypotheses or the closed form's other branches); a given start after the first that collides is dropped
+before any iteration (a colliding hypothesis mostly lands on a colliding answer; LM from it would spend the
+budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the collision-free draw
+nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before any iteration).
+The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
+reached with the spheres overlapping by millimetres beats a free configuration far from the pose).
+Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nik.kernels._jit import kernel
+from nik.kernels.chain import LOWER, UPPER, _chain
+from nik.kernels.collision import collision_residual
+from nik.kernels.lm import (
+    _STREAM,
+    EPS,
+    ITERS,
+    LAMBDA0,
+    LAMBDA_DOWN,
+    LAMBDA_MAX,
+    LAMBDA_MIN,
+    LAMBDA_UP,
+    MAX_STEP,
+    ROT_WEIGHT,
+    STALL_ITERS,
+    STALL_REL,
+    TOL_POS,
+    TOL_ROT,
+    _bounds,
+    _cholesky_solve,
+    _copy,
+    _draw,
+    _eval,
+    _score,
+)
+
+__all__ = ["collision_lm"]
+
+
+@kernel
+def _stacked_step(J, e, Jr, r, w2, q, joints, lam, eps, max_step, A, g, dq):
+    """The damped, limit-aware step ``dq (n,)`` for the pose rows ``J (6, n), e (6,)`` (``e`` = target - reached,
+    as in :mod:`nik.kernels.lm`) and the collision rows ``Jr (R, n), r (R,)`` (``r`` = residual) weighted by
+    ``w2``; False if it failed."""
+    n = q.shape[0]
+    R = r.shape[0]
+    for i in range(n):
+        v = 0.0
+        for k in range(6):
+            v += J[k, i] * e[k]
+        for k in range(R):
+            if r[k] != 0.0:
+                v -= w2 * Jr[k, i] * r[k]
+        g[i] = v
+        for m in range(i + 1):
+            a = 0.0
+            for k in range(6):
+                a += J[k, i] * J[k, m]
+            for k in range(R):
+                if r[k] != 0.0:
+                    a += w2 * Jr[k, i] * Jr[k, m]
+            A[i, m] = a
+            A[m, i] = a
+    for i in range(n):
+        held = (q[i] <= joints[i, LOWER] and g[i] < 0.0) or (q[i] >= joints[i, UPPER] and g[i] > 0.0)
+        if held:
+            for m in range(n):
+                A[i, m] = 0.0
+                A[m, i] = 0.0
+            A[i, i] = 1.0
+            g[i] = 0.0
+    for i in range(n):
+        A[i, i] += lam * (A[i, i] + eps) + eps
+    if not _cholesky_solve(A, g, dq):
+        return False
+    big = 0.0
+    for i in range(n):
+        if not math.isfinite(dq[i]):
+            return False
+        big = max(big, abs(dq[i]))
+    if big > max_step:
+        f = max_step / big
+        for i in range(n):
+            dq[i] *= f
+    return True
+
+
+@kernel
+def _sum_sq(r):
+    s = 0.0
+    for k in range(r.shape[0]):
+        s += r[k] * r[k]
+    return s
+
+
+@kernel
+def collision_lm(
+    G, joints, Tt, starts, n_starts, bounds, modes, opts, iopts, restarts, tries, seed,
+    spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, weight,
+    q, free, done_out, iterations, pos, rot,
+):  # fmt: skip
+    """LM with collision rows for each target ``Tt[b] (4, 4)`` (module docstring).
+
+    Args:
+        G, joints: the chain model; ``spheres ... self_on``: :func:`nik.collision.compiled.kernel_arguments`.
+        starts: (B, H, n) given starts, ``n_starts: (B,)`` int64 how many of them target ``b`` uses (>= 0).
+        bounds: (B, 6), modes: (B,) int64: the goal (``modes[b] == CLASSIC``: the tolerances of ``opts``).
+        opts, iopts: :func:`nik.kernels.lm.lm_options` (``iters``, ``stall_iters`` per start).
+        restarts: (B,) int64 uniform starts each target may draw at most; ``tries``: draws per uniform start.
+        seed: (1,) uint64; ``margin``: metres, the collision rows' reach; ``weight``: their weight.
+        q: (B, n) out, inside the limits; free, done_out: (B,) bool out (collision-free; reached and free);
+        iterations: (B,) int64 out; pos, rot: (B,) float64 out, the pose errors of ``q`` (m, rad).
+    """
+    B, n = q.shape
+    R = pairs.shape[0] + body_start.shape[0] - 1
+    rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
+    lambda0, lam_up, lam_down = opts[LAMBDA0], opts[LAMBDA_UP], opts[LAMBDA_DOWN]
+    lam_min, lam_max, eps, max_step = opts[LAMBDA_MIN], opts[LAMBDA_MAX], opts[EPS], opts[MAX_STEP]
+    stall_rel = opts[STALL_REL]
+    limit, stall_limit = iopts[ITERS], iopts[STALL_ITERS]
+    w2 = weight * weight
+    T, Tc = np.empty((3, 4)), np.empty((3, 4))
+    e, ec, d = np.empty(6), np.empty(6), np.empty(6)
+    J, Jc = np.empty((6, n)), np.empty((6, n))
+    r, rc = np.empty(R), np.empty(R)
+    Jr, Jrc = np.empty((R, n)), np.empty((R, n))
+    A, g, dq = np.empty((n, n)), np.empty(n), np.empty(n)
+    qs, qc, best_q = np.empty(n), np.empty(n), np.empty(n)
+    rng = np.empty(1, dtype=np.uint64)
+    for b in range(B):
+        rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
+        bnd, mode = bounds[b], modes[b]
+        total = 0
+        best_S, best_free, best_done = math.inf, False, False
+        best_pos, best_rot = math.inf, math.inf
+        H = n_starts[b]
+        for s in range(H + restarts[b]):
+            if s < H:
+                _copy(starts[b, s], qs)
+                _bounds(joints, qs)
+                if s > 0 and collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs,
+                                                w_spheres, w_boxes, w_capsules, self_on, 0.0, r, Jr) < 0.0:  # fmt: skip
+                    continue  # a colliding hypothesis: dropped early
+            else:  # the free draw nearest the pose (by its error) among `tries`
+                best_draw = math.inf
+                for _ in range(tries):
+                    _draw(joints, rng, qc)
+                    _chain(G, joints, qc, Tc)
+                    Ed = _score(Tt[b], Tc, rw, bnd, mode, ec, d)
+                    if Ed < best_draw and collision_residual(G, joints, qc, spheres, sphere_frame, body_start, pairs,
+                                                             w_spheres, w_boxes, w_capsules, self_on, 0.0, r,
+                                                             Jr) >= 0.0:  # fmt: skip
+                        best_draw = Ed
+                        _copy(qc, qs)
+                if best_draw == math.inf:
+                    continue
+            E, p_e, r_e, reached = _eval(G, joints, qs, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
+            near = collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                                      w_capsules, self_on, margin, r, Jr)  # fmt: skip
+            S = E + w2 * _sum_sq(r)
+            done = reached and near >= 0.0
+            lam = lambda0
+            stall = 0
+            for _ in range(limit):
+                if done:
+                    break
+                good = _stacked_step(J, e, Jr, r, w2, qs, joints, lam, eps, max_step, A, g, dq)
+                total += 1
+                Sc = math.inf
+                donec = False
+                if good:
+                    for i in range(n):
+                        qc[i] = qs[i] + dq[i]
+                    _bounds(joints, qc)
+                    Ec, p_c, r_c, reached_c = _eval(G, joints, qc, Tt[b], rw, bnd, mode, tol_pos, tol_rot, Tc, Jc,
+                                                    ec, d)  # fmt: skip
+                    near_c = collision_residual(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
+                                                w_boxes, w_capsules, self_on, margin, rc, Jrc)  # fmt: skip
+                    Sc = Ec + w2 * _sum_sq(rc)
+                    donec = reached_c and near_c >= 0.0
+                if good and (Sc < S or donec):
+                    stall = 0 if S - Sc >= stall_rel * S else stall + 1
+                    _copy(qc, qs)
+                    _copy(Jc.ravel(), J.ravel())
+                    _copy(ec, e)
+                    _copy(rc, r)
+                    _copy(Jrc.ravel(), Jr.ravel())
+                    S, p_e, r_e, near, done = Sc, p_c, r_c, near_c, donec
+                    lam = max(lam * lam_down, lam_min)
+                else:
+                    stall += 1
+                    lam = min(lam * lam_up, lam_max)
+                if stall >= stall_limit:
+                    break
+            # the best so far: done, else the lowest sum (a reached pose that collides by millimetres beats a free
+            # configuration far from the pose: the best effort a user can look at)
+            if done or S < best_S:
+                best_S, best_free, best_done, best_pos, best_rot = S, near >= 0.0, done, p_e, r_e
+                _copy(qs, best_q)
+            if done:
+                break
+        if best_S == math.inf:  # every start dropped: keep the first given start (or a draw) as it is
+            if H > 0:
+                _copy(starts[b, 0], best_q)
+            else:
+                _draw(joints, rng, best_q)
+            _bounds(joints, best_q)
+            _, best_pos, best_rot, _ = _eval(G, joints, best_q, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
+            best_free = (
+                collision_residual(
+                    G,
+                    joints,
+                    best_q,
+                    spheres,
+                    sphere_frame,
+                    body_start,
+                    pairs,
+                    w_spheres,
+                    w_boxes,
+                    w_capsules,
+                    self_on,
+                    0.0,
+                    r,
+                    Jr,
+                )
+                >= 0.0  # fmt: skip
+            )
+        _copy(best_q, q[b])
+        free[b], done_out[b], iterations[b], pos[b], rot[b] = best_free, best_done, total, best_pos, best_rot

@@ -1,0 +1,328 @@
+"""Whole-trajectory optimisation: a block-banded Levenberg-Marquardt over the joints of every waypoint, compiled.
+
+The unknown is the joint trajectory ``Q: (N, n)``, flattened waypoint by waypoint (``M = N n`` values). The
+residual stacks, for the poses ``T: (N, 4, 4)``:
+
+- **pose** (6 rows per waypoint): the LM's error ``-e`` of :func:`nik.kernels.lm._evaluate` (metres; rotation
+  vector times ``rot_weight``), Jacobian the geometric one (rotation rows times ``rot_weight``; exact where the
+  error vanishes, the Gauss-Newton model of the one-pose LM elsewhere);
+- **velocity** (``n`` rows per step): ``sqrt(w_vel) (q_i+1 - q_i)``, and from ``qs`` to ``q_0`` and from ``q_N-1``
+  to ``qe`` when given (``has_start``, ``has_end``: the fixed rows either side of a window of a longer path);
+- **acceleration** (``n`` rows per inner waypoint): ``sqrt(w_acc) (q_i-1 - 2 q_i + q_i+1)``;
+- **step cap** (``n`` rows per step): ``sqrt(w_step) sign(d) max(|d| - step_cap, 0)`` with ``d = q_i+1 - q_i``: a
+  hinge that pushes every step under ``step_cap`` (a fraction of the path's ``max_step``);
+- **limits** (``2 n`` rows per waypoint): ``sqrt(w_lim) max(lo + m - q, 0)`` and ``sqrt(w_lim) max(q - hi + m, 0)``
+  with the margin ``m = margin x (hi - lo)``: a barrier near each limit.
+
+The acceleration rows couple waypoints ``i - 1, i, i + 1``, so the normal matrix ``J^T J`` is block-pentadiagonal
+(``n x n`` blocks, two blocks either side of the diagonal): in scalars, a band of half-width ``b = 3 n - 1``. It is
+kept in lower band storage, ``H[r, k] = A[r, r - k]`` (``H: (M, b + 1)``), factorised by a banded Cholesky and
+solved in ``O(M b^2) = O(N n^3)``: the cost is linear in the waypoints.
+
+The step is LM's: ``(A + lambda (diag(A) + eps)) dq = -J^T r``, scaled so that no joint moves more than
+``max_step_lm``, then clamped into the limits (the limits always hold: a projected step); kept when the total
+cost ``|r|^2`` falls (lambda shrinks by 0.3), else lambda grows by 5 and the step is refactorised. It stops after
+``iters`` factorisations, when a kept step lowers the cost by less than ``stall_rel`` of it, or as soon as the path
+is feasible (every waypoint within ``tol_pos`` and ``tol_rot``, every step at most ``path_step``; ``tol_pos <= 0``:
+never): the polish asks for a feasible path, not for the optimum of the weights.
+
+Options ``opts: (len OPTS,) float64`` (:func:`trajopt_options` in :mod:`nik.ik.trajopt` builds them); indices below.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nik.kernels._jit import kernel
+from nik.kernels.chain import LOWER, UPPER, _chain, _chain_jacobian
+from nik.kernels.lm import _residual
+
+__all__ = ["band_cholesky", "band_solve", "normal_equations", "path_check", "residuals", "trajopt"]
+
+ROT_WEIGHT, W_VEL, W_ACC, W_STEP, STEP_CAP, W_LIM, MARGIN, LAMBDA0, MAX_STEP_LM, EPS, STALL_REL = range(11)
+TOL_POS, TOL_ROT, PATH_STEP = 11, 12, 13
+#: length of ``opts``
+OPTS = 14
+
+
+@kernel
+def band_cholesky(H, b):
+    """In place: ``H: (M, b + 1)`` the lower band ``H[r, k] = A[r, r - k]`` of an SPD matrix -> that of its
+    Cholesky factor ``L`` (``A = L L^T``). Returns False when a pivot is not positive (``H`` is then garbage)."""
+    M = H.shape[0]
+    for i in range(M):
+        j0 = max(0, i - b)
+        for j in range(j0, i + 1):
+            s = H[i, i - j]
+            k0 = max(j0, j - b)
+            for k in range(k0, j):
+                s -= H[i, i - k] * H[j, j - k]
+            if j == i:
+                if not s > 0.0:
+                    return False
+                H[i, 0] = math.sqrt(s)
+            else:
+                H[i, i - j] = s / H[j, 0]
+    return True
+
+
+@kernel
+def band_solve(L, b, g, x):
+    """``x (M,)`` solving ``L L^T x = g`` for the band factor ``L: (M, b + 1)`` of :func:`band_cholesky`."""
+    M = L.shape[0]
+    for i in range(M):  # L y = g
+        s = g[i]
+        for k in range(max(0, i - b), i):
+            s -= L[i, i - k] * x[k]
+        x[i] = s / L[i, 0]
+    for i in range(M - 1, -1, -1):  # L^T x = y
+        s = x[i]
+        for k in range(i + 1, min(M, i + b + 1)):
+            s -= L[k, k - i] * x[k]
+        x[i] = s / L[i, 0]
+
+
+@kernel
+def _pair(H, g, r, ia, ib, wa, wb, res):
+    """Add one scalar residual ``res`` with Jacobian ``wa`` at flat index ``ia`` and ``wb`` at ``ib > ia`` (``ia <
+    0``: none) to the band ``H`` and ``g = -J^T r``; returns ``res^2``."""
+    H[ib, 0] += wb * wb
+    g[ib] -= wb * res
+    if ia >= 0:
+        H[ia, 0] += wa * wa
+        H[ib, ib - ia] += wa * wb
+        g[ia] -= wa * res
+    return res * res
+
+
+@kernel
+def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, pos, rot):
+    """The residual and, with ``build``, the band ``H = J^T J`` and ``g = -J^T r`` (zeroed here). ``r``: the residual
+    vector written in the order of the module docstring when its length is > 0 (:func:`residuals`). Fills
+    ``pos, rot: (N,)`` (metres, radians); returns the cost ``|r|^2``."""
+    N, n = Q.shape
+    rw = opts[ROT_WEIGHT]
+    sv, sa, sh, sl = math.sqrt(opts[W_VEL]), math.sqrt(opts[W_ACC]), math.sqrt(opts[W_STEP]), math.sqrt(opts[W_LIM])
+    cap, margin = opts[STEP_CAP], opts[MARGIN]
+    if build:
+        H[:] = 0.0
+        g[:] = 0.0
+    keep = r.shape[0] > 0
+    at = 0
+    Tw = np.empty((3, 4))
+    J = np.empty((6, n))
+    e = np.empty(6)
+    cost = 0.0
+    for i in range(N):  # pose rows
+        _chain_jacobian(G, joints, Q[i], Tw, J)
+        E, pos[i], rot[i] = _residual(T[i], Tw, rw, e)
+        cost += E
+        if keep:
+            for k in range(6):
+                r[at + k] = -e[k]
+            at += 6
+        if build:
+            for k in range(3, 6):
+                for a in range(n):
+                    J[k, a] *= rw
+            base = i * n
+            for a in range(n):
+                s = 0.0
+                for k in range(6):
+                    s += J[k, a] * e[k]
+                g[base + a] += s
+                for c in range(a + 1):
+                    s = 0.0
+                    for k in range(6):
+                        s += J[k, a] * J[k, c]
+                    H[base + a, a - c] += s
+    for i in range(-1, N - 1):  # velocity and step cap, from q_start (i = -1) or waypoint i to i + 1
+        if i < 0 and not has_start:
+            continue
+        for j in range(n):
+            prev = qs[j] if i < 0 else Q[i, j]
+            d = Q[i + 1, j] - prev
+            ia, ib = (-1 if i < 0 else i * n + j), (i + 1) * n + j
+            res = sv * d
+            cost += _pair(H, g, r, ia, ib, -sv, sv, res) if build else res * res
+            if keep:
+                r[at] = res
+                at += 1
+            over = abs(d) - cap
+            s = sh if d > 0.0 else -sh
+            res = s * over if over > 0.0 else 0.0
+            if over > 0.0:
+                cost += _pair(H, g, r, ia, ib, -sh, sh, res) if build else res * res
+            if keep:
+                r[at] = res
+                at += 1
+    if has_end:  # velocity and step cap from the last waypoint to the fixed qe
+        for j in range(n):
+            f = (N - 1) * n + j
+            d = qe[j] - Q[N - 1, j]
+            res = sv * d
+            cost += _pair(H, g, r, -1, f, 0.0, -sv, res) if build else res * res
+            if keep:
+                r[at] = res
+                at += 1
+            over = abs(d) - cap
+            res = (sh if d > 0.0 else -sh) * over if over > 0.0 else 0.0
+            if over > 0.0:
+                cost += _pair(H, g, r, -1, f, 0.0, -sh, res) if build else res * res
+            if keep:
+                r[at] = res
+                at += 1
+    for i in range(1, N - 1):  # acceleration
+        for j in range(n):
+            res = sa * (Q[i - 1, j] - 2.0 * Q[i, j] + Q[i + 1, j])
+            cost += res * res
+            if keep:
+                r[at] = res
+                at += 1
+            if build:
+                i0, i1, i2 = (i - 1) * n + j, i * n + j, (i + 1) * n + j
+                H[i0, 0] += sa * sa
+                H[i1, 0] += 4.0 * sa * sa
+                H[i2, 0] += sa * sa
+                H[i1, n] -= 2.0 * sa * sa
+                H[i2, n] -= 2.0 * sa * sa
+                H[i2, 2 * n] += sa * sa
+                g[i0] -= sa * res
+                g[i1] += 2.0 * sa * res
+                g[i2] -= sa * res
+    for i in range(N):  # limits
+        for j in range(n):
+            lo, hi = joints[j, LOWER], joints[j, UPPER]
+            m = margin * (hi - lo)
+            below, above = lo + m - Q[i, j], Q[i, j] - hi + m
+            res_lo = sl * below if below > 0.0 else 0.0
+            res_hi = sl * above if above > 0.0 else 0.0
+            cost += res_lo * res_lo + res_hi * res_hi
+            if keep:
+                r[at], r[at + 1] = res_lo, res_hi
+                at += 2
+            if build:
+                f = i * n + j
+                if below > 0.0:
+                    H[f, 0] += sl * sl
+                    g[f] += sl * res_lo
+                if above > 0.0:
+                    H[f, 0] += sl * sl
+                    g[f] -= sl * res_hi
+    return cost
+
+
+@kernel
+def residuals(G, joints, T, Q, qs, has_start, qe, has_end, opts, r):
+    """The residual vector ``r`` (its length: :func:`nik.ik.trajopt.residual_count`) of ``Q: (N, n)``; returns
+    ``|r|^2`` (for tests: finite differences of it check :func:`normal_equations`)."""
+    N = Q.shape[0]
+    H = np.empty((1, 1))
+    g = np.empty(1)
+    pos, rot = np.empty(N), np.empty(N)
+    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, False, H, g, r, pos, rot)
+
+
+@kernel
+def normal_equations(G, joints, T, Q, qs, has_start, qe, has_end, opts, H, g):
+    """The band ``H: (N n, 3 n)`` of ``J^T J`` and ``g = -J^T r: (N n,)`` at ``Q``; returns ``|r|^2``."""
+    N = Q.shape[0]
+    pos, rot = np.empty(N), np.empty(N)
+    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, np.empty(0), pos, rot)
+
+
+@kernel
+def _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot):
+    """Every waypoint within ``TOL_POS`` / ``TOL_ROT`` (by ``pos, rot``) and every step at most ``PATH_STEP``."""
+    if not opts[TOL_POS] > 0.0:
+        return False
+    N, n = Q.shape
+    for i in range(N):
+        if pos[i] > opts[TOL_POS] or rot[i] > opts[TOL_ROT]:
+            return False
+        if i > 0 or has_start:
+            for j in range(n):
+                if abs(Q[i, j] - (Q[i - 1, j] if i > 0 else qs[j])) > opts[PATH_STEP]:
+                    return False
+    if has_end:
+        for j in range(n):
+            if abs(qe[j] - Q[N - 1, j]) > opts[PATH_STEP]:
+                return False
+    return True
+
+
+@kernel
+def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, pos, rot):
+    """Optimise ``Q: (N, n)`` in place (inside the limits on entry and on return) towards the poses ``T: (N, 4, 4)``.
+
+    ``qs: (n,)`` the joints before the path, counted when ``has_start``; ``qe: (n,)`` those after it, counted when
+    ``has_end``. ``pos, rot: (N,)`` out, the pose errors of
+    the returned ``Q`` (metres, radians). Returns ``(factorisations, final cost)``."""
+    N, n = Q.shape
+    M, b = N * n, 3 * n - 1
+    H = np.zeros((M, b + 1))
+    A = np.empty((M, b + 1))
+    g = np.empty(M)
+    dq = np.empty(M)
+    X = np.empty((N, n))
+    pt, rt = np.empty(N), np.empty(N)
+    none = np.empty(0)
+    lam = opts[LAMBDA0]
+    cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot)
+    it = 0
+    while it < iters:
+        it += 1
+        for f in range(M):
+            for k in range(b + 1):
+                A[f, k] = H[f, k]
+            A[f, 0] += lam * (H[f, 0] + opts[EPS])
+        if not band_cholesky(A, b):
+            lam *= 5.0
+            continue
+        band_solve(A, b, g, dq)
+        big = 0.0
+        for f in range(M):
+            big = max(big, abs(dq[f]))
+        scale = min(1.0, opts[MAX_STEP_LM] / big) if big > 0.0 else 1.0
+        for i in range(N):
+            for j in range(n):
+                x = Q[i, j] + scale * dq[i * n + j]
+                X[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
+        new = _terms(G, joints, T, X, qs, has_start, qe, has_end, opts, False, H, g, none, pt, rt)
+        if new < cost:
+            Q[:] = X
+            drop = cost - new
+            cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot)
+            lam = max(lam * 0.3, 1e-12)
+            if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot):
+                break
+        else:
+            lam *= 5.0
+            if lam > 1e8:
+                break
+    return it, cost
+
+
+@kernel
+def path_check(G, joints, T, Q, qs, has_start, tol_pos, tol_rot, pos, rot):
+    """The pose errors ``pos, rot: (N,)`` (out, metres and radians) of ``Q: (N, n)`` against ``T: (N, 4, 4)`` by FK,
+    in one call with what the polish asks: returns ``(waypoints within both tolerances, the largest step)`` (the
+    largest joint motion between consecutive rows, from ``qs`` when ``has_start``)."""
+    N, n = Q.shape
+    Tw = np.empty((3, 4))
+    e = np.empty(6)
+    reached = 0
+    step = 0.0
+    for i in range(N):
+        _chain(G, joints, Q[i], Tw)
+        _, pos[i], rot[i] = _residual(T[i], Tw, 1.0, e)
+        if pos[i] <= tol_pos and rot[i] <= tol_rot:
+            reached += 1
+        if i > 0 or has_start:
+            for j in range(n):
+                d = abs(Q[i, j] - (Q[i - 1, j] if i > 0 else qs[j]))
+                if d > step:
+                    step = d
+    return reached, step

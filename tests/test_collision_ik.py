@@ -1,0 +1,206 @@
+"""Collision-free IK (nik/ik/collide.py, nik/kernels/collision_lm.py): the solver's world and self-collision."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.collision import collides, link_frames, set_collision_model
+
+
+def _poses(robot, n: int, seed: int, world=None) -> np.ndarray:
+    """Poses of ``n`` random configurations that the spheres call free in ``world`` (self pairs included)."""
+    q = robot.sample(8 * n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64).numpy()
+    q = q[~collides(robot, q, world)][:n]
+    return np.ascontiguousarray(robot.fk(q))
+
+
+def _table_and_box() -> nik.World:
+    world = nik.World().add_box([0.0, 0.0, -0.05], [2.0, 2.0, 0.1])
+    return world.add_box([0.45, 0.25, 0.35], [0.12, 0.12, 0.12]).add_sphere([0.35, -0.3, 0.5], 0.06)
+
+
+def test_default_stays_off_for_a_robot_without_an_attached_model():
+    robot = nik.load_robot("panda")
+    T = _poses(robot, 16, seed=1)
+    res = nik.IKSolver(robot).solve(T)
+    ref = nik.IKSolver(robot, self_collision=False).solve(T)
+    assert res.collision_free is None
+    np.testing.assert_array_equal(res.q, ref.q)
+    np.testing.assert_array_equal(res.success, ref.success)
+
+
+def test_attached_model_turns_the_default_on():
+    robot = nik.load_robot("ur5")
+    set_collision_model(robot, robot.collision_spheres())
+    try:
+        res = nik.IKSolver(robot).solve(_poses(robot, 8, seed=2))
+    finally:
+        set_collision_model(robot, None)
+    assert res.collision_free is not None and res.collision_free.shape == (8,)
+    assert not collides(robot, res.q[res.collision_free]).any()
+
+
+def test_answers_are_collision_free_and_reach_the_pose():
+    robot = nik.load_robot("panda")
+    world = _table_and_box()
+    T = _poses(robot, 40, seed=3, world=world)
+    plain = nik.IKSolver(robot, self_collision=False).solve(T)
+    res = nik.IKSolver(robot, world=world, self_collision=True).solve(T)
+    assert collides(robot, plain.q, world).any()  # the scene bites: some plain answers collide
+    assert res.success.mean() >= 0.9
+    assert not collides(robot, res.q[res.collision_free], world).any()
+    assert (res.success <= res.collision_free).all()  # success needs collision-free
+    ok = res.success
+    fk = robot.fk(res.q[ok])
+    assert np.abs(fk[:, :3, 3] - T[ok][:, :3, 3]).max() <= 1e-4
+
+
+def test_obstacles_changed_between_calls_change_the_answer():
+    robot = nik.load_robot("ur5")
+    world = nik.World()
+    solver = nik.IKSolver(robot, world=world)
+    T = _poses(robot, 1, seed=4)
+    first = solver.solve(T)
+    assert first.collision_free is None  # an empty world and no attached model: nothing to check
+    elbow = link_frames(robot, torch.as_tensor(first.q))[0, 3, :3, 3].numpy()
+    world.add_sphere(elbow, 0.05)  # on the answer's elbow
+    assert collides(robot, first.q, world, self_collision=False)[0]
+    second = solver.solve(T)
+    assert second.collision_free[0] and second.success[0]
+    assert np.abs(second.q - first.q).max() > 0.1
+    per_call = nik.IKSolver(robot).solve(T, world=world)  # the same world given per call
+    np.testing.assert_allclose(per_call.q, second.q)
+
+
+def test_solve_all_returns_collision_free_solutions_only():
+    robot = nik.load_robot("ur5")
+    T = _poses(robot, 1, seed=5)
+    every = nik.IKSolver(robot).solve_all(T)
+    elbow = link_frames(robot, every[:1].double())[0, 3, :3, 3].numpy()
+    world = nik.World().add_sphere(elbow, 0.02)  # on the elbow of the first solution
+    kept = nik.IKSolver(robot, world=world, self_collision=False).solve_all(T)
+    assert 0 < kept.shape[0] < every.shape[0]
+    assert not collides(robot, kept.numpy(), world, self_collision=False).any()
+
+
+def test_torch_input_gets_tensors_and_the_same_check():
+    robot = nik.load_robot("panda")
+    world = _table_and_box()
+    T = torch.from_numpy(_poses(robot, 8, seed=6, world=world))
+    res = nik.IKSolver(robot, world=world, backend="torch").solve(T)
+    assert isinstance(res.collision_free, torch.Tensor) and res.collision_free.dtype == torch.bool
+    assert not collides(robot, res.q[res.collision_free].numpy(), world, self_collision=False).any()
+
+
+def test_bad_collision_arguments_are_one_line_errors():
+    with pytest.raises(ValueError, match="self_collision must be None, True or False"):
+        nik.IKSolver("ur5", self_collision="yes")
+    with pytest.raises(ValueError, match="world must be a nik.World"):
+        nik.IKSolver("ur5", world={"spheres": []}).solve(np.eye(4))
+
+
+def test_answers_called_free_never_collide_with_the_meshes():
+    pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik[collision-check]')")
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from collisions import panda_urdf, scene
+    finally:
+        sys.path.pop(0)
+    try:
+        urdf = panda_urdf()
+    except SystemExit:
+        pytest.skip("example-robot-data's panda (with meshes) is not installed")
+    from nik.collision.meshcheck import MeshCheck
+    from nik.collision.model import srdf_disabled, srdf_of
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = nik.load_robot(urdf, end_link="panda_hand")
+    world = scene(0)
+    mesh = MeshCheck(robot, urdf, skip=list(srdf_disabled(srdf_of(urdf))))
+    q = robot.sample(120, generator=torch.Generator().manual_seed(7), dtype=torch.float64).numpy()
+    T = np.ascontiguousarray(robot.fk(q[~mesh.collides(q, world)][:30]))
+    res = nik.IKSolver(robot, world=world, self_collision=True).solve(T)
+    assert res.collision_free.any()
+    assert not mesh.collides(res.q[res.collision_free], world).any()
+
+
+def test_solve_path_calls_a_colliding_waypoint_infeasible():
+    robot = nik.load_robot("ur5")
+    q = np.linspace([0.1, -1.2, 1.2, -1.5, -1.5, 0.2], [0.5, -1.0, 1.0, -1.4, -1.5, 0.4], 8)
+    T = np.ascontiguousarray(robot.fk(q))
+    free = nik.IKSolver(robot).solve_path(T)
+    assert free.success.all() and free.collision_free is None
+    tool = T[5, :3, 3]
+    world = nik.World().add_sphere(tool, 0.02)  # on the tool at waypoint 5
+    with pytest.warns(UserWarning, match="colliding"):
+        res = nik.IKSolver(robot).solve_path(T, world=world)
+    hit = collides(robot, np.asarray(res.q), world, self_collision=False)
+    assert hit[5] and not res.success[5] and res.path.reasons[5] == "colliding"
+    assert [r == "colliding" for r in res.path.reasons] == hit.tolist()
+    np.testing.assert_array_equal(res.collision_free.numpy(), ~hit)
+
+
+def test_viewer_draws_obstacles_and_colours_the_colliding_links():
+    pytest.importorskip("viser", reason="the viewer needs viser (pip install 'nik[view]')")
+    from nik.view import Viewer, ViewerCfg
+
+    robot = nik.load_robot("ur5")
+    q = np.array([0.3, -1.2, 1.3, -1.6, -1.5, 0.2])
+    T = torch.from_numpy(robot.fk(q))
+    elbow = link_frames(robot, torch.as_tensor(q[None]))[0, 3, :3, 3].numpy()
+    world = nik.World().add_box([0, 0, -0.05], [1, 1, 0.1]).add_capsule([0.6, 0, 0], [0.6, 0, 0.5], 0.02)
+    solver = nik.IKSolver(robot, world=world, self_collision=False)
+    with Viewer(solver, cfg=ViewerCfg(port=0, ghosts=False, meshes=False)) as viewer:
+        shown = viewer.set_target(T)
+        assert shown.collision_free and "collisions: collision-free" in viewer._status.content
+        assert viewer.colliding_links(viewer.joints) == []
+        world.add_sphere(elbow, 0.04)  # the world changes under the page: the shown joints now collide
+        names = viewer.colliding_links(torch.as_tensor(q))
+        assert names and all(n in solver.robot.collision_spheres().links for n in names)
+        viewer._show(dataclasses.replace(viewer._shown, q=torch.as_tensor(q)))
+        assert "COLLIDING" in viewer._status.content
+        red = [red.visible for _, red in viewer._sphere_nodes]
+        body = solver.robot.collision_spheres().sphere_body
+        links = solver.robot.collision_spheres().links
+        assert red == [links[body[k]] in names for k in range(len(red))]
+        assert not any(plain.visible for plain, _ in viewer._sphere_nodes)  # the check box is off
+        viewer._sphere_box.value = True
+        viewer._show_collisions(torch.as_tensor(q))
+        assert all(p.visible or r.visible for p, r in viewer._sphere_nodes)
+
+
+def _orange(path) -> int:
+    """Pixels of the obstacles' colour (#e07b1a and its translucent shades: red well above blue)."""
+    from PIL import Image
+
+    img = np.asarray(Image.open(path).convert("RGB")).astype(int)
+    return int(((img[..., 0] > img[..., 2] + 90) & (img[..., 1] > img[..., 2] + 20)).sum())
+
+
+def test_nik_solve_scene_avoids_the_obstacles_and_the_plot_draws_them(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from nik.cli import main
+
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("boxes: [{center: [0.0, 0.0, -0.05], size: [1.0, 1.0, 0.1]}]\n")
+    pose = ["0.4", "0.1", "0.3", "0", "1", "0", "0"]
+    plain, with_scene = tmp_path / "plain.png", tmp_path / "scene.png"
+    assert main(["solve", "--robot", "ur5", "--pose", *pose, "--plot", str(plain)]) == 0
+    assert main(["solve", "--robot", "ur5", "--pose", *pose, "--scene", str(scene), "--plot", str(with_scene)]) == 0
+    capsys.readouterr()
+    assert _orange(with_scene) > 20 * max(_orange(plain), 1)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("boxes: [{center: [0, 0, 0], size: [1, -1, 1]}]\n")
+    assert main(["solve", "--robot", "ur5", "--pose", *pose, "--scene", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("nik solve: error: scene file") and "\n" not in err

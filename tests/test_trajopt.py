@@ -1,0 +1,170 @@
+"""Whole-trajectory optimisation (nik.ik.trajopt, nik.kernels.trajopt): the banded solve, the objective's Jacobian,
+a redundant-arm path the waypoint chain cannot follow, and the polish that never makes a path worse."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.ik.model import model_of
+from nik.ik.trajopt import TrajCfg, optimise_path, polish_path, residual_count, trajopt_options
+from nik.kernels.trajopt import band_cholesky, band_solve, normal_equations, residuals
+
+TOL_POS, TOL_ROT = 1e-4, math.radians(0.1)
+
+
+def _dense(H: np.ndarray) -> np.ndarray:
+    """The symmetric matrix of the lower band ``H[r, k] = A[r, r - k]``."""
+    M, w = H.shape
+    A = np.zeros((M, M))
+    for r in range(M):
+        for k in range(min(w, r + 1)):
+            A[r, r - k] = A[r - k, r] = H[r, k]
+    return A
+
+
+def test_banded_cholesky_solve_equals_a_dense_solve():
+    rng = np.random.default_rng(0)
+    M, half = 60, 4
+    B = np.zeros((M, M))
+    for i in range(M):
+        lo = max(0, i - half)
+        B[i, lo : i + 1] = rng.normal(size=i + 1 - lo)
+    B[np.arange(M), np.arange(M)] = np.abs(np.diag(B)) + 3.0  # well conditioned
+    A = B @ B.T  # SPD, half-bandwidth 2 * half
+    b = 2 * half
+    H = np.array([[A[r, r - k] if r >= k else 0.0 for k in range(b + 1)] for r in range(M)])
+    assert band_cholesky(H, b)
+    g = rng.normal(size=M)
+    x = np.empty(M)
+    band_solve(H, b, g, x)
+    np.testing.assert_allclose(x, np.linalg.solve(A, g), rtol=1e-9, atol=1e-10)
+
+
+def test_banded_cholesky_refuses_a_matrix_that_is_not_positive_definite():
+    H = np.array([[1.0, 0.0], [1.0, 2.0], [-4.0, 0.0]])  # diag (1, 1, -4), one off-diagonal 2
+    assert not band_cholesky(H, 1)
+
+
+def test_normal_equations_match_finite_differences_of_the_residual():
+    """``J^T J`` and ``-J^T r`` of the kernel against the finite-difference Jacobian of the residual vector, at a
+    path whose poses are met exactly (the geometric Jacobian is the exact derivative there) but whose steps exceed
+    the cap and whose joints sit near their limits (every other term active)."""
+    robot = nik.load_robot("panda")
+    m = model_of(robot)
+    rng = np.random.default_rng(1)
+    N, n = 5, robot.dof
+    Q = rng.uniform(m.lo, m.hi, size=(N, n))
+    Q[2] = m.lo + 1e-3
+    Q[3] = m.hi - 1e-3
+    T = np.ascontiguousarray(robot.fk(torch.from_numpy(Q)).numpy())
+    opts = trajopt_options(TrajCfg(w_vel=0.3, w_acc=0.2, w_step=0.5, w_lim=0.7), math.radians(10.0))
+    qs = np.clip(Q[0] + 0.3, m.lo, m.hi)
+    qe = np.clip(Q[-1] - 0.3, m.lo, m.hi)
+    R = residual_count(N, n, True, True)
+    r = np.empty(R)
+    cost = residuals(m.G, m.joints, T, Q, qs, True, qe, True, opts, r)
+    assert cost == pytest.approx((r**2).sum())
+    assert np.abs(r[: 6 * N]).max() < 1e-12 and np.abs(r[6 * N :]).max() > 0.1
+    J = np.empty((R, N * n))
+    h = 1e-6
+    for f in range(N * n):
+        cols = []
+        for s in (h, -h):
+            Qs = Q.copy()
+            Qs.flat[f] += s
+            rs = np.empty(R)
+            residuals(m.G, m.joints, T, Qs, qs, True, qe, True, opts, rs)
+            cols.append(rs)
+        J[:, f] = (cols[0] - cols[1]) / (2 * h)
+    H, g = np.empty((N * n, 3 * n)), np.empty(N * n)
+    assert normal_equations(m.G, m.joints, T, Q, qs, True, qe, True, opts, H, g) == pytest.approx(cost)
+    np.testing.assert_allclose(_dense(H), J.T @ J, atol=1e-6)
+    np.testing.assert_allclose(g, -J.T @ r, atol=1e-6)
+
+
+def _xarm7_circle():
+    """A 60-waypoint circle (radius 5 cm, orientation fixed) on xarm7 from ``q0``: path 37 of benchmarks/paths.py's
+    xarm7 stream, where the waypoint chain reaches every pose but needs a step of 3.4 deg."""
+    robot = nik.load_robot("xarm7")
+    q0 = torch.tensor(
+        [-3.7690758749285, 0.085624766732189, -1.3870104036149629, 1.5032070640616755, 3.346257153772674,
+         2.1736983269078713, -2.187432020684759], dtype=torch.float64,
+    )  # fmt: skip
+    u = torch.tensor([-0.7748731305753529, -0.32139997072311666, -0.5443102886511807], dtype=torch.float64)
+    v = torch.tensor([-0.5406809388525697, -0.1090946657939946, 0.8341237775395208], dtype=torch.float64)
+    T0 = robot.fk(q0[None])[0]
+    a = torch.linspace(0.0, 2 * math.pi, 60, dtype=torch.float64)
+    T = T0.expand(60, 4, 4).clone()
+    T[:, :3, 3] = T0[:3, 3] + 0.05 * u - 0.05 * (torch.cos(a)[:, None] * u + torch.sin(a)[:, None] * v)
+    return robot, q0, T
+
+
+def _check(robot, T, q, q0):
+    """``(every waypoint within 0.1 mm / 0.1 deg by FK and inside the limits, largest step from q0 on)``."""
+    qt = torch.from_numpy(np.ascontiguousarray(q))
+    pe, re = nik.pose_error(T, robot.fk(qt))
+    lo, hi = robot.limits.double().T
+    ok = bool(((pe <= TOL_POS) & (re <= TOL_ROT)).all() and ((qt >= lo) & (qt <= hi)).all())
+    steps = np.abs(np.diff(np.concatenate([q0.numpy()[None], q]), axis=0)).max()
+    return ok, float(steps)
+
+
+def test_optimisation_follows_a_redundant_path_the_waypoint_chain_cannot():
+    robot, q0, T = _xarm7_circle()
+    max_step = math.radians(3.0)
+    solver = nik.IKSolver(robot)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        chain = solver.solve_path(T, q_start=q0, max_step=math.radians(10.0))  # the chain alone: no step is > 10
+    ok, step = _check(robot, T, chain.q.numpy(), q0)
+    assert step > max_step  # the chain cannot keep its steps under 3 deg
+    res = optimise_path(model_of(robot), T.numpy(), chain.q.numpy(), q_start=q0.numpy(), max_step=max_step)
+    ok, step = _check(robot, T, res.q, q0)
+    assert ok and step <= max_step
+    assert (res.pos_err <= TOL_POS).all() and (res.rot_err <= TOL_ROT).all()
+    q, pos, rot = polish_path(  # the path stage: optimised because a step exceeds max_step, kept because feasible
+        model_of(robot), T.numpy(), chain.q.numpy(), q0.numpy(), tol_pos=TOL_POS, tol_rot=TOL_ROT, max_step=max_step
+    )
+    ok, step = _check(robot, T, q, q0)
+    assert ok and step <= max_step
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_polish_never_worsens_a_feasible_path(name):
+    """Random smooth joint paths (so feasible: the poses are their FK) with noise added to some waypoints: the
+    polished path keeps every waypoint that was within tolerance and its largest step does not grow."""
+    robot = nik.load_robot(name)
+    m = model_of(robot)
+    rng = np.random.default_rng(2)
+    for trial in range(6):
+        a, b = rng.uniform(0.2, 0.8, size=(2, robot.dof))
+        s = np.linspace(0.0, 1.0, 40)[:, None]
+        Q = m.lo + (a + (b - a) * s * 0.3) * (m.hi - m.lo)
+        T = np.ascontiguousarray(robot.fk(torch.from_numpy(Q)).numpy())
+        noisy = Q.copy()
+        if trial % 2:
+            noisy[rng.integers(0, 40, size=3)] += rng.normal(scale=1e-3, size=(3, robot.dof))
+            noisy = np.clip(noisy, m.lo, m.hi)
+        out, pe, re = polish_path(
+            m, T, noisy, None, tol_pos=TOL_POS, tol_rot=TOL_ROT, max_step=math.radians(10), always=True
+        )
+        pos, rot = (x.numpy() for x in nik.pose_error(torch.from_numpy(T), robot.fk(torch.from_numpy(noisy))))
+        pos2, rot2 = (x.numpy() for x in nik.pose_error(torch.from_numpy(T), robot.fk(torch.from_numpy(out))))
+        was = (pos <= TOL_POS) & (rot <= TOL_ROT)
+        now = (pos2 <= TOL_POS) & (rot2 <= TOL_ROT)
+        assert now[was].all() and now.sum() >= was.sum()
+        assert np.abs(np.diff(out, axis=0)).max() <= np.abs(np.diff(noisy, axis=0)).max()
+        assert ((out >= m.lo) & (out <= m.hi)).all()
+        np.testing.assert_allclose(pe, pos2, atol=1e-12)  # the errors returned are those of the path returned
+        np.testing.assert_allclose(re, rot2, atol=1e-12)
+
+
+def test_optimise_path_refuses_poses_that_do_not_match_the_path():
+    robot = nik.load_robot("panda")
+    Q = np.zeros((4, robot.dof))
+    with pytest.raises(ValueError, match="T must have shape"):
+        optimise_path(model_of(robot), np.tile(np.eye(4), (3, 1, 1)), Q)
