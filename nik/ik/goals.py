@@ -226,15 +226,15 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
     (classic where ``half`` is None, else towards the bounds ``half: (B, 6)``): the steps of
     :func:`nik.kernels.driver.rest_posture`, batched. Returns a new tensor."""
     from nik.lm.batched import _residual, bounded_residual
-    from nik.poses import pose_error, within_bounds
+    from nik.poses import within_bounds
 
-    rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None and hasattr(plan.lm_cfg, "rot_weight") else 0.5
+    rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None else 0.5
     qr = torch.from_numpy(rest_target(robot, plan.q_rest, q.shape[0])).to(q)
     q = q.clone()
     s = torch.where(ok, 1.0, 0.0).to(q)
     w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=q.dtype, device=q.device)
     eye = torch.eye(6, dtype=q.dtype, device=q.device) * REST_DAMPING
-    max_step = getattr(plan.lm_cfg, "max_step", 0.5) if plan.lm_cfg is not None else 0.5
+    max_step = plan.lm_cfg.max_step if plan.lm_cfg is not None else 0.5
 
     def task(qq):
         Tq, J = robot.fk_and_jacobian(qq)
@@ -269,8 +269,6 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
         J = torch.where(good[:, None, None], Jc, J)
         dist = torch.where(good, dc, dist)
         s = torch.where(good, (2.0 * s).clamp(max=1.0), s * 0.5)
-    if half is None:  # never worse than asked: re-measured by the caller
-        pose_error(T, robot.fk(q))
     return q
 
 
