@@ -12,6 +12,7 @@ import torch
 import nik
 from nik.ik.bounds import bounds_from_cli, parse_bounds
 from nik.ik.free_axis import _about, closed_form_free_axis
+from nik.ik.goals import rest_target
 from nik.lm.batched import bounded_residual
 from nik.lm.batched import lm_solve as torch_lm
 from nik.poses import bounded_error, rotation_modes, tool_error, within_bounds
@@ -360,3 +361,220 @@ def test_closed_form_free_axis_refuses_goals_without_one_free_rotation_axis():
     for bounds in ("position", (1e-4,) * 6, None):
         with pytest.raises(ValueError, match="exactly one rotation axis free"):
             closed_form_free_axis(robot, T, bounds=bounds)
+
+
+# ---------------------------------------------------------------------------
+# the solver: bounds= and q_rest= on both backends (nik.ik.goals)
+# ---------------------------------------------------------------------------
+_URDF_ARM = "configs/robots/urdf/xarm7.urdf"  # a URDF arm without a closed form
+SOLVER_CASES = {
+    "bounded": (1e-4, 1e-4, 1e-4, 1e-3, 1e-3, 1e-3),
+    "free_rz": (1e-4, 1e-4, 1e-4, 1e-3, 1e-3, INF),
+    "free_rx": (1e-4, 1e-4, 1e-4, INF, 1e-3, 1e-3),
+    "free_x": (INF, 1e-4, 1e-4, 1e-3, 1e-3, 1e-3),
+    "position": (1e-4, 1e-4, 1e-4, INF, INF, INF),
+}
+
+
+def _robot(name):
+    from pathlib import Path
+
+    return nik.load_robot(Path(__file__).resolve().parents[1] / _URDF_ARM if name == "xarm7_urdf" else name)
+
+
+def _honest(robot, T, res, bounds):
+    """Success measured independently: FK of the answer, the torch bounded error; a success never outside."""
+    q = torch.as_tensor(res.q, dtype=torch.float64)
+    assert bool(robot.within_limits(q).all())
+    half = torch.as_tensor(np.broadcast_to(np.asarray(bounds, dtype=np.float64), (T.shape[0], 6)).copy())
+    inside = within_bounds(T, robot.fk(q), half)
+    ok = torch.as_tensor(res.success)
+    assert bool((inside | ~ok).all()), "a success outside the bounds"
+    assert inside.tolist() == ok.tolist()
+    assert float(bounded_error(T, robot.fk(q), half).abs().amax(-1)[ok].sum()) == 0.0
+    return ok
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+@pytest.mark.parametrize("name", ["panda", "ur5", "kuka_kr", "xarm7_urdf"])
+@pytest.mark.parametrize("case", list(SOLVER_CASES))
+def test_solve_with_bounds_succeeds_inside_them_by_fk_on_both_backends(name, case, backend):
+    robot = _robot(name)
+    bounds = SOLVER_CASES[case]
+    T, _ = _targets(robot, bounds, 12, seed=len(case))  # turned about a free axis, moved along a free position axis
+    res = nik.IKSolver(robot, backend=backend).solve(T.numpy(), bounds=bounds, seed=1)
+    assert isinstance(res.q, np.ndarray) and res.axis_err.shape == (12, 6)
+    ok = _honest(robot, T, res, bounds)
+    assert bool(ok.all())
+    # the classic errors stay the classic errors: a free axis shows there
+    pos, rot = nik.poses.pose_error(T, robot.fk(torch.from_numpy(res.q)))
+    np.testing.assert_allclose(res.pos_err, pos.numpy(), atol=1e-9)
+    np.testing.assert_allclose(res.rot_err, rot.numpy(), atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["ur5", "kuka_kr"])
+def test_closed_forms_and_lm_solve_the_same_free_axis_goals(name):
+    """A tool off the flange, targets turned about the tool's z: the closed-form arm (free-axis closed form as the
+    guess) and the same arm without its closed form (LM only) solve the same targets, on both backends."""
+    robot = nik.load_robot(name, tool=[0.25, 0, 0.1, 1, 0, 0, 0])
+    g = torch.Generator().manual_seed(3)
+    T = robot.fk(robot.sample(24, generator=g, dtype=torch.float64)) @ _rot(
+        2, (torch.rand(24, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
+    )
+    got = {}
+    for analytic in (True, False):
+        for backend in ("compiled", "torch"):
+            solver = nik.IKSolver(robot, checkpoint=None, analytic=analytic, backend=backend)
+            res = solver.solve(T, bounds="axis_z", seed=0)
+            assert res.source == ("analytic" if analytic else "multistart")
+            got[analytic, backend] = _honest(robot, T, res, parse_bounds("axis_z").half[0]).tolist()
+    assert len({tuple(v) for v in got.values()}) == 1 and all(got[True, "compiled"])
+
+
+def test_solve_all_with_a_free_axis_gives_distinct_solutions_inside_the_bounds():
+    robot = nik.load_robot("ur5")
+    T = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(2), dtype=torch.float64))
+    half = torch.from_numpy(parse_bounds("axis_z").half)
+    for analytic in (True, False):
+        solver = nik.IKSolver(robot, checkpoint=None, analytic=analytic)
+        every = solver.solve_all(T, bounds="axis_z", n_starts=64)
+        exact = solver.solve_all(T, n_starts=64)
+        assert every.shape[0] > exact.shape[0] >= 1
+        assert bool(within_bounds(T.expand(every.shape[0], 4, 4), robot.fk(every), half).all())
+        assert bool(robot.within_limits(every).all())
+
+
+@pytest.mark.parametrize(
+    "bounds,match",
+    [
+        ((1, 1, 1, -1, 1, 1), "negative"),
+        ((1, 1, 1, math.nan, 1, 1), "NaN"),
+        ("axis_w", "unknown shorthand"),
+        ((1, 1, 1, INF, INF, 1), "two axes"),
+    ],
+)
+def test_solve_refuses_bad_bounds_in_one_line(bounds, match):
+    solver = nik.IKSolver("ur5")
+    T = solver.robot.fk(torch.zeros(1, 6, dtype=torch.float64))
+    with pytest.raises(ValueError, match=match) as err:
+        solver.solve(T, bounds=bounds)
+    assert "\n" not in str(err.value)
+
+
+def test_cli_solve_takes_bounds_in_mm_and_degrees_and_refuses_bad_ones(capsys):
+    from nik.cli import main
+
+    robot = nik.load_robot("ur5")
+    T = robot.fk(torch.tensor([[0.3, -1.0, 1.2, -0.5, 1.1, 0.4]], dtype=torch.float64))
+    T = T @ _rot(2, torch.tensor([2.0], dtype=torch.float64))
+    pose = [*T[0, :3, 3].tolist(), *nik.poses.matrix_to_quaternion(T[0, :3, :3]).tolist()]
+    args = ["solve", "--robot", "ur5", "--json", "--pose", *map(repr, pose)]
+    assert main(args + ["--bounds", "0.1", "0.1", "0.1", "0.1", "0.1", "free"]) == 0
+    out = __import__("json").loads(capsys.readouterr().out)
+    q = torch.tensor([out["results"][0]["q_si"]], dtype=torch.float64)
+    bounds = (1e-4, 1e-4, 1e-4, math.radians(0.1), math.radians(0.1), INF)
+    assert bool(within_bounds(T, robot.fk(q), torch.tensor(bounds, dtype=torch.float64)))
+    assert main(args + ["--position-only"]) == 0
+    capsys.readouterr()
+    for bad, word in ((["--bounds", "1", "1", "1", "-1", "1", "1"], "half-width"), (["--free-axis", "w"], "x, y or z"),
+                      (["--free-axis", "z", "--position-only"], "exclude")):  # fmt: skip
+        assert main(args + bad) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("nik solve: error:") and err.count("\n") == 1 and word in err
+
+
+FIVE_JOINTS = """\
+name: five_joints
+convention: dh
+unit: mm
+angles: deg
+joints:
+  - {alpha: 90, a: 0, d: 120, limits: [-170, 170]}
+  - {alpha: 0, a: 110, d: 0, offset: 90, limits: [-100, 100]}
+  - {alpha: 0, a: 130, d: 0, limits: [-140, 140]}
+  - {alpha: 90, a: 0, d: 0, offset: 90, limits: [-100, 100]}
+  - {alpha: 0, a: 0, d: 100, limits: [-170, 170]}
+"""
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_position_only_solves_every_reachable_position_of_a_five_joint_arm(tmp_path, backend):
+    arm = tmp_path / "five.yaml"
+    arm.write_text(FIVE_JOINTS)
+    robot = nik.load_robot(arm)
+    g = torch.Generator().manual_seed(5)
+    T = robot.fk(robot.sample(100, generator=g, dtype=torch.float64))  # reachable positions (by construction)
+    T[:, :3, :3] = nik.poses.quaternion_to_matrix(torch.randn(100, 4, generator=g, dtype=torch.float64))
+    res = nik.IKSolver(robot, backend=backend).solve(T, bounds="position")
+    ok = _honest(robot, T, res, parse_bounds("position").half[0])
+    assert bool(ok.all())
+    assert float(torch.as_tensor(res.pos_err).max()) <= 1e-4
+
+
+# ---------------------------------------------------------------------------
+# preferred postures
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_a_rest_posture_moves_panda_towards_it_without_costing_accuracy(backend):
+    robot = nik.load_robot("panda")
+    g = torch.Generator().manual_seed(7)
+    T = robot.fk(robot.sample(40, generator=g, dtype=torch.float64))
+    solver = nik.IKSolver(robot, backend=backend)
+    for q_rest in (robot.sample(1, generator=g, dtype=torch.float64)[0], "mid"):
+        rest = torch.from_numpy(rest_target(robot, q_rest, 40))
+        plain = solver.solve(T, seed=0)
+        moved = solver.solve(T, seed=0, q_rest=q_rest, rest_weight=0.2)
+        assert bool(plain.success.all()) and bool(moved.success.all())
+        pos, rot = nik.poses.pose_error(T, robot.fk(moved.q))  # every success still within tolerance by FK
+        assert float(pos.max()) <= 1e-4 and float(rot.max()) <= math.radians(0.1)
+        assert bool(robot.within_limits(moved.q).all())
+        d0, d1 = (plain.q - rest).norm(dim=-1), (moved.q - rest).norm(dim=-1)
+        # one null-space direction (self-motion): nearer on every target, and moved on most
+        assert bool((d1 <= d0 + 1e-9).all()) and float((d1 < d0 - 1e-3).double().mean()) >= 0.5
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_a_rest_posture_changes_nothing_on_a_six_joint_arm_without_a_free_axis(backend):
+    robot = nik.load_robot("kuka_kr")
+    g = torch.Generator().manual_seed(8)
+    T = robot.fk(robot.sample(20, generator=g, dtype=torch.float64))
+    solver = nik.IKSolver(robot, backend=backend)
+    plain = solver.solve(T, seed=0)
+    moved = solver.solve(T, seed=0, q_rest="mid")
+    assert bool(moved.success.all())
+    torch.testing.assert_close(moved.q, plain.q, atol=1e-5, rtol=0)
+    # under a free tool axis the same arm has a null space: the posture moves it
+    free = solver.solve(T, seed=0, bounds="axis_z")
+    free_rest = solver.solve(T, seed=0, bounds="axis_z", q_rest="mid")
+    _honest(robot, T, free_rest, parse_bounds("axis_z").half[0])
+    rest = torch.from_numpy(rest_target(robot, "mid", 20))
+    assert float((free_rest.q - rest).norm(dim=-1).mean()) < float((free.q - rest).norm(dim=-1).mean())
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_per_target_bounds_and_float32_tensors_are_measured_against_the_asked_bounds(backend):
+    robot = nik.load_robot("ur5")
+    g = torch.Generator().manual_seed(9)
+    T = robot.fk(robot.sample(6, generator=g, dtype=torch.float64))
+    T = T @ _rot(0, torch.full((6,), 0.5, dtype=torch.float64))  # turned about x: only the free-x rows allow it
+    half = np.tile(np.array([1e-4, 1e-4, 1e-4, 1e-3, 1e-3, 1e-3]), (6, 1))
+    half[::2, 3] = INF
+    solver = nik.IKSolver(robot, backend=backend)
+    res = solver.solve(T.float(), bounds=half)
+    assert isinstance(res.q, torch.Tensor) and res.q.dtype == torch.float32
+    ok = within_bounds(T, robot.fk(res.q.double()), torch.from_numpy(half))
+    assert ok.tolist() == res.success.tolist()
+    assert bool(res.success[::2].all())  # the free-x targets: solved
+    with pytest.raises(ValueError, match="rows for 6 targets"):
+        solver.solve(T, bounds=half[:4])
+
+
+def test_bad_q_rest_is_a_one_line_error():
+    solver = nik.IKSolver("panda")
+    T = solver.robot.fk(torch.zeros(1, 7, dtype=torch.float64))
+    for q_rest, match in (("middle", "'mid'"), ([0.0] * 6, "shape"), ([math.nan] * 7, "NaN")):
+        with pytest.raises(ValueError, match=match) as err:
+            solver.solve(T, q_rest=q_rest)
+        assert "\n" not in str(err.value)
+    with pytest.raises(ValueError, match="rest_weight"):
+        solver.solve(T, q_rest="mid", rest_weight=0.0)

@@ -103,6 +103,20 @@ def register(sub) -> None:
         help=f"draw the arm at its solution(s) and the target frame(s) (the first {PLOT_MAX_POSES} poses) to this "
         "picture (matplotlib; .png, .svg, .pdf)",
     )
+    s.add_argument(
+        "--bounds",
+        nargs=6,
+        metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+        help="a tolerant goal: half-widths along the target tool's axes, mm then degrees, inf or free = free axis "
+        "(success: inside them, by FK; docs/bounds.md)",
+    )
+    s.add_argument("--position-only", action="store_true", help="orientation free (the position within --tol-mm)")
+    s.add_argument(
+        "--free-axis",
+        action="append",
+        metavar="x|y|z",
+        help="rotation about this tool axis free (a drill, a torch, a suction cup); once",
+    )
     add_threads_argument(s)
     add_scene_argument(s)
     s.set_defaults(func=_cmd_solve)
@@ -311,6 +325,12 @@ def _cmd_solve(args) -> int:
         poses[:, :3] *= 1e-3
     if args.tol_mm <= 0 or args.tol_deg <= 0:
         raise ValueError(f"--tol-mm and --tol-deg must be > 0, got {args.tol_mm} and {args.tol_deg}")
+    from nik.ik.bounds import bounds_from_cli
+
+    tol = (args.tol_mm * 1e-3, math.radians(args.tol_deg))
+    goal = bounds_from_cli(args.bounds, position_only=args.position_only, free_axis=args.free_axis, tol_pos=tol[0],
+                           tol_rot=tol[1])  # fmt: skip
+    tolerance = describe(*tol) if goal is None else goal.describe()
     q_near = None
     if args.q_near is not None:
         if len(args.q_near) != robot.dof:
@@ -329,6 +349,7 @@ def _cmd_solve(args) -> int:
             seed=args.seed,
             q_near=q_near,
             max_iters=args.max_iters,
+            bounds=goal,
         )
     res = res.to("cpu")
     every = None
@@ -339,11 +360,11 @@ def _cmd_solve(args) -> int:
                 tol_pos=args.tol_mm * 1e-3,
                 tol_rot=math.radians(args.tol_deg),
                 seed=args.seed,
+                bounds=goal,
             ).cpu()
             for i in range(len(T))
         ]
     if args.plot:
-        tolerance = describe(args.tol_mm * 1e-3, math.radians(args.tol_deg))
         _plot(robot, T, res, every, args.plot, tolerance=tolerance, world=solver.world)
     hint = "pass --unit mm" if args.unit == "m" else ""
     msg = unreachable_message(robot, T, res.reachable, unit_hint=hint)
@@ -409,11 +430,11 @@ def _cmd_solve(args) -> int:
     elif args.out:
         ok = int(res.success.sum())
         print(
-            f"solved {ok} of {len(res)} poses within {describe(args.tol_mm * 1e-3, math.radians(args.tol_deg))} "
+            f"solved {ok} of {len(res)} poses within {tolerance} "
             f"({robot.name}{tool_link_text(robot)}, guess: {res.source}, refine: {args.refine}); wrote {args.out}"
         )
     else:
-        _print_table(robot, res, tolerance=describe(args.tol_mm * 1e-3, math.radians(args.tol_deg)))
+        _print_table(robot, res, tolerance=tolerance)
     if every is not None and not args.json:
         _print_every(robot, every)
     if args.plot and not args.json:

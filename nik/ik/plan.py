@@ -30,7 +30,7 @@ from typing import Any
 
 from nik.lm.batched import LMCfg
 
-__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network", "in_arm_frame"]
+__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network", "in_arm_frame", "resolve_fallback", "with_goal"]
 
 #: Float32 targets are refined to this fraction of the asked tolerance (both backends; module docstring).
 FLOAT32_MARGIN = 0.5
@@ -58,6 +58,10 @@ class Plan:
         tol_pos, tol_rot: the asked tolerances, metres and radians; float32_margin: float32 targets are refined
             to this fraction of them.
         seed: seeds every random choice.
+        bounds: the tolerant goal (:class:`nik.ik.bounds.Bounds`, parsed once by :func:`with_goal`), or None for the
+            classic tolerances; then the goal stages of :mod:`nik.ik.goals` solve the call on either backend.
+        q_rest: a preferred posture (``"mid"``, ``(dof,)`` or ``(B, dof)`` radians) or None; rest_weight: the share
+            of the way to it each null-space step asks (:mod:`nik.ik.goals`).
     """
 
     source: str
@@ -76,6 +80,9 @@ class Plan:
     seed: int = 0
     swarm_cfg: Any = None
     polish: bool = True
+    bounds: Any = None
+    q_rest: Any = None
+    rest_weight: float = 0.1
 
     def stage_tolerances(self, float32: bool) -> tuple[float, float]:
         """``(tol_pos, tol_rot)`` the stages refine to: the asked ones, times :attr:`float32_margin` for float32."""
@@ -109,3 +116,33 @@ def in_arm_frame(robot, net) -> bool:
     if found is None:
         found = per_net[robot] = made_for.definition_hash == robot.arm_hash != robot.definition_hash
     return found
+
+
+def with_goal(plan: Plan, bounds=None, q_rest=None, rest_weight: float = 0.1, *, batch: int | None = None) -> Plan:
+    """``plan`` with the call's tolerant goal (parsed and checked here, once: :func:`nik.ik.bounds.parse_bounds`, its
+    shorthands made of the plan's tolerances) and preferred posture; ``plan`` itself when neither is given.
+    Raises ``ValueError`` (one line) on bad bounds or a bad ``rest_weight``."""
+    from dataclasses import replace
+
+    from nik.ik.bounds import parse_bounds
+
+    goal = parse_bounds(bounds, batch=batch, tol_pos=plan.tol_pos, tol_rot=plan.tol_rot)
+    if goal is None and q_rest is None:
+        return plan
+    if not 0.0 < float(rest_weight) <= 1.0:
+        raise ValueError(f"rest_weight: expected a share in (0, 1], got {rest_weight!r}")
+    return replace(plan, bounds=goal, q_rest=q_rest, rest_weight=float(rest_weight))
+
+
+def resolve_fallback(fallback, closed_form: bool, name: str) -> str:
+    """``IKSolver(fallback=...)`` as the plan's ``analytic | multistart | none``: True is ``"auto"``, False ``"none"``;
+    ``"auto"`` is analytic on an arm with a closed form (``closed_form``), else multistart. Raises ``ValueError`` on
+    an unknown value and on ``"analytic"`` for an arm (``name``) without a closed form."""
+    fallback = {True: "auto", False: "none"}.get(fallback, fallback)
+    if fallback not in ("auto", "analytic", "multistart", "none"):
+        raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
+    if fallback == "analytic" and not closed_form:
+        raise ValueError(f"IKSolver: fallback='analytic' needs an arm with a closed form; {name} is not")
+    if fallback == "auto":
+        fallback = "analytic" if closed_form else "multistart"
+    return fallback

@@ -30,6 +30,9 @@ class IKResult:
             (:meth:`IKSolver.solve_path` also ``q_start``: the LM chain from the given start).
         reachable: (B,) bool, False where no configuration can reach the target (provable reach
             bound, :func:`nik.robots.reach.within_reach`); such targets get ``success=False`` and a best effort.
+        axis_err: (B, 6) under a tolerant goal (``bounds=``): the error per axis of the target's tool frame, ``x, y,
+            z`` (m) and ``rx, ry, rz`` (rad; with one rotation axis free the swing of that axis, its own entry 0):
+            success is ``|axis_err| <= bounds`` (:mod:`nik.ik.goals`); None otherwise.
         path: for :meth:`IKSolver.solve_path`, how the trajectory follows its path (:class:`PathReport`:
             every step, the largest and where, reconfigurations, why a waypoint failed); None otherwise.
         collision_free: (B,) bool where a collision model is active (a world, or self-collision:
@@ -46,6 +49,7 @@ class IKResult:
     reachable: torch.Tensor | np.ndarray | None = None
     path: PathReport | None = None
     collision_free: torch.Tensor | np.ndarray | None = None
+    axis_err: torch.Tensor | np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])

@@ -38,7 +38,7 @@ from pathlib import Path
 import torch
 
 from nik.ik import backends, collide, networks, stages
-from nik.ik.plan import Plan, choose_network, in_arm_frame
+from nik.ik.plan import Plan, choose_network, in_arm_frame, resolve_fallback, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.lm.batched import LMCfg
@@ -130,13 +130,11 @@ class IKSolver:
         self.refine = refine
         self.polish = bool(polish)
         self.swarm_cfg = swarm_cfg
-        fallback = {True: "auto", False: "none"}.get(fallback, fallback)
-        if fallback not in ("auto", "analytic", "multistart", "none"):
-            raise ValueError(f"IKSolver: fallback must be auto, analytic, multistart or none, got {fallback!r}")
         self._net, self._net_one, self._given = None, None, checkpoint is not None and checkpoint != "auto"
         from nik.analytic import family
 
         self.closed_form = bool(analytic) and family(self.robot) is not None
+        self.fallback = resolve_fallback(fallback, self.closed_form, self.robot.name)
         if isinstance(checkpoint, str) and checkpoint == "auto":
             if not self.closed_form:
                 # loaded (SHA-256 checked: a damaged file is refused here) once per process, shared by every solver
@@ -145,11 +143,6 @@ class IKSolver:
                     self._net_one = networks.known_network(self.robot, self.device, single_pose=True)[0]
         elif checkpoint is not None:
             self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
-        if fallback == "analytic" and not self.closed_form:
-            raise ValueError(f"IKSolver: fallback='analytic' needs an arm with a closed form; {self.robot.name} is not")
-        if fallback == "auto":
-            fallback = "analytic" if self.closed_form else "multistart"
-        self.fallback = fallback
         self._plans, self.world, self.self_collision = {}, world, collide.check_self_collision(self_collision)
 
     @property
@@ -229,6 +222,9 @@ class IKSolver:
         representation: str | None = None,
         plan: Plan | None = None,
         world=None,
+        bounds=None,
+        q_rest=None,
+        rest_weight: float = 0.1,
     ) -> IKResult:
         """Joint angles that reach the target poses.
 
@@ -249,6 +245,13 @@ class IKSolver:
             plan: a plan of :meth:`plan` (changed with ``dataclasses.replace``) to run instead of the solver's
                 own; its tolerances, seed and iteration cap then replace the arguments.
             world: a :class:`nik.World` for this call instead of the solver's (:mod:`nik.ik.collide`).
+            bounds: a tolerant goal per axis of the target's tool frame (:mod:`nik.ik.bounds`: 6 half-widths x, y, z
+                m, rx, ry, rz rad, ``math.inf`` = free, or ``(B, 6)``; ``"position"``, ``"axis_z"``): success means
+                inside them by FK; ``res.axis_err`` the error per axis (:mod:`nik.ik.goals`). None: the tolerances.
+            q_rest: a preferred posture (``(dof,)`` / ``(B, dof)`` radians, or ``"mid"``: the middle of the joint
+                ranges), reached in the null space of the task without leaving the tolerance; moves the answers of
+                redundant arms (7 joints, or any arm under a free axis) only; rest_weight: the share of the way to
+                it each step asks (:mod:`nik.ik.goals`).
 
         Returns:
             :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``
@@ -256,7 +259,7 @@ class IKSolver:
             collision check is active (success requires it).
 
         Raises:
-            ValueError: bad poses, a negative or NaN tolerance, a malformed ``q_near``.
+            ValueError: bad poses, a negative or NaN tolerance, a malformed ``q_near``, bad bounds or ``q_rest``.
 
         Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
@@ -265,6 +268,7 @@ class IKSolver:
         be = backends.choose(self, T_target)
         if plan is None:
             plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
+        plan = with_goal(plan, bounds, q_rest, rest_weight)
         return collide.after_solve(self, be, plan, T_target, q_near, representation, world)
 
     def solve_all(
@@ -277,6 +281,7 @@ class IKSolver:
         n_starts: int = 256,
         dedupe_tol: float = 1e-3,
         representation: str | None = None,
+        bounds=None,
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
 
@@ -285,7 +290,9 @@ class IKSolver:
         multi-head one; the guess of a plain network) and then ``n_starts`` uniform starts; the
         successful ones (within ``tol_pos`` metres / ``tol_rot`` radians) are de-duplicated
         (two solutions are the same when no joint differs by more than ``dedupe_tol`` radians,
-        modulo 2 pi). For a redundant arm (7 joints) the solutions form a continuum; K is then
+        modulo 2 pi). With ``bounds`` (:mod:`nik.ik.goals`): on a closed-form arm with one free rotation axis the
+        valid closed-form solutions over 36 free angles, else LM towards the bounds from the same starts. For a
+        redundant arm (7 joints) the solutions form a continuum; K is then
         simply how many distinct samples of it the starts found.
         Cost: on the CPU the LM runs compiled from each start; panda and xarm7 with 256 starts take 50-100 ms a
         pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the
@@ -296,7 +303,7 @@ class IKSolver:
         if T.shape[0] != 1:
             raise ValueError(f"solve_all: expected one pose, got {T.shape[0]}")
         check_tolerances(tol_pos, tol_rot)
-        plan = self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
+        plan = with_goal(self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds)
         job = stages.Job(backends.torch_backend(), self.robot, T, within_reach(self.robot, T), None, plan.tol_pos,
                          plan.tol_rot, T.dtype, plan.tol_pos, plan.tol_rot)  # fmt: skip
         Q = stages.all_solutions(plan, job, closed_form=self.closed_form, n_starts=n_starts, dedupe_tol=dedupe_tol)

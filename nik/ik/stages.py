@@ -242,7 +242,15 @@ def fallback(plan: Plan, job: Job, answers: Answers) -> Answers:
 
 
 def final_check(plan: Plan, job: Job, answers: Answers) -> IKResult:
-    """Stage 6: the result, with success measured against the asked tolerances and reachability attached."""
+    """Stage 6: the result, with success measured against the asked tolerances and reachability attached; with
+    ``plan.q_rest`` the successful answers first moved towards it in the null space (:mod:`nik.ik.goals`)."""
+    if plan.q_rest is not None:
+        from nik.ik import goals
+
+        if job.model is not None:
+            goals.rest_compiled(plan, job, answers)
+        else:
+            answers = goals.rest_stage(plan, job, answers)
     return job.backend.result(job, answers, plan.source)
 
 
@@ -261,6 +269,10 @@ def all_solutions(
     thread, panda, 256 starts): tens of milliseconds (``python benchmarks/solve_all.py``)."""
 
     robot, T = job.robot, job.T
+    if plan.bounds is not None:
+        from nik.ik.goals import all_solutions_bounded
+
+        return all_solutions_bounded(plan, job, closed_form=closed_form, n_starts=n_starts, dedupe_tol=dedupe_tol)
     if closed_form:
         from nik.analytic import solve
 

@@ -20,13 +20,30 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
+from nik.kernels.chain import _chain
 from nik.kernels.closed import guess as closed_guess
-from nik.kernels.lm import lm_solve
+from nik.kernels.lm import (
+    _STREAM,
+    CLASSIC,
+    MAX_STEP,
+    ROT_WEIGHT,
+    TOL_POS,
+    TOL_ROT,
+    _bounded_check,
+    _bounds,
+    _cholesky_solve,
+    _copy,
+    _eval,
+    _lm_one_bounded,
+    _tool_error,
+    _work_size,
+    lm_solve,
+)
 from nik.kernels.poses import reach_flags
 from nik.kernels.seeded import lm_starts, merge, ranked_hypotheses
 
 __all__ = ["FALLBACK_ANALYTIC", "FALLBACK_MULTISTART", "FALLBACK_NONE", "SOURCE_ANALYTIC", "SOURCE_MULTISTART",
-           "SOURCE_NETWORK", "solve"]  # fmt: skip
+           "SOURCE_NETWORK", "rest_posture", "solve", "solve_bounded"]  # fmt: skip
 
 #: Codes of the plan's guess source and fallback.
 SOURCE_NETWORK, SOURCE_ANALYTIC, SOURCE_MULTISTART = 0, 1, 2
@@ -232,3 +249,175 @@ def solve(
                 )
             merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, True, tol_pos, tol_rot)
     return every
+
+
+@kernel
+def solve_bounded(
+    G, joints, T, starts, half, modes, opts, iopts, iopts_multi, budget, seed, q, ok, iterations, pos, rot, d
+):
+    """One call towards tolerant goals (:mod:`nik.ik.bounds`) on ``T: (B, 4, 4)`` float64 targets.
+
+    Per target ``b``: its starts ``starts[b]: (K, n)`` (the network's hypotheses, the closed-form solutions, ``q_near``;
+    rows with a NaN are skipped) are brought inside the limits and ranked by the bounded error
+    (:func:`nik.kernels.lm._bounded_check`), then LM towards the bounds (:func:`nik.kernels.lm._lm_one_bounded`, no
+    restarts) runs from each in that order until one lands inside every bound; a target still outside (or without
+    starts) gets LM from the best of the uniform configurations of ``iopts_multi`` with ``budget[b]`` restarts (0 for
+    a target proven out of reach). The answer is the first inside, else the smallest bounded error.
+
+    Args:
+        half: (B, 6) half-widths (m, rad, ``inf`` = free); modes: (B,) rotation modes
+            (:func:`nik.kernels.lm.rotation_modes`); opts, iopts, iopts_multi: LM options
+            (:func:`nik.kernels.lm.lm_options`);
+        budget: (B,) int64; seed: (1,) uint64 (target ``b`` draws from its own stream).
+
+    Outputs ``q (B, n)`` inside the limits, ``ok (B,)`` (FK of ``q`` inside every bound), ``iterations (B,)``,
+    ``pos, rot (B,)`` the classic errors (m, geodesic rad) and ``d (B, 6)`` the error per tool axis
+    (:func:`nik.kernels.lm.bounded_errors`; 0 on the entry of a free rotation axis).
+    """
+    B, K, n = starts.shape
+    rw = opts[ROT_WEIGHT]
+    rng = np.empty(1, dtype=np.uint64)
+    work = np.empty(_work_size(n))
+    cand = np.empty(n)
+    Tc = np.empty((3, 4))
+    e = np.empty(6)
+    ds = np.empty(6)
+    score = np.empty(max(K, 1))
+    for b in range(B):
+        rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
+        for k in range(K):
+            score[k] = math.inf
+            if math.isfinite(starts[b, k, 0]):
+                _bounds(joints, starts[b, k])
+                _chain(G, joints, starts[b, k], Tc)
+                score[k], _, _, _ = _bounded_check(T[b], Tc, half[b], modes[b], rw, e, ds)
+        best = math.inf
+        total = 0
+        done = False
+        for _ in range(K):
+            k = 0
+            for j in range(1, K):
+                if score[j] < score[k]:
+                    k = j
+            if score[k] == math.inf:
+                break
+            score[k] = math.inf
+            it, conv, _, _ = _lm_one_bounded(
+                G, joints, T[b], starts[b, k], half[b], modes[b], opts, iopts, 0, rng, cand, work
+            )
+            total += it
+            _chain(G, joints, cand, Tc)
+            E, _, _, _ = _bounded_check(T[b], Tc, half[b], modes[b], rw, e, ds)
+            if conv or E < best:
+                best = E
+                _copy(cand, q[b])
+            if conv:
+                done = True
+                break
+        if not done and (best == math.inf or budget[b] > 0):
+            it, conv, _, _ = _lm_one_bounded(
+                G, joints, T[b], cand, half[b], modes[b], opts, iopts_multi, budget[b], rng, cand, work
+            )
+            total += it
+            _chain(G, joints, cand, Tc)
+            E, _, _, _ = _bounded_check(T[b], Tc, half[b], modes[b], rw, e, ds)
+            if conv or E < best:
+                _copy(cand, q[b])
+        iterations[b] = total
+        _chain(G, joints, q[b], Tc)
+        pos[b], rot[b] = _tool_error(T[b], Tc, modes[b], d[b])
+        inside = True
+        for r in range(6):
+            if not abs(d[b, r]) <= half[b, r]:
+                inside = False
+        ok[b] = inside
+
+
+@kernel
+def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damping, ok, pos, rot, d):
+    """In place: the answers ``q: (B, n)`` where ``ok[b]`` moved towards ``q_rest: (B, n)`` in the null space of the
+    task, never leaving it (see :mod:`nik.ik.goals`).
+
+    Each iteration takes the step ``dq = z + J^T (J J^T + damping I)^-1 (e - J z)`` with ``z = s * weight * (q_rest -
+    q)``: the task residual ``e`` (and its Jacobian ``J``: the classic error where ``modes[b] == CLASSIC``, else the
+    bounded one of ``half[b]``, whose free rows vanish and so leave more room) is held (to first order) while the rest
+    of the motion goes to ``q_rest``. The step is kept only where FK of the result is still within tolerance (the
+    tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved (from 1; doubled
+    after a kept one; stop below 1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s).
+    A target whose task has as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space
+    and is left as it is.
+    """
+    B, n = q.shape
+    rw, tol_pos, tol_rot, max_step = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT], opts[MAX_STEP]
+    Tc = np.empty((3, 4))
+    J, Jc = np.empty((6, n)), np.empty((6, n))
+    e, ec, dd, y, rhs = np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6)
+    A = np.empty((6, 6))
+    z, qc, dq = np.empty(n), np.empty(n), np.empty(n)
+    for b in range(B):
+        mode = modes[b]
+        bnd = half[b]
+        live = 6
+        if mode != CLASSIC:
+            live = 3 if mode == 3 else (5 if mode >= 0 else 6)
+            for r in range(3):
+                if not bnd[r] < math.inf:
+                    live -= 1
+        if not ok[b] or n <= live:  # no null space: nothing to move
+            continue
+        _, p, r, done = _eval(G, joints, q[b], T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, J, e, dd)
+        if not done:
+            continue
+        dist = 0.0
+        for i in range(n):
+            dist += (q[b, i] - q_rest[b, i]) ** 2
+        s = 1.0
+        for _ in range(iters):
+            for i in range(n):
+                z[i] = s * weight * (q_rest[b, i] - q[b, i])
+            for a in range(6):
+                v = e[a]
+                for i in range(n):
+                    v -= J[a, i] * z[i]
+                rhs[a] = v
+                for c in range(a + 1):
+                    w = 0.0
+                    for i in range(n):
+                        w += J[a, i] * J[c, i]
+                    A[a, c] = w
+                    A[c, a] = w
+                A[a, a] += damping
+            good = _cholesky_solve(A, rhs, y)
+            big = 0.0
+            if good:
+                for i in range(n):
+                    v = z[i]
+                    for a in range(6):
+                        v += J[a, i] * y[a]
+                    dq[i] = v
+                    big = max(big, abs(v))
+                    qc[i] = q[b, i] + v
+                good = big <= max_step
+            if good:
+                _bounds(joints, qc)
+                _, pc, rc, donec = _eval(G, joints, qc, T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, dd)
+                dc = 0.0
+                for i in range(n):
+                    dc += (qc[i] - q_rest[b, i]) ** 2
+                good = donec and dc < dist
+            if good:
+                _copy(qc, q[b])
+                _copy(Jc.ravel(), J.ravel())
+                _copy(ec, e)
+                dist, p, r = dc, pc, rc
+                s = min(1.0, 2.0 * s)
+                if big < 1e-9:
+                    break
+            else:
+                s *= 0.5
+                if s < 1.0 / 64.0:
+                    break
+        pos[b], rot[b] = p, r
+        if mode != CLASSIC:
+            _chain(G, joints, q[b], Tc)
+            _tool_error(T[b], Tc, mode, d[b])

@@ -163,7 +163,12 @@ class CompiledBackend:
         """The plan on the targets: validated (:meth:`job`), then every stage in one call of
         :func:`nik.kernels.driver.solve` (the same stages on the same kernels as :func:`nik.ik.stages.run`, the same
         answers, reach flags included); the staged path where the driver does not apply (a network the kernels do
-        not pack, or more than :data:`PACKED_MAX_BATCH` poses with a network)."""
+        not pack, or more than :data:`PACKED_MAX_BATCH` poses with a network). A tolerant goal (``plan.bounds``) runs
+        the goal stages of :mod:`nik.ik.goals` (:func:`nik.kernels.driver.solve_bounded`)."""
+        if plan.bounds is not None:
+            from nik.ik import goals
+
+            return goals.solve_compiled(self, robot, plan, T_target, q_near, representation)
         job = self.job(robot, plan, T_target, q_near, representation, reach=False)
         model = job.model
         packed = None
@@ -215,6 +220,10 @@ class CompiledBackend:
 
         answers = Answers(q, pos, rot, iters)
         answers._ok = ok
+        if plan.q_rest is not None:  # the preferred posture, in the null space (nik.ik.goals)
+            from nik.ik.goals import rest_compiled
+
+            rest_compiled(plan, job, answers)
         return self.result(job, answers, plan.source)
 
     # -- guesses -----------------------------------------------------------------------

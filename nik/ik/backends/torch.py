@@ -80,6 +80,11 @@ class TorchBackend:
         from nik.ik import stages
         from nik.threads import threads_for
 
+        if plan.bounds is not None:  # a tolerant goal: the goal stages (nik.ik.goals)
+            from nik.ik import goals
+
+            with threads_for(T_target.shape[0] if hasattr(T_target, "shape") else 1):
+                return goals.solve_torch(self, robot, plan, T_target, q_near, representation)
         job = self.job(robot, plan, T_target, q_near, representation, stacklevel=4)
         with threads_for(job.size):
             return stages.run(plan, job)

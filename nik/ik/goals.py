@@ -1,0 +1,325 @@
+"""The goal stages of a call: tolerant goals (``bounds=``) and preferred postures (``q_rest=``), both backends.
+
+**Tolerant goals** (:mod:`nik.ik.bounds`; the plan's ``bounds``). Success means every axis of the error in the
+target's tool frame inside its bound, measured by FK of the returned joints (:func:`nik.poses.within_bounds`,
+:func:`nik.kernels.lm.bounded_errors`: the same numbers). The result's ``pos_err`` / ``rot_err`` stay the classic
+errors (position norm, geodesic angle: a free axis shows there); ``axis_err: (B, 6)`` is the error per tool axis
+(m, rad; 0 on the entry of a free rotation axis, whose twist is not measured). The starts, ranked by the bounded
+error:
+
+- a network: all its hypotheses;
+- an arm with a closed form: its solutions of the pose as given (they meet any goal where they exist), and with one
+  rotation axis free, for the targets none of those reach, the closed form at the free angle of
+  :func:`nik.ik.free_axis.closed_form_free_axis` (36 angles searched); with the orientation free (``"position"``)
+  the closed form has no angle to search: LM does the rest from those starts and uniform ones;
+- ``q_near`` when given (an extra start; no second refinement).
+
+Then LM towards the bounds from each start in turn until one lands inside (compiled:
+:func:`nik.kernels.driver.solve_bounded`; torch: :func:`nik.lm.lm_solve` with ``bounds``, the starts side by side),
+and for the targets still outside, LM from uniform starts with the restart budget (none for a target proven out of
+reach, a free position axis lifting the reach test; none at all where the plan has neither restarts nor a
+fallback). Float32 targets are refined to the plan's float32 margin of the bounds and measured again after rounding.
+
+**Preferred postures** (``q_rest``, ``rest_weight``; the plan's). After the answer is found, each target that
+succeeded moves towards ``q_rest`` in the null space of its task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
+``z = s * rest_weight * (q_rest - q)`` (``e, J``: the task's residual and Jacobian, classic or bounded, the rows of
+free axes zero, so a free axis adds a direction of the null space), kept only where FK of the result is still within
+tolerance (the stages' tolerance: nothing is lost) and nearer ``q_rest``; a refused step halves ``s``,
+a kept one doubles it (at most 1)
+(:func:`nik.kernels.driver.rest_posture`; torch: :func:`rest_torch`, the same steps batched). ``q_rest="mid"`` is
+the middle of the joint ranges (distance from the limits). A 6-joint arm without a free axis has no null space: its
+answers do not move (to rounding; the residual step only polishes them). :data:`REST_ITERS` steps at most.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import torch
+
+from nik.ik.result import IKResult
+
+__all__ = ["REST_DAMPING", "REST_ITERS", "all_solutions_bounded", "rest_target", "rest_torch", "solve_compiled",
+           "solve_torch"]  # fmt: skip
+
+#: Most null-space steps towards ``q_rest`` per target.
+REST_ITERS = 50
+#: Damping of ``J J^T`` in the null-space step (m^2): keeps the step finite at singular configurations.
+REST_DAMPING = 1e-8
+
+
+def rest_target(robot, q_rest, batch: int) -> np.ndarray:
+    """``q_rest`` (``"mid"``, ``(dof,)`` or ``(B, dof)`` radians) as ``(batch, dof)`` float64; ``"mid"``: the middle
+    of each joint's range (a joint without finite limits: 0). Raises ``ValueError`` (one line) on a bad one."""
+    dof = robot.dof
+    if isinstance(q_rest, str):
+        if q_rest != "mid":
+            raise ValueError(f"q_rest: expected 'mid' or joint angles, got {q_rest!r}")
+        lim = robot.limits.detach().double().cpu().numpy()
+        mid = np.where(np.isfinite(lim).all(1), lim.mean(1), 0.0)
+        return np.broadcast_to(mid, (batch, dof)).copy()
+    if isinstance(q_rest, torch.Tensor):
+        q_rest = q_rest.detach().double().cpu().numpy()
+    try:
+        q = np.asarray(q_rest, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"q_rest: expected 'mid' or ({dof},) / ({batch}, {dof}) radians, got {q_rest!r:.60}") from None
+    if q.shape not in ((dof,), (batch, dof), (1, dof)):
+        raise ValueError(f"q_rest: expected shape ({dof},) or ({batch}, {dof}), got {q.shape}")
+    if not np.isfinite(q).all():
+        raise ValueError("q_rest: NaN or infinite joint angle")
+    return np.broadcast_to(q.reshape(-1, dof), (batch, dof)).copy()
+
+
+def _modes_half(plan, B: int, margin: float):
+    """``(half (B, 6), modes (B,))`` of the plan's goal for the stages (bounds times ``margin``), or the classic
+    placeholder (``modes == CLASSIC``) without one."""
+    from nik.kernels.lm import CLASSIC
+
+    if plan.bounds is None:
+        return np.zeros((B, 6)), np.full(B, CLASSIC, dtype=np.int64)
+    return plan.bounds.expand(B) * margin, plan.bounds.modes(B)
+
+
+# -- compiled ------------------------------------------------------------------------------------------------------
+def _closed_starts(robot, model, plan, T: np.ndarray) -> list[np.ndarray]:
+    """The closed form's starts ``[(B, k, 6)]`` (NaN rows where there is none; module docstring)."""
+    out = []
+    q, valid = model.closed_solutions(T)
+    out.append(np.where(valid[..., None], q, np.nan))
+    modes = plan.bounds.modes(T.shape[0])
+    if ((modes >= 0) & (modes <= 2)).all() and len(set(modes.tolist())) == 1:
+        from nik.ik.free_axis import closed_form_free_axis
+
+        todo = np.flatnonzero(~valid.any(1))  # a valid solution of the pose as given meets the goal already
+        extra = np.full((T.shape[0], 1, q.shape[-1]), np.nan)
+        if todo.size:
+            bounds = plan.bounds if not plan.bounds.per_target else plan.bounds.expand(T.shape[0])[todo]
+            fa = closed_form_free_axis(robot, torch.from_numpy(T[todo]), bounds=bounds, refine=False)
+            found = ~torch.isnan(fa.gamma).numpy()
+            extra[todo[found], 0] = fa.q.double().numpy()[found]
+        out.insert(0, extra)
+    return out
+
+
+def solve_compiled(backend, robot, plan, T_target, q_near, representation) -> IKResult:
+    """``plan.bounds`` on the compiled backend (module docstring): one :func:`nik.kernels.driver.solve_bounded` call."""
+    from nik.kernels import driver, lm
+
+    job = backend.job(robot, plan, T_target, q_near, representation, reach=False)
+    model, B, n = job.model, job.size, job.model.dof
+    reachable, every = model.reach(job.T)
+    free_pos = np.isinf(plan.bounds.expand(B)[:, :3]).any(1)
+    reachable = reachable | free_pos
+    if not reachable.all():
+        warnings.warn(model.unreachable_message(job.T, reachable), UserWarning, stacklevel=4)
+    job.reachable = reachable
+    starts = []
+    if plan.source == "network":
+        hyp = backend.network(plan, job)[0]
+        starts.append(np.asarray(hyp, dtype=np.float64))
+    elif plan.source == "analytic":
+        starts += _closed_starts(robot, model, plan, job.T)
+    if job.q_near is not None:
+        starts.append(job.q_near[:, None])
+    starts = np.ascontiguousarray(np.concatenate(starts, 1) if starts else np.zeros((B, 0, n)))
+    float32 = job.dtype == torch.float32
+    half, modes = _modes_half(plan, B, plan.float32_margin if float32 else 1.0)
+    lmod = model.lm
+    opts, iopts = lmod.options(job.tol_pos, job.tol_rot, plan.max_iters)
+    _, iopts_multi = lmod.options(job.tol_pos, job.tol_rot, plan.max_iters, multistart=True)
+    budget = np.where(reachable, lmod.budget if plan.restarts or plan.fallback != "none" else 0, 0)
+    q, ok, it = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
+    pos, rot, d = np.empty(B), np.empty(B), np.empty((B, 6))
+    seed = lm.seed_state(plan.seed)
+    driver.solve_bounded(model.G, model.joints, job.T, starts, half, modes, opts, iopts, iopts_multi,
+                         budget.astype(np.int64), seed, q, ok, it, pos, rot, d)  # fmt: skip
+    if plan.q_rest is not None:
+        qr = rest_target(robot, plan.q_rest, B)
+        driver.rest_posture(model.G, model.joints, job.T, q, half, modes, opts, qr, float(plan.rest_weight),
+                            REST_ITERS, REST_DAMPING, ok, pos, rot, d)  # fmt: skip
+    if float32:  # rounded, clamped into the float32 limits, measured again against the asked bounds
+        q = np.clip(q.astype(np.float32), model.lo32, model.hi32)
+        full, _ = _modes_half(plan, B, 1.0)
+        lm.bounded_errors(model.G, model.joints, job.T, q.astype(np.float64), modes, d)
+        lm.pose_errors(model.G, model.joints, job.T, q.astype(np.float64), pos, rot)
+        ok = (np.abs(d) <= full).all(1)
+        pos, rot, d = pos.astype(np.float32), rot.astype(np.float32), d.astype(np.float32)
+    res = IKResult(q, pos, rot, ok, it, plan.source, reachable=reachable, axis_err=d)
+    return res if job.numpy_out else res.to("cpu")
+
+
+def rest_compiled(plan, job, answers) -> None:
+    """In place: the successful answers (classic tolerances) moved towards ``plan.q_rest`` (compiled)."""
+    from nik.kernels import driver
+
+    model, B = job.model, job.size
+    opts, _ = model.lm.options(job.tol_pos, job.tol_rot, plan.max_iters)
+    half, modes = _modes_half(plan, B, 1.0)
+    qr = rest_target(job.robot, plan.q_rest, B)
+    driver.rest_posture(model.G, model.joints, job.T, answers.q, half, modes, opts, qr, float(plan.rest_weight),
+                        REST_ITERS, REST_DAMPING, answers.ok(job), answers.pos_err, answers.rot_err,
+                        np.empty((B, 6)))  # fmt: skip
+
+
+# -- torch ---------------------------------------------------------------------------------------------------------
+def solve_torch(backend, robot, plan, T_target, q_near, representation) -> IKResult:
+    """``plan.bounds`` on the torch backend (module docstring): :func:`nik.lm.lm_solve` with ``bounds`` from the
+    starts side by side, then from uniform starts for the targets left."""
+    from nik.lm import lm_solve
+    from nik.poses import pose_error, tool_error, within_bounds
+
+    job = backend.job(robot, plan, T_target, q_near, representation, stacklevel=5)
+    T, B = job.T, job.size
+    float32 = T.dtype == torch.float32
+    half = torch.from_numpy(plan.bounds.expand(B)).to(T)
+    stage_half = half * (plan.float32_margin if float32 else 1.0)
+    reachable = job.reachable | torch.isinf(half[:, :3]).any(1)
+    starts = []
+    if plan.source == "network":
+        starts.append(backend.network(plan, job)[0].to(T))
+    elif plan.source == "analytic":
+        starts += [torch.from_numpy(s).to(T) for s in _closed_starts(robot, _model(robot, plan), plan,
+                                                                     T.detach().double().cpu().numpy())]  # fmt: skip
+    if job.q_near is not None:
+        starts.append(job.q_near[:, None])
+    g = torch.Generator(device=T.device).manual_seed(int(plan.seed))
+    if starts:
+        q0 = torch.cat(starts, 1)
+        bad = torch.isnan(q0).any(-1, keepdim=True)
+        fill = robot.sample(B * q0.shape[1], generator=g, dtype=T.dtype, device=T.device).reshape(q0.shape)
+        q0 = torch.where(bad, fill, q0)
+    else:
+        q0 = None
+    q, it = lm_solve(
+        robot,
+        T,
+        q0,
+        cfg=plan.lm_cfg,
+        max_iters=plan.max_iters,
+        generator=g,
+        reachable=reachable,
+        bounds=stage_half,
+        restarts=None if plan.restarts or plan.fallback != "none" else 0,
+    )
+    q = robot.clamp(q).to(T.dtype)
+    if plan.q_rest is not None:
+        ok = within_bounds(T, robot.fk(q), stage_half)
+        q = rest_torch(robot, T, q, ok, plan, stage_half, job.tol_pos, job.tol_rot)
+    Tq = robot.fk(q)
+    pos, rot = pose_error(T, Tq)
+    d = tool_error(T, Tq, torch.from_numpy(plan.bounds.modes(B)).to(T.device))
+    ok = (d.abs() <= half).all(-1)
+    res = IKResult(q, pos, rot, ok, it.long(), plan.source, reachable=reachable, axis_err=d)
+    return res.numpy() if job.numpy_out else res
+
+
+def _model(robot, plan):
+    from nik.ik.model import model_of
+
+    return model_of(robot, plan.lm_cfg)
+
+
+def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> torch.Tensor:
+    """``q: (B, dof)`` with the answers where ``ok`` moved towards ``plan.q_rest`` in the null space of the task
+    (classic where ``half`` is None, else towards the bounds ``half: (B, 6)``): the steps of
+    :func:`nik.kernels.driver.rest_posture`, batched. Returns a new tensor."""
+    from nik.lm.batched import _residual, bounded_residual
+    from nik.poses import within_bounds
+
+    rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None else 0.5
+    qr = torch.from_numpy(rest_target(robot, plan.q_rest, q.shape[0])).to(q)
+    q = q.clone()
+    s = torch.where(ok, 1.0, 0.0).to(q)
+    w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=q.dtype, device=q.device)
+    eye = torch.eye(6, dtype=q.dtype, device=q.device) * REST_DAMPING
+    max_step = plan.lm_cfg.max_step if plan.lm_cfg is not None else 0.5
+
+    def task(qq):
+        Tq, J = robot.fk_and_jacobian(qq)
+        if half is None:
+            e, _, pos, rot = _residual(T[..., :3, :], Tq[..., :3, :], rw)
+            return e, J * w[:, None], (pos <= tol_pos) & (rot <= tol_rot)
+        e, Jr, _, _, _, inside = bounded_residual(T, Tq[..., :3, :], J, half, rw)
+        return e, Jr, inside & within_bounds(T, Tq, half)
+
+    e, J, _ = task(q)
+    if half is None:
+        live = torch.full_like(s, 6.0)
+    else:
+        live = torch.isfinite(half[:, :3]).sum(-1).to(q) + torch.isfinite(half[:, 3:]).any(-1).to(q) * (
+            3 - torch.isinf(half[:, 3:]).sum(-1).to(q).clamp(max=1)
+        )
+    s = torch.where(live < q.shape[1], s, torch.zeros_like(s))  # no null space: nothing to move
+    dist = (q - qr).square().sum(-1)
+    for _ in range(REST_ITERS):
+        if not bool((s >= 1.0 / 64.0).any()):
+            break
+        z = s[:, None] * plan.rest_weight * (qr - q)
+        rhs = e - (J @ z[..., None])[..., 0]
+        y = torch.linalg.solve(J @ J.transpose(-1, -2) + eye, rhs[..., None])[..., 0]
+        dq = z + (J.transpose(-1, -2) @ y[..., None])[..., 0]
+        qc = robot.clamp(q + dq)
+        ec, Jc, done = task(qc)
+        dc = (qc - qr).square().sum(-1)
+        good = (s >= 1.0 / 64.0) & done & (dc < dist) & (dq.abs().amax(-1) <= max_step) & torch.isfinite(dq).all(-1)
+        q = torch.where(good[:, None], qc, q)
+        e = torch.where(good[:, None], ec, e)
+        J = torch.where(good[:, None, None], Jc, J)
+        dist = torch.where(good, dc, dist)
+        s = torch.where(good, (2.0 * s).clamp(max=1.0), s * 0.5)
+    return q
+
+
+def rest_stage(plan, job, answers):
+    """The stages' posture step (classic tolerances, torch): the successful answers moved towards ``plan.q_rest``."""
+    from nik.poses import pose_error
+
+    ok = answers.ok(job)
+    q = rest_torch(job.robot, job.T, answers.q, ok, plan, None, job.tol_pos, job.tol_rot)
+    pos, rot = pose_error(job.T, job.robot.fk(q))
+    answers.q, answers.pos_err, answers.rot_err, answers._ok = q, pos, rot, None
+    return answers
+
+
+# -- solve_all -----------------------------------------------------------------------------------------------------
+def all_solutions_bounded(plan, job, *, closed_form: bool, n_starts: int = 256, dedupe_tol: float = 1e-3):
+    """``(K, dof)`` distinct solutions of the one pose of ``job`` inside ``plan.bounds``: on a closed-form arm with
+    one free rotation axis, every valid sampled closed-form solution (:func:`nik.ik.free_axis.closed_form_free_axis`,
+    36 angles) that meets the goal; else LM towards the bounds (100 iterations, no restarts) from the network's
+    hypotheses and ``n_starts`` uniform starts, kept where inside, de-duplicated at ``dedupe_tol`` (a free axis makes
+    a continuum: K counts the samples found)."""
+    from nik.ik.guesses import dedupe
+    from nik.lm import lm_solve
+    from nik.poses import bounded_error, within_bounds
+
+    robot, T = job.robot, job.T
+    half = torch.from_numpy(plan.bounds.expand(1)).to(T)
+    modes = plan.bounds.modes(1)
+    if closed_form and 0 <= int(modes[0]) <= 2:
+        from nik.ik.free_axis import closed_form_free_axis
+
+        fa = closed_form_free_axis(robot, T, bounds=plan.bounds, refine=False)
+        q = fa.solutions[0][fa.valid[0]]
+    else:
+        g = torch.Generator(device=T.device).manual_seed(int(plan.seed))
+        starts = robot.sample(n_starts, generator=g, dtype=T.dtype, device=T.device)
+        if plan.net is not None:
+            Tn = T
+            if plan.net_in_arm_frame:  # the bare arm's frame: base^-1 @ T @ tool^-1
+                Tn = Tn if robot.base is None else torch.linalg.inv(robot.base.to(T)) @ Tn
+                Tn = Tn if robot.tool is None else Tn @ torch.linalg.inv(robot.tool.to(T))
+            hyp = plan.net.hypotheses(Tn)[0] if hasattr(plan.net, "hypotheses") else plan.net.predict(Tn)
+            starts = torch.cat([robot.clamp(hyp).to(T), starts])
+        Tk = T.expand(starts.shape[0], 4, 4)
+        q, _ = lm_solve(robot, Tk, starts, cfg=plan.lm_cfg, max_iters=100, restarts=0, generator=g,
+                        bounds=half.expand(starts.shape[0], 6))  # fmt: skip
+        q = robot.clamp(q).to(T.dtype)
+    if q.shape[0] == 0:
+        return q
+    Tq = robot.fk(q)
+    keep = within_bounds(T.expand(q.shape[0], 4, 4), Tq, half.expand(q.shape[0], 6))
+    q = q[keep]
+    err = bounded_error(T.expand(q.shape[0], 4, 4), robot.fk(q), half.expand(q.shape[0], 6)).square().sum(-1)
+    return dedupe(q[err.argsort()], tol=dedupe_tol, prismatic=robot.prismatic)
