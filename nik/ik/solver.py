@@ -297,6 +297,11 @@ class IKSolver:
         seed: int = 0,
         representation: str | None = None,
         max_step: float | None = None,
+        closed: bool | None = None,
+        timing: bool | dict = False,
+        vel_limits=None,
+        acc_limits=None,
+        bounds=None,
     ) -> IKResult:
         """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.ik.paths`).
 
@@ -309,6 +314,11 @@ class IKSolver:
             representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
             max_step: a step (largest joint motion between waypoints) above it is a reconfiguration, reported and
                 warned about; radians, default :data:`nik.ik.paths.PATH_MAX_STEP` (10 degrees).
+            closed: None: closed when the last pose equals the first (within the tolerances); then the last row
+                of joints equals the first. True / False force it.
+            timing: True (or a dict of :func:`nik.ik.timing.time_path` keywords) fills ``res.path.t``, ``qd``,
+                ``qdd``; vel_limits, acc_limits: ``(dof,)`` its limits (default the robot's).
+            bounds: a tolerant goal per waypoint (:func:`nik.ik.bounds.parse_bounds`, e.g. ``"axis_z"``).
 
         Returns:
             :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,
@@ -323,5 +333,5 @@ class IKSolver:
         step = paths.PATH_MAX_STEP if max_step is None else max_step
         return paths.solve_path(
             self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
-            max_step=step,
+            max_step=step, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits, bounds=bounds,
         )  # fmt: skip
