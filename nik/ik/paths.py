@@ -312,7 +312,6 @@ class _Run:
         return q, its, ok
 
 
-
 def _q_start(robot, model, q_start) -> np.ndarray | None:
     """``q_start`` as ``(dof,)`` float64: one configuration, checked as ``q_near`` is
     (:func:`nik.ik.targets.q_near_array`: finite, degrees warned about), then inside the limits (ValueError naming
