@@ -34,6 +34,26 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
    on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
 
+**Closed loops** (``closed=None``: detected when the last pose equals the first within the tolerances; True /
+False force it): the last row of joints equals the first, so the cycle repeats without a jump. Closed-form arms:
+the choice ends on the start's branch (:func:`_choose`: when the free choice does not, each start branch is tried
+with the end pinned to its own). Every arm, after the path: where the last row still differs from the first (an
+LM chain's drift in the null space), :func:`_close_loop` solves the last waypoint from the first row and blends the
+difference back over the path, kept only when no waypoint is lost and no step grows beyond ``max_step`` (or the
+largest step before). On joints that turn past a full turn (``wraps``) the rows are equal modulo whole turns: a
+path that takes such a joint once around ends one turn further (turning back would be a jump); ``res.path.closure``
+reports the gap.
+
+**Tolerant paths** (``bounds=``, :mod:`nik.ik.bounds`): with one free tool axis on a closed-form arm the candidates
+are the closed form's branches at sampled angles about it (:func:`_branches`) and the dynamic programming picks the
+least-motion sequence; other goals and arms run the LM chains towards the bounds
+(:func:`nik.ik.path_kernels.path_chains_bounded`). Success is checked by FK in each waypoint's tool frame
+(:func:`_final_check`); ``rot_err`` is then the rotation error that counts (with a free axis, its swing).
+
+**Timing** (``timing=True`` or a dict of :func:`nik.ik.timing.time_path` keywords): the answer is timed after the
+path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
+one-line ValueError before any work): ``res.path.t``, ``qd``, ``qdd``, ``timing``.
+
 **Settings**: the solver's, as :meth:`~nik.IKSolver.solve` reads them. The LM config (``swarm_cfg`` an
 :class:`nik.lm.LMCfg`) is the chains' and polishes' LM; ``fallback="multistart"`` (the default without a closed
 form) lets a waypoint the chain does not reach draw up to :data:`PATH_RESTARTS` uniform restarts (within reach),
