@@ -516,3 +516,18 @@ def test_timing_without_speed_limits_is_a_one_line_error():
     assert "\n" not in str(err.value)
     res = solver.solve_path(T, timing=True, vel_limits=[1.0] * 6)  # given per call
     assert res.path.timing.duration > 0
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"closed": "yes"}, "closed: expected"),
+        ({"timing": "fast"}, "timing: expected"),
+        ({"bounds": "axis_q"}, "bounds"),
+    ],
+)
+def test_bad_closed_timing_or_bounds_is_a_one_line_error(ur5, kw, match):
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    with pytest.raises(ValueError, match=match) as err:
+        ur5.solve_path(_line(ur5.robot, q0, [0.0, 1.0, 0.0], 0.05, 5), **kw)
+    assert "\n" not in str(err.value)
