@@ -523,6 +523,7 @@ def test_timing_without_speed_limits_is_a_one_line_error():
     [
         ({"closed": "yes"}, "closed: expected"),
         ({"timing": "fast"}, "timing: expected"),
+        ({"timing": {"speed": 1.0}}, "timing: unknown keyword"),
         ({"bounds": "axis_q"}, "bounds"),
     ],
 )

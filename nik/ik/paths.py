@@ -181,6 +181,9 @@ def solve_path(
         raise ValueError(f"closed: expected None, True or False, got {closed!r}")
     if not isinstance(timing, bool | dict):
         raise ValueError(f"timing: expected True, False or a dict of time_path keywords, got {timing!r:.60}")
+    unknown = sorted(set(timing) - {"tool_speed", "vel_scale", "acc_scale"}) if isinstance(timing, dict) else []
+    if unknown:
+        raise ValueError(f"timing: unknown keyword {unknown[0]!r} (expected tool_speed, vel_scale, acc_scale)")
     goal = parse_bounds(bounds, batch=Tn.shape[0], tol_pos=tol_pos, tol_rot=tol_rot)
     robot = solver.robot
     if timing is not False and vel_limits is None and robot.vel_limits is None:
