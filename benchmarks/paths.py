@@ -27,9 +27,17 @@ waypoint the per-pose solver (``solve(T)``, no continuity asked) reaches; the go
 Speed: median time per waypoint over the paths (each path timed once per solver); ratios are the peer's median
 over solve_path's (from q0).
 
+The second table reports ``solve_path(T)`` (no ``q_start``) as CppFlow (ICRA 2024) does, over all paths: valid
+(every waypoint at 0.1 mm / 0.1 deg, inside the limits, every step <= 7 deg revolute / 2 cm prismatic), the largest
+step, the total joint motion, the time per path; on the circles (closed) the last row vs the first; on the valid
+paths, the trajectory timed by ``nik.ik.timing.time_path`` (the robot's limits) sampled every millisecond: samples
+over a limit, and the duration over toppra's answer. ``ur10`` is example-robot-data's URDF (a robot nik does not
+ship; skipped when the package is missing).
+
     python benchmarks/paths.py                 # 40 lines + 40 circles per arm (a few minutes)
     python benchmarks/paths.py --out benchmarks/results/paths   # also writes the table to paths.md
     python benchmarks/paths.py --paths 5       # a smoke run
+    python benchmarks/paths.py --paths 10 --out benchmarks/results/paths_10   # the stored short run
 """
 
 from __future__ import annotations
