@@ -99,3 +99,9 @@ def test_bad_timing_scales_exit_2_with_one_line(tmp_path, capsys, extra, match):
     assert main(["path", "--robot", "ur5", "--poses", str(poses), *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("nik path: error:") and match in err and "\n" not in err
+
+
+def test_free_axis_on_the_command_line_frees_the_tool_axis(tmp_path, capsys):
+    _, _, poses = _ur5_poses(tmp_path)
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--free-axis", "z"]) == 0
+    assert "rz free" in capsys.readouterr().out

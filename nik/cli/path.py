@@ -133,7 +133,8 @@ def _cmd_path(args) -> int:
     ok = int(res.success.sum())
     wrote = ", ".join(str(x) for x in (args.out, args.plot) if x)
     print(
-        f"reached {ok} of {len(res)} waypoints within {describe(args.tol_mm * 1e-3, math.radians(args.tol_deg))} "
+        f"reached {ok} of {len(res)} waypoints within "
+        f"{bounds.describe() if bounds is not None else describe(tol_pos, tol_rot)} "
         f"({robot.name}{tool_link_text(robot)}, start: {res.source}); largest step {rep.largest_step * factor[j]:.3g} "
         f"{shown[j]} (joint {j}, {robot.joint_names[j]}) into waypoint {rep.largest_step_at}; "
         f"{int(rep.reconfigurations.sum())} step(s) above {args.max_step_deg:g} deg"
