@@ -27,9 +27,17 @@ waypoint the per-pose solver (``solve(T)``, no continuity asked) reaches; the go
 Speed: median time per waypoint over the paths (each path timed once per solver); ratios are the peer's median
 over solve_path's (from q0).
 
+The second table reports ``solve_path(T)`` (no ``q_start``) as CppFlow (ICRA 2024) does, over all paths: valid
+(every waypoint at 0.1 mm / 0.1 deg, inside the limits, every step <= 7 deg revolute / 2 cm prismatic), the largest
+step, the total joint motion, the time per path; on the circles (closed) the last row vs the first; on the valid
+paths, the trajectory timed by ``nik.ik.timing.time_path`` (the robot's limits) sampled every millisecond: samples
+over a limit, and the duration over toppra's answer. ``ur10`` is example-robot-data's URDF (a robot nik does not
+ship; skipped when the package is missing).
+
     python benchmarks/paths.py                 # 40 lines + 40 circles per arm (a few minutes)
     python benchmarks/paths.py --out benchmarks/results/paths   # also writes the table to paths.md
     python benchmarks/paths.py --paths 5       # a smoke run
+    python benchmarks/paths.py --paths 10 --out benchmarks/results/paths_10   # the stored short run
 """
 
 from __future__ import annotations
@@ -59,7 +67,16 @@ from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from peers import RTB_MASK, RTB_TOL  # noqa: E402  (ik_LM given nik's tolerance)
 
-ARMS = ("ur5", "kuka_kr", "panda", "xarm7")
+ARMS = ("ur5", "kuka_kr", "panda", "xarm7", "ur10")
+#: Arms from URDFs nik does not ship: name -> (pip distribution, file inside its cmeel prefix).
+EXTERNAL = {
+    "ur10": ("example-robot-data", "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur10_robot.urdf")
+}
+#: CppFlow's (ICRA 2024) validity of a path: every waypoint at 0.1 mm / 0.1 deg and every step at most this.
+CPPFLOW_STEP = math.radians(7.0)  # rad, revolute joints
+CPPFLOW_SLIDE = 0.02  # m, prismatic joints
+#: Relative excess over a speed or acceleration limit counted as a violation of the timed trajectory (1 ms samples).
+RATE_SLACK = 1e-6
 N_WAYPOINTS = 60
 STEP_GOAL = math.radians(3.0)  # rad
 SLACK_GOAL = math.radians(0.5)  # rad
@@ -213,14 +230,69 @@ def quality(robot, T, q, q0=None) -> tuple[bool, float]:
 # ---------------------------------------------------------------------------
 # the table
 # ---------------------------------------------------------------------------
-def bench_arm(name: str, n_paths: int) -> dict:
-    """Per kind of path (``line``, ``circle``): paths, feasible ones, goals met per solver, times per waypoint."""
-    solver = nik.IKSolver(name)
-    robot = solver.robot
+def load_arm(name: str):
+    """The robot ``name``: built in, or from :data:`EXTERNAL` (None when its package is not installed)."""
+    if name not in EXTERNAL:
+        return nik.load_robot(name)
+    import importlib.metadata
+
+    dist, rel = EXTERNAL[name]
+    try:
+        path = Path(importlib.metadata.distribution(dist).locate_file(rel))
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    return nik.load_robot(str(path)) if path.exists() else None
+
+
+def cppflow(robot, T, q: np.ndarray, seconds: float, closed: bool) -> dict:
+    """CppFlow's report of one ``solve_path`` answer: valid (every waypoint reached within 0.1 mm / 0.1 deg by FK,
+    inside the limits; every step <= 7 deg revolute / 2 cm prismatic), the largest step (deg, revolute; mm,
+    prismatic), the total joint motion (deg, revolute joints), seconds, and on a closed path the last row vs the
+    first (deg)."""
+    reached, _ = quality(robot, T, q)
+    dq = np.abs(np.diff(q, axis=0))
+    slide = robot.prismatic.numpy()
+    step_rev = float(dq[:, ~slide].max()) if (~slide).any() else 0.0
+    step_pri = float(dq[:, slide].max()) if slide.any() else 0.0
+    out = {
+        "valid": reached and step_rev <= CPPFLOW_STEP and step_pri <= CPPFLOW_SLIDE,
+        "step": math.degrees(step_rev),
+        "motion": math.degrees(float(dq[:, ~slide].sum())),
+        "seconds": seconds,
+        "closure": math.degrees(float(np.abs(q[-1] - q[0]).max())) if closed else None,
+    }
+    return out
+
+
+def timed(robot, q: np.ndarray) -> tuple[int, int, float]:
+    """``(samples above a limit, samples, duration / toppra's)`` of ``q``'s time-optimal trajectory
+    (:func:`nik.ik.timing.time_path`, the robot's limits), sampled every millisecond."""
+    from nik.ik.timing import time_path
+
+    tm = time_path(q, robot=robot)
+    _, _, qd, qdd = tm.sample(1e-3)
+    bad = (np.abs(qd) > tm.vel_limits * (1 + RATE_SLACK)).any(axis=1) | (
+        np.abs(qdd) > tm.acc_limits * (1 + RATE_SLACK)
+    ).any(axis=1)
+    ratio = tm.duration / tm.toppra_duration if tm.toppra_duration > 0 else 1.0
+    return int(bad.sum()), int(bad.size), ratio
+
+
+def bench_arm(name: str, n_paths: int) -> dict | None:
+    """Per kind of path (``line``, ``circle``): paths, feasible ones, goals met per solver, times per waypoint, and
+    CppFlow's report of ``solve_path`` without ``q_start`` (``"cppflow"``: one entry per path; ``"timing"``: the
+    timed trajectory of each valid one)."""
+    robot = load_arm(name)
+    if robot is None:
+        return None
+    solver = nik.IKSolver(robot)
     ets = ets_of(robot)
     redundant = not solver.closed_form
     gen = torch.Generator().manual_seed(PATH_SEED + sum(map(ord, name)))
-    rows = {kind: {"feasible": 0, "paths": 0, "meets": {}, "times": {}} for kind in ("line", "circle")}
+    rows = {
+        kind: {"feasible": 0, "paths": 0, "meets": {}, "times": {}, "cppflow": [], "timing": []}
+        for kind in ("line", "circle")
+    }
     for k in range(2 * n_paths):
         kind = "line" if k % 2 == 0 else "circle"
         row = rows[kind]
@@ -231,8 +303,8 @@ def bench_arm(name: str, n_paths: int) -> dict:
             "solve_path (q_start)": lambda T=T, q0=q0: run_solve_path(solver, T, q0),
             "chain (q_near)": lambda T=T, q0=q0: run_chain(solver, T, q0),
         }
+        runs["solve_path"] = lambda T=T: run_solve_path(solver, T, None)
         if not redundant:
-            runs["solve_path"] = lambda T=T: run_solve_path(solver, T, None)
             runs["chain"] = lambda T=T: run_chain(solver, T, None)
         if ets is not None:
             runs["rtb"] = lambda T=T, q0=q0: run_rtb(ets, T, q0)
@@ -243,6 +315,11 @@ def bench_arm(name: str, n_paths: int) -> dict:
             q, dt = runs[label]()
             out[label] = q
             row["times"].setdefault(label, []).append(dt / T.shape[0])
+        q = out["solve_path"]  # CppFlow's report reads solve_path without q_start
+        report = cppflow(robot, T, q, row["times"]["solve_path"][-1] * T.shape[0], kind == "circle")
+        row["cppflow"].append(report)
+        if report["valid"] and robot.vel_limits is not None:
+            row["timing"].append(timed(robot, q))
         if redundant:  # feasible: the per-pose solver reaches every waypoint (continuity aside)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -282,14 +359,20 @@ def main(argv=None) -> int:
         "us/waypoint: solve_path from q_start (no q_start) | chain | rtb | rtb / solve_path | chain / solve_path |"
     )
     say("|---|---|---|---|---|---|---|---|---|---|---|")
+    cpp_rows = []
     for name in args.arms.split(","):
-        for kind, row in bench_arm(name, args.paths).items():
+        kinds = bench_arm(name, args.paths)
+        if kinds is None:
+            say(f"| {name} | (not installed: pip install {EXTERNAL[name][0]}) |")
+            continue
+        cpp_rows.append((name, kinds))
+        for kind, row in kinds.items():
             med = {k: statistics.median(v) * 1e6 for k, v in row["times"].items()}
             m, f = row["meets"], row["feasible"]
             sp, chain = med["solve_path (q_start)"], med["chain (q_near)"]
             rtb = med.get("rtb", float("nan"))
-            free = f" ({med['solve_path']:.1f})" if "solve_path" in med else ""
-            if "solve_path" in med:  # closed-form arms: the goal against the exhaustive check's best
+            free = f" ({med['solve_path']:.1f})"
+            if "chain" in med:  # closed-form arms: the goal against the exhaustive check's best
                 met = (m.get("solve_path", 0), m.get("chain", 0), "n/a")
             else:
                 met = (m.get("solve_path (q_start)", 0), m.get("chain (q_near)", 0), m.get("rtb", "n/a"))
@@ -297,6 +380,29 @@ def main(argv=None) -> int:
             say(
                 f"| {name} {kind}s | {row['paths']} | {f} | {met[0]} | {met[1]} | {met[2]} | {sp:.1f}{free} | "
                 f"{chain:.1f} | {rtb:.1f} | {rtb / sp:.1f}x | {chain / sp:.1f}x |"
+            )
+    say("")
+    say(
+        "| arm | paths | valid (CppFlow: 0.1 mm / 0.1 deg, steps <= 7 deg) | largest step, deg: median (max) | "
+        "total joint motion, deg: median | ms per path: median | closed loops: last vs first, deg: max | "
+        "timed: samples over a limit at 1 ms | timed: duration / toppra's, max |"
+    )
+    say("|---|---|---|---|---|---|---|---|---|")
+    for name, kinds in cpp_rows:
+        for kind, row in kinds.items():
+            c = row["cppflow"]
+            valid = sum(r["valid"] for r in c)
+            steps = [r["step"] for r in c]
+            closure = [r["closure"] for r in c if r["valid"] and r["closure"] is not None]
+            tm = row["timing"]
+            over = f"{sum(t[0] for t in tm)} / {sum(t[1] for t in tm)}" if tm else "n/a"
+            ratio = f"{max(t[2] for t in tm):.4f}" if tm else "n/a"
+            say(
+                f"| {name} {kind}s | {len(c)} | {valid} / {len(c)} | "
+                f"{statistics.median(steps):.2f} ({max(steps):.1f}) | "
+                f"{statistics.median(r['motion'] for r in c):.1f} | "
+                f"{statistics.median(r['seconds'] for r in c) * 1e3:.2f} | "
+                f"{f'{max(closure):.2g}' if closure else 'n/a'} | {over} | {ratio} |"
             )
     if args.out:
         command = "python benchmarks/paths.py " + " ".join(sys.argv[1:] if argv is None else argv)

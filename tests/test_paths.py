@@ -412,3 +412,123 @@ def test_a_solver_without_a_network_starts_its_chains_from_uniform_starts_only(p
     bare = nik.IKSolver(panda.robot, checkpoint=None).solve_path(T)
     assert bare.source == "multistart"
     assert bool(_reached(panda.robot, T, bare.q).all()) and _largest_step(bare.q) < math.radians(3.0)
+
+
+# ---- closed loops (issue 29.2) ---------------------------------------------------------------------------------
+def _circle(robot, seed: int, n: int = 40, radius: float = 0.05) -> torch.Tensor:
+    """``(n, 4, 4)``: a full circle through FK of a random configuration, in a random plane, orientation fixed; its
+    last pose equals its first."""
+    gen = torch.Generator().manual_seed(seed)
+    q0 = robot.sample(1, generator=gen, dtype=torch.float64)[0]
+    T0 = robot.fk(q0[None])[0]
+    u, v = torch.linalg.qr(torch.randn(3, 2, generator=gen, dtype=torch.float64))[0].T
+    a = torch.linspace(0.0, 2 * math.pi, n, dtype=torch.float64)
+    T = T0.expand(n, 4, 4).clone()
+    T[:, :3, 3] = T0[:3, 3] + radius * ((1 - torch.cos(a))[:, None] * u - torch.sin(a)[:, None] * v)
+    return T
+
+
+@pytest.mark.parametrize("name, seed", [("ur5", 1), ("panda", 1)])
+def test_a_closed_circle_ends_on_its_first_row(name, seed, ur5, panda):
+    solver = {"ur5": ur5, "panda": panda}[name]
+    T = _circle(solver.robot, seed)
+    res = solver.solve_path(T)
+    q = res.q
+    assert res.path.closed
+    assert math.degrees(float((q[-1] - q[0]).abs().max())) <= 0.1
+    assert bool(_reached(solver.robot, T, q).all())
+    assert _largest_step(q) < math.radians(10.0)
+
+
+def test_a_redundant_arm_drifts_around_a_loop_unless_it_is_closed(panda):
+    """The check above can fail: the chain alone (closed=False) ends elsewhere in the null space."""
+    T = _circle(panda.robot, 1)
+    res = panda.solve_path(T, closed=False)
+    assert not res.path.closed and res.path.closure is None
+    assert math.degrees(float((res.q[-1] - res.q[0]).abs().max())) > 1.0
+
+
+def test_an_open_path_is_not_taken_as_closed(ur5):
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    assert not ur5.solve_path(_line(ur5.robot, q0, [0.0, 1.0, 0.0], 0.05, 10)).path.closed
+
+
+# ---- tolerant paths (issue 29.4) ---------------------------------------------------------------------------------
+def _turning_line(robot) -> torch.Tensor:
+    """A ur5 line (15 cm) whose orientation turns 60 deg about the tool's z axis on the way, from a start with the
+    last wrist joint at 150 deg: with that orientation fixed at every waypoint the wrist must pass its +180 deg limit
+    (a reconfiguration); with rotation about z free it need not turn at all."""
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.5, -1.5, math.radians(150.0)], dtype=torch.float64)
+    n = 40
+    s = torch.linspace(0.0, 1.0, n, dtype=torch.float64)
+    T = _line(robot, q0, [0.0, 1.0, 0.0], 0.15, n)
+    T[:, :3, :3] = T[:, :3, :3] @ torch.stack([_rz(float(a))[:3, :3] for a in s * math.radians(60.0)])
+    return T
+
+
+def test_a_free_tool_axis_makes_an_infeasible_path_feasible_with_small_steps(ur5):
+    T = _turning_line(ur5.robot)
+    with pytest.warns(UserWarning, match="reconfiguration"):
+        fixed = ur5.solve_path(T)
+    assert fixed.path.largest_step > math.radians(10.0)
+    res = ur5.solve_path(T, bounds="axis_z")
+    half = torch.from_numpy(nik.ik.bounds.parse_bounds("axis_z").expand(1)[0])
+    assert bool(nik.poses.within_bounds(T, ur5.robot.fk(res.q), half).all())  # by FK, independently
+    assert bool(res.success.all())
+    assert _largest_step(res.q) < math.radians(3.0)
+
+
+def test_a_redundant_arms_chains_keep_the_bounds(panda):
+    gen = torch.Generator().manual_seed(1)
+    q0 = panda.robot.sample(1, generator=gen, dtype=torch.float64)[0]
+    T = _line(panda.robot, q0, [0.0, 1.0, 0.0], 0.1, 30)
+    T[:, :3, :3] = T[:, :3, :3] @ torch.stack([_rz(a)[:3, :3] for a in np.linspace(0, math.radians(60), 30)])
+    res = panda.solve_path(T, bounds="axis_z")
+    half = torch.from_numpy(nik.ik.bounds.parse_bounds("axis_z").expand(1)[0])
+    assert bool(nik.poses.within_bounds(T, panda.robot.fk(res.q), half).all())
+    assert bool(res.success.all())
+    assert _largest_step(res.q) < math.radians(3.0)
+
+
+# ---- timing (issue 29.3) ----------------------------------------------------------------------------------------
+def test_a_timed_path_keeps_its_limits_at_1_ms(ur5):
+    pytest.importorskip("toppra")
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    res = ur5.solve_path(_line(ur5.robot, q0, [0.0, 1.0, 0.0], 0.2, 20), timing=True)
+    rep = res.path
+    assert rep.t.shape == (20,) and rep.qd.shape == rep.qdd.shape == (20, 6)
+    assert float(rep.t[0]) == 0.0 and bool((rep.t.diff() > 0).all())
+    t, q, qd, qdd = rep.timing.sample(1e-3)
+    vel = ur5.robot.vel_limits.numpy()
+    assert (np.abs(qd) <= vel * (1 + 1e-6)).all()
+    assert (np.abs(qdd) <= rep.timing.acc_limits * (1 + 1e-6)).all()
+    np.testing.assert_allclose(rep.timing.at(rep.t.numpy())[0], res.q.numpy(), atol=1e-9)  # through the waypoints
+
+
+def test_timing_without_speed_limits_is_a_one_line_error():
+    robot = nik.load_robot("ur5")
+    robot.vel_limits = None
+    solver = nik.IKSolver(robot)
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    T = _line(robot, q0, [0.0, 1.0, 0.0], 0.05, 5)
+    with pytest.raises(ValueError, match="timing needs joint speed limits") as err:
+        solver.solve_path(T, timing=True)
+    assert "\n" not in str(err.value)
+    res = solver.solve_path(T, timing=True, vel_limits=[1.0] * 6)  # given per call
+    assert res.path.timing.duration > 0
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"closed": "yes"}, "closed: expected"),
+        ({"timing": "fast"}, "timing: expected"),
+        ({"timing": {"speed": 1.0}}, "timing: unknown keyword"),
+        ({"bounds": "axis_q"}, "bounds"),
+    ],
+)
+def test_bad_closed_timing_or_bounds_is_a_one_line_error(ur5, kw, match):
+    q0 = torch.tensor([0.3, -1.2, 1.4, -1.6, -1.5, 0.2], dtype=torch.float64)
+    with pytest.raises(ValueError, match=match) as err:
+        ur5.solve_path(_line(ur5.robot, q0, [0.0, 1.0, 0.0], 0.05, 5), **kw)
+    assert "\n" not in str(err.value)

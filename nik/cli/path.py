@@ -54,6 +54,20 @@ def register(sub) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     add_scene_argument(p)
+    p.add_argument(
+        "--timing",
+        action="store_true",
+        help="time the trajectory within the robot's joint speed and acceleration limits (toppra, the 'timing' "
+        "extra): writes a t_s column (seconds); with --plot, positions and velocities against time",
+    )
+    p.add_argument("--vel-scale", type=float, default=1.0, metavar="S", help="with --timing: fraction (0, 1] of the "
+                   "speed limits (default 1)")  # fmt: skip
+    p.add_argument("--acc-scale", type=float, default=1.0, metavar="S", help="with --timing: fraction (0, 1] of the "
+                   "acceleration limits (default 1)")  # fmt: skip
+    p.add_argument("--free-axis", action="append", metavar="x|y|z", help="rotation about this tool axis free at "
+                   "every waypoint (the path uses the freedom for the least joint motion)")  # fmt: skip
+    p.add_argument("--open", action="store_true", help="a path whose last pose equals its first is closed (its last "
+                   "row of joints equals the first) unless this is given")  # fmt: skip
     p.set_defaults(func=_cmd_path)
 
 
@@ -71,6 +85,19 @@ def _cmd_path(args) -> int:
             f"--tol-mm, --tol-deg and --max-step-deg must be > 0, got {args.tol_mm}, {args.tol_deg}, "
             f"{args.max_step_deg}"
         )
+    from nik.ik.bounds import bounds_from_cli
+    from nik.ik.timing import check_scale
+
+    timing = False
+    if args.timing:
+        timing = {"vel_scale": check_scale(args.vel_scale, "--vel-scale"),
+                  "acc_scale": check_scale(args.acc_scale, "--acc-scale")}  # fmt: skip
+        if robot.vel_limits is None:
+            raise ValueError(f"--timing: {robot.name} has no joint speed limits (give them in its URDF or YAML)")
+    elif args.vel_scale != 1.0 or args.acc_scale != 1.0:
+        raise ValueError("--vel-scale and --acc-scale need --timing")
+    tol_pos, tol_rot = args.tol_mm * 1e-3, math.radians(args.tol_deg)
+    bounds = bounds_from_cli(free_axis=args.free_axis, tol_pos=tol_pos, tol_rot=tol_rot)
     _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
     q_start = None
     if args.q_start is not None:
@@ -83,42 +110,63 @@ def _cmd_path(args) -> int:
         res = solver.solve_path(
             poses,
             q_start,
-            tol_pos=args.tol_mm * 1e-3,
-            tol_rot=math.radians(args.tol_deg),
+            tol_pos=tol_pos,
+            tol_rot=tol_rot,
             seed=args.seed,
             representation="quat",
             max_step=math.radians(args.max_step_deg),
+            closed=False if args.open else None,
+            timing=timing,
+            bounds=bounds,
         )
     for w in caught:
         if issubclass(w.category, UserWarning):
             print(f"nik path: warning: {w.message}", file=sys.stderr)
     if args.out:
         write_trajectory_csv(args.out, robot, res, q_start)
-    if args.plot:
+    if args.plot and res.path.timing is not None:
+        from nik.view.timing_plot import plot_timing
+
+        plot_timing(robot, res.path.timing, args.plot)
+    elif args.plot:
         plot_trajectory(args.plot, robot, res)
     rep = res.path
     j = rep.largest_step_joint
     ok = int(res.success.sum())
     wrote = ", ".join(str(x) for x in (args.out, args.plot) if x)
     print(
-        f"reached {ok} of {len(res)} waypoints within {describe(args.tol_mm * 1e-3, math.radians(args.tol_deg))} "
+        f"reached {ok} of {len(res)} waypoints within "
+        f"{bounds.describe() if bounds is not None else describe(tol_pos, tol_rot)} "
         f"({robot.name}{tool_link_text(robot)}, start: {res.source}); largest step {rep.largest_step * factor[j]:.3g} "
         f"{shown[j]} (joint {j}, {robot.joint_names[j]}) into waypoint {rep.largest_step_at}; "
         f"{int(rep.reconfigurations.sum())} step(s) above {args.max_step_deg:g} deg"
+        + (f"; closed loop, last row vs first {math.degrees(rep.closure):.3g} deg" if rep.closed else "")
+        + (f"; duration {rep.timing.duration:.3f} s" if rep.timing is not None else "")
         + (f"; wrote {wrote}" if wrote else "")
     )
     if not args.out:
         names = [f"{n}_{u}" for n, u in zip(robot.joint_names, shown, strict=True)]
-        print(",".join(["index", *names, "success"]))
+        times = _time_cells(rep)
+        print(",".join(["index", *(["t_s"] if times else []), *names, "success"]))
         for i in range(len(res)):
             row = [f"{v * f:.4f}" for v, f in zip(res.q[i].tolist(), factor, strict=True)]
-            print(",".join([str(i), *row, str(int(bool(res.success[i])))]))
+            print(",".join([str(i), *times[i : i + 1], *row, str(int(bool(res.success[i])))]))
     return 0 if ok == len(res) else 1
 
 
+def _time_cells(rep) -> list[str]:
+    """The ``t_s`` cells of a timed path (:func:`nik.ik.timing.time_cells`), or ``[]``."""
+    if rep.t is None:
+        return []
+    from nik.ik.timing import time_cells
+
+    return time_cells(rep.t.numpy())
+
+
 def write_trajectory_csv(path: str | Path, robot, res, q_start=None) -> None:
-    """One row per waypoint: ``index``, the joints in degrees (``<name>_deg``; prismatic: ``<name>_mm``), the
-    position error (mm), rotation error (deg), ``success``, ``step_deg`` (the largest motion of a revolute joint
+    """One row per waypoint: ``index``, with timing ``t_s`` (seconds, :data:`nik.ik.timing.TIME_COLUMN`), the
+    joints in degrees (``<name>_deg``; prismatic: ``<name>_mm``), the position error (mm), rotation error (deg),
+    ``success``, ``step_deg`` (the largest motion of a revolute joint
     into that waypoint, degrees), for an arm with prismatic joints also ``step_mm`` (the largest slide of a
     prismatic joint, mm), and ``reason`` (why a waypoint failed, else empty). The step into waypoint 0 is from
     ``q_start`` ((dof,) radians / metres), 0 without it. Written to a temporary name, then renamed."""
@@ -134,6 +182,7 @@ def write_trajectory_csv(path: str | Path, robot, res, q_start=None) -> None:
     step_deg = torch.rad2deg(dq[:, [not p for p in slides]].amax(dim=1))
     step_mm = 1e3 * dq[:, slides].amax(dim=1) if any(slides) else None
     rep = res.path
+    times = _time_cells(rep)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
         with tmp.open("w", newline="") as fh:
@@ -141,6 +190,7 @@ def write_trajectory_csv(path: str | Path, robot, res, q_start=None) -> None:
             w.writerow(
                 [
                     "index",
+                    *(["t_s"] if times else []),
                     *[f"{n}_{u}" for n, u in zip(robot.joint_names, shown, strict=True)],
                     "pos_err_mm",
                     "rot_err_deg",
@@ -154,6 +204,7 @@ def write_trajectory_csv(path: str | Path, robot, res, q_start=None) -> None:
                 w.writerow(
                     [
                         i,
+                        *times[i : i + 1],
                         *[f"{v * f:.10g}" for v, f in zip(q[i].tolist(), factor, strict=True)],
                         f"{float(res.pos_err[i]) * 1e3:.6g}",
                         f"{math.degrees(float(res.rot_err[i])):.6g}",

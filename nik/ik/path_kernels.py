@@ -25,9 +25,9 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER
-from nik.kernels.lm import _STREAM, _lm_one, _work_size
+from nik.kernels.lm import _STREAM, _lm_one, _lm_one_bounded, _work_size
 
-__all__ = ["path_chains", "path_dp"]
+__all__ = ["path_chains", "path_chains_bounded", "path_dp"]
 
 _TWO_PI = 2.0 * math.pi
 #: Weight of the total joint motion (radians) beside the sum of squared steps (radians^2) in the second pass:
@@ -188,5 +188,41 @@ def path_chains(G, joints, T, starts, opts, iopts, restarts, seed, pull, pull_ca
             elif not good and restarts[i] > 0:
                 total = it
                 it, good, p, r = _lm_one(G, joints, T[i], x, opts, iopts, restarts[i], rng, q[c, i], work)
+                it += total
+            iterations[c, i], ok[c, i], pos[c, i], rot[c, i] = it, good, p, r
+
+
+@kernel
+def path_chains_bounded(
+    G, joints, T, starts, half, modes, opts, iopts, restarts, seed, pull, pull_cap, q, iterations, ok, pos, rot
+):
+    """:func:`path_chains` towards tolerant goals (:mod:`nik.ik.bounds`): waypoint ``i`` is reached when its error
+    in the target's tool frame lies inside ``half[i] (6,)`` (rotation mode ``modes[i]``); LM is
+    :func:`nik.kernels.lm._lm_one_bounded`. Arguments and outputs otherwise as :func:`path_chains` (``pos, rot``:
+    position error m, geodesic angle rad to the pose as given)."""
+    K, n = starts.shape
+    N = T.shape[0]
+    x = np.empty(n)
+    work = np.empty(_work_size(n))
+    rng = np.empty(1, dtype=np.uint64)
+    for c in range(K):
+        for i in range(N):
+            rng[0] = seed[0] ^ (np.uint64(c * N + i + 1) * _STREAM)
+            if i == 0:
+                for j in range(n):
+                    x[j] = starts[c, j]
+            else:
+                for j in range(n):
+                    lo, hi = joints[j, LOWER], joints[j, UPPER]
+                    d = -pull * (q[c, i - 1, j] - 0.5 * (lo + hi))
+                    x[j] = q[c, i - 1, j] + min(max(d, -pull_cap), pull_cap)
+            h, m = half[i], modes[i]
+            it, good, p, r = _lm_one_bounded(G, joints, T[i], x, h, m, opts, iopts, 0, rng, q[c, i], work)
+            if not good and (i > 0 or restarts[i] > 0):
+                total = it
+                if i > 0:
+                    for j in range(n):
+                        x[j] = q[c, i - 1, j]
+                it, good, p, r = _lm_one_bounded(G, joints, T[i], x, h, m, opts, iopts, restarts[i], rng, q[c, i], work)
                 it += total
             iterations[c, i], ok[c, i], pos[c, i], rot[c, i] = it, good, p, r

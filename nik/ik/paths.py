@@ -34,6 +34,26 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
    on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
 
+**Closed loops** (``closed=None``: detected when the last pose equals the first within the tolerances; True /
+False force it): the last row of joints equals the first, so the cycle repeats without a jump. Closed-form arms:
+the choice ends on the start's branch (:func:`_choose`: when the free choice does not, each start branch is tried
+with the end pinned to its own). Every arm, after the path: where the last row still differs from the first (an
+LM chain's drift in the null space), :func:`_close_loop` solves the last waypoint from the first row and blends the
+difference back over the path, kept only when no waypoint is lost and no step grows beyond ``max_step`` (or the
+largest step before). On joints that turn past a full turn (``wraps``) the rows are equal modulo whole turns: a
+path that takes such a joint once around ends one turn further (turning back would be a jump); ``res.path.closure``
+reports the gap.
+
+**Tolerant paths** (``bounds=``, :mod:`nik.ik.bounds`): with one free tool axis on a closed-form arm the candidates
+are the closed form's branches at sampled angles about it (:func:`_branches`) and the dynamic programming picks the
+least-motion sequence; other goals and arms run the LM chains towards the bounds
+(:func:`nik.ik.path_kernels.path_chains_bounded`). Success is checked by FK in each waypoint's tool frame
+(:func:`_final_check`); ``rot_err`` is then the rotation error that counts (with a free axis, its swing).
+
+**Timing** (``timing=True`` or a dict of :func:`nik.ik.timing.time_path` keywords): the answer is timed after the
+path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
+one-line ValueError before any work): ``res.path.t``, ``qd``, ``qdd``, ``timing``.
+
 **Settings**: the solver's, as :meth:`~nik.IKSolver.solve` reads them. The LM config (``swarm_cfg`` an
 :class:`nik.lm.LMCfg`) is the chains' and polishes' LM; ``fallback="multistart"`` (the default without a closed
 form) lets a waypoint the chain does not reach draw up to :data:`PATH_RESTARTS` uniform restarts (within reach),
@@ -61,6 +81,7 @@ import numpy as np
 import torch
 
 from nik.ik import collide
+from nik.ik.bounds import parse_bounds
 from nik.ik.model import model_of
 from nik.ik.result import IKResult, PathReport
 from nik.ik.targets import check_tolerances, pose_array, q_near_array
@@ -87,8 +108,18 @@ PATH_FOLLOW_STEP = math.radians(2.0)
 #: Uniform starts at the first waypoint on an arm without a closed form and without ``q_start`` (beside the
 #: network's hypotheses); distinct postures found become parallel chains.
 PATH_STARTS = 8
-#: Two first-waypoint answers closer than this (largest joint difference, radians) are one chain.
+#: Two first-waypoint answers closer than this (largest joint difference, radians) are one chain; a closed path's
+#: last candidate this close to its first is on the same branch.
 PATH_DEDUPE = 1e-2
+#: Closed paths on closed-form arms: start candidates tried with the end pinned to their branch (when the free
+#: choice does not close).
+PATH_CLOSED_STARTS = 8
+#: A closed path whose last row is within this of its first (largest joint difference, radians; modulo whole turns
+#: on joints that wrap) is closed as it is; else :func:`_close_loop` closes it.
+PATH_CLOSE_TOL = 1e-9
+#: Most entries of one of the dynamic programming's ``(N, K, K)`` tables (with a free tool axis, K grows with the
+#: sampled angles: :func:`_free_samples`).
+PATH_DP_CELLS = 30_000_000
 
 
 def solve_path(
@@ -102,6 +133,11 @@ def solve_path(
     representation: str | None = None,
     max_step: float = PATH_MAX_STEP,
     world=None,
+    closed: bool | None = None,
+    timing: bool | dict = False,
+    vel_limits=None,
+    acc_limits=None,
+    bounds=None,
 ) -> IKResult:
     """One continuous joint trajectory through the waypoints ``T_path`` (see :meth:`nik.IKSolver.solve_path`).
 
@@ -117,6 +153,14 @@ def solve_path(
         world: a :class:`nik.World` (else the solver's): a waypoint whose answer collides is infeasible, reason
             ``"colliding"`` (:func:`nik.ik.collide.path_waypoints`; the trajectory itself is not re-planned around
             obstacles).
+        closed: None: the path is closed when its last pose equals its first within the tolerances (position and
+            rotation); True / False force it. A closed path returns joints whose last row equals its first (module
+            docstring, "closed loops").
+        timing: True (or a dict of :func:`nik.ik.timing.time_path` keywords: ``tool_speed``, ``vel_scale``,
+            ``acc_scale``) times the trajectory: ``res.path.t``, ``qd``, ``qdd`` and ``timing``.
+        vel_limits, acc_limits: ``(dof,)`` joint speed / acceleration limits of the timing (default the robot's).
+        bounds: a tolerant goal for every waypoint (:func:`nik.ik.bounds.parse_bounds`: ``"axis_z"``, 6 numbers,
+            ``(N, 6)``); None: ``tol_pos`` / ``tol_rot``. Module docstring, "tolerant paths".
 
     Returns:
         :class:`IKResult` of N rows (``q: (N, dof)``) with ``path``: a :class:`PathReport`.
@@ -139,37 +183,58 @@ def solve_path(
     check_tolerances(tol_pos, tol_rot)
     if not (isinstance(max_step, int | float) and math.isfinite(max_step) and max_step > 0):
         raise ValueError(f"max_step: expected a number > 0 (radians), got {max_step!r}")
+    if closed is not None and not isinstance(closed, bool):
+        raise ValueError(f"closed: expected None, True or False, got {closed!r}")
+    if not isinstance(timing, bool | dict):
+        raise ValueError(f"timing: expected True, False or a dict of time_path keywords, got {timing!r:.60}")
+    unknown = sorted(set(timing) - {"tool_speed", "vel_scale", "acc_scale"}) if isinstance(timing, dict) else []
+    if unknown:
+        raise ValueError(f"timing: unknown keyword {unknown[0]!r} (expected tool_speed, vel_scale, acc_scale)")
+    goal = parse_bounds(bounds, batch=Tn.shape[0], tol_pos=tol_pos, tol_rot=tol_rot)
     robot = solver.robot
+    if timing is not False and vel_limits is None and robot.vel_limits is None:
+        raise ValueError(f"timing needs joint speed limits: {robot.name} has none (give vel_limits=, rad/s per joint)")
     plan = _plan(solver, tol_pos, tol_rot, seed)
     model = model_of(robot, plan.lm_cfg)
     reachable, every = model.reach(Tn)
     reach_note = None if every else model.unreachable_message(Tn, reachable)
     q0 = _q_start(robot, model, q_start)
-    run = _Run(plan, model, Tn, q0, reachable)
+    N = Tn.shape[0]
+    half, modes = (None, None) if goal is None else (goal.expand(N), goal.modes(N))
+    is_closed = _is_closed(Tn, tol_pos, tol_rot) if closed is None else closed
+    run = _Run(plan, model, Tn, q0, reachable, half, modes)
     follows = None
-    if solver.closed_form and q0 is not None and run.refine:  # the quick answer: LM from q_start, if it follows
+    free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
+    closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
+    if closed_form and q0 is not None and run.refine:  # the quick answer: LM from q_start, if it follows
         follows = _follows_from_start(run, max_step)
     if follows is not None:
         q, its, found, source = *follows, None, "q_start"
-    elif solver.closed_form:
-        q, its, found, source = _closed_form_path(run)
+    elif closed_form:
+        q, its, found, source = _closed_form_path(run, is_closed)
     else:
         q, its, source = _chain_path(run)
         found = None
-    if run.refine:  # whole-trajectory optimisation where a waypoint is missed or a step too large, kept if no worse
-        q, pos, rot = polish_path(
+    if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
+        # large (the classic tolerances only), kept if no worse
+        q, _, _ = polish_path(
             model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
         )
-    else:
-        pos, rot = _errors(model, Tn, q)
+    if is_closed:
+        q, its = _close_loop(run, q, its, max_step)
+    pos, rot, within = _final_check(run, q)
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
-    success = (pos <= tol_pos) & (rot <= tol_rot) & inside
+    success = within & inside
     success, free, colliding = collide.path_waypoints(solver, q, world, success)
     reasons = [""] * len(success)
     for i in np.nonzero(~success)[0]:
         why = "" if found is None else found[i]
         reasons[i] = why or colliding[i] or ("out of reach" if not reachable[i] else "not reached")
     report = _report(robot, q, q0, success, reasons, max_step, reach_note)
+    report.closed = bool(is_closed)
+    report.closure = _closure(q, model.wraps) if is_closed else None
+    if timing is not False:
+        _time(report, robot, q, timing, vel_limits, acc_limits)
     if report.warning is not None:
         warnings.warn(report.warning, UserWarning, stacklevel=3)
     like = dict(dtype=dtype, device=device)
@@ -229,6 +294,8 @@ class _Run:
     T: np.ndarray
     q0: np.ndarray | None
     reachable: np.ndarray
+    half: np.ndarray | None = None  # (N, 6) a tolerant goal's half-widths (nik.ik.bounds), None: the tolerances
+    modes: np.ndarray | None = None  # (N,) its rotation modes
 
     @property
     def tol_pos(self) -> float:
@@ -253,10 +320,12 @@ class _Run:
         ``fallback="multistart"``, else none."""
         return PATH_RESTARTS if self.plan.fallback == "multistart" else 0
 
-    def chains(self, T, starts, reachable, *, pull: float, restarts: int, seed: int | None = None):
+    def chains(self, T, starts, reachable, *, pull: float, restarts: int, seed: int | None = None, offset: int = 0):
         """:func:`nik.ik.path_kernels.path_chains` along ``T`` from ``starts: (K, dof)``: ``q (K, N, dof)``,
-        iterations ``(K, N)``, ok ``(K, N)`` (LM options: the model's LM with this call's tolerances)."""
-        from nik.ik.path_kernels import path_chains
+        iterations ``(K, N)``, ok ``(K, N)`` (LM options: the model's LM with this call's tolerances; with a tolerant
+        goal, :func:`~nik.ik.path_kernels.path_chains_bounded` towards the bounds of waypoints ``offset ...`` of
+        the path, which ``T`` are)."""
+        from nik.ik.path_kernels import path_chains, path_chains_bounded
         from nik.kernels.lm import seed_state
 
         lm = self.model.lm
@@ -266,11 +335,16 @@ class _Run:
         its, ok = np.empty((K, N), dtype=np.int64), np.empty((K, N), dtype=bool)
         pos, rot = np.empty((K, N)), np.empty((K, N))
         budget = np.where(reachable, restarts, 0).astype(np.int64)
-        path_chains(
-            lm.G, lm.joints, np.ascontiguousarray(T), np.ascontiguousarray(starts, dtype=np.float64), opts, iopts,
-            budget, seed_state(self.seed if seed is None else seed), pull, PATH_PULL_CAP if pull > 0 else 0.0, q,
-            its, ok, pos, rot,
-        )  # fmt: skip
+        T, starts = np.ascontiguousarray(T), np.ascontiguousarray(starts, dtype=np.float64)
+        rng, cap = seed_state(self.seed if seed is None else seed), PATH_PULL_CAP if pull > 0 else 0.0
+        if self.half is None:
+            path_chains(lm.G, lm.joints, T, starts, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot)
+        else:
+            at = slice(offset, offset + T.shape[0])
+            half, modes = np.ascontiguousarray(self.half[at]), np.ascontiguousarray(self.modes[at])
+            path_chains_bounded(
+                lm.G, lm.joints, T, starts, half, modes, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot
+            )
         return q, its, ok
 
 
@@ -304,6 +378,107 @@ def _errors(model, Tn: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return pos, rot
 
 
+def _final_check(run: _Run, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(pos (N,), rot (N,), within (N,))`` of ``q`` by FK: with the tolerances, the position error (m), the
+    geodesic rotation error (rad) and both within them; with a tolerant goal, the error in each waypoint's tool frame
+    (:func:`nik.kernels.lm.bounded_errors`): ``pos`` its position part's norm, ``rot`` its rotation part's norm (with
+    a free tool axis, the swing of that axis: the rotation about it does not count), ``within`` every axis inside
+    its half-width."""
+    if run.half is None:
+        pos, rot = _errors(run.model, run.T, q)
+        return pos, rot, (pos <= run.tol_pos) & (rot <= run.tol_rot)
+    from nik.kernels.lm import bounded_errors
+
+    d = np.empty((q.shape[0], 6))
+    bounded_errors(run.model.G, run.model.joints, run.T, np.ascontiguousarray(q), run.modes, d)
+    within = (np.abs(d) <= run.half).all(axis=1)
+    return np.linalg.norm(d[:, :3], axis=1), np.linalg.norm(d[:, 3:], axis=1), within
+
+
+def _lm_batch(run: _Run, q0: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """LM (no restarts) for waypoints ``rows`` from ``q0: (M, dof)``, towards the call's tolerances or its tolerant
+    goal: ``(q (M, dof), iterations (M,), converged (M,))``."""
+    lm, T = run.model.lm, np.ascontiguousarray(run.T[rows])
+    if run.half is None:
+        res = lm.solve(T, q0, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False)
+        return res.q, res.iterations, res.converged
+    from nik.kernels.lm import lm_solve_bounded, seed_state
+
+    M, n = q0.shape
+    opts, iopts = lm.options(run.tol_pos, run.tol_rot)
+    q, its, ok = np.empty((M, n)), np.empty(M, dtype=np.int64), np.empty(M, dtype=bool)
+    pos, rot = np.empty(M), np.empty(M)
+    lm_solve_bounded(
+        lm.G, lm.joints, T, np.ascontiguousarray(q0, dtype=np.float64), np.ascontiguousarray(run.half[rows]),
+        np.ascontiguousarray(run.modes[rows]), opts, iopts, np.zeros(M, dtype=np.int64), seed_state(run.seed),
+        q, its, ok, pos, rot,
+    )  # fmt: skip
+    return q, its, ok
+
+
+# ---------------------------------------------------------------------------
+# closed loops
+# ---------------------------------------------------------------------------
+def _is_closed(Tn: np.ndarray, tol_pos: float, tol_rot: float) -> bool:
+    """True when the last pose of ``Tn: (N, 4, 4)`` equals its first within the tolerances (position, geodesic
+    rotation)."""
+    a, b = Tn[0], Tn[-1]
+    cos = np.clip((np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
+    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) <= tol_pos and math.acos(cos) <= tol_rot)
+
+
+def _closure(q: np.ndarray, wraps: np.ndarray) -> float:
+    """The largest joint difference between the last row of ``q: (N, dof)`` and its first (radians; metres on
+    prismatic joints), modulo whole turns on the joints that wrap (their range exceeds a full turn)."""
+    d = np.abs(q[-1] - q[0])
+    d[wraps] = np.abs(np.remainder(d[wraps] + math.pi, 2 * math.pi) - math.pi)
+    return float(d.max())
+
+
+def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed path's joints with the last row equal to the first (module docstring, "closed loops"): LM from the
+    first row at the last waypoint; the difference ``delta`` between that answer and the last row (modulo whole
+    turns on wrapping joints) is blended back over the path (row ``i`` seeded at ``q_i + w_i delta``,
+    ``w = 3 s^2 - 2 s^3`` of ``s = i / (N - 1)``: no added motion at either end) and every row re-solved by LM from
+    its seed (the tool stays, the null-space drift is undone). Kept only when every waypoint reached before is
+    still reached, inside the limits, and no step grows above ``max(max_step, the largest step before)``;
+    else ``q`` as it was (its closure is reported)."""
+    model = run.model
+    if _closure(q, model.wraps) <= PATH_CLOSE_TOL:
+        return q, its
+    N = q.shape[0]
+    end, end_its, ok = _lm_batch(run, q[:1], np.array([N - 1]))
+    if not ok[0]:
+        return q, its
+    delta = end[0] - q[-1]
+    w = model.wraps
+    delta[w] = np.remainder(delta[w] + math.pi, 2 * math.pi) - math.pi  # never undo a whole turn of the path
+    s = np.arange(N) / (N - 1)
+    seeds = np.clip(q + (3 * s**2 - 2 * s**3)[:, None] * delta, model.lo, model.hi)
+    new, new_its, reached = _lm_batch(run, seeds, np.arange(N))
+    new[-1] = q[-1] + delta
+    new_its[-1] = end_its[0]
+    _, _, before = _final_check(run, q)
+    _, _, after = _final_check(run, new)
+    inside = ((new >= model.lo - 1e-9) & (new <= model.hi + 1e-9)).all(axis=1)
+    old_step = np.abs(np.diff(q, axis=0)).max()
+    new_step = np.abs(np.diff(new, axis=0)).max()
+    if (before & ~(after & inside)).any() or new_step > max(max_step, old_step):
+        return q, its
+    return new, its + new_its
+
+
+def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limits) -> None:
+    """Fills ``report.t``, ``qd``, ``qdd`` and ``timing`` with :func:`nik.ik.timing.time_path` of ``q`` (the robot's
+    limits unless given; ``timing`` a dict: its keywords)."""
+    from nik.ik.timing import time_path
+
+    kw = timing if isinstance(timing, dict) else {}
+    tm = time_path(q, vel_limits, acc_limits, robot=robot, **kw)
+    report.timing = tm
+    report.t, report.qd, report.qdd = (torch.from_numpy(np.ascontiguousarray(a)) for a in (tm.t, tm.qd, tm.qdd))
+
+
 def _follows_from_start(run: _Run, max_step: float):
     """``(q (N, dof), iterations (N,))`` of the LM chain from ``q0`` when it follows the whole path smoothly
     (:data:`PATH_FOLLOW_STEP`), else None."""
@@ -319,24 +494,17 @@ def _follows_from_start(run: _Run, max_step: float):
 # ---------------------------------------------------------------------------
 # arms with a closed form: every branch at every waypoint, the choice by dynamic programming
 # ---------------------------------------------------------------------------
-def _closed_form_path(run: _Run):
+def _closed_form_path(run: _Run, closed: bool = False):
     """``(q (N, 6), iterations (N,), reasons, source)`` of a closed-form arm: the guess stage (every branch of every
-    waypoint), the choice over the whole path, then the refine stage (LM from the chosen branch where it misses the
-    tolerance: an approximate closed form, :mod:`nik.ik.model`; LM from the neighbour's answer where no branch
-    serves)."""
-    from nik.ik.path_kernels import path_dp
-
+    waypoint; with a free tool axis, every branch of every sampled angle: :func:`_branches`), the choice over the
+    whole path (a closed path ends on its start's branch: :func:`_choose`), then the refine stage (LM from the
+    chosen branch where it misses the tolerance: an approximate closed form, :mod:`nik.ik.model`; LM from the
+    neighbour's answer where no branch serves)."""
     model, Tn, q0 = run.model, run.T, run.q0
     N = Tn.shape[0]
-    # valid: inside the limits and within the call's tolerance by FK (an approximate closed form: within the model's
-    # check, the one policy of nik.ik.model; LM then polishes what misses the call's tolerance)
-    cand, valid = (
-        model.closed_solutions(Tn) if model.approximate else model.closed_solutions(Tn, run.tol_pos, run.tol_rot)
-    )
+    cand, valid = _branches(run)
     wraps = model.wraps
-    choice = np.empty(N, dtype=np.int64)
-    start = np.zeros(6) if q0 is None else q0
-    path_dp(cand, valid, wraps, start, q0 is not None, 1e-9, choice)
+    choice = _choose(cand, valid, wraps, q0, closed)
     have = choice >= 0
     its = np.zeros(N, dtype=np.int64)
     if not have.any() and run.refine:  # no waypoint has a valid branch: LM along the path from q_start or a start
@@ -364,6 +532,87 @@ def _closed_form_path(run: _Run):
     return q, its, reasons, "analytic"
 
 
+def _branches(run: _Run) -> tuple[np.ndarray, np.ndarray]:
+    """``(cand (N, K, 6), valid (N, K))``: the closed form's branches of every waypoint, valid where inside the limits
+    and within the call's tolerance by FK (an approximate closed form: within the model's check, the one policy of
+    :mod:`nik.ik.model`; LM then polishes what misses the call's tolerance). With one free tool axis (a tolerant
+    goal, :mod:`nik.ik.bounds`) the branches of every sampled angle about it (:mod:`nik.ik.free_axis`'s sampling:
+    evenly from 0, :func:`_free_samples` of them), checked at the goal's tightest half-widths, the valid ones first
+    (K: the most any waypoint has)."""
+    model, Tn = run.model, run.T
+    tol = () if model.approximate else (run.tol_pos, run.tol_rot)
+    if run.half is None or not set(run.modes.tolist()) <= {0, 1, 2}:
+        return model.closed_solutions(Tn, *tol)
+    N, S = Tn.shape[0], _free_samples(Tn.shape[0])
+    gamma = 2.0 * math.pi * np.arange(S) / S
+    gamma = np.where(gamma > math.pi, gamma - 2.0 * math.pi, gamma)
+    c, s = np.cos(gamma), np.sin(gamma)
+    R = np.zeros((N, S, 4, 4))
+    R[..., 3, 3] = 1.0
+    for k in range(3):  # the rotation about each waypoint's free axis k
+        at = run.modes == k
+        i, j = (k + 1) % 3, (k + 2) % 3
+        R[at, :, k, k] = 1.0
+        R[at, :, i, i], R[at, :, i, j], R[at, :, j, i], R[at, :, j, j] = c, -s, s, c
+    Tm = np.ascontiguousarray((Tn[:, None] @ R).reshape(N * S, 4, 4))
+    if not model.approximate:
+        rot = run.half[:, 3:]
+        tol = (float(run.half[:, :3].min()), float(rot[np.isfinite(rot)].min()))
+    cand, valid = model.closed_solutions(Tm, *tol)
+    cand, valid = cand.reshape(N, S * 8, -1), valid.reshape(N, S * 8)
+    order = np.argsort(~valid, axis=1, kind="stable")[:, : max(int(valid.sum(axis=1).max()), 1)]
+    cand = np.ascontiguousarray(np.take_along_axis(cand, order[..., None], axis=1))
+    return cand, np.ascontiguousarray(np.take_along_axis(valid, order, axis=1))
+
+
+def _free_samples(N: int) -> int:
+    """Angles sampled about a free tool axis on a path of ``N`` waypoints: 36 (every 10 degrees, as
+    :func:`nik.ik.free_axis.closed_form_free_axis`), fewer on long paths so that the dynamic programming's
+    ``(N, K, K)`` tables (``K = 8`` per angle) stay within :data:`PATH_DP_CELLS` (at least 4)."""
+    return int(np.clip(math.isqrt(PATH_DP_CELLS // N) // 8, 4, 36))
+
+
+def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
+    """``choice (N,)``: :func:`nik.ik.path_kernels.path_dp` over the candidates; on a closed path, the choice that
+    ends on its start's branch (the last waypoint's candidate nearest the first's, modulo whole turns on the joints
+    that wrap): when the free choice does not, each start candidate (at most :data:`PATH_CLOSED_STARTS`) is tried
+    with the end pinned to its match, and the least-motion sequence (largest step, then sum of squared steps) is
+    kept."""
+    from nik.ik.path_kernels import path_dp
+
+    N = cand.shape[0]
+    choice = np.empty(N, dtype=np.int64)
+    start = np.zeros(cand.shape[2]) if q0 is None else q0
+    path_dp(cand, valid, wraps, start, q0 is not None, 1e-9, choice)
+    if not closed or choice[0] < 0 or choice[-1] < 0:
+        return choice
+    if _closure(cand[[0, -1], choice[[0, -1]]], wraps) <= PATH_DEDUPE:
+        return choice
+    first = [int(choice[0])] + [int(k) for k in np.nonzero(valid[0])[0] if k != choice[0]]
+    best, best_cost = choice, (math.inf, math.inf)
+    for k in first[:PATH_CLOSED_STARTS]:
+        gap = np.array([_closure(np.stack([cand[0, k], c]), wraps) for c in cand[-1]])
+        gap[~valid[-1]] = math.inf
+        end = int(np.argmin(gap))
+        if gap[end] > PATH_DEDUPE:
+            continue
+        pinned = valid.copy()
+        pinned[0], pinned[-1] = False, False
+        pinned[0, k], pinned[-1, end] = True, True
+        c = np.empty(N, dtype=np.int64)
+        path_dp(cand, pinned, wraps, start, q0 is not None, 1e-9, c)
+        if (c < 0).any() and not ((c < 0) == (choice < 0)).all():
+            continue
+        seq = cand[np.nonzero(c >= 0)[0], c[c >= 0]]
+        d = np.abs(np.diff(seq, axis=0))
+        d[:, wraps] = np.abs(np.remainder(d[:, wraps] + math.pi, 2 * math.pi) - math.pi)
+        steps = d.max(axis=1) if d.size else np.zeros(1)
+        cost = (float(steps.max()), float((steps**2).sum()))
+        if cost < best_cost:
+            best, best_cost = c, cost
+    return best
+
+
 def _nearest_clamped(model, T: np.ndarray, cand: np.ndarray) -> np.ndarray:
     """``(B, 6)``: per pose of ``T: (B, 4, 4)``, the branch of ``cand: (B, 8, 6)`` that comes nearest it once clamped
     into the limits (the closed form's one rule for a pose no branch reaches: :func:`nik.kernels.closed.pick`)."""
@@ -381,7 +630,7 @@ def _polish(run: _Run, q: np.ndarray, have: np.ndarray) -> tuple[np.ndarray, np.
     """The refine stage on the chosen branches: LM (no restarts) from each one that misses the call's tolerance (an
     approximate closed form's branch, checked at :data:`nik.ik.model.APPROXIMATE_CHECK_TOL`), kept where better."""
     its = np.zeros(q.shape[0], dtype=np.int64)
-    if not run.model.approximate:
+    if not run.model.approximate or run.half is not None:  # a tolerant goal: its branches are checked as they are
         return q, its
     pos, rot = _errors(run.model, run.T, q)
     idx = np.nonzero(have & ((pos > run.tol_pos) | (rot > run.tol_rot)))[0]
@@ -461,7 +710,7 @@ def _fill_gaps(run: _Run, q: np.ndarray, its: np.ndarray, have: np.ndarray):
     its = its.copy()
     first = int(np.argmax(have))
     for i in range(first - 1, -1, -1):  # a leading gap, walking back from the first solved waypoint
-        qi, it, _ = run.chains(Tn[i : i + 1], q[i + 1][None], reachable[i : i + 1], **kw)
+        qi, it, _ = run.chains(Tn[i : i + 1], q[i + 1][None], reachable[i : i + 1], offset=i, **kw)
         q[i], its[i] = qi[0, 0], it[0, 0]
     i = first + 1
     while i < N:  # the other gaps, each run of missing waypoints in one compiled chain
@@ -471,7 +720,7 @@ def _fill_gaps(run: _Run, q: np.ndarray, its: np.ndarray, have: np.ndarray):
         j = i
         while j < N and not have[j]:
             j += 1
-        qi, it, _ = run.chains(Tn[i:j], q[i - 1][None], reachable[i:j], seed=run.seed + i, **kw)
+        qi, it, _ = run.chains(Tn[i:j], q[i - 1][None], reachable[i:j], seed=run.seed + i, offset=i, **kw)
         q[i:j], its[i:j] = qi[0], it[0]
         i = j
     return q, its

@@ -84,6 +84,11 @@ class PathReport:
         reasons: per waypoint, ``""`` when reached, else why not (``"out of reach"``, ``"beyond a joint limit on
             every branch"``, ``"not reached"``).
         warning: one line naming the first waypoint that failed or forced a reconfiguration (None when none did).
+        closed: the path was taken as closed (its last pose equals its first; ``solve_path(closed=)``).
+        closure: on a closed path, the largest joint difference between the last row and the first (radians; metres
+            on prismatic joints; modulo whole turns on joints whose range exceeds a full turn); None otherwise.
+        t: (N,) seconds at each waypoint, with ``timing=True`` (None otherwise); qd, qdd: (N, dof) the joint
+            velocities and accelerations there; timing: the whole :class:`nik.ik.timing.Timing` (sample it at 1 ms).
     """
 
     steps: torch.Tensor
@@ -96,6 +101,12 @@ class PathReport:
     reconfigurations: torch.Tensor
     reasons: list[str]
     warning: str | None = None
+    closed: bool = False
+    closure: float | None = None
+    t: torch.Tensor | None = None
+    qd: torch.Tensor | None = None
+    qdd: torch.Tensor | None = None
+    timing: object | None = None
 
     @property
     def continuous(self) -> bool:

@@ -320,6 +320,11 @@ class IKSolver:
         representation: str | None = None,
         max_step: float | None = None,
         world=None,
+        closed: bool | None = None,
+        timing: bool | dict = False,
+        vel_limits=None,
+        acc_limits=None,
+        bounds=None,
     ) -> IKResult:
         """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.ik.paths`).
 
@@ -334,6 +339,11 @@ class IKSolver:
                 warned about; radians, default :data:`nik.ik.paths.PATH_MAX_STEP` (10 degrees).
             world: a :class:`nik.World` for this call (else the solver's): a waypoint whose answer collides is
                 infeasible, its ``res.path.reasons`` entry ``"colliding"``; ``res.collision_free`` per waypoint.
+            closed: None: closed when the last pose equals the first (within the tolerances); then the last row
+                of joints equals the first. True / False force it.
+            timing: True (or a dict of :func:`nik.ik.timing.time_path` keywords) fills ``res.path.t``, ``qd``,
+                ``qdd``; vel_limits, acc_limits: ``(dof,)`` its limits (default the robot's).
+            bounds: a tolerant goal per waypoint (:func:`nik.ik.bounds.parse_bounds`, e.g. ``"axis_z"``).
 
         Returns:
             :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,
@@ -348,5 +358,6 @@ class IKSolver:
         step = paths.PATH_MAX_STEP if max_step is None else max_step
         return paths.solve_path(
             self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
-            max_step=step, world=world,
+            max_step=step, world=world, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits,
+            bounds=bounds,
         )  # fmt: skip
