@@ -134,6 +134,21 @@ def with_goal(plan: Plan, bounds=None, q_rest=None, rest_weight: float = 0.1, *,
     return replace(plan, bounds=goal, q_rest=q_rest, rest_weight=float(rest_weight))
 
 
+#: Values of ``IKSolver(refine=...)``.
+REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
+
+
+def check_settings(backend: str, refine: str) -> None:
+    """``IKSolver(backend=..., refine=...)`` checked: one-line ``ValueError`` for an unknown value, and for the
+    compiled backend with a refinement other than LM (its only refiner)."""
+    if backend not in ("auto", "compiled", "torch"):
+        raise ValueError(f"IKSolver: backend must be auto, compiled or torch, got {backend!r}")
+    if backend == "compiled" and refine != "lm":
+        raise ValueError(f"IKSolver: the compiled backend refines by LM only (refine='lm'), got refine={refine!r}")
+    if refine not in REFINE_METHODS:
+        raise ValueError(f"IKSolver: refine must be one of {list(REFINE_METHODS)}, got {refine!r}")
+
+
 def resolve_fallback(fallback, closed_form: bool, name: str) -> str:
     """``IKSolver(fallback=...)`` as the plan's ``analytic | multistart | none``: True is ``"auto"``, False ``"none"``;
     ``"auto"`` is analytic on an arm with a closed form (``closed_form``), else multistart. Raises ``ValueError`` on

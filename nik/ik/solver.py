@@ -38,7 +38,7 @@ from pathlib import Path
 import torch
 
 from nik.ik import backends, collide, networks, stages
-from nik.ik.plan import Plan, choose_network, in_arm_frame, resolve_fallback, with_goal
+from nik.ik.plan import REFINE_METHODS, Plan, check_settings, choose_network, in_arm_frame, resolve_fallback, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.lm.batched import LMCfg
@@ -47,9 +47,6 @@ from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["REFINE_METHODS", "IKSolver"]
-
-#: Values of ``IKSolver(refine=...)``.
-REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 
 class IKSolver:
@@ -117,15 +114,9 @@ class IKSolver:
     ):
         from nik.device import resolve_device
 
-        if backend not in ("auto", "compiled", "torch"):
-            raise ValueError(f"IKSolver: backend must be auto, compiled or torch, got {backend!r}")
-        if backend == "compiled" and refine != "lm":
-            raise ValueError(f"IKSolver: the compiled backend refines by LM only (refine='lm'), got refine={refine!r}")
+        check_settings(backend, refine)
         self.backend = backend
-
         self.device = resolve_device(device)
-        if refine not in REFINE_METHODS:
-            raise ValueError(f"IKSolver: refine must be one of {list(REFINE_METHODS)}, got {refine!r}")
         self.robot = load_robot(robot) if not isinstance(robot, Robot) else robot
         self.refine = refine
         self.polish = bool(polish)
