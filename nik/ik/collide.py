@@ -79,14 +79,19 @@ class Setup:
 
 def attached_model(robot):
     """The collision model attached to ``robot`` (set by the user, or a ``NAME.collision.json`` beside its file),
-    else None; never fits one."""
-    from nik.collision.model import _beside
-
+    else None; never fits one. The file beside the robot's is looked for once per robot (not on every solve: a
+    file system call costs more than a pose); one written later is attached by
+    :func:`nik.collision.set_collision_model` or by loading the robot again."""
     model = robot.__dict__.get("_collision_model")
     if model is not None:
         return model
-    beside = _beside(robot)
-    return robot.collision_spheres() if beside is not None and beside.is_file() else None
+    found = robot.__dict__.get("_collision_beside")
+    if found is None:
+        from nik.collision.model import _beside
+
+        beside = _beside(robot)
+        found = robot.__dict__["_collision_beside"] = beside is not None and beside.is_file()
+    return robot.collision_spheres() if found else None
 
 
 def check_self_collision(value):
@@ -110,10 +115,11 @@ def after_solve(solver, backend, plan, T_target, q_near, representation, world):
 
 def setup(robot, world, self_collision) -> Setup | None:
     """The collision check of a call (module docstring), or None when nothing is checked."""
-    from nik.collision import World
+    if world is not None:
+        from nik.collision import World
 
-    if world is not None and not isinstance(world, World):
-        raise ValueError(f"IKSolver: world must be a nik.World, got {type(world).__name__}")
+        if not isinstance(world, World):
+            raise ValueError(f"IKSolver: world must be a nik.World, got {type(world).__name__}")
     model = attached_model(robot) if self_collision is None else None
     self_on = model is not None if self_collision is None else bool(self_collision)
     if not self_on and (world is None or world.empty):
