@@ -34,6 +34,7 @@ from pathlib import Path
 
 import torch
 
+from nik.data.storage import _fsync_dir, _pid_alive  # the datasets' kill-safe writes, shared
 from nik.errors import CheckpointError
 from nik.robots import Robot, load_robot
 
@@ -212,31 +213,6 @@ def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
 
 
 _STAGED = re.compile(r"^\.(?P<name>.+)\.(?P<kind>new|ready|del)-(?P<pid>\d+)-(?P<tag>[0-9a-f]+)\.(safetensors|json)$")
-
-
-def _pid_alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # exists, owned by someone else
-        return True
-    return True
-
-
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def _write_synced(path: Path, data: bytes) -> None:
