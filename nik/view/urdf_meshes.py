@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from nik.collision.urdf import resolve_mesh_path  # one reading of <mesh filename>, the collision model's
 from nik.poses import rpy_to_matrix
 
 __all__ = ["LinkVisual", "UrdfVisuals", "load_urdf_visuals", "resolve_mesh_path"]
@@ -118,23 +119,6 @@ def _origin(el) -> np.ndarray:
     if o.get("xyz"):
         T[:3, 3] = [float(v) for v in o.get("xyz").split()]
     return T
-
-
-def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path | None:
-    """The file a URDF's ``<mesh filename>`` names, or None where it is not on this machine."""
-    if filename.startswith("file://"):
-        p = Path(filename[len("file://") :])
-        return p if p.is_file() else None
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://") :].partition("/")
-        for folder in [urdf_dir, *urdf_dir.parents]:
-            for candidate in (folder / rest if folder.name == package else None, folder / package / rest):
-                if candidate is not None and candidate.is_file():
-                    return candidate
-        return None
-    p = Path(filename)
-    p = p if p.is_absolute() else urdf_dir / p
-    return p if p.is_file() else None
 
 
 def _geometry(geom, urdf_dir: Path):
