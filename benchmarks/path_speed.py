@@ -114,11 +114,11 @@ def bench(name: str, repeats: int) -> list[str]:
 
 
 def optimisation_cost(solver, repeats: int) -> str:
-    """The whole-trajectory optimisation's cost per waypoint (nik.ik.trajopt.optimise_path from solve_path's answer
+    """The whole-trajectory optimisation's cost per waypoint (nik.paths.trajopt.optimise_path from solve_path's answer
     on the 60- and 1,000-waypoint lines, polished with every step capped at 1 deg: the shape terms active; run to its
     optimum, without the early stop of a feasible path that the polish uses)."""
     from nik.ik.model import model_of
-    from nik.ik.trajopt import optimise_path
+    from nik.paths.trajopt import optimise_path
 
     model = model_of(solver.robot)
     out = []

@@ -30,7 +30,7 @@ over solve_path's (from q0).
 The second table reports ``solve_path(T)`` (no ``q_start``) as CppFlow (ICRA 2024) does, over all paths: valid
 (every waypoint at 0.1 mm / 0.1 deg, inside the limits, every step <= 7 deg revolute / 2 cm prismatic), the largest
 step, the total joint motion, the time per path; on the circles (closed) the last row vs the first; on the valid
-paths, the trajectory timed by ``nik.ik.timing.time_path`` (the robot's limits) sampled every millisecond: samples
+paths, the trajectory timed by ``nik.paths.timing.time_path`` (the robot's limits) sampled every millisecond: samples
 over a limit, and the duration over toppra's answer. ``ur10`` is example-robot-data's URDF (a robot nik does not
 ship; skipped when the package is missing).
 
@@ -266,8 +266,8 @@ def cppflow(robot, T, q: np.ndarray, seconds: float, closed: bool) -> dict:
 
 def timed(robot, q: np.ndarray) -> tuple[int, int, float]:
     """``(samples above a limit, samples, duration / toppra's)`` of ``q``'s time-optimal trajectory
-    (:func:`nik.ik.timing.time_path`, the robot's limits), sampled every millisecond."""
-    from nik.ik.timing import time_path
+    (:func:`nik.paths.timing.time_path`, the robot's limits), sampled every millisecond."""
+    from nik.paths.timing import time_path
 
     tm = time_path(q, robot=robot)
     _, _, qd, qdd = tm.sample(1e-3)

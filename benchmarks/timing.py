@@ -1,4 +1,4 @@
-"""Timing of IK paths by toppra (nik.ik.timing.time_path): limits kept at 1 ms, duration against toppra's own
+"""Timing of IK paths by toppra (nik.paths.timing.time_path): limits kept at 1 ms, duration against toppra's own
 defaults, the check's stretch and the time per call.
 
 For each arm, Cartesian lines and circles (radius 5-15 cm, seeded) are solved by ``IKSolver.solve_path``; the
@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 import nik
-from nik.ik.timing import time_path
+from nik.paths.timing import time_path
 
 
 def _paths(robot, n_paths: int, n_points: int, seed: int):

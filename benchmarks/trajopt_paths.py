@@ -1,5 +1,5 @@
 """What the whole-trajectory optimisation adds to ``solve_path`` (issue 29.1): feasible paths followed with the polish
-(nik.ik.trajopt.polish_path) and without it, on the redundant arms.
+(nik.paths.trajopt.polish_path) and without it, on the redundant arms.
 
 Paths: benchmarks/paths.py's stream (lines of 0.15 m and circles of radius 5 cm, 60 waypoints, orientation fixed,
 from a configuration in the middle 60 % of the ranges). Feasible: the per-pose solver reaches every waypoint
@@ -28,8 +28,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from paths import PATH_SEED, STEP_GOAL, circle, line, quality, start_configuration  # noqa: E402
 
 import nik  # noqa: E402
-import nik.ik.paths as P  # noqa: E402
-from nik.ik.trajopt import polish_path  # noqa: E402
+import nik.paths.solve as P  # noqa: E402
+from nik.paths.trajopt import polish_path  # noqa: E402
 
 
 def _off(model, Tn, q, q0, **kw):

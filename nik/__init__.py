@@ -25,6 +25,7 @@ _SUBMODULES = {
     "learn",
     "lm",
     "models",
+    "paths",
     "nets",
     "poses",
     "robots",
@@ -35,7 +36,7 @@ _SUBMODULES = {
 }
 # torch is imported with the first of these, not by ``import nik`` (``nik --help`` stays light)
 _LAZY = {
-    "IKSolver": "nik.ik",
+    "IKSolver": "nik.solver",
     "World": "nik.collision",
     "IKResult": "nik.ik",
     "set_threads": "nik.threads",

@@ -317,7 +317,7 @@ def evaluate(
     """
     from nik.data import load_dataset
     from nik.device import resolve_device
-    from nik.ik import IKSolver
+    from nik.solver import IKSolver
 
     dev = resolve_device(device)
     robot = load_robot(robot) if not isinstance(robot, Robot) else robot

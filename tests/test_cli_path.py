@@ -62,7 +62,7 @@ def _ur5_poses(tmp_path):
 
 def test_a_timed_trajectory_round_trips_through_its_csv(tmp_path, capsys):
     pytest.importorskip("toppra")
-    from nik.ik.timing import read_time_column
+    from nik.paths.timing import read_time_column
 
     robot, T, poses = _ur5_poses(tmp_path)
     out = tmp_path / "traj.csv"

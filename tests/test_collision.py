@@ -112,7 +112,7 @@ def test_capsule_model_holds_the_capsules(prims):
 # -- pairs --------------------------------------------------------------------
 def test_adjacent_and_same_frame_pairs_are_left_out(prims):
     robot, _ = prims
-    model = robot.collision_spheres()
+    model = collision_model(robot)
     assert model.left_out["base|l1"] == "adjacent"
     assert model.left_out["l1|l2"] == "adjacent"
     names = model.pair_names()
@@ -121,12 +121,12 @@ def test_adjacent_and_same_frame_pairs_are_left_out(prims):
 
 def test_pairs_an_srdf_disables_are_left_out(prims):
     robot, path = prims
-    assert ("base", "l3") in robot.collision_spheres().pair_names()
+    assert ("base", "l3") in collision_model(robot).pair_names()
     path.with_suffix(".srdf").write_text(
         '<robot name="prims"><disable_collisions link1="l3" link2="base" reason="Never"/></robot>'
     )
     fresh = nik.load_robot(path, end_link="l3")
-    model = fresh.collision_spheres()
+    model = collision_model(fresh)
     assert ("base", "l3") not in model.pair_names() and model.left_out["base|l3"] == "srdf: Never"
     assert ("base", "l3") in collision_model(fresh, srdf=False).pair_names()
 
@@ -148,7 +148,7 @@ def test_always_and_never_pairs_hold_on_fresh_samples():
 
 def test_pairs_can_be_added_and_removed():
     robot = nik.load_robot("ur5")
-    model = robot.collision_spheres()
+    model = collision_model(robot)
     a, b = model.pair_names()[0]
     fewer = model.with_pairs(remove=[(a, b)])
     assert (a, b) not in fewer.pair_names() and fewer.left_out[f"{a}|{b}"] == "removed"
@@ -157,7 +157,7 @@ def test_pairs_can_be_added_and_removed():
     with pytest.raises(ValueError, match="unknown link 'nope'"):
         model.with_pairs(add=[("nope", a)])
     set_collision_model(robot, fewer)
-    assert robot.collision_spheres() is fewer
+    assert collision_model(robot) is fewer
 
 
 # -- distances ------------------------------------------------------------------
@@ -176,7 +176,7 @@ def test_compiled_rows_match_torch_and_collides_agrees():
     np.testing.assert_array_equal(hit, (d_torch < 0).any(axis=1))
     links = colliding_links(robot, q, world)
     np.testing.assert_array_equal(links.any(axis=1), hit)
-    model = robot.collision_spheres()
+    model = collision_model(robot)
     np.testing.assert_array_equal(
         links[:, 3],
         (d_torch[:, len(model.pairs) + 3] < 0)
@@ -188,7 +188,7 @@ def test_compiled_jacobian_matches_finite_differences():
     from nik.kernels.collision import collision_distances, collision_residual
 
     robot = nik.load_robot("ur5")
-    model = robot.collision_spheres()
+    model = collision_model(robot)
     (G, joints), rest = kernel_arguments(robot, model, _world())
     R = len(model.pairs) + len(model.links)
     for q0 in _q(robot, 5, 3).numpy():
@@ -287,7 +287,7 @@ def test_bad_scene_files_are_one_line_errors(tmp_path, text, message):
 # -- files ---------------------------------------------------------------------------
 def test_model_saved_beside_the_robot_is_loaded_and_checked(prims, tmp_path):
     robot, path = prims
-    model = robot.collision_spheres()
+    model = collision_model(robot)
     saved = model.save(tmp_path / "prims.collision.json")
     again = CollisionModel.load(saved, robot)
     np.testing.assert_array_equal(again.radii, model.radii)
@@ -316,7 +316,7 @@ def test_a_mesh_that_cannot_be_read_is_one_line(tmp_path):
     path.write_text(URDF.replace('<sphere radius="0.05"/>', '<mesh filename="missing.stl"/>'))
     robot = nik.load_robot(path, end_link="l3")
     with pytest.raises(ValueError, match="mesh file not found: missing.stl"):
-        robot.collision_spheres()
+        collision_model(robot)
 
 
 # -- the independent check ---------------------------------------------------------

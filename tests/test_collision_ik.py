@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import nik
-from nik.collision import collides, link_frames, set_collision_model
+from nik.collision import collides, collision_model, link_frames, set_collision_model
 
 
 def _poses(robot, n: int, seed: int, world=None) -> np.ndarray:
@@ -37,7 +37,7 @@ def test_default_stays_off_for_a_robot_without_an_attached_model():
 
 def test_attached_model_turns_the_default_on():
     robot = nik.load_robot("ur5")
-    set_collision_model(robot, robot.collision_spheres())
+    set_collision_model(robot, collision_model(robot))
     try:
         res = nik.IKSolver(robot).solve(_poses(robot, 8, seed=2))
     finally:
@@ -166,12 +166,12 @@ def test_viewer_draws_obstacles_and_colours_the_colliding_links():
         assert viewer.colliding_links(viewer.joints) == []
         world.add_sphere(elbow, 0.04)  # the world changes under the page: the shown joints now collide
         names = viewer.colliding_links(torch.as_tensor(q))
-        assert names and all(n in solver.robot.collision_spheres().links for n in names)
+        assert names and all(n in collision_model(solver.robot).links for n in names)
         viewer._show(dataclasses.replace(viewer._shown, q=torch.as_tensor(q)))
         assert "COLLIDING" in viewer._status.content
         red = [red.visible for _, red in viewer._sphere_nodes]
-        body = solver.robot.collision_spheres().sphere_body
-        links = solver.robot.collision_spheres().links
+        body = collision_model(solver.robot).sphere_body
+        links = collision_model(solver.robot).links
         assert red == [links[body[k]] in names for k in range(len(red))]
         assert not any(plain.visible for plain, _ in viewer._sphere_nodes)  # the check box is off
         viewer._sphere_box.value = True

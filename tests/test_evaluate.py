@@ -258,7 +258,7 @@ def test_rows_say_the_guess_that_served_and_rows_with_different_guesses_differ(p
 
 def test_every_row_is_timed_after_a_warm_up_call_of_the_same_solver(odd_arm, odd_data, monkeypatch):
     import nik.evaluate as ev
-    from nik.ik import IKSolver
+    from nik.solver import IKSolver
 
     calls = []
     real_solve = IKSolver.solve

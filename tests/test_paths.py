@@ -145,7 +145,7 @@ def test_redundant_arm_without_q_start_keeps_one_posture(panda):
 def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
     """Back and forth six times along a line whose far end the arm cannot reach in that orientation: without the
     secondary objective (joint-limit centring) the posture drifts into a limit and then jumps; with it, neither."""
-    import nik.ik.paths as paths
+    import nik.paths.solve as paths
 
     lo, hi = panda.robot.limits.double().T
     q0 = lo + (hi - lo) * torch.tensor([0.5, 0.55, 0.5, 0.5, 0.5, 0.45, 0.5], dtype=torch.float64)

@@ -1,5 +1,5 @@
 """Joint speed / acceleration limits of robots (URDF, YAML, per call) and the timing of joint paths
-(nik.ik.timing, by toppra): limits kept at 1 ms sampling, toppra's duration, one-line errors."""
+(nik.paths.timing, by toppra): limits kept at 1 ms sampling, toppra's duration, one-line errors."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 import torch
 
 import nik
-from nik.ik import timing as T
+from nik.paths import timing as T
 from nik.robots.config import robot_from_config
 
 needs_toppra = pytest.mark.skipif(

@@ -1,4 +1,4 @@
-"""Whole-trajectory optimisation (nik.ik.trajopt, nik.kernels.trajopt): the banded solve, the objective's Jacobian,
+"""Whole-trajectory optimisation (nik.paths.trajopt, nik.kernels.trajopt): the banded solve, the objective's Jacobian,
 a redundant-arm path the waypoint chain cannot follow, and the polish that never makes a path worse."""
 
 import math
@@ -10,8 +10,8 @@ import torch
 
 import nik
 from nik.ik.model import model_of
-from nik.ik.trajopt import TrajCfg, optimise_path, polish_path, residual_count, trajopt_options
 from nik.kernels.trajopt import band_cholesky, band_solve, normal_equations, residuals
+from nik.paths.trajopt import TrajCfg, optimise_path, polish_path, residual_count, trajopt_options
 
 TOL_POS, TOL_ROT = 1e-4, math.radians(0.1)
 

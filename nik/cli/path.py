@@ -17,7 +17,7 @@ from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
 
 __all__ = ["plot_trajectory", "register", "write_trajectory_csv"]
 
-#: Default of ``--max-step-deg`` (the reconfiguration threshold of :data:`nik.ik.paths.PATH_MAX_STEP`).
+#: Default of ``--max-step-deg`` (the reconfiguration threshold of :data:`nik.paths.solve.PATH_MAX_STEP`).
 MAX_STEP_DEG = 10.0
 
 
@@ -74,7 +74,7 @@ def register(sub) -> None:
 def _cmd_path(args) -> int:
     import torch
 
-    from nik.ik import IKSolver
+    from nik.solver import IKSolver
 
     robot = robot_from_args(args)
     poses = read_poses_csv(args.poses)
@@ -86,7 +86,7 @@ def _cmd_path(args) -> int:
             f"{args.max_step_deg}"
         )
     from nik.ik.bounds import bounds_from_cli
-    from nik.ik.timing import check_scale
+    from nik.paths.timing import check_scale
 
     timing = False
     if args.timing:
@@ -155,16 +155,16 @@ def _cmd_path(args) -> int:
 
 
 def _time_cells(rep) -> list[str]:
-    """The ``t_s`` cells of a timed path (:func:`nik.ik.timing.time_cells`), or ``[]``."""
+    """The ``t_s`` cells of a timed path (:func:`nik.paths.timing.time_cells`), or ``[]``."""
     if rep.t is None:
         return []
-    from nik.ik.timing import time_cells
+    from nik.paths.timing import time_cells
 
     return time_cells(rep.t.numpy())
 
 
 def write_trajectory_csv(path: str | Path, robot, res, q_start=None) -> None:
-    """One row per waypoint: ``index``, with timing ``t_s`` (seconds, :data:`nik.ik.timing.TIME_COLUMN`), the
+    """One row per waypoint: ``index``, with timing ``t_s`` (seconds, :data:`nik.paths.timing.TIME_COLUMN`), the
     joints in degrees (``<name>_deg``; prismatic: ``<name>_mm``), the position error (mm), rotation error (deg),
     ``success``, ``step_deg`` (the largest motion of a revolute joint
     into that waypoint, degrees), for an arm with prismatic joints also ``step_mm`` (the largest slide of a

@@ -313,8 +313,9 @@ def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None
 def _cmd_solve(args) -> int:
     import torch
 
-    from nik.ik import IKSolver, as_poses
+    from nik.ik import as_poses
     from nik.robots.reach import unreachable_message
+    from nik.solver import IKSolver
 
     robot = robot_from_args(args)
     if args.pose is not None:

@@ -50,7 +50,8 @@ def _cmd_view(args) -> int:
         print(VIEW_EXTRA_MESSAGE, file=sys.stderr)
         return 2
     from nik.cli.common import robot_from_args, tool_link_text
-    from nik.ik import IKSolver, as_poses
+    from nik.ik import as_poses
+    from nik.solver import IKSolver
 
     def targets(file):
         if file is None:

@@ -2,30 +2,19 @@
 
 The room sits between robots and data (it imports kernels, kinematics / poses and robots only):
 
-- :func:`collision_model` / :meth:`nik.Robot.collision_spheres`: spheres per link fitted to a URDF's collision
+- :func:`collision_model`: spheres per link fitted to a URDF's collision
   geometry (or capsules along the links), the link pairs worth checking, cached per robot (:mod:`.model`);
 - :class:`World`: spheres, boxes, capsules and point clouds in the base frame (:mod:`.world`);
 - :func:`signed_distances`, :func:`collision_residual`, :func:`collides`: batched, differentiable (torch,
-  :mod:`.distance`); the compiled kernels with their Jacobians are :mod:`nik.kernels.collision`.
+  :mod:`.distance`, :mod:`.check`); the compiled kernels with their Jacobians are :mod:`nik.kernels.collision`.
 
 Importing this room loads neither numba nor trimesh (the kernels and the mesh reader come on first use).
 """
 
-from nik.collision.distance import (
-    collides,
-    colliding_links,
-    collision_residual,
-    link_frames,
-    self_distances,
-    signed_distances,
-    sphere_centers,
-    world_distances,
-)
+from nik.collision.check import collides, colliding_links, collision_residual, signed_distances
+from nik.collision.distance import link_frames, self_distances, sphere_centers, world_distances
 from nik.collision.model import CollisionModel, collision_model, set_collision_model
 from nik.collision.world import World
-from nik.robots.model import register_collision_model
-
-register_collision_model(collision_model)
 
 __all__ = [
     "CollisionModel",

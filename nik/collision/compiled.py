@@ -25,9 +25,10 @@ def kernel_arguments(robot, model, world=None, *, self_collision: bool = True):
 
 def signed_distances_compiled(robot, q, world=None, *, model=None, self_collision: bool = True) -> np.ndarray:
     """``(B, P + L)`` rows of :func:`nik.collision.signed_distances` for ``q: (B, dof)`` (numpy), compiled."""
+    from nik.collision.model import collision_model
     from nik.kernels.collision import collision_distances_batch
 
-    model = robot.collision_spheres() if model is None else model
+    model = collision_model(robot) if model is None else model
     Q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, robot.dof))
     (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
     D = np.empty((len(Q), len(model.pairs) + len(model.links)))

@@ -456,7 +456,7 @@ def _beside(robot) -> Path | None:
 
 def set_collision_model(robot, model: CollisionModel | None) -> None:
     """Make ``model`` (e.g. one with pairs added or removed, or loaded from a file) the one
-    :meth:`nik.Robot.collision_spheres` returns for ``robot``; None restores the automatic one. A model made for
+    :func:`nik.collision.collision_model` returns for ``robot``; None restores the automatic one. A model made for
     another robot is refused (definition hash)."""
     if model is not None and model.robot_hash != robot.definition_hash:
         raise ValueError(

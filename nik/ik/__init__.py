@@ -1,6 +1,8 @@
-"""ik: the inverse-kinematics pipeline, guess -> refine -> more hypotheses -> fallback -> final check.
+"""ik: the inverse-kinematics pipeline of poses, guess -> refine -> more hypotheses -> fallback -> final check.
 
-- :mod:`nik.ik.solver`: :class:`IKSolver`, which holds one robot's configuration and composes the stages;
+:class:`nik.IKSolver` (:mod:`nik.solver`, a room above this one and :mod:`nik.paths`) holds one robot's
+configuration and composes these stages for poses and the paths' stages for sequences.
+
 - :mod:`nik.ik.stages`: the stages, one small function each, ``stage(solver, job, answers) -> answers``, written
   once for both backends;
 - :mod:`nik.ik.backends`: where a stage's work is computed: compiled numba kernels on numpy (CPU) or torch (GPU,
@@ -10,17 +12,15 @@
 - :mod:`nik.ik.refiners`: refiners ``(robot, T, q0) -> RefineResult`` (LM, the swarms);
 - :mod:`nik.ik.targets`: target poses in any accepted form -> ``(B, 4, 4)``, the input checks of both backends;
   :mod:`nik.ik.result`: :class:`IKResult`;
-- :mod:`nik.ik.paths` (and its kernels, :mod:`nik.ik.path_kernels`): :meth:`IKSolver.solve_path`, one continuous
-  joint trajectory for a Cartesian path.
 
-The room composes the rooms below it (robots, nets, analytic, lm, swarm); only learn, evaluation and cli
-import it.
+The room composes the rooms below it (robots, nets, analytic, collision, lm, swarm); paths, the solver, learn,
+evaluation and cli import it.
 """
 
 from nik.ik.guesses import dedupe
+from nik.ik.plan import REFINE_METHODS
 from nik.ik.refiners import RefineResult, lm_refine, swarm_refine
 from nik.ik.result import IKResult, PathReport
-from nik.ik.solver import REFINE_METHODS, IKSolver
 from nik.ik.targets import QUAT_NORM_TOL, as_poses, check_tolerances
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
@@ -30,7 +30,6 @@ __all__ = [
     "QUAT_NORM_TOL",
     "REFINE_METHODS",
     "IKResult",
-    "IKSolver",
     "PathReport",
     "RefineResult",
     "as_poses",

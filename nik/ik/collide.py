@@ -6,7 +6,7 @@
   attached**: a ``NAME.collision.json`` beside its URDF / YAML file (:func:`nik.collision.collision_model` loads
   it) or one set by the user (:func:`nik.collision.set_collision_model`); otherwise it is off;
 - ``self_collision=True``: checked; the model is built if needed (fitted to the URDF's collision geometry, or
-  capsules along the links; cached, :meth:`nik.Robot.collision_spheres`);
+  capsules along the links; cached, :func:`nik.collision.collision_model`);
 - ``self_collision=False``: never checked;
 - a ``world`` (on the solver or per call) is always checked, with self-collision by the same rule (the model is
   built if needed to place the arm's spheres).
@@ -91,7 +91,9 @@ def attached_model(robot):
 
         beside = _beside(robot)
         found = robot.__dict__["_collision_beside"] = beside is not None and beside.is_file()
-    return robot.collision_spheres() if found else None
+    from nik.collision.model import collision_model
+
+    return collision_model(robot) if found else None
 
 
 def check_self_collision(value):
@@ -125,7 +127,9 @@ def setup(robot, world, self_collision) -> Setup | None:
     if not self_on and (world is None or world.empty):
         return None
     if model is None:
-        model = robot.collision_spheres()
+        from nik.collision.model import collision_model
+
+        model = collision_model(robot)
     return Setup(model, world, self_on)
 
 
@@ -209,7 +213,7 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
 
 
 def path_waypoints(solver, q: np.ndarray, world, success: np.ndarray):
-    """For :func:`nik.ik.paths.solve_path`: ``(success & free, free, reasons)`` for the trajectory ``q: (N, dof)``
+    """For :func:`nik.paths.solve.solve_path`: ``(success & free, free, reasons)`` for the trajectory ``q: (N, dof)``
     under the call's check (``world``, else the solver's; the rule of :func:`setup`): ``free (N,)`` bool and
     ``reasons`` (N strings, ``"colliding"`` where the answer collides, else ``""``); without a check
     ``(success, None, ["", ...])``."""

@@ -2,7 +2,7 @@
 
 :func:`model_of` ``(robot, lm_cfg=None) -> Model`` builds the :class:`Model` of a robot (and an LM config) on first
 use and keeps it while the robot lives (a weak reference: a dropped robot drops its model). The compiled backend
-(:mod:`nik.ik.backends.compiled`), the paths (:mod:`nik.ik.paths`) and the viewer read these facts here; nothing
+(:mod:`nik.ik.backends.compiled`), the paths (:mod:`nik.paths.solve`) and the viewer read these facts here; nothing
 else keeps per-robot facts.
 
 What a model holds (numpy, float64 unless said; ``n`` joints):

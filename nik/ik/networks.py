@@ -1,4 +1,4 @@
-"""The network of an :class:`~nik.ik.solver.IKSolver`: the one known for its robot (installed or shipped), or a
+"""The network of an :class:`~nik.solver.IKSolver`: the one known for its robot (installed or shipped), or a
 file it was given, loaded once per process.
 
 Loading a shipped network costs tens of milliseconds (building a 4 x 256 MLP, copying a quarter of a million

@@ -79,7 +79,7 @@ class PathReport:
         largest_step: the largest of ``steps``; largest_step_at: the waypoint it leads into;
             largest_step_joint: the joint that makes it.
         total_motion: sum over steps and joints of ``|dq|`` (radians / metres), from ``q_start`` when given.
-        max_step: the threshold of a reconfiguration, radians (:data:`nik.ik.paths.PATH_MAX_STEP` unless given).
+        max_step: the threshold of a reconfiguration, radians (:data:`nik.paths.solve.PATH_MAX_STEP` unless given).
         reconfigurations: (N,) bool, ``steps > max_step``.
         reasons: per waypoint, ``""`` when reached, else why not (``"out of reach"``, ``"beyond a joint limit on
             every branch"``, ``"not reached"``).
@@ -88,7 +88,7 @@ class PathReport:
         closure: on a closed path, the largest joint difference between the last row and the first (radians; metres
             on prismatic joints; modulo whole turns on joints whose range exceeds a full turn); None otherwise.
         t: (N,) seconds at each waypoint, with ``timing=True`` (None otherwise); qd, qdd: (N, dof) the joint
-            velocities and accelerations there; timing: the whole :class:`nik.ik.timing.Timing` (sample it at 1 ms).
+            velocities and accelerations there; timing: the whole :class:`nik.paths.timing.Timing` (sample it at 1 ms).
     """
 
     steps: torch.Tensor

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from nik.ik.backends import Job, Refined
+from nik.ik.backends.base import Job, Refined
 from nik.ik.guesses import analytic_guess, dedupe, multistart_guess, network_guess
 from nik.ik.plan import Plan
 from nik.ik.result import IKResult

@@ -26,7 +26,7 @@ cost ``|r|^2`` falls (lambda shrinks by 0.3), else lambda grows by 5 and the ste
 is feasible (every waypoint within ``tol_pos`` and ``tol_rot``, every step at most ``path_step``; ``tol_pos <= 0``:
 never): the polish asks for a feasible path, not for the optimum of the weights.
 
-Options ``opts: (len OPTS,) float64`` (:func:`trajopt_options` in :mod:`nik.ik.trajopt` builds them); indices below.
+Options ``opts: (len OPTS,) float64`` (:func:`trajopt_options` in :mod:`nik.paths.trajopt` builds them); indices below.
 """
 
 from __future__ import annotations
@@ -216,7 +216,7 @@ def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, po
 
 @kernel
 def residuals(G, joints, T, Q, qs, has_start, qe, has_end, opts, r):
-    """The residual vector ``r`` (its length: :func:`nik.ik.trajopt.residual_count`) of ``Q: (N, n)``; returns
+    """The residual vector ``r`` (its length: :func:`nik.paths.trajopt.residual_count`) of ``Q: (N, n)``; returns
     ``|r|^2`` (for tests: finite differences of it check :func:`normal_equations`)."""
     N = Q.shape[0]
     H = np.empty((1, 1))

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import torch
 
-from nik.ik import IKSolver
 from nik.nets.multi import hypothesis_pose_error
+from nik.solver import IKSolver
 from nik.tolerances import score
 
 __all__ = ["NetworkReport", "network_report"]

@@ -5,7 +5,6 @@ of :mod:`nik.kinematics`."""
 from __future__ import annotations
 
 import hashlib
-import importlib
 import math
 import warnings
 from collections.abc import Sequence
@@ -18,7 +17,6 @@ from nik.poses import validate_joints
 from nik.robots.rates import check_rates
 
 __all__ = ["Robot", "NormalFormBuilder", "dh_chain", "mdh_chain", "poe_chain", "rot_x", "rot_z", "trans", "axis_frame"]
-__all__ += ["register_collision_model"]  # nik.collision registers the builder of Robot.collision_spheres
 
 
 # ---------------------------------------------------------------------------
@@ -195,17 +193,6 @@ def _chain_kernels():
             warnings.warn(f"compiled kernels unavailable ({err}); using the torch path", RuntimeWarning, stacklevel=3)
             _chain_module = False
     return _chain_module or None
-
-
-#: the builder of :meth:`Robot.collision_spheres`, registered by :mod:`nik.collision` (a room above this one) when
-#: it is first imported, so that this room does not depend on it
-_collision_model_builder = None
-
-
-def register_collision_model(builder) -> None:
-    """Register ``builder(robot, **options) -> CollisionModel`` (done by :mod:`nik.collision` on import)."""
-    global _collision_model_builder
-    _collision_model_builder = builder
 
 
 def _fk_one_kernels(G: np.ndarray, joints: np.ndarray) -> None:
@@ -559,15 +546,6 @@ class Robot:
             validate_joints(q, dof)  # raises the usual message
         T = _from_numpy(out[0] if len(shape) == 1 else out.reshape(*shape[:-1], 4, 4))
         return T if dtype is _F64 else T.to(dtype)
-
-    def collision_spheres(self, **options):
-        """The arm's sphere model, a :class:`nik.collision.CollisionModel`: per link, sphere centres ``(k, 3)``
-        in the frame of the joint carrying the link (metres) and radii ``(k,)`` (``.per_link``), and the link
-        pairs checked. Fitted to the URDF's collision geometry, else capsules along the links; cached per robot.
-        ``options``: those of :func:`nik.collision.collision_model` (``radius=`` the capsules' radius, ...)."""
-        if _collision_model_builder is None:  # nik.collision registers its builder when first imported (a room
-            importlib.import_module("nik.collision")  # above this one: imported by name, not depended on)
-        return _collision_model_builder(self, **options)
 
     def fk_and_jacobian(
         self, q: torch.Tensor | np.ndarray

@@ -1,7 +1,7 @@
 """A picture of a timed joint path: :func:`plot_timing` (matplotlib, imported when it draws).
 
 One row per joint: its position (left, degrees; prismatic joints mm) and velocity (right, deg/s; mm/s) against
-time, sampled every millisecond from the trajectory of :func:`nik.ik.timing.time_path`, the waypoints as dots,
+time, sampled every millisecond from the trajectory of :func:`nik.paths.timing.time_path`, the waypoints as dots,
 the joint limits and the speed limits (plus and minus) dashed. The file is written under a temporary name and
 then renamed.
 """
@@ -20,7 +20,7 @@ _LIMIT = "0.4"
 
 
 def plot_timing(robot, timing, path: str | Path, *, dt: float = 1e-3, title: str | None = None, dpi: int = 110) -> Path:
-    """Draw positions and velocities of ``timing`` (a :class:`nik.ik.timing.Timing` of ``robot``'s joints) against
+    """Draw positions and velocities of ``timing`` (a :class:`nik.paths.timing.Timing` of ``robot``'s joints) against
     time and write the picture to ``path`` (format from its suffix); its folder is made. Returns the path.
 
     Raises ValueError when ``timing`` is not for ``robot``'s joints or matplotlib cannot write the suffix."""

@@ -120,7 +120,7 @@ class Viewer:
             import viser
         except ImportError as err:
             raise MissingExtraError(VIEW_EXTRA_MESSAGE) from err
-        from nik.ik import IKSolver
+        from nik.solver import IKSolver
 
         self.cfg = cfg or ViewerCfg()
         self.solver = solver if isinstance(solver, IKSolver) else IKSolver(solver)
@@ -462,7 +462,9 @@ class Viewer:
         if self._check is None and not want and self._sphere_nodes is None:
             return
         if self._model is None:
-            self._model = self._check.model if self._check is not None else self.robot.collision_spheres()
+            from nik.collision import collision_model
+
+            self._model = self._check.model if self._check is not None else collision_model(self.robot)
         model = self._model
         hit_names = set(self.colliding_links(q))
         if self._sphere_nodes is None:

@@ -1,4 +1,4 @@
-"""The compiled loops of :mod:`nik.ik.paths`: the whole-path choice over candidates, and LM chains along a path.
+"""The compiled loops of :mod:`nik.paths.solve`: the whole-path choice over candidates, and LM chains along a path.
 
 Both loops run over waypoints, one after the other (each waypoint's answer depends on the one before), so they
 are compiled: a Python loop would spend more time in its own overhead than in the arithmetic (one LM solve

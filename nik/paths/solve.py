@@ -17,7 +17,7 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    network's hypotheses (the compiled backend's guess stage: the packed network) and from uniform starts at the
    first waypoint (several chains side by side, each the continuation of a different posture).
 3. **the choice over the whole path**: by dynamic programming over the candidates
-   (:func:`nik.ik.path_kernels.path_dp`; the branches, or every chain's answer at every waypoint), the sequence
+   (:func:`nik.paths.kernels.path_dp`; the branches, or every chain's answer at every waypoint), the sequence
    whose largest step is the smallest, and among those the one with the least sum of squared steps (then the least
    total joint motion); with ``q_start`` the step from it to the first waypoint counts too, so the trajectory starts
    nearest it. With ``q_start`` on a closed-form arm the LM chain from ``q_start`` is tried first and kept when it
@@ -47,10 +47,10 @@ reports the gap.
 **Tolerant paths** (``bounds=``, :mod:`nik.ik.bounds`): with one free tool axis on a closed-form arm the candidates
 are the closed form's branches at sampled angles about it (:func:`_branches`) and the dynamic programming picks the
 least-motion sequence; other goals and arms run the LM chains towards the bounds
-(:func:`nik.ik.path_kernels.path_chains_bounded`). Success is checked by FK in each waypoint's tool frame
+(:func:`nik.paths.kernels.path_chains_bounded`). Success is checked by FK in each waypoint's tool frame
 (:func:`_final_check`); ``rot_err`` is then the rotation error that counts (with a free axis, its swing).
 
-**Timing** (``timing=True`` or a dict of :func:`nik.ik.timing.time_path` keywords): the answer is timed after the
+**Timing** (``timing=True`` or a dict of :func:`nik.paths.timing.time_path` keywords): the answer is timed after the
 path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
 one-line ValueError before any work): ``res.path.t``, ``qd``, ``qdd``, ``timing``.
 
@@ -85,7 +85,7 @@ from nik.ik.bounds import parse_bounds
 from nik.ik.model import model_of
 from nik.ik.result import IKResult, PathReport
 from nik.ik.targets import check_tolerances, pose_array, q_near_array
-from nik.ik.trajopt import polish_path
+from nik.paths.trajopt import polish_path
 from nik.tolerances import score
 
 __all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
@@ -156,7 +156,7 @@ def solve_path(
         closed: None: the path is closed when its last pose equals its first within the tolerances (position and
             rotation); True / False force it. A closed path returns joints whose last row equals its first (module
             docstring, "closed loops").
-        timing: True (or a dict of :func:`nik.ik.timing.time_path` keywords: ``tool_speed``, ``vel_scale``,
+        timing: True (or a dict of :func:`nik.paths.timing.time_path` keywords: ``tool_speed``, ``vel_scale``,
             ``acc_scale``) times the trajectory: ``res.path.t``, ``qd``, ``qdd`` and ``timing``.
         vel_limits, acc_limits: ``(dof,)`` joint speed / acceleration limits of the timing (default the robot's).
         bounds: a tolerant goal for every waypoint (:func:`nik.ik.bounds.parse_bounds`: ``"axis_z"``, 6 numbers,
@@ -321,12 +321,12 @@ class _Run:
         return PATH_RESTARTS if self.plan.fallback == "multistart" else 0
 
     def chains(self, T, starts, reachable, *, pull: float, restarts: int, seed: int | None = None, offset: int = 0):
-        """:func:`nik.ik.path_kernels.path_chains` along ``T`` from ``starts: (K, dof)``: ``q (K, N, dof)``,
+        """:func:`nik.paths.kernels.path_chains` along ``T`` from ``starts: (K, dof)``: ``q (K, N, dof)``,
         iterations ``(K, N)``, ok ``(K, N)`` (LM options: the model's LM with this call's tolerances; with a tolerant
-        goal, :func:`~nik.ik.path_kernels.path_chains_bounded` towards the bounds of waypoints ``offset ...`` of
+        goal, :func:`~nik.paths.kernels.path_chains_bounded` towards the bounds of waypoints ``offset ...`` of
         the path, which ``T`` are)."""
-        from nik.ik.path_kernels import path_chains, path_chains_bounded
         from nik.kernels.lm import seed_state
+        from nik.paths.kernels import path_chains, path_chains_bounded
 
         lm = self.model.lm
         K, n, N = starts.shape[0], starts.shape[1], T.shape[0]
@@ -469,9 +469,9 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
 
 
 def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limits) -> None:
-    """Fills ``report.t``, ``qd``, ``qdd`` and ``timing`` with :func:`nik.ik.timing.time_path` of ``q`` (the robot's
+    """Fills ``report.t``, ``qd``, ``qdd`` and ``timing`` with :func:`nik.paths.timing.time_path` of ``q`` (the robot's
     limits unless given; ``timing`` a dict: its keywords)."""
-    from nik.ik.timing import time_path
+    from nik.paths.timing import time_path
 
     kw = timing if isinstance(timing, dict) else {}
     tm = time_path(q, vel_limits, acc_limits, robot=robot, **kw)
@@ -573,12 +573,12 @@ def _free_samples(N: int) -> int:
 
 
 def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
-    """``choice (N,)``: :func:`nik.ik.path_kernels.path_dp` over the candidates; on a closed path, the choice that
+    """``choice (N,)``: :func:`nik.paths.kernels.path_dp` over the candidates; on a closed path, the choice that
     ends on its start's branch (the last waypoint's candidate nearest the first's, modulo whole turns on the joints
     that wrap): when the free choice does not, each start candidate (at most :data:`PATH_CLOSED_STARTS`) is tried
     with the end pinned to its match, and the least-motion sequence (largest step, then sum of squared steps) is
     kept."""
-    from nik.ik.path_kernels import path_dp
+    from nik.paths.kernels import path_dp
 
     N = cand.shape[0]
     choice = np.empty(N, dtype=np.int64)
@@ -685,7 +685,7 @@ def _with_turns(cand, valid, have, wraps, q0, lo, hi) -> np.ndarray:
     between them. ``cand: (N, 8, dof)``; returns ``q: (N, dof)``."""
     from itertools import product
 
-    from nik.ik.path_kernels import path_dp
+    from nik.paths.kernels import path_dp
 
     N, K, n = cand.shape
     turns = np.zeros((3 ** int(wraps.sum()), n))
@@ -742,8 +742,8 @@ def _first_answer(run: _Run) -> np.ndarray:
 def _chain_path(run: _Run):
     """``(q (N, dof), iterations (N,), source)`` of an arm without a closed form: chains of LM from the start
     postures (candidates at every waypoint: each chain's answer), the choice over the whole path by
-    :func:`nik.ik.path_kernels.path_dp` over those candidates."""
-    from nik.ik.path_kernels import path_dp
+    :func:`nik.paths.kernels.path_dp` over those candidates."""
+    from nik.paths.kernels import path_dp
 
     pull = PATH_PULL if run.model.dof > 6 else 0.0
     kw = {"pull": pull, "restarts": run.restarts}

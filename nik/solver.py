@@ -317,7 +317,7 @@ class IKSolver:
         acc_limits=None,
         bounds=None,
     ) -> IKResult:
-        """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.ik.paths`).
+        """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.paths.solve`).
 
         Args:
             T_path: ``(N, 4, 4)``, ``(N, 7)`` or ``(N, 6)`` waypoints in order, metres/radians, N >= 2.
@@ -327,12 +327,12 @@ class IKSolver:
             seed: seeds every random choice.
             representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
             max_step: a step (largest joint motion between waypoints) above it is a reconfiguration, reported and
-                warned about; radians, default :data:`nik.ik.paths.PATH_MAX_STEP` (10 degrees).
+                warned about; radians, default :data:`nik.paths.solve.PATH_MAX_STEP` (10 degrees).
             world: a :class:`nik.World` for this call (else the solver's): a waypoint whose answer collides is
                 infeasible, its ``res.path.reasons`` entry ``"colliding"``; ``res.collision_free`` per waypoint.
             closed: None: closed when the last pose equals the first (within the tolerances); then the last row
                 of joints equals the first. True / False force it.
-            timing: True (or a dict of :func:`nik.ik.timing.time_path` keywords) fills ``res.path.t``, ``qd``,
+            timing: True (or a dict of :func:`nik.paths.timing.time_path` keywords) fills ``res.path.t``, ``qd``,
                 ``qdd``; vel_limits, acc_limits: ``(dof,)`` its limits (default the robot's).
             bounds: a tolerant goal per waypoint (:func:`nik.ik.bounds.parse_bounds`, e.g. ``"axis_z"``).
 
@@ -344,7 +344,7 @@ class IKSolver:
             UserWarning: naming the first waypoint out of reach, beyond a joint limit on every branch, not reached,
             or forcing a reconfiguration.
         """
-        from nik.ik import paths
+        from nik.paths import solve as paths
 
         step = paths.PATH_MAX_STEP if max_step is None else max_step
         return paths.solve_path(
