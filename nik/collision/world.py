@@ -18,7 +18,8 @@ Scene files (:meth:`World.from_file`, YAML or JSON; metres unless ``unit: mm``):
 
 Unknown keys, missing fields, negative or zero sizes, an empty or malformed file: one-line ``ValueError``. A scene
 without ``unit`` whose largest coordinate or size exceeds :data:`MM_HINT` metres (no arm reaches that far) warns
-that it looks written in millimetres, as targets 100 x beyond the reach do (:func:`nik.robots.reach.unreachable_message`).
+that it looks written in millimetres, as targets 100 x beyond the reach do
+(:func:`nik.robots.reach.unreachable_message`).
 """
 
 from __future__ import annotations
