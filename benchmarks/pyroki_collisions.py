@@ -86,8 +86,12 @@ def _pyroki_solver(urdf: Path, skip):
     import jaxls
     import pyroki as pk
     import yourdfpy
+    from loguru import logger
 
     from nik.collision.urdf import resolve_mesh_path
+
+    logger.disable("pyroki")  # its problem-building log lines
+    logger.disable("jaxls")
 
     model = yourdfpy.URDF.load(
         str(urdf), filename_handler=lambda fname: str(resolve_mesh_path(fname, urdf.parent)), load_collision_meshes=True
