@@ -119,11 +119,9 @@ class IKSolver:
         from nik.device import resolve_device
 
         check_settings(backend, refine)
-        self.backend = backend
-        self.device = resolve_device(device)
+        self.backend, self.device = backend, resolve_device(device)
         self.robot = load_robot(robot) if not isinstance(robot, Robot) else robot
-        self.refine = refine
-        self.polish = bool(polish)
+        self.refine, self.polish = refine, bool(polish)
         self.swarm_cfg = swarm_cfg
         self._net, self._net_one, self._given = None, None, checkpoint is not None and checkpoint != "auto"
         from nik.analytic import family
