@@ -43,7 +43,8 @@ class IKResult:
         collisions: where a collision model is active, a list of B entries: None where the answer is free, else the
             sorted names of what overlaps, by the verdict's check: ``"linkA|linkB"`` (the arm against itself) and
             ``"link|box 2"`` (a link and the world's obstacle of that kind, ``sphere`` | ``box`` | ``capsule``, and
-            index in :meth:`nik.World.packed`); None (not a list) where no collision model is active.
+            index in :meth:`nik.World.packed`); None (not a list) where no collision model is active, and from
+            :meth:`IKSolver.solve_path` (its ``path.reasons`` say ``"colliding"``).
     """
 
     q: torch.Tensor | np.ndarray
