@@ -289,7 +289,7 @@ def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     si, shown, factor = _units(prismatic, len(joint_names))
-    checked = result.collision_free is not None
+    checked = getattr(result, "collision_free", None) is not None  # any object with the fields of an IKResult
     with _written_whole(path) as fh:
         w = csv.writer(fh)
         w.writerow(
