@@ -160,21 +160,20 @@ def ik_main(args) -> None:
     T = np.ascontiguousarray(robot.fk(Q[free][: args.targets]))
     plain = nik.IKSolver(robot, self_collision=False)
     safe = nik.IKSolver(robot, world=world, self_collision=True)
+    judged = nik.IKSolver(robot, world=world, mesh_verdict=urdf)  # the spheres steer, the meshes judge
     print(f"panda (example-robot-data, arm + hand + fingers), {len(T)} targets from configurations the meshes call")
     print(f"free in a scene of {sum(world.counts())} obstacles (table + 10), seed {args.seed}; model: {model}")
-    plain.solve(T[:4]), safe.solve(T[:4])  # compile / load the kernels before timing
-    times = {"plain": [], "safe": []}
-    cpu = {"plain": [], "safe": []}  # CPU time of this process: fair on a machine shared with other jobs
+    plain.solve(T[:4]), safe.solve(T[:4]), judged.solve(T[:4])  # compile / load the kernels before timing
+    times = {"plain": [], "safe": [], "judged": []}
+    cpu = {"plain": [], "safe": [], "judged": []}  # CPU time of this process: fair on a machine shared with others
+    out = {}
     for _ in range(3):
-        for name, solver in (("plain", plain), ("safe", safe)):
+        for name, solver in (("plain", plain), ("safe", safe), ("judged", judged)):
             t, c = time.perf_counter(), time.process_time()
-            res = solver.solve(T)
+            out[name] = solver.solve(T)
             times[name].append((time.perf_counter() - t) / len(T))
             cpu[name].append((time.process_time() - c) / len(T))
-            if name == "plain":
-                r0 = res
-            else:
-                r1 = res
+    r0, r1, r2 = out["plain"], out["safe"], out["judged"]
     called_free = np.asarray(r1.collision_free)
     mesh_hit = mesh.collides(np.asarray(r1.q)[called_free], world)
     plain_hit = mesh.collides(np.asarray(r0.q), world)
@@ -193,7 +192,16 @@ def ik_main(args) -> None:
         f"| scene + self (spheres) | {np.mean(r1.success):.1%} | {called_free.mean():.1%} | {int(mesh_hit.sum())} "
         f"| {mesh.collides(np.asarray(r1.q), world).mean():.1%} | {1e6 * t1:.0f} | {1e6 * c1:.0f} |"
     )
-    print(f"time ratio collision-free / plain: {t1 / t0:.2f}x wall, {c1 / c0:.2f}x CPU")
+    t2, c2 = float(np.median(times["judged"])), float(np.median(cpu["judged"]))
+    q2, free2 = np.asarray(r2.q), np.asarray(r2.collision_free)
+    print(
+        f"| scene + self, mesh verdict | {np.mean(r2.success):.1%} | - | "
+        f"{int(mesh.collides(q2[free2], world).sum())} | {mesh.collides(q2, world).mean():.1%} "
+        f"| {1e6 * t2:.0f} | {1e6 * c2:.0f} |"
+    )
+    print(
+        f"time ratio collision-free / plain: {t1 / t0:.2f}x wall, {c1 / c0:.2f}x CPU (mesh verdict {c2 / c0:.2f}x CPU)"
+    )
     own = ~collides(robot, Q[free][: args.targets], world, model=model)
     ok = np.asarray(r1.success)
     print(

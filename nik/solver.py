@@ -88,13 +88,16 @@ class IKSolver:
             kernels on numpy: CPU targets, ``refine="lm"`` only) or ``"torch"`` (every device and method). The
             answers meet the same contract on both; benchmarks and tests use it to compare them.
         world: a :class:`nik.World` of obstacles (base frame) every call avoids (``solve(world=)`` replaces it for
-            one call); a world always turns the collision check on.
-        self_collision: None (default): checked where the robot has a collision model attached (a
-            ``NAME.collision.json`` beside its file, or :func:`nik.collision.set_collision_model`), not otherwise (a
-            conservative sphere model calls 5-33 % of free configurations colliding; on by default, it would fail
-            reachable targets solved today); True: checked, the model built (fitted, cached) if needed; False:
-            never. Where a check is active, colliding answers are solved again and ``res.collision_free`` is set
+            one call); a world turns the collision check on, the arm against itself included.
+        self_collision: None (default): checked with a world, and without one where the robot has a collision model
+            attached (a ``NAME.collision.json`` beside its file, or :func:`nik.collision.set_collision_model`), not
+            otherwise (a conservative sphere model calls 5-33 % of free configurations colliding); True: checked,
+            the model built (fitted, cached) if needed; False: never (a world is then checked alone). Where a check
+            is active, colliding answers are solved again, ``res.collision_free`` and ``res.collisions`` are set
             (:mod:`nik.ik.collide`).
+        mesh_verdict: who judges ``collision_free``: False (default) the spheres; ``"auto"`` the robot's collision
+            meshes (coal) where coal and the meshes are there, else the spheres; True the meshes (a one-line error
+            without them); a URDF path: that URDF's meshes (:func:`nik.collision.meshcheck.mesh_check`).
     """
 
     def __init__(
@@ -111,15 +114,14 @@ class IKSolver:
         backend: str = "auto",
         world=None,
         self_collision: bool | None = None,
+        mesh_verdict: bool | str | Path = False,
     ):
         from nik.device import resolve_device
 
         check_settings(backend, refine)
-        self.backend = backend
-        self.device = resolve_device(device)
+        self.backend, self.device = backend, resolve_device(device)
         self.robot = load_robot(robot) if not isinstance(robot, Robot) else robot
-        self.refine = refine
-        self.polish = bool(polish)
+        self.refine, self.polish = refine, bool(polish)
         self.swarm_cfg = swarm_cfg
         self._net, self._net_one, self._given = None, None, checkpoint is not None and checkpoint != "auto"
         from nik.analytic import family
@@ -135,6 +137,7 @@ class IKSolver:
         elif checkpoint is not None:
             self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
         self._plans, self.world, self.self_collision = {}, world, collide.check_self_collision(self_collision)
+        self.mesh_verdict = collide.check_mesh_verdict(mesh_verdict)
 
     @property
     def net(self):

@@ -26,3 +26,14 @@ def test_quick_run_without_robotics_toolbox_says_so_once_and_prints_no_nan(capsy
     assert "nan" not in out.lower()
     table = (tmp_path / "peers.md").read_text()
     assert "nan" not in table.lower() and "| panda | 200 | 1 | nik" in table and "| ur5 | 200 | 1 | nik" in table
+
+
+def test_pyroki_comparison_says_why_it_skips_without_pyroki(capsys, monkeypatch):
+    spec = importlib.util.spec_from_file_location("nik_bench_pyroki", ROOT / "benchmarks" / "pyroki_collisions.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setitem(__import__("sys").modules, "pyroki", None)  # as if not installed
+    monkeypatch.setenv("JAX_PLATFORMS", "cpu")  # the script sets them for JAX; restored after the test
+    monkeypatch.setenv("XLA_FLAGS", "")
+    assert module.main(["--targets", "2"]) == 0
+    assert capsys.readouterr().out.startswith("skipped: PyRoki is not installed")

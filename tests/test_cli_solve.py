@@ -421,3 +421,48 @@ def test_evaluate_end_link_names_the_tool_link(tmp_path, capsys):
     assert "tool link `tool0`" in (out / "evaluation.md").read_text()
     assert json.loads((out / "evaluation.json").read_text())["end_link"] == "tool0"
     capsys.readouterr()
+
+
+def test_solve_with_a_scene_reports_collision_free_per_pose_and_why_poses_failed(tmp_path, capsys):
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(
+        "boxes: [{center: [0.0, 0.0, -0.05], size: [1.0, 1.0, 0.1]},\n"
+        "        {center: [0.3, -0.3, 0.3], size: [0.2, 0.2, 0.2]}]\n"
+    )
+    rows = "x,y,z,qw,qx,qy,qz\n0.4,0.1,0.3,0,1,0,0\n0.3,-0.3,0.3,0,1,0,0\n3,0,0,0,1,0,0\n"
+    poses = tmp_path / "poses.csv"
+    poses.write_text(rows)
+    base = ["solve", "--robot", "ur5", "--poses", str(poses), "--scene", str(scene)]
+    assert main(base) == 1
+    out = capsys.readouterr().out
+    assert "collision-free" in out.splitlines()[0]
+    assert "2 of 3 poses not reached: 1 colliding with the scene, 1 out of reach" in out and str(scene) in out
+    assert main([*base, "--json"]) == 1
+    doc = json.loads(capsys.readouterr().out)
+    free = [r["collision_free"] for r in doc["results"]]
+    assert free[0] and not free[1] and free == [r["collisions"] == [] for r in doc["results"]]
+    assert any(n.endswith("|box 1") for n in doc["results"][1]["collisions"])
+    assert doc["not_reached"] == "2 of 3 poses not reached: 1 colliding with the scene, 1 out of reach"
+    out_csv = tmp_path / "out.csv"
+    assert main([*base, "--out", str(out_csv)]) == 1
+    assert "1 colliding with the scene" in capsys.readouterr().out
+    with out_csv.open() as fh:
+        table = list(csv.DictReader(fh))
+    assert [r["collision_free"] for r in table] == ["1" if f else "0" for f in free]
+    assert "|box 1" in table[1]["collisions"]
+    assert main(["solve", "--robot", "ur5", "--poses", str(poses), "--out", str(out_csv)]) == 1  # no scene
+    with out_csv.open() as fh:
+        assert "collision_free" not in next(csv.reader(fh))
+
+
+def test_solve_asks_about_a_scene_written_in_millimetres(tmp_path, capsys):
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("boxes: [{center: [0, 0, -50], size: [1000, 1000, 100]}]\n")
+    main(["solve", "--robot", "ur5", "--pose", "0.4", "0.1", "0.3", "0", "1", "0", "0", "--scene", str(scene)])
+    err = capsys.readouterr().err
+    assert "written in millimetres? add 'unit: mm'" in err
+    scene.write_text("unit: mm\n" + scene.read_text())
+    assert (
+        main(["solve", "--robot", "ur5", "--pose", "0.4", "0.1", "0.3", "0", "1", "0", "0", "--scene", str(scene)]) == 0
+    )
+    assert "millimetres" not in capsys.readouterr().err

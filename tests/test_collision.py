@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -333,3 +334,62 @@ def test_spheres_never_call_free_what_the_meshes_call_colliding(prims):
         ours = collides(robot, q, w)
         assert theirs.any()
         assert not (theirs & ~ours).any()
+
+
+def test_mesh_paths_resolve_the_same_with_a_cold_or_warm_cache(tmp_path, monkeypatch):
+    import trimesh
+
+    pkg = tmp_path / "src" / "pkg"
+    (pkg / "meshes").mkdir(parents=True)
+    (pkg / "urdf").mkdir()
+    trimesh.creation.box(extents=[0.08, 0.08, 0.08]).export(pkg / "meshes" / "box.stl")
+    text = URDF.replace('<sphere radius="0.05"/>', '<mesh filename="package://pkg/meshes/box.stl"/>')
+    (pkg / "urdf" / "r.urdf").write_text(text)
+    first = collision_model(nik.load_robot(pkg / "urdf" / "r.urdf", end_link="l3"))  # fitted: the cache is warm
+    copy = tmp_path / "a" / "b" / "r.urdf"  # the same bytes elsewhere: no folder above it holds pkg
+    copy.parent.mkdir(parents=True)
+    copy.write_text(text)
+    robot = nik.load_robot(copy, end_link="l3")
+    with pytest.raises(ValueError, match="mesh file not found") as err:
+        collision_model(robot)  # not the warm cache's model: the meshes are looked for first, as when cold
+    msg = str(err.value)
+    assert "\n" not in msg and f"looked in: {copy.parent / 'pkg' / 'meshes' / 'box.stl'}" in msg
+    assert str(tmp_path / "pkg" / "meshes" / "box.stl") in msg and "share/pkg/meshes/box.stl" in msg
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "src"))
+    model = collision_model(robot, cache=False)  # found through ROS_PACKAGE_PATH, cold
+    np.testing.assert_allclose(model.radii, first.radii)
+    np.testing.assert_allclose(collision_model(robot).radii, first.radii)  # and warm
+
+
+def test_scene_files_in_millimetres(tmp_path):
+    metres = tmp_path / "m.yaml"
+    metres.write_text(
+        "boxes: [{center: [0.45, 0.0, -0.05], size: [0.9, 1.2, 0.1], rpy: [0, 0, 0.3]}]\n"
+        "spheres: [{center: [0.5, 0.0, 0.3], radius: 0.05}]\n"
+        "capsules: [{p0: [0.3, -0.4, 0.0], p1: [0.3, -0.4, 0.8], radius: 0.03}]\n"
+        "points: [{xyz: [[0.6, 0.1, 0.2]], radius: 0.01}]\n"
+    )
+    mm = tmp_path / "mm.yaml"
+    mm.write_text(
+        "unit: mm\n"
+        "boxes: [{center: [450, 0, -50], size: [900, 1200, 100], rpy: [0, 0, 0.3]}]\n"
+        "spheres: [{center: [500, 0, 300], radius: 50}]\n"
+        "capsules: [{p0: [300, -400, 0], p1: [300, -400, 800], radius: 30}]\n"
+        "points: [{xyz: [[600, 100, 200]], radius: 10}]\n"
+    )
+    for a, b in zip(World.from_file(metres).packed(), World.from_file(mm).packed(), strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    pose = tmp_path / "pose.yaml"
+    pose.write_text("unit: mm\nboxes: [{pose: [450, 0, -50, 1, 0, 0, 0], size: [900, 1200, 100]}]\n")
+    np.testing.assert_allclose(World.from_file(pose).packed()[1][0, 9:], [0.45, 0, -0.05, 0.45, 0.6, 0.05])
+    forgot = tmp_path / "forgot.yaml"
+    forgot.write_text(mm.read_text().replace("unit: mm\n", ""))
+    with pytest.warns(UserWarning, match="written in millimetres\\? add 'unit: mm'"):
+        World.from_file(forgot)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        World.from_file(metres)  # no warning for a scene in metres
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("unit: cm\nspheres: [{center: [0, 0, 0], radius: 1}]\n")
+    with pytest.raises(ValueError, match="unit must be m or mm, got 'cm'"):
+        World.from_file(bad)

@@ -67,7 +67,7 @@ def test_obstacles_changed_between_calls_change_the_answer():
     solver = nik.IKSolver(robot, world=world)
     T = _poses(robot, 1, seed=4)
     first = solver.solve(T)
-    assert first.collision_free is None  # an empty world and no attached model: nothing to check
+    assert first.collision_free[0]  # a world, even an empty one, checks the arm itself (issue 35; was: None)
     elbow = link_frames(robot, torch.as_tensor(first.q))[0, 3, :3, 3].numpy()
     world.add_sphere(elbow, 0.05)  # on the answer's elbow
     assert collides(robot, first.q, world, self_collision=False)[0]

@@ -14,9 +14,9 @@ def add_scene_argument(parser) -> None:
     parser.add_argument(
         "--scene",
         metavar="FILE.yaml",
-        help="obstacles in the robot's base frame (YAML/JSON: spheres, boxes, capsules, points; metres): answers "
-        "that collide with them (or with the arm itself where it has a collision model) are solved again or "
-        "reported as failures (docs/collisions.md)",
+        help="obstacles in the robot's base frame (YAML/JSON: spheres, boxes, capsules, points; metres, or "
+        "millimetres with a key 'unit: mm'): answers that collide with them or with the arm itself are solved again "
+        "or reported as failures (docs/collisions.md)",
     )
 
 
@@ -25,6 +25,8 @@ def world_from_args(args):
     path = getattr(args, "scene", None)
     if path is None:
         return None
+    from nik.cli.common import notes_as_lines
     from nik.collision import World
 
-    return World.from_file(path)
+    with notes_as_lines():  # a scene that looks written in millimetres: one line
+        return World.from_file(path)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -119,6 +120,14 @@ def register(sub) -> None:
     )
     add_threads_argument(s)
     add_scene_argument(s)
+    s.add_argument(
+        "--mesh-verdict",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="with --scene, who judges collision_free: auto (default) the robot's collision meshes where coal "
+        "(pip install 'nik[collision-check]') and a URDF with meshes are there, else the spheres; on: the meshes "
+        "(an error without them); off: the conservative spheres",
+    )
     s.set_defaults(func=_cmd_solve)
 
     e = sub.add_parser(
@@ -274,11 +283,13 @@ def _written_whole(path: Path):
 
 def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None) -> None:
     """Write one row per target: ``index``, joints in radians and degrees (prismatic joints: metres and mm,
-    columns ``<name>_m`` / ``<name>_mm``), errors (mm, deg), success, iterations. Written to a temporary name and
-    renamed."""
+    columns ``<name>_m`` / ``<name>_mm``), errors (mm, deg), success, iterations; where collisions were checked
+    also ``collision_free`` (1/0) and ``collisions`` (what overlaps, ``;``-separated). Written to a temporary name
+    and renamed."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     si, shown, factor = _units(prismatic, len(joint_names))
+    checked = getattr(result, "collision_free", None) is not None  # any object with the fields of an IKResult
     with _written_whole(path) as fh:
         w = csv.writer(fh)
         w.writerow(
@@ -290,6 +301,7 @@ def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None
                 "rot_err_deg",
                 "success",
                 "iterations",
+                *(["collision_free", "collisions"] if checked else []),
             ]
         )
         for i in range(len(result)):
@@ -303,8 +315,38 @@ def write_solutions_csv(path: str | Path, joint_names, result, *, prismatic=None
                     f"{math.degrees(float(result.rot_err[i])):.6g}",
                     int(bool(result.success[i])),
                     int(result.iterations[i]),
+                    *([int(bool(result.collision_free[i])), ";".join(_collisions(result, i))] if checked else []),
                 ]
             )
+
+
+def _collisions(res, i: int) -> list[str]:
+    """What overlaps in answer ``i`` (``res.collisions``; [] where free or unchecked)."""
+    return (res.collisions[i] or []) if res.collisions is not None else []
+
+
+def _with_scene(names) -> bool:
+    """True when one of the overlap names (:attr:`nik.IKResult.collisions`) is a link against an obstacle."""
+    return any(re.search(r"\|(sphere|box|capsule) \d+$", n) for n in names)
+
+
+def failure_summary(res) -> str | None:
+    """``"3 of 50 poses not reached: 2 colliding with the scene, 1 out of reach"`` (why each failed pose failed:
+    out of reach, colliding with the scene, colliding with the arm itself, else not reached), None when all were."""
+    counts = {"colliding with the scene": 0, "colliding with the arm itself": 0, "out of reach": 0, "not reached": 0}
+    failed = [i for i in range(len(res)) if not bool(res.success[i])]
+    for i in failed:
+        if res.reachable is not None and not bool(res.reachable[i]):
+            counts["out of reach"] += 1
+        elif res.collision_free is not None and not bool(res.collision_free[i]):
+            scene = _with_scene(_collisions(res, i))
+            counts["colliding with the scene" if scene else "colliding with the arm itself"] += 1
+        else:
+            counts["not reached"] += 1
+    if not failed:
+        return None
+    why = ", ".join(f"{n} {k}" for k, n in counts.items() if n)
+    return f"{len(failed)} of {len(res)} poses not reached: {why}"
 
 
 # ---------------------------------------------------------------------------
@@ -340,7 +382,10 @@ def _cmd_solve(args) -> int:
         q_near = torch.tensor([v / f for v, f in zip(args.q_near, factor, strict=True)], dtype=torch.float64)
     T = as_poses(poses, "quat", name="--pose" if args.pose is not None else str(args.poses))
     checkpoint = None if str(args.checkpoint).lower() == "none" else args.checkpoint
-    solver = IKSolver(robot, checkpoint=checkpoint, refine=args.refine, device=args.device, world=world_from_args(args))
+    world = world_from_args(args)
+    verdict = {"auto": "auto", "on": True, "off": False}[args.mesh_verdict] if world is not None else False
+    solver = IKSolver(robot, checkpoint=checkpoint, refine=args.refine, device=args.device, world=world,
+                      mesh_verdict=verdict)  # fmt: skip
     with warnings.catch_warnings():  # the reach warning becomes the one line below
         warnings.simplefilter("ignore", UserWarning)
         res = solver.solve(
@@ -397,6 +442,11 @@ def _cmd_solve(args) -> int:
                     "reachable": bool(res.reachable[i]),
                     "iterations": int(res.iterations[i]),
                     **(
+                        {"collision_free": bool(res.collision_free[i]), "collisions": _collisions(res, i)}
+                        if res.collision_free is not None
+                        else {}
+                    ),
+                    **(
                         {
                             "all_q_display": [
                                 [v * f for v, f in zip(qk, factor, strict=True)] for qk in every[i].tolist()
@@ -422,6 +472,7 @@ def _cmd_solve(args) -> int:
                     "tol_mm": args.tol_mm,
                     "tol_deg": args.tol_deg,
                     "results": results,
+                    **({"scene": str(args.scene), "not_reached": failure_summary(res)} if args.scene else {}),
                     **({"out": str(args.out)} if args.out else {}),
                     **({"plot": str(args.plot)} if args.plot else {}),
                 },
@@ -430,12 +481,14 @@ def _cmd_solve(args) -> int:
         )
     elif args.out:
         ok = int(res.success.sum())
+        why = failure_summary(res)
         print(
             f"solved {ok} of {len(res)} poses within {tolerance} "
-            f"({robot.name}{tool_link_text(robot)}, guess: {res.source}, refine: {args.refine}); wrote {args.out}"
+            f"({robot.name}{tool_link_text(robot)}, guess: {res.source}, refine: {args.refine}"
+            f"{_scene_text(args)}); {why + '; ' if why else ''}wrote {args.out}"
         )
     else:
-        _print_table(robot, res, tolerance=tolerance)
+        _print_table(robot, res, tolerance=tolerance, scene=_scene_text(args))
     if every is not None and not args.json:
         _print_every(robot, every)
     if args.plot and not args.json:
@@ -481,8 +534,17 @@ def _plot(robot, T, res, every, path, *, tolerance: str, world=None) -> None:
     plot_arm(robot, res.q[:n], path, ghosts=ghosts, T_target=T[:n], title=title, world=world)
 
 
-def _print_table(robot, res, *, tolerance: str, limit: int = 50) -> None:
-    """Joints in degrees, prismatic joints in mm (each column header says which), errors in mm and degrees."""
+def _scene_text(args) -> str:
+    """``", scene: FILE"`` for ``--scene`` (empty without)."""
+    if getattr(args, "scene", None) is None:
+        return ""
+    return f", scene: {args.scene}"
+
+
+def _print_table(robot, res, *, tolerance: str, scene: str = "", limit: int = 50) -> None:
+    """Joints in degrees, prismatic joints in mm (each column header says which), errors in mm and degrees; a
+    ``collision-free`` column where collisions were checked (``--scene``)."""
+    checked = res.collision_free is not None
     names = robot.joint_names
     _, shown, factor = _units(robot.prismatic.tolist(), robot.dof)
     width = max(9, *(len(n) for n in names))
@@ -491,9 +553,10 @@ def _print_table(robot, res, *, tolerance: str, limit: int = 50) -> None:
         *[f"{n} ({u})" for n, u in zip(names, shown, strict=True)],
         "pos err (mm)",
         "rot err (deg)",
+        *(["collision-free"] if checked else []),
         "success",
     ]
-    widths = [4, *[max(width + 6, 10)] * len(names), 13, 14, 8]
+    widths = [4, *[max(width + 6, 10)] * len(names), 13, 14, *([14] if checked else []), 8]
     print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
     for i in range(min(len(res), limit)):
         cells = [
@@ -501,14 +564,16 @@ def _print_table(robot, res, *, tolerance: str, limit: int = 50) -> None:
             *[f"{v * f:.4f}" for v, f in zip(res.q[i].tolist(), factor, strict=True)],
             f"{float(res.pos_err[i]) * 1e3:.3g}",
             f"{math.degrees(float(res.rot_err[i])):.3g}",
+            *((["yes" if bool(res.collision_free[i]) else "NO"]) if checked else []),
             "yes" if bool(res.success[i]) else "NO",
         ]
         print("  ".join(c.rjust(w) for c, w in zip(cells, widths, strict=True)))
     if len(res) > limit:
         print(f"... {len(res) - limit} more rows (use --out FILE.csv)")
+    why = failure_summary(res)
     print(
-        f"robot {robot.name}{tool_link_text(robot)}, initial guess: {res.source}; "
-        f"{int(res.success.sum())} of {len(res)} reached within {tolerance}"
+        f"robot {robot.name}{tool_link_text(robot)}, initial guess: {res.source}{scene}; "
+        f"{int(res.success.sum())} of {len(res)} reached within {tolerance}{'; ' + why if why else ''}"
     )
 
 

@@ -11,7 +11,7 @@ The room sits between robots and data (it imports kernels, kinematics / poses an
 Importing this room loads neither numba nor trimesh (the kernels and the mesh reader come on first use).
 """
 
-from nik.collision.check import collides, colliding_links, collision_residual, signed_distances
+from nik.collision.check import collides, colliding_links, collision_names, collision_residual, signed_distances
 from nik.collision.distance import link_frames, self_distances, sphere_centers, world_distances
 from nik.collision.model import CollisionModel, collision_model, set_collision_model
 from nik.collision.world import World
@@ -21,6 +21,7 @@ __all__ = [
     "World",
     "colliding_links",
     "collides",
+    "collision_names",
     "collision_model",
     "collision_residual",
     "link_frames",

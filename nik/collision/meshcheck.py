@@ -5,13 +5,21 @@ they are, curved primitives by the polyhedra around them) with nik's frames and 
 against the world's spheres, boxes and capsules, whether anything overlaps. It shares no distance code with
 the sphere model, so tests and ``benchmarks/collisions.py`` compare the two verdicts. ``pip install
 'nik[collision-check]'`` (coal); without it, constructing one is a one-line ``ImportError``.
+
+:func:`mesh_check` is the one the solver's mesh verdict uses (``IKSolver(mesh_verdict=)``, :mod:`nik.ik.collide`):
+the meshes of the URDF named, else of the URDF the sphere model was fitted to (its ``source``, ``"urdf:PATH"``:
+where a shipped model names its vendor's URDF, that one), else of the robot's own URDF; the pairs the model leaves
+out by decision (same frame, adjacent, the SRDF's, always touching, removed) are left out, the ones it left out by
+sampling ("never") are checked.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
-__all__ = ["MeshCheck"]
+__all__ = ["MeshCheck", "mesh_check", "mesh_urdf"]
 
 
 class MeshCheck:
@@ -82,14 +90,17 @@ class MeshCheck:
         return dropped
 
     def _world_geoms(self, world):
+        """``[(geometry, transform, name)]`` of the world's obstacles, named as
+        :func:`nik.collision.collision_names` names them (``"box 2"``)."""
         coal = self._coal
         out = []
         spheres, boxes, caps = world.packed()
-        for s in spheres:
-            out.append((coal.Sphere(float(s[3])), coal.Transform3s(np.eye(3), s[:3].copy())))
-        for b in boxes:
-            out.append((coal.Box(*(2 * b[12:15])), coal.Transform3s(b[:9].reshape(3, 3).copy(), b[9:12].copy())))
-        for c in caps:
+        for i, s in enumerate(spheres):
+            out.append((coal.Sphere(float(s[3])), coal.Transform3s(np.eye(3), s[:3].copy()), f"sphere {i}"))
+        for i, b in enumerate(boxes):
+            T = coal.Transform3s(b[:9].reshape(3, 3).copy(), b[9:12].copy())
+            out.append((coal.Box(*(2 * b[12:15])), T, f"box {i}"))
+        for i, c in enumerate(caps):
             a, e, r = c[:3], c[3:6], float(c[6])
             axis = e - a
             L = float(np.linalg.norm(axis))
@@ -98,7 +109,7 @@ class MeshCheck:
             x = np.cross(h, z)
             x /= np.linalg.norm(x)
             R = np.stack([x, np.cross(z, x), z], axis=1)
-            out.append((coal.Capsule(r, L), coal.Transform3s(R, (a + e) / 2)))
+            out.append((coal.Capsule(r, L), coal.Transform3s(R, (a + e) / 2), f"capsule {i}"))
         return out
 
     def collides(self, Q, world=None, *, self_collision: bool = True) -> np.ndarray:
@@ -114,7 +125,59 @@ class MeshCheck:
                     self._hit(g, tf[k], og, ot)
                     for k, g in enumerate(self._geoms)
                     if self.frames[k] > 0  # the fixed base: as nik's model
-                    for og, ot in obstacles
+                    for og, ot, _ in obstacles
                 )
             out[i] = hit
         return out
+
+    def collision_names(self, Q, world=None, *, self_collision: bool = True) -> list[list[str] | None]:
+        """Per configuration of ``Q: (B, dof)``, the sorted names of the overlapping pairs (``"a|b"``) and links and
+        obstacles (``"link|box 2"``), as :func:`nik.collision.collision_names` names them; None where none."""
+        Q = np.asarray(Q, dtype=np.float64).reshape(-1, self.robot.dof)
+        obstacles = self._world_geoms(world) if world is not None else []
+        out = []
+        for q in Q:
+            tf = self._transforms(q)
+            names = [f"{self.links[a]}|{self.links[b]}" for a, b in self.pairs if self_collision
+                     and self._hit(self._geoms[a], tf[a], self._geoms[b], tf[b])]  # fmt: skip
+            names += [f"{self.links[k]}|{name}" for k, g in enumerate(self._geoms) if self.frames[k] > 0
+                      for og, ot, name in obstacles if self._hit(g, tf[k], og, ot)]  # fmt: skip
+            out.append(sorted(names) or None)
+        return out
+
+
+def mesh_urdf(robot, model, urdf=None) -> Path | None:
+    """The URDF whose collision meshes judge ``robot``'s answers (module docstring), or None where there is none."""
+    from nik.collision.model import _has_collision, _urdf_of
+
+    if urdf is not None:
+        path = Path(urdf)
+        if not path.is_file() or not _has_collision(path):
+            raise ValueError(f"mesh verdict: {path} is not a URDF file with <collision> geometry")
+        return path
+    fitted = Path(model.source[len("urdf:") :]) if model.source.startswith("urdf:") else None
+    for path in (fitted, _urdf_of(robot)):
+        if path is not None and path.is_file() and _has_collision(path):
+            return path
+    return None
+
+
+def mesh_check(robot, model, urdf=None, *, required: bool = False) -> MeshCheck | None:
+    """The :class:`MeshCheck` of ``robot`` with the pairs of ``model`` (module docstring), cached per robot; None
+    where coal or the meshes are missing (``required``: a one-line ``ImportError`` / ``ValueError`` instead)."""
+    path = mesh_urdf(robot, model, urdf)
+    if path is None:
+        if required:
+            raise ValueError(f"mesh verdict: robot {robot.name!r} has no URDF with collision meshes (name one)")
+        return None
+    skip = tuple(sorted(tuple(k.split("|")) for k, why in model.left_out.items() if why != "never"))
+    key = (str(path.resolve()), skip)
+    memo = robot.__dict__.setdefault("_mesh_checks", {})
+    if key not in memo:
+        try:
+            memo[key] = MeshCheck(robot, path, skip=skip)
+        except ImportError:
+            if required:
+                raise
+            return None
+    return memo[key]

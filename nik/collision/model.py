@@ -520,6 +520,11 @@ def collision_model(
     h = hashlib.sha256(f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}".encode())
     if urdf is not None:
         h.update(urdf.read_bytes())
+        if model_source_is_urdf(robot, source):  # the meshes found (or not) the same way, cache warm or cold
+            from nik.collision.urdf import collision_mesh_files
+
+            for mesh in collision_mesh_files(urdf):
+                h.update(f"|{mesh.resolve()}:{mesh.stat().st_size}".encode())
     fit_path = _cache_path("spheres-" + h.hexdigest())
     srdf_path = srdf_of(urdf) if srdf and model_source_is_urdf(robot, source) else None
     h.update(memo_key.encode())

@@ -28,7 +28,7 @@ from nik.collision.shapes import (
     sphere_triangles,
 )
 
-__all__ = ["Body", "frames_at", "resolve_mesh_path", "rpy_matrix", "urdf_bodies"]
+__all__ = ["Body", "collision_mesh_files", "frames_at", "mesh_places", "resolve_mesh_path", "rpy_matrix", "urdf_bodies"]
 
 #: agreement needed between the URDF walk and nik's frames (metres and rotation-matrix entries)
 MATCH_TOL = 1e-5
@@ -54,22 +54,65 @@ class Body:
     radius: float | None = None
 
 
-def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path | None:
-    """The file a URDF's ``<mesh filename>`` names (``package://PKG/rest`` looked up in the folders above the
-    URDF: a folder named PKG or one holding PKG; plain paths relative to the URDF), or None."""
+def mesh_places(filename: str, urdf_dir: Path) -> list[Path]:
+    """Every place a URDF's ``<mesh filename>`` may be, in the order looked: for ``package://PKG/rest`` the folders
+    above the URDF (a folder named PKG, or one holding PKG), then ``$ROS_PACKAGE_PATH`` (as the folders above),
+    ``$AMENT_PREFIX_PATH`` / ``$CMAKE_PREFIX_PATH`` and this Python's prefixes (``PREFIX/share/PKG/rest``; pip's
+    robot-description wheels, e.g. example-robot-data, install there or under ``site-packages/cmeel.prefix``);
+    ``file://PATH`` that path; a plain path relative to the URDF's folder. The same places whatever nik's cache
+    holds, so a copied URDF finds its meshes (or not) the same way every time."""
+    import os
+    import site
+    import sys
+
     if filename.startswith("file://"):
-        p = Path(filename[len("file://") :])
-        return p if p.is_file() else None
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://") :].partition("/")
-        for folder in [urdf_dir, *urdf_dir.parents]:
-            for candidate in (folder / rest if folder.name == package else None, folder / package / rest):
-                if candidate is not None and candidate.is_file():
-                    return candidate
-        return None
-    p = Path(filename)
-    p = p if p.is_absolute() else urdf_dir / p
-    return p if p.is_file() else None
+        return [Path(filename[len("file://") :])]
+    if not filename.startswith("package://"):
+        p = Path(filename)
+        return [p if p.is_absolute() else urdf_dir / p]
+    package, _, rest = filename[len("package://") :].partition("/")
+    places = []
+    folders = [urdf_dir, *urdf_dir.parents]
+    folders += [Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d]
+    for folder in folders:
+        places += [folder / rest] if folder.name == package else []
+        places.append(folder / package / rest)
+    prefixes = [
+        Path(d)
+        for v in ("AMENT_PREFIX_PATH", "CMAKE_PREFIX_PATH")
+        for d in os.environ.get(v, "").split(os.pathsep)
+        if d
+    ]
+    prefixes += [Path(sys.prefix), *(Path(d) / "cmeel.prefix" for d in site.getsitepackages())]
+    places += [prefix / "share" / package / rest for prefix in prefixes]
+    return list(dict.fromkeys(places))
+
+
+def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path | None:
+    """The file a URDF's ``<mesh filename>`` names: the first of :func:`mesh_places` that exists, or None."""
+    return next((p for p in mesh_places(filename, urdf_dir) if p.is_file()), None)
+
+
+def mesh_not_found(filename: str, urdf_dir: Path, where: str) -> ValueError:
+    """The one-line error of a mesh found nowhere, naming every place looked."""
+    looked = ", ".join(str(p) for p in mesh_places(filename, urdf_dir))
+    return ValueError(f"{where}: mesh file not found: {filename} (looked in: {looked})")
+
+
+def collision_mesh_files(path: Path) -> list[Path]:
+    """The files of the URDF ``path``'s ``<collision>`` meshes, resolved (:func:`resolve_mesh_path`); a missing one
+    is a one-line ``ValueError`` naming every place looked (:func:`mesh_not_found`)."""
+    links, _ = _read(Path(path))
+    out = []
+    for name, link in links.items():
+        for i, col in enumerate(link.findall("collision")):
+            for mesh in col.iter("mesh"):
+                filename = mesh.get("filename", "")
+                found = resolve_mesh_path(filename, Path(path).parent)
+                if found is None:
+                    raise mesh_not_found(filename, Path(path).parent, f"{Path(path).name}: link {name!r} collision {i}")
+                out.append(found)
+    return out
 
 
 def _floats(text: str | None, n: int, default: float, where: str) -> np.ndarray:
@@ -126,7 +169,7 @@ def _geometry_triangles(geom, urdf_dir: Path, where: str) -> np.ndarray:
         name = shape.get("filename", "")
         path = resolve_mesh_path(name, urdf_dir)
         if path is None:
-            raise ValueError(f"{where}: mesh file not found: {name}")
+            raise mesh_not_found(name, urdf_dir, where)
         return mesh_triangles(path, _floats(shape.get("scale"), 3, 1.0, f"{where} mesh scale"))
     if tag == "box":
         size = _floats(shape.get("size"), 3, float("nan"), f"{where} box size")

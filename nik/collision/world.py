@@ -8,27 +8,35 @@ first read after a change. Packed layout (float64, metres):
 - ``boxes: (Nb, 15)``: rotation R row by row (9), centre (3), half sizes (3); the box is ``|R^T (x - c)| <= h``;
 - ``capsules: (Nc, 7)``: end points p0 (3), p1 (3), radius.
 
-Scene files (:meth:`World.from_file`, YAML or JSON; metres)::
+Scene files (:meth:`World.from_file`, YAML or JSON; metres unless ``unit: mm``)::
 
+    unit:     m                    # or mm: every length below in millimetres (angles stay radians)
     spheres:  [{center: [x, y, z], radius: r}, ...]
     boxes:    [{center: [x, y, z], size: [sx, sy, sz], rpy: [r, p, y]}, ...]   # or pose: 4x4 / [x y z qw qx qy qz]
     capsules: [{p0: [x, y, z], p1: [x, y, z], radius: r}, ...]
     points:   [{xyz: [[x, y, z], ...], radius: r}, ...]
 
-Unknown keys, missing fields, negative or zero sizes, an empty or malformed file: one-line ``ValueError``.
+Unknown keys, missing fields, negative or zero sizes, an empty or malformed file: one-line ``ValueError``. A scene
+without ``unit`` whose largest coordinate or size exceeds :data:`MM_HINT` metres (no arm reaches that far) warns
+that it looks written in millimetres, as targets 100 x beyond the reach do
+(:func:`nik.robots.reach.unreachable_message`).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from nik.collision.urdf import rpy_matrix
 
-__all__ = ["World"]
+__all__ = ["MM_HINT", "World"]
+
+#: a scene length (coordinate or size) beyond this many metres looks written in millimetres
+MM_HINT = 20.0
 
 
 def _vec(value, n: int, what: str) -> np.ndarray:
@@ -74,6 +82,23 @@ def _pose(value, what: str) -> np.ndarray:
     else:
         raise ValueError(f"{what}: expected a centre (3,), x y z qw qx qy qz (7,) or a (4, 4) pose, got {a.shape}")
     return T
+
+
+def _scaled(key: str, value, scale: float):
+    """A scene item's ``value`` with its lengths times ``scale`` (``rpy`` and a pose's rotation unchanged)."""
+    if scale == 1.0 or key == "rpy":
+        return value
+    try:
+        a = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return value  # the add_* call names the problem
+    if key == "pose" and a.shape == (4, 4):
+        a[:3, 3] *= scale
+    elif key == "pose":
+        a[:3] *= scale
+    else:
+        a = a * scale
+    return a
 
 
 class World:
@@ -153,11 +178,34 @@ class World:
         return self._packed[1]
 
     # -- scene files ----------------------------------------------------------
+    def largest_length(self) -> float:
+        """The largest absolute coordinate or size of the obstacles, metres (0 for an empty world)."""
+        s, b, c = self.packed()
+        parts = [np.abs(s).ravel(), np.abs(b[:, 9:]).ravel(), np.abs(c).ravel()]
+        return float(max((p.max() for p in parts if p.size), default=0.0))
+
     @classmethod
     def from_dict(cls, data, source: str = "scene") -> World:
         """A world from plain data (the scene-file schema of the module docstring)."""
         if not isinstance(data, dict) or not data:
             raise ValueError(f"{source}: expected a mapping with spheres, boxes, capsules or points; got {data!r}")
+        data = dict(data)
+        unit = data.pop("unit", None)
+        if unit not in (None, "m", "mm"):
+            raise ValueError(f"{source}: unit must be m or mm, got {unit!r}")
+        world = cls._from_items(data, source, 1e-3 if unit == "mm" else 1.0)
+        if unit is None and world.largest_length() > MM_HINT:
+            warnings.warn(
+                f"{source}: a coordinate or size of {world.largest_length():.4g} m, beyond any arm's reach "
+                f"(> {MM_HINT:g} m): written in millimetres? add 'unit: mm' to the file",
+                UserWarning,
+                stacklevel=2,
+            )
+        return world
+
+    @classmethod
+    def _from_items(cls, data: dict, source: str, scale: float) -> World:
+        """The obstacles of ``data`` (without ``unit``), lengths multiplied by ``scale``."""
         fields = {
             "spheres": {"center", "radius"},
             "boxes": {"center", "size", "rpy", "pose"},
@@ -166,7 +214,7 @@ class World:
         }
         unknown = sorted(set(data) - set(fields))
         if unknown:
-            raise ValueError(f"{source}: unknown key {unknown[0]!r} (expected {', '.join(fields)})")
+            raise ValueError(f"{source}: unknown key {unknown[0]!r} (expected unit, {', '.join(fields)})")
         world = cls()
         for kind, allowed in fields.items():
             items = data.get(kind) or []
@@ -180,6 +228,7 @@ class World:
                 if bad:
                     raise ValueError(f"{where}: unknown key {bad[0]!r} (expected {', '.join(sorted(allowed))})")
                 try:
+                    item = {k: _scaled(k, v, scale) for k, v in item.items()}
                     if kind == "spheres":
                         world.add_sphere(item["center"], item["radius"])
                     elif kind == "capsules":

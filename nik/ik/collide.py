@@ -2,27 +2,33 @@
 
 **When collisions are checked** (``IKSolver(robot, world=None, self_collision=None)``, per call ``solve(world=)``):
 
-- ``self_collision=None`` (the default): self-collision is checked where the robot **has a collision model
-  attached**: a ``NAME.collision.json`` beside its URDF / YAML file (:func:`nik.collision.collision_model` loads
-  it) or one set by the user (:func:`nik.collision.set_collision_model`); otherwise it is off;
-- ``self_collision=True``: checked; the model is built if needed (fitted to the URDF's collision geometry, or
-  capsules along the links; cached, :func:`nik.collision.collision_model`);
-- ``self_collision=False``: never checked;
-- a ``world`` (on the solver or per call) is always checked, with self-collision by the same rule (the model is
-  built if needed to place the arm's spheres).
+- a ``world`` (on the solver or per call, even an empty one) turns the check on, **the arm against itself
+  included**: ``collision_free`` means free of the world and of the arm (the model is built if needed: fitted to
+  the URDF's collision geometry, or capsules along the links; cached, :func:`nik.collision.collision_model`);
+  ``self_collision=False`` checks the world only;
+- without a world, ``self_collision=None`` (the default) checks the arm against itself where the robot **has a
+  collision model attached**: a ``NAME.collision.json`` beside its URDF / YAML file or one set by the user
+  (:func:`nik.collision.set_collision_model`); otherwise nothing is checked; ``True``: checked; ``False``: never.
 
-Why not on by default for every arm: a sphere model is conservative (every surface point inside; it overreaches
-by 1.5-3.5 cm), so it calls 5-33 % of the panda's free configurations colliding (docs/collisions.md). Turned on
-silently, it would make random reachable targets fail that the same call solves today, and fit a model (seconds)
-inside a solve. A model the user attached is a decision the user made, so it is honoured by default.
+Why not on by default for every arm without a world: a sphere model is conservative (every surface point inside;
+it overreaches by 1.5-3.5 cm), so it calls 5-33 % of the panda's free configurations colliding
+(docs/collisions.md). Turned on silently, it would make random reachable targets fail that the same call solves
+today, and fit a model (seconds) inside a solve. A world or an attached model is a decision the user made.
 
 **What the stage does** (:func:`resolve`, after the main pipeline, both backends): every answer is checked
 (:func:`nik.kernels.collision.collides_batch`, margin 0); the ones that collide (within reach) are solved again by
 LM with collision rows (:mod:`nik.kernels.collision_lm`): from the answer, then the network's other hypotheses
 or the closed form's other branches (colliding ones dropped before any iteration), then uniform restarts drawn
-collision-free. The torch backend runs the same compiled kernel on the CPU (the answers go there and back). The
-final verdict ``res.collision_free`` is the sphere check of the returned ``q`` (margin 0): conservative, so an
-answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it.
+collision-free. The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
+
+**The verdict** ``res.collision_free``: the sphere check of the returned ``q`` (margin 0): conservative, so an
+answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it. With a mesh
+verdict (``IKSolver(mesh_verdict=)``: ``"auto"`` where coal is installed and the robot has collision meshes,
+True (required), a URDF path, False: the default) the meshes judge instead (:func:`nik.collision.meshcheck.mesh_check`,
+coal): every answer is checked on them, and only those colliding on the meshes are solved again, so a
+conservative sphere model never turns a free answer into a failure (the spheres steer, the meshes judge; it costs
+one coal check per answer, 0.6-2.7 ms on the panda). ``res.collisions`` names what overlaps in each colliding
+answer (``"linkA|linkB"``, ``"link|box 2"``; :func:`nik.collision.collision_names`).
 
 Choices (:class:`CollideCfg`): margin 5 mm (the rows push the spheres that far apart, the verdict needs 0), weight
 1 (a millimetre of penetration costs as much as a millimetre of pose error), 30 iterations per start,
@@ -64,11 +70,32 @@ class CollideCfg:
 
 @dataclass(frozen=True)
 class Setup:
-    """The collision check of one call: the arm's ``model``, the ``world`` (None: self only) and ``self_on``."""
+    """The collision check of one call: the arm's ``model``, the ``world`` (None: self only), ``self_on`` and the
+    ``mesh`` check that judges (a :class:`nik.collision.meshcheck.MeshCheck`; None: the spheres judge)."""
 
     model: object
     world: object
     self_on: bool
+    mesh: object = None
+
+    def colliding(self, robot, q: np.ndarray) -> np.ndarray:
+        """``(B,)`` bool, the verdict for ``q: (B, dof)``: the meshes' where they judge, else the spheres'."""
+        if self.mesh is not None:
+            return self.mesh.collides(q, self.world, self_collision=self.self_on)
+        from nik.kernels.collision import collides_batch
+
+        (G, joints), rest = self.arguments(robot)
+        hit = np.empty(len(q), dtype=bool)
+        collides_batch(G, joints, np.ascontiguousarray(q, dtype=np.float64), *rest, 0.0, hit)
+        return hit
+
+    def names(self, robot, q: np.ndarray) -> list:
+        """What overlaps in each of ``q: (B, dof)`` (:func:`nik.collision.collision_names`), by the verdict's check."""
+        if self.mesh is not None:
+            return self.mesh.collision_names(q, self.world, self_collision=self.self_on)
+        from nik.collision import collision_names
+
+        return collision_names(robot, q, self.world, model=self.model, self_collision=self.self_on)
 
     def arguments(self, robot):
         """``(G, joints), rest``: :func:`nik.collision.compiled.kernel_arguments`."""
@@ -103,11 +130,20 @@ def check_self_collision(value):
     return value
 
 
+def check_mesh_verdict(value):
+    """``value`` when it is True, False, ``"auto"`` or a URDF path (one line otherwise)."""
+    from pathlib import Path
+
+    if isinstance(value, bool) or value == "auto" or isinstance(value, str | Path) and Path(value).suffix == ".urdf":
+        return value
+    raise ValueError(f"IKSolver: mesh_verdict must be True, False, 'auto' or a URDF path, got {value!r}")
+
+
 def after_solve(solver, backend, plan, T_target, q_near, representation, world):
     """:meth:`nik.IKSolver.solve` on ``backend``, then :func:`resolve` where a check is active (the call's
     ``world``, else the solver's); without one the backend's result itself (``collision_free`` None)."""
     res = backend.solve(solver.robot, plan, T_target, q_near, representation)
-    s = setup(solver.robot, solver.world if world is None else world, solver.self_collision)
+    s = setup(solver.robot, solver.world if world is None else world, solver.self_collision, solver.mesh_verdict)
     if s is None:
         return res
     from nik.ik.targets import as_poses
@@ -115,7 +151,7 @@ def after_solve(solver, backend, plan, T_target, q_near, representation, world):
     return resolve(solver.robot, plan, as_poses(T_target, representation), res, s, getattr(solver, "collide_cfg", None))
 
 
-def setup(robot, world, self_collision) -> Setup | None:
+def setup(robot, world, self_collision, mesh_verdict=False) -> Setup | None:
     """The collision check of a call (module docstring), or None when nothing is checked."""
     if world is not None:
         from nik.collision import World
@@ -123,14 +159,20 @@ def setup(robot, world, self_collision) -> Setup | None:
         if not isinstance(world, World):
             raise ValueError(f"IKSolver: world must be a nik.World, got {type(world).__name__}")
     model = attached_model(robot) if self_collision is None else None
-    self_on = model is not None if self_collision is None else bool(self_collision)
+    self_on = (model is not None or world is not None) if self_collision is None else bool(self_collision)
     if not self_on and (world is None or world.empty):
         return None
     if model is None:
         from nik.collision.model import collision_model
 
         model = collision_model(robot)
-    return Setup(model, world, self_on)
+    mesh = None
+    if mesh_verdict is not False:
+        from nik.collision.meshcheck import mesh_check
+
+        urdf = None if isinstance(mesh_verdict, bool) or mesh_verdict == "auto" else mesh_verdict
+        mesh = mesh_check(robot, model, urdf, required=mesh_verdict != "auto")
+    return Setup(model, world, self_on, mesh)
 
 
 def _numpy(x) -> np.ndarray:
@@ -171,7 +213,6 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     """``res`` with colliding answers solved again and ``collision_free`` set (module docstring); ``T: (B, 4, 4)``
     the validated targets, ``res`` of either kind (numpy or tensors: the result keeps its kind)."""
     from nik.ik.model import model_of
-    from nik.kernels.collision import collides_batch
     from nik.kernels.collision_lm import collision_lm
     from nik.kernels.lm import CLASSIC, ITERS, STALL_ITERS, seed_state
 
@@ -179,8 +220,7 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     (G, joints), rest = s.arguments(robot)
     q = np.ascontiguousarray(_numpy(res.q), dtype=np.float64)
     B = q.shape[0]
-    hit = np.empty(B, dtype=bool)
-    collides_batch(G, joints, q, *rest, 0.0, hit)
+    hit = s.colliding(robot, q)
     reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
     idx = np.nonzero(hit & reach)[0]
     success = _numpy(res.success).astype(bool).copy()
@@ -201,14 +241,15 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
                      seed_state(plan.seed), *rest, cfg.margin, cfg.weight, qk, free, done, itk, pk, rk)  # fmt: skip
         q[idx], pos[idx], rot[idx], it[idx] = qk, pk, rk, it[idx] + itk
         success[idx] = (pk <= plan.tol_pos) & (rk <= plan.tol_rot)
-        again = np.empty(idx.size, dtype=bool)
-        collides_batch(G, joints, np.ascontiguousarray(q[idx]), *rest, 0.0, again)  # the verdict of the new answers
-        hit[idx] = again  # (the other rows are unchanged: their verdict stands)
+        hit[idx] = s.colliding(robot, q[idx])  # the verdict of the new answers (the others' stands)
     free = ~hit
     out = type(res)(**{**res.__dict__})
     out.q, out.pos_err, out.rot_err = _like(q, res.q), _like(pos, res.pos_err), _like(rot, res.rot_err)
     out.iterations, out.success = _like(it, res.iterations), _like(success & free, res.success)
     out.collision_free = _like(free, res.success)
+    out.collisions = [None] * B
+    for i, names in zip(np.nonzero(hit)[0], s.names(robot, q[hit]), strict=True):
+        out.collisions[i] = names or []  # [] only where the verdict's margin 0 and the names' rounding differ
     return out
 
 
@@ -217,26 +258,18 @@ def path_waypoints(solver, q: np.ndarray, world, success: np.ndarray):
     under the call's check (``world``, else the solver's; the rule of :func:`setup`): ``free (N,)`` bool and
     ``reasons`` (N strings, ``"colliding"`` where the answer collides, else ``""``); without a check
     ``(success, None, ["", ...])``."""
-    s = setup(solver.robot, solver.world if world is None else world, solver.self_collision)
+    s = setup(solver.robot, solver.world if world is None else world, solver.self_collision, solver.mesh_verdict)
     if s is None:
         return success, None, [""] * len(success)
-    from nik.kernels.collision import collides_batch
-
-    (G, joints), rest = s.arguments(solver.robot)
-    hit = np.empty(len(q), dtype=bool)
-    collides_batch(G, joints, np.ascontiguousarray(q, dtype=np.float64), *rest, 0.0, hit)
+    hit = s.colliding(solver.robot, q)
     return success & ~hit, ~hit, ["colliding" if h else "" for h in hit]
 
 
 def free_solutions(solver, Q: torch.Tensor) -> torch.Tensor:
     """The rows of ``Q: (K, dof)`` that are collision-free under the solver's check (all without one)."""
     robot = solver.robot
-    s = setup(robot, solver.world, solver.self_collision)
+    s = setup(robot, solver.world, solver.self_collision, solver.mesh_verdict)
     if s is None or Q.shape[0] == 0:
         return Q
-    from nik.kernels.collision import collides_batch
-
-    (G, joints), rest = s.arguments(robot)
-    hit = np.empty(Q.shape[0], dtype=bool)
-    collides_batch(G, joints, np.ascontiguousarray(_numpy(Q), dtype=np.float64), *rest, 0.0, hit)
+    hit = s.colliding(robot, _numpy(Q))
     return Q[torch.from_numpy(~hit).to(Q.device)]

@@ -36,8 +36,15 @@ class IKResult:
         path: for :meth:`IKSolver.solve_path`, how the trajectory follows its path (:class:`PathReport`:
             every step, the largest and where, reconfigurations, why a waypoint failed); None otherwise.
         collision_free: (B,) bool where a collision model is active (a world, or self-collision:
-            :mod:`nik.ik.collide`): the returned ``q`` is free by the sphere check (conservative: free on the
-            meshes too); ``success`` requires it. None where no collision model is active.
+            :mod:`nik.ik.collide`): the returned ``q`` is free of the world and of the arm itself (with a world,
+            self-collision is checked unless ``self_collision=False``), by the sphere check (conservative: free on
+            the meshes too) or, with a mesh verdict (``IKSolver(mesh_verdict=)``), by the meshes; ``success``
+            requires it. None where no collision model is active.
+        collisions: where a collision model is active, a list of B entries: None where the answer is free, else the
+            sorted names of what overlaps, by the verdict's check: ``"linkA|linkB"`` (the arm against itself) and
+            ``"link|box 2"`` (a link and the world's obstacle of that kind, ``sphere`` | ``box`` | ``capsule``, and
+            index in :meth:`nik.World.packed`); None (not a list) where no collision model is active, and from
+            :meth:`IKSolver.solve_path` (its ``path.reasons`` say ``"colliding"``).
     """
 
     q: torch.Tensor | np.ndarray
@@ -50,6 +57,7 @@ class IKResult:
     path: PathReport | None = None
     collision_free: torch.Tensor | np.ndarray | None = None
     axis_err: torch.Tensor | np.ndarray | None = None
+    collisions: list | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
