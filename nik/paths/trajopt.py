@@ -50,16 +50,21 @@ class TrajCfg:
     eps: float = 1e-9
     stall_rel: float = 1e-7
     iters: int = 100
+    w_col: float = 1.0
+    col_margin: float = 0.005
+    col_sub: int = 4
 
 
 @dataclass
 class TrajResult:
-    """``q: (N, dof)`` the optimised path, ``pos_err, rot_err: (N,)`` (m, rad), ``iterations`` (factorisations)."""
+    """``q: (N, dof)`` the optimised path, ``pos_err, rot_err: (N,)`` (m, rad), ``iterations`` (factorisations),
+    ``clearance`` the smallest signed distance of the collision samples (m; ``inf`` without collision rows)."""
 
     q: np.ndarray
     pos_err: np.ndarray
     rot_err: np.ndarray
     iterations: int
+    clearance: float = math.inf
 
 
 def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot: float = 0.0) -> np.ndarray:
@@ -73,14 +78,16 @@ def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot
     opts[k.W_LIM], opts[k.MARGIN], opts[k.LAMBDA0] = cfg.w_lim, cfg.margin, cfg.lambda0
     opts[k.MAX_STEP_LM], opts[k.EPS], opts[k.STALL_REL] = cfg.max_step_lm, cfg.eps, cfg.stall_rel
     opts[k.TOL_POS], opts[k.TOL_ROT], opts[k.PATH_STEP] = tol_pos, tol_rot, max_step
+    opts[k.W_COL], opts[k.COL_MARGIN], opts[k.COL_SUB] = cfg.w_col, cfg.col_margin, cfg.col_sub
     return opts
 
 
-def residual_count(N: int, dof: int, has_start: bool, has_end: bool = False) -> int:
+def residual_count(N: int, dof: int, has_start: bool, has_end: bool = False, rows: int = 0, sub: int = 1) -> int:
     """Rows of the residual of :func:`nik.kernels.trajopt.residuals`: pose, velocity + step cap, acceleration,
-    limits."""
+    limits; with ``rows`` collision rows per sample (:func:`nik.kernels.trajopt.residuals_collision`), those of
+    every waypoint and of ``sub - 1`` samples inside every step."""
     steps = N - 1 + int(has_start) + int(has_end)
-    return 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N
+    return 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N + rows * (N + steps * (max(sub, 1) - 1))
 
 
 def optimise_path(
@@ -94,6 +101,7 @@ def optimise_path(
     tol_pos: float = 0.0,
     tol_rot: float = 0.0,
     cfg: TrajCfg | None = None,
+    collision: tuple | None = None,
 ) -> TrajResult:
     """The joint path ``Q0: (N, dof)`` optimised as one problem towards the poses ``T: (N, 4, 4)`` (float64, metres).
 
@@ -101,7 +109,10 @@ def optimise_path(
     joints before the path (its first step counts); ``q_end: (dof,)`` those after it (the step to them counts: a
     window of a longer path). ``Q0`` is clamped into the limits first; the answer is inside
     them. With ``tol_pos > 0`` (and ``tol_rot``) each stage stops as soon as the path is feasible: every waypoint
-    within the tolerances, every step at most ``max_step``."""
+    within the tolerances, every step at most ``max_step`` (and, with ``collision``, every sample clear). ``collision``:
+    the arrays after ``q`` of :func:`nik.kernels.collision.collision_residual` (``Setup.arguments(robot)[1]`` of
+    :mod:`nik.ik.collide`): collision rows at the waypoints and inside the steps (``cfg.w_col``, ``cfg.col_margin``,
+    ``cfg.col_sub``). ``TrajResult.clearance``: the smallest signed distance of those samples (``inf`` without)."""
     from nik.kernels import trajopt as k
 
     cfg = _default_cfg(model) if cfg is None else cfg
@@ -114,15 +125,16 @@ def optimise_path(
     qs = np.zeros(n) if q_start is None else np.ascontiguousarray(q_start, dtype=np.float64)
     qe = np.zeros(n) if q_end is None else np.ascontiguousarray(q_end, dtype=np.float64)
     ends = (qs, q_start is not None, qe, q_end is not None)
-    pos, rot = np.empty(N), np.empty(N)
+    pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
     opts = trajopt_options(cfg, max_step, tol_pos, tol_rot)
-    its, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, pos, rot)
+    col = k._no_collision() if collision is None else tuple(collision)
+    its, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
     feasible = (pos <= tol_pos).all() and (rot <= tol_rot).all() and _largest_step(Q, q_start, q_end) <= max_step
-    if tol_pos > 0.0 and feasible:
-        return TrajResult(Q, pos, rot, int(its))  # feasible already
+    if tol_pos > 0.0 and feasible and info[0] >= 0.5 * opts[k.COL_MARGIN]:
+        return TrajResult(Q, pos, rot, int(its), float(info[0]))  # feasible already
     opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM]] *= FINISH  # the finish: the poses first, the shape kept
-    more, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, pos, rot)
-    return TrajResult(Q, pos, rot, int(its + more))
+    more, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
+    return TrajResult(Q, pos, rot, int(its + more), float(info[0]))
 
 
 def _default_cfg(model) -> TrajCfg:
