@@ -220,12 +220,22 @@ def solve_path(
         q, _, _ = polish_path(
             model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
         )
+    check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
+    if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
+        q = _avoid(solver, run, q, check, max_step)
     if is_closed:
         q, its = _close_loop(run, q, its, max_step)
     pos, rot, within = _final_check(run, q)
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
     success = within & inside
     success, free, colliding = collide.path_waypoints(solver, q, world, success)
+    if check is not None:  # the motion between waypoints: samples inside each step (the sphere check)
+        from nik.paths.trajopt import TrajCfg, path_collisions
+
+        _, between = path_collisions(model, q, q0, check.arguments(robot)[1], TrajCfg.col_sub)
+        for i in np.nonzero(between & free)[0]:
+            colliding[i] = "colliding on the way from the waypoint before"
+        success = success & ~between
     reasons = [""] * len(success)
     for i in np.nonzero(~success)[0]:
         why = "" if found is None else found[i]
@@ -466,6 +476,40 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     if (before & ~(after & inside)).any() or new_step > max(max_step, old_step):
         return q, its
     return new, its + new_its
+
+
+def _avoid(solver, run: _Run, q: np.ndarray, check, max_step: float) -> np.ndarray:
+    """``q: (N, dof)`` re-planned around the obstacles of ``check`` (:func:`nik.paths.trajopt.avoid_path`: the
+    whole-path optimisation with collision rows over each colliding stretch), each optimised stretch then polished
+    waypoint by waypoint from its rows: LM towards half the tolerances, and where a row collides, LM with collision
+    rows (:func:`nik.ik.collide.resolve`: from the row first, then the network's hypotheses or the closed form's
+    branches, then uniform restarts)."""
+    from nik.ik.result import IKResult
+    from nik.paths.trajopt import avoid_path
+
+    col = check.arguments(solver.robot)[1]
+
+    def polish(a: int, rows: np.ndarray) -> np.ndarray:
+        """LM with collision rows from each row of waypoints ``a ...`` (:func:`nik.ik.collide.resolve`), kept where
+        it reaches the pose within half ``max_step`` of the row (no jump to another posture)."""
+        idx = a + np.arange(rows.shape[0])
+        pos, rot = _errors(run.model, run.T[idx], rows)
+        miss = np.nonzero((pos > 0.5 * run.tol_pos) | (rot > 0.5 * run.tol_rot))[0]
+        if miss.size:
+            lm = run.model.lm.solve(run.T[idx[miss]], rows[miss], tol_pos=0.5 * run.tol_pos,
+                                    tol_rot=0.5 * run.tol_rot, seed=run.seed, restarts=False)  # fmt: skip
+            rows = rows.copy()
+            rows[miss] = lm.q
+            pos[miss], rot[miss] = lm.pos_err, lm.rot_err
+        ok = (pos <= run.tol_pos) & (rot <= run.tol_rot)
+        res = IKResult(rows, pos, rot, ok, np.zeros(rows.shape[0], dtype=np.int64), "path",
+                       reachable=run.reachable[idx])  # fmt: skip
+        out = collide.resolve(solver.robot, run.plan, torch.from_numpy(run.T[idx]), res, check)
+        good = np.asarray(out.success) & (np.abs(np.asarray(out.q) - rows).max(axis=1) <= 0.5 * max_step)  # no jump
+        return np.where(good[:, None], np.asarray(out.q), rows)
+
+    kw = {"tol_pos": run.tol_pos, "tol_rot": run.tol_rot, "max_step": max_step, "collision": col, "polish": polish}
+    return avoid_path(run.model, run.T, q, run.q0, **kw)
 
 
 def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limits) -> None:

@@ -16,12 +16,22 @@ as reached inside the call's tolerances (``tol_pos``, ``tol_rot``), as everywher
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TrajCfg", "TrajResult", "optimise_path", "polish_path", "residual_count", "trajopt_options"]
+__all__ = [
+    "TrajCfg",
+    "TrajResult",
+    "avoid_path",
+    "optimise_path",
+    "path_collisions",
+    "polish_path",
+    "residual_count",
+    "trajopt_options",
+]
 
 
 #: The second stage of :func:`optimise_path` scales the shape weights by this: the poses are brought inside their
@@ -31,6 +41,9 @@ FINISH = 1e-3
 #: ``max_step``; windows that overlap merge), the rows outside fixed: a 60-waypoint path is one window, a long one
 #: costs in proportion to its problems.
 WINDOW = 40
+#: :func:`avoid_path`: the step hinge's weight and where it starts (a fraction of ``max_step``) when the collision
+#: rows pull (weight 1 per metre of penetration): the path goes round an obstacle in small steps, not in a jump.
+AVOID_W_STEP, AVOID_STEP_FRAC = 100.0, 0.3
 
 
 @dataclass(frozen=True)
@@ -254,3 +267,80 @@ def _windows(bad: np.ndarray, N: int) -> list[tuple[int, int]]:
         else:
             out.append((a, b))
     return out
+
+
+def path_collisions(model, Q: np.ndarray, q_start: np.ndarray | None, collision: tuple, sub: int):
+    """``(at (N,), between (N,))`` bool for ``Q: (N, dof)``: waypoint ``i`` collides; some of the ``sub - 1`` evenly
+    spaced samples inside the step into waypoint ``i`` (from ``q_start``, for ``i = 0``, where given) collides. The
+    sphere check (:func:`nik.kernels.collision.collides_batch`, margin 0) of ``collision``, the arrays after ``q``."""
+    from nik.kernels.collision import collides_batch
+
+    N, n = Q.shape
+    prev = np.concatenate([Q[:1] if q_start is None else q_start[None], Q[:-1]])
+    t = np.arange(1, max(sub, 1)) / max(sub, 1)
+    inside = prev[:, None] + t[None, :, None] * (Q - prev)[:, None]
+    pts = np.ascontiguousarray(np.concatenate([Q[:, None], inside], axis=1).reshape(-1, n), dtype=np.float64)
+    hit = np.empty(len(pts), dtype=bool)
+    collides_batch(model.G, model.joints, pts, *collision, 0.0, hit)
+    hit = hit.reshape(N, -1)
+    return hit[:, 0], hit[:, 1:].any(axis=1)
+
+
+def avoid_path(
+    model,
+    T: np.ndarray,
+    Q: np.ndarray,
+    q_start: np.ndarray | None,
+    *,
+    tol_pos: float,
+    tol_rot: float,
+    max_step: float,
+    collision: tuple,
+    seeds: np.ndarray | None = None,
+    polish=None,
+    cfg: TrajCfg | None = None,
+) -> np.ndarray:
+    """``Q: (N, dof)`` with its colliding stretches (waypoints, or samples inside the steps: :func:`path_collisions`)
+    optimised with the collision rows (:func:`optimise_path` with ``collision``, in windows of :data:`WINDOW`
+    waypoints either side of each, aiming at half the tolerances). ``seeds: (N, dof)``: other answers of the
+    waypoints (collision-free ones, where the caller has them), tried as the window's warm start where the path's own
+    rows do not come free. ``polish(a, rows) -> rows``: a last per-waypoint step on each optimised window (waypoints
+    ``a ...``; the caller's LM with collision rows: the optimisation trades millimetres of pose for clearance, the
+    polish gives them back). A window is kept when it collides at fewer samples, every waypoint reached before still
+    is, and its largest step is not above ``max(max_step, the largest step before)``."""
+    if cfg is None:  # a stiff step hinge: clearance bought by one joint's jump is no answer
+        cfg = dataclasses.replace(_default_cfg(model), w_step=AVOID_W_STEP, step_frac=AVOID_STEP_FRAC)
+    Q = np.ascontiguousarray(Q, dtype=np.float64).copy()
+    T = np.ascontiguousarray(T, dtype=np.float64)
+    at, between = path_collisions(model, Q, q_start, collision, cfg.col_sub)
+    if not (at | between).any():
+        return Q
+    from nik.kernels.lm import pose_errors
+
+    def judged(rows, a, b):
+        """(colliding samples, reached (b - a,), largest step) of ``rows`` as waypoints ``a:b``."""
+        before = q_start if a == 0 else Q[a - 1]
+        x, y = path_collisions(model, rows, before, collision, cfg.col_sub)
+        hits = int(x.sum() + y.sum())
+        if b < len(Q):
+            hits += int(path_collisions(model, Q[b : b + 1], rows[-1], collision, cfg.col_sub)[1][0])
+        pos, rot = np.empty(b - a), np.empty(b - a)
+        pose_errors(model.G, model.joints, T[a:b], np.ascontiguousarray(rows), pos, rot)
+        return hits, (pos <= tol_pos) & (rot <= tol_rot), _largest_step(rows, before, Q[b] if b < len(Q) else None)
+
+    for a, b in _windows(np.nonzero(at | between)[0], len(Q)):
+        hits, ok, step = judged(Q[a:b], a, b)
+        starts = [Q[a:b]] if seeds is None else [Q[a:b], seeds[a:b]]
+        for start in starts:
+            res = optimise_path(
+                model, T[a:b], start, q_start=q_start if a == 0 else Q[a - 1], q_end=Q[b] if b < len(Q) else None,
+                max_step=max_step, tol_pos=0.5 * tol_pos, tol_rot=0.5 * tol_rot, cfg=cfg, collision=collision,
+            )  # fmt: skip
+            rows = res.q if polish is None else polish(a, res.q)
+            hits2, ok2, step2 = judged(rows, a, b)
+            if hits2 < hits and ok2[ok].all() and step2 <= max(max_step, step):
+                Q[a:b] = rows
+                hits, ok, step = hits2, ok2, step2
+            if hits == 0:
+                break
+    return Q
