@@ -150,9 +150,10 @@ def solve_path(
         seed: seeds the uniform starts and restarts.
         representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
         max_step: steps above it are reconfigurations (reported, warned about), radians.
-        world: a :class:`nik.World` (else the solver's): a waypoint whose answer collides is infeasible, reason
-            ``"colliding"`` (:func:`nik.ik.collide.path_waypoints`; the trajectory itself is not re-planned around
-            obstacles).
+        world: a :class:`nik.World` (else the solver's; with self-collision by :func:`nik.ik.collide.setup`'s rule):
+            the path's colliding stretches (waypoints, or samples inside the steps) are re-planned by the path
+            optimisation with collision rows (:func:`_avoid`); what still collides is infeasible, reason
+            ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"`` (the motion).
         closed: None: the path is closed when its last pose equals its first within the tolerances (position and
             rotation); True / False force it. A closed path returns joints whose last row equals its first (module
             docstring, "closed loops").
