@@ -58,4 +58,14 @@ def test_a_path_whose_plain_answer_collides_is_found_free():
     assert not collides(robot, motion, world, self_collision=False).any()  # between the waypoints too
     assert res.path.largest_step <= math.radians(10.0)
     pos, rot = nik.pose_error(torch.from_numpy(T), robot.fk(res.q))
-    assert float(pos.max()) <= 1e-4 and float(rot.max()) <= math.radians(0.1)
+    assert float(pos.max()) <= 0.5e-4 and float(rot.max()) <= math.radians(0.05)  # half the tolerances
+
+
+def test_the_worst_error_of_a_path_is_below_half_the_tolerance():
+    """The last polish aims at half the tolerances (nik.paths.solve.PATH_MARGIN): the worst waypoint is not at the
+    threshold (the same line without the box: its chain answers sit up to 0.084 mm off without that polish)."""
+    robot, solver, T, q0, _, _ = _line_past_a_box()
+    res = solver.solve_path(T, q_start=q0)
+    pos, rot = nik.pose_error(torch.from_numpy(T), robot.fk(res.q))
+    assert res.success.all() and res.path.largest_step <= math.radians(10.0)
+    assert float(pos.max()) <= 0.5e-4 and float(rot.max()) <= math.radians(0.05)

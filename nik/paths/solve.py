@@ -120,6 +120,9 @@ PATH_CLOSE_TOL = 1e-9
 #: Most entries of one of the dynamic programming's ``(N, K, K)`` tables (with a free tool axis, K grows with the
 #: sampled angles: :func:`_free_samples`).
 PATH_DP_CELLS = 30_000_000
+#: The last polish aims at this fraction of the tolerances (every reached waypoint whose error is above it), so that a
+#: path's worst error is not at the threshold; a waypoint moves at most this fraction of ``max_step`` for it.
+PATH_MARGIN = 0.5
 
 
 def solve_path(
@@ -226,6 +229,8 @@ def solve_path(
         q = _avoid(solver, run, q, check, max_step)
     if is_closed:
         q, its = _close_loop(run, q, its, max_step)
+    if run.refine and run.half is None:
+        q = _inside_margin(run, q, max_step, check, is_closed)
     pos, rot, within = _final_check(run, q)
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
     success = within & inside
@@ -477,6 +482,36 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     if (before & ~(after & inside)).any() or new_step > max(max_step, old_step):
         return q, its
     return new, its + new_its
+
+
+def _inside_margin(run: _Run, q: np.ndarray, max_step: float, check, closed: bool) -> np.ndarray:
+    """``q: (N, dof)`` with each waypoint that is reached but not within :data:`PATH_MARGIN` of the tolerances polished
+    by LM (no restarts) from its row towards that fraction of them, kept where its error falls, it moves less than
+    :data:`PATH_MARGIN` ``x max_step`` and (with ``check``) comes out free where it was: a path's worst error is not at
+    the threshold. A closed path's last row follows its first."""
+    pos, rot = _errors(run.model, run.T, q)
+    tp, tr = PATH_MARGIN * run.tol_pos, PATH_MARGIN * run.tol_rot
+    idx = np.nonzero((pos <= run.tol_pos) & (rot <= run.tol_rot) & ((pos > tp) | (rot > tr)))[0]
+    if closed:
+        idx = idx[idx != q.shape[0] - 1]  # the last row follows the first
+    if not idx.size:
+        return q
+    res = run.model.lm.solve(run.T[idx], q[idx], tol_pos=tp, tol_rot=tr, seed=run.seed, restarts=False)
+    keep = (score(res.pos_err, res.rot_err) < score(pos[idx], rot[idx])) & (
+        np.abs(res.q - q[idx]).max(axis=1) <= PATH_MARGIN * max_step
+    )
+    if check is not None:
+        from nik.paths.trajopt import path_collisions
+
+        col = check.arguments(run.model.robot)[1]
+        keep &= (
+            ~path_collisions(run.model, res.q, None, col, 1)[0] | path_collisions(run.model, q[idx], None, col, 1)[0]
+        )
+    out = q.copy()
+    out[idx[keep]] = res.q[keep]
+    if closed:
+        out[-1] = q[-1] + (out[0] - q[0])
+    return out
 
 
 def _avoid(solver, run: _Run, q: np.ndarray, check, max_step: float) -> np.ndarray:
