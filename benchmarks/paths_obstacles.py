@@ -5,8 +5,8 @@ Problems (seeded): a 200-waypoint, 25 cm tool line (orientation fixed) from a co
 ranges; the plain answer (no world) is solved; a box is placed off its elbow at the middle waypoint (``offset`` from
 the elbow, away from the shoulder-wrist axis; half size ``size``), at least 20 cm from the tool's line, kept only
 where the plain answer collides with it. Valid (CppFlow): every waypoint within 0.1 mm / 0.1 deg by FK, no step
-(from q0 on) above 7 deg, no collision of the spheres at the waypoints and at 7 samples inside every step, and
-(coal + example-robot-data installed, panda) none of the meshes at the waypoints. Columns: valid paths, the largest
+(from q0 on) above 7 deg, no collision of the spheres at the waypoints and at 7 samples inside every step (the
+sphere model: conservative, docs/collisions.md). Columns: valid paths, the largest
 step (median over the problems, deg), the joint path length (median, sum of |dq|, rad), the worst error (mm), the
 time per path (median, s). Rows: nik with the world (network on: the default checkpoint; off: ``checkpoint=None``)
 and the plain answer (no world: what the straight motion does).
@@ -68,7 +68,7 @@ def problems(name: str, n: int, seed: int = 0):
     return robot, out
 
 
-def verdict(robot, T, q0, q, world, mesh) -> tuple[bool, float, float, float]:
+def verdict(robot, T, q0, q, world) -> tuple[bool, float, float, float]:
     """``(valid, largest step rad, path length rad, worst error mm)`` of ``q: (N, dof)`` (module docstring)."""
     rows = np.concatenate([q0[None], q])
     d = np.diff(rows, axis=0)
@@ -77,21 +77,15 @@ def verdict(robot, T, q0, q, world, mesh) -> tuple[bool, float, float, float]:
     pos, rot = (x.numpy() for x in nik.pose_error(torch.from_numpy(T), robot.fk(torch.from_numpy(q))))
     ok = pos.max() <= 1e-4 and rot.max() <= math.radians(0.1) and np.abs(d).max() <= STEP
     ok = ok and not collides(robot, motion, world, self_collision=False).any()
-    if ok and mesh is not None:
-        ok = not mesh.collides(q, world).any()
     return bool(ok), float(np.abs(d).max()), float(np.abs(d).sum()), float(pos.max() * 1e3)
 
 
 def bench(name: str, n: int) -> list[str]:
     robot, probs = problems(name, n)
-    mesh = None
-    try:
-        from nik.collision.meshcheck import MeshChecker
-
-        mesh = MeshChecker(robot)
-    except Exception:  # coal / the meshes not installed: the spheres only
-        mesh = None
-    solvers = {"nik, world, network on": nik.IKSolver(robot), "nik, world, network off": nik.IKSolver(robot, checkpoint=None)}
+    solvers = {
+        "nik, world, network on": nik.IKSolver(robot),
+        "nik, world, network off": nik.IKSolver(robot, checkpoint=None),
+    }
     rows = []
     for label, solver in [*solvers.items(), ("plain (no world)", solvers["nik, world, network off"])]:
         res = []
@@ -101,7 +95,7 @@ def bench(name: str, n: int) -> list[str]:
                 warnings.simplefilter("ignore")
                 out = solver.solve_path(T, q_start=q0, world=None if label.startswith("plain") else world)
             dt = time.perf_counter() - t
-            res.append((*verdict(robot, T, q0, out.q.numpy(), world, mesh), dt))
+            res.append((*verdict(robot, T, q0, out.q.numpy(), world), dt))
         v, step, length, err, dt = (np.array(x) for x in zip(*res, strict=True))
         rows.append(
             f"| {name} | {label} | {int(v.sum())}/{len(v)} | {math.degrees(np.median(step)):.2f} | "
@@ -115,7 +109,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=6, help="problems per robot")
     ap.add_argument("--robots", default="panda,xarm7")
     args = ap.parse_args()
-    print("| robot | solver | valid | largest step (deg, median) | path length (rad, median) | worst error (mm) | s / path |")
+    print("| robot | solver | valid | largest step (deg) | path length (rad) | worst error (mm) | s / path |")
     print("|---|---|---|---|---|---|---|")
     for name in args.robots.split(","):
         for row in bench(name, args.n):

@@ -521,7 +521,7 @@ def _avoid(solver, run: _Run, q: np.ndarray, check, max_step: float) -> np.ndarr
     rows (:func:`nik.ik.collide.resolve`: from the row first, then the network's hypotheses or the closed form's
     branches, then uniform restarts)."""
     from nik.ik.result import IKResult
-    from nik.paths.trajopt import avoid_path
+    from nik.paths.trajopt import TrajCfg, _windows, avoid_path, path_collisions
 
     col = check.arguments(solver.robot)[1]
 
@@ -545,7 +545,23 @@ def _avoid(solver, run: _Run, q: np.ndarray, check, max_step: float) -> np.ndarr
         return np.where(good[:, None], np.asarray(out.q), rows)
 
     kw = {"tol_pos": run.tol_pos, "tol_rot": run.tol_rot, "max_step": max_step, "collision": col, "polish": polish}
-    return avoid_path(run.model, run.T, q, run.q0, **kw)
+    q = avoid_path(run.model, run.T, q, run.q0, **kw)
+    at, between = path_collisions(run.model, q, run.q0, col, TrajCfg.col_sub)
+    bad = np.nonzero(at | between)[0]
+    if not bad.size:
+        return q
+    # more candidates: a chain of collision-free answers over each stretch still colliding (each waypoint's LM seeded
+    # by the previous free answer, then the collision LM where it collides), the optimisation's other warm start
+    seeds = q.copy()
+    for a, b in _windows(bad, q.shape[0]):
+        prev = (q[a - 1] if a else q[0]) if run.q0 is None or a else run.q0
+        for i in range(a, b):
+            lm = run.model.lm.solve(run.T[i : i + 1], prev[None], tol_pos=0.5 * run.tol_pos,
+                                    tol_rot=0.5 * run.tol_rot, seed=run.seed, restarts=False)  # fmt: skip
+            row = polish(i, lm.q)[0]
+            if np.abs(row - prev).max() <= max_step:
+                seeds[i] = prev = row
+    return avoid_path(run.model, run.T, q, run.q0, seeds=seeds, **kw)
 
 
 def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limits) -> None:
