@@ -4,7 +4,7 @@ sweeps the arm through a box, with CppFlow's criteria.
 Problems (seeded): a 200-waypoint, 25 cm tool line (orientation fixed) from a configuration in the middle 60 % of the
 ranges; the plain answer (no world) is solved; a box is placed off its elbow at the middle waypoint (``offset`` from
 the elbow, away from the shoulder-wrist axis; half size ``size``), at least 20 cm from the tool's line, kept only
-where the plain answer collides with it. Valid (CppFlow): every waypoint within 0.1 mm / 0.1 deg by FK, no step
+where the plain answer (which takes no step above 7 deg) collides with it and ``q0`` does not. Valid (CppFlow): every waypoint within 0.1 mm / 0.1 deg by FK, no step
 (from q0 on) above 7 deg, no collision of the spheres at the waypoints and at 7 samples inside every step (the
 sphere model: conservative, docs/collisions.md). Columns: valid paths, the largest
 step (median over the problems, deg), the joint path length (median, sum of |dq|, rad), the worst error (mm), the
@@ -63,7 +63,8 @@ def problems(name: str, n: int, seed: int = 0):
         away = elbow - sh - ((elbow - sh) @ ax) * ax
         offset, size = BOXES[len(out) % len(BOXES)]
         world = nik.World().add_box(elbow + offset * away / np.linalg.norm(away), [size] * 3)
-        if collides(robot, q, world, self_collision=False).any():
+        hit = collides(robot, np.concatenate([q0[None], q]), world, self_collision=False)
+        if hit.any() and not hit[0] and np.abs(np.diff(q, axis=0)).max() <= STEP:  # q0 free, no jump of its own
             out.append((T, q0, world))
     return robot, out
 
