@@ -7,16 +7,17 @@ import math
 import warnings
 
 import numpy as np
+import pytest
 import torch
 
 import nik
 from nik.collision import collides, link_frames
 
 
-def _line_past_a_box(seed: int = 0, N: int = 200):
+def _line_past_a_box(seed: int = 0, N: int = 200, robot=None):
     """A 25 cm tool line on the panda whose plain answer (from ``q_start``) sweeps the elbow through a small box
     placed 10 cm off the elbow, away from the shoulder-wrist axis, at least 20 cm from the tool's line."""
-    robot = nik.load_robot("panda")
+    robot = nik.load_robot("panda") if robot is None else robot
     solver = nik.IKSolver(robot)
     rng = np.random.default_rng(seed)
     lim = robot.limits.numpy()
@@ -69,3 +70,32 @@ def test_the_worst_error_of_a_path_is_below_half_the_tolerance():
     pos, rot = nik.pose_error(torch.from_numpy(T), robot.fk(res.q))
     assert res.success.all() and res.path.largest_step <= math.radians(10.0)
     assert float(pos.max()) <= 0.5e-4 and float(rot.max()) <= math.radians(0.05)
+
+
+def test_a_path_past_a_box_is_free_on_the_meshes():
+    """The same problem on example-robot-data's panda (its sphere model fitted to its meshes): the plain answer hits
+    the box by the meshes (coal), the answer among obstacles does not, at any waypoint."""
+    pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik[collision-check]')")
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from collisions import panda_urdf
+    finally:
+        sys.path.pop(0)
+    try:
+        urdf = panda_urdf()
+    except SystemExit:
+        pytest.skip("example-robot-data's panda (with meshes) is not installed")
+    from nik.collision.meshcheck import MeshCheck
+    from nik.collision.model import srdf_disabled, srdf_of
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = nik.load_robot(urdf, end_link="panda_hand")
+    robot, solver, T, q0, world, plain = _line_past_a_box(robot=robot)
+    mesh = MeshCheck(robot, urdf, skip=list(srdf_disabled(srdf_of(urdf))))
+    assert mesh.collides(plain, world, self_collision=False).any()
+    res = solver.solve_path(T, q_start=q0, world=world)
+    assert res.success.all() and not mesh.collides(res.q.numpy(), world, self_collision=False).any()
