@@ -303,8 +303,8 @@ def avoid_path(
     """``Q: (N, dof)`` with its colliding stretches (waypoints, or samples inside the steps: :func:`path_collisions`)
     optimised with the collision rows (:func:`optimise_path` with ``collision``, in windows of :data:`WINDOW`
     waypoints either side of each, aiming at half the tolerances). ``seeds: (N, dof)``: other answers of the
-    waypoints (collision-free ones, where the caller has them), tried as the window's warm start where the path's own
-    rows do not come free. ``polish(a, rows) -> rows``: a last per-waypoint step on each optimised window (waypoints
+    waypoints (collision-free ones, where the caller has them), the windows' warm start instead of the path's rows.
+    ``polish(a, rows) -> rows``: a last per-waypoint step on each optimised window (waypoints
     ``a ...``; the caller's LM with collision rows: the optimisation trades millimetres of pose for clearance, the
     polish gives them back). A window is kept when it collides at fewer samples, every waypoint reached before still
     is, and its largest step is not above ``max(max_step, the largest step before)``."""
@@ -330,17 +330,13 @@ def avoid_path(
 
     for a, b in _windows(np.nonzero(at | between)[0], len(Q)):
         hits, ok, step = judged(Q[a:b], a, b)
-        starts = [Q[a:b]] if seeds is None else [Q[a:b], seeds[a:b]]
-        for start in starts:
-            res = optimise_path(
-                model, T[a:b], start, q_start=q_start if a == 0 else Q[a - 1], q_end=Q[b] if b < len(Q) else None,
-                max_step=max_step, tol_pos=0.5 * tol_pos, tol_rot=0.5 * tol_rot, cfg=cfg, collision=collision,
-            )  # fmt: skip
-            rows = res.q if polish is None else polish(a, res.q)
-            hits2, ok2, step2 = judged(rows, a, b)
-            if hits2 < hits and ok2[ok].all() and step2 <= max(max_step, step):
-                Q[a:b] = rows
-                hits, ok, step = hits2, ok2, step2
-            if hits == 0:
-                break
+        res = optimise_path(
+            model, T[a:b], Q[a:b] if seeds is None else seeds[a:b], q_start=q_start if a == 0 else Q[a - 1],
+            q_end=Q[b] if b < len(Q) else None, max_step=max_step, tol_pos=0.5 * tol_pos, tol_rot=0.5 * tol_rot,
+            cfg=cfg, collision=collision,
+        )  # fmt: skip
+        rows = res.q if polish is None else polish(a, res.q)
+        hits2, ok2, step2 = judged(rows, a, b)
+        if hits2 < hits and ok2[ok].all() and step2 <= max(max_step, step):
+            Q[a:b] = rows
     return Q
