@@ -8,8 +8,8 @@ where the plain answer (which takes no step above 7 deg) collides with it and ``
 every waypoint within 0.1 mm / 0.1 deg by FK, no step (from q0 on) above 7 deg, no collision of the spheres at the
 waypoints and at 7 samples inside every step (the sphere model: conservative, docs/collisions.md). Columns: valid
 paths, the largest step (median over the problems, deg), the joint path length (median, sum of |dq|, rad), the
-worst error (mm), the time per path (median, s). Rows: nik with the world (network on: the default checkpoint; off: ``checkpoint=None``)
-and the plain answer (no world: what the straight motion does).
+worst error (mm), the time per path (median, s). Rows: nik with the world (network on: the default checkpoint;
+off: ``checkpoint=None``) and the plain answer (no world: what the straight motion does).
 
     OMP_NUM_THREADS=1 python benchmarks/paths_obstacles.py --n 8
 
