@@ -168,3 +168,47 @@ def test_optimise_path_refuses_poses_that_do_not_match_the_path():
     Q = np.zeros((4, robot.dof))
     with pytest.raises(ValueError, match="T must have shape"):
         optimise_path(model_of(robot), np.tile(np.eye(4), (3, 1, 1)), Q)
+
+
+def test_collision_rows_match_finite_differences():
+    """The collision rows of the path optimisation (waypoints and samples inside the steps, a box and self pairs):
+    ``J^T J`` and ``-J^T r`` of :func:`normal_equations_collision` against finite differences of
+    :func:`residuals_collision`, on a path some of whose samples sit inside the box."""
+    from nik.collision import link_frames
+    from nik.ik.collide import setup
+    from nik.kernels.trajopt import normal_equations_collision, residuals_collision
+
+    robot = nik.load_robot("panda")
+    m = model_of(robot)
+    rng = np.random.default_rng(4)
+    N, n = 4, robot.dof
+    Q = rng.uniform(0.5 * m.lo, 0.5 * m.hi, size=(N, n))
+    elbow = link_frames(robot, torch.from_numpy(Q[1:2]))[0, 4, :3, 3].numpy()
+    world = nik.World().add_box(elbow + [0.13, 0.07, 0.04], [0.2, 0.25, 0.3])  # off its medial planes
+    _, col = setup(robot, world, True).arguments(robot)
+    T = np.ascontiguousarray(robot.fk(torch.from_numpy(Q)).numpy())
+    opts = trajopt_options(TrajCfg(w_col=2.0, col_margin=0.03, col_sub=3), math.radians(10.0))
+    qs = np.clip(Q[0] + 0.1, m.lo, m.hi)
+    rows = len(col[3]) + len(col[2]) - 1
+    R = residual_count(N, n, True, False, rows=rows, sub=3)
+    r = np.empty(R)
+    cost = residuals_collision(m.G, m.joints, T, Q, qs, True, Q[0], False, opts, col, r)
+    assert cost == pytest.approx((r**2).sum())
+    assert np.abs(r[R - rows * (N + 2 * N) :]).max() > 0.01  # collision rows are active
+    J = np.empty((R, N * n))
+    h = 1e-7
+    for f in range(N * n):
+        cols = []
+        for s in (h, -h):
+            Qs = Q.copy()
+            Qs.flat[f] += s
+            rs = np.empty(R)
+            residuals_collision(m.G, m.joints, T, Qs, qs, True, Q[0], False, opts, col, rs)
+            cols.append(rs)
+        J[:, f] = (cols[0] - cols[1]) / (2 * h)
+    H, g = np.empty((N * n, 3 * n)), np.empty(N * n)
+    assert normal_equations_collision(m.G, m.joints, T, Q, qs, True, Q[0], False, opts, col, H, g) == pytest.approx(
+        cost
+    )
+    np.testing.assert_allclose(_dense(H), J.T @ J, atol=1e-5)
+    np.testing.assert_allclose(g, -J.T @ r, atol=1e-5)

@@ -12,7 +12,13 @@ residual stacks, for the poses ``T: (N, 4, 4)``:
 - **step cap** (``n`` rows per step): ``sqrt(w_step) sign(d) max(|d| - step_cap, 0)`` with ``d = q_i+1 - q_i``: a
   hinge that pushes every step under ``step_cap`` (a fraction of the path's ``max_step``);
 - **limits** (``2 n`` rows per waypoint): ``sqrt(w_lim) max(lo + m - q, 0)`` and ``sqrt(w_lim) max(q - hi + m, 0)``
-  with the margin ``m = margin x (hi - lo)``: a barrier near each limit.
+  with the margin ``m = margin x (hi - lo)``: a barrier near each limit;
+- **collision** (``R = P + L`` rows per sample, only with a collision model: the ``*_collision`` kernels and
+  :func:`trajopt` given one): ``sqrt(w_col) max(col_margin - d, 0)`` of the signed distances ``d`` of
+  :func:`nik.kernels.collision.collision_residual` (self pairs and the world), at every waypoint and at
+  ``col_sub - 1`` evenly spaced points inside every step (the motion between waypoints: ``q = (1 - t) q_i + t
+  q_i+1``, Jacobian ``(1 - t) J`` on block ``i`` and ``t J`` on block ``i + 1``). A waypoint's rows touch only its
+  own block, a step's rows the two blocks either side: the band stays as it is.
 
 The acceleration rows couple waypoints ``i - 1, i, i + 1``, so the normal matrix ``J^T J`` is block-pentadiagonal
 (``n x n`` blocks, two blocks either side of the diagonal): in scalars, a band of half-width ``b = 3 n - 1``. It is
@@ -24,7 +30,8 @@ The step is LM's: ``(A + lambda (diag(A) + eps)) dq = -J^T r``, scaled so that n
 cost ``|r|^2`` falls (lambda shrinks by 0.3), else lambda grows by 5 and the step is refactorised. It stops after
 ``iters`` factorisations, when a kept step lowers the cost by less than ``stall_rel`` of it, or as soon as the path
 is feasible (every waypoint within ``tol_pos`` and ``tol_rot``, every step at most ``path_step``; ``tol_pos <= 0``:
-never): the polish asks for a feasible path, not for the optimum of the weights.
+never; with collision rows, also every sample at least ``col_margin / 2`` from a collision): the polish asks for a
+feasible path, not for the optimum of the weights.
 
 Options ``opts: (len OPTS,) float64`` (:func:`trajopt_options` in :mod:`nik.paths.trajopt` builds them); indices below.
 """
@@ -37,14 +44,24 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, _chain, _chain_jacobian
+from nik.kernels.collision import collision_residual
 from nik.kernels.lm import _residual
 
-__all__ = ["band_cholesky", "band_solve", "normal_equations", "path_check", "residuals", "trajopt"]
+__all__ = [
+    "band_cholesky",
+    "band_solve",
+    "normal_equations",
+    "normal_equations_collision",
+    "path_check",
+    "residuals",
+    "residuals_collision",
+    "trajopt",
+]
 
 ROT_WEIGHT, W_VEL, W_ACC, W_STEP, STEP_CAP, W_LIM, MARGIN, LAMBDA0, MAX_STEP_LM, EPS, STALL_REL = range(11)
-TOL_POS, TOL_ROT, PATH_STEP = 11, 12, 13
+TOL_POS, TOL_ROT, PATH_STEP, W_COL, COL_MARGIN, COL_SUB = 11, 12, 13, 14, 15, 16
 #: length of ``opts``
-OPTS = 14
+OPTS = 17
 
 
 @kernel
@@ -98,10 +115,71 @@ def _pair(H, g, r, ia, ib, wa, wb, res):
 
 
 @kernel
-def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, pos, rot):
+def _add_row(H, g, row, res, a, wa, b, wb):
+    """Add one scalar residual ``res`` whose Jacobian is ``wa row`` on block ``a`` and ``wb row`` on block ``b > a``
+    (``row: (n,)``; a block ``< 0``: none) to the band ``H`` and ``g = -J^T r``."""
+    n = row.shape[0]
+    for blk, w in ((a, wa), (b, wb)):
+        if blk < 0:
+            continue
+        base = blk * n
+        for x in range(n):
+            g[base + x] -= w * row[x] * res
+            for c in range(x + 1):
+                H[base + x, x - c] += w * w * row[x] * row[c]
+    if a >= 0 and b >= 0:
+        off = (b - a) * n
+        for x in range(n):
+            for c in range(n):
+                H[b * n + x, off + x - c] += wb * wa * row[x] * row[c]
+
+
+@kernel
+def _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g, r, at, col, info):
+    """The collision rows (module docstring) added to ``H, g`` (with ``build``) and written to ``r`` from ``at`` (when
+    its length is > 0); ``info[0]``: the smallest signed distance over the samples (metres). Returns the cost."""
+    N, n = Q.shape
+    spheres, frames, start, pairs, w_sph, w_box, w_cap, self_on = col
+    R = pairs.shape[0] + start.shape[0] - 1
+    sub = max(int(opts[COL_SUB]), 1)
+    sc, margin = math.sqrt(opts[W_COL]), opts[COL_MARGIN]
+    keep = r.shape[0] > 0
+    qx, rr, Jr = np.empty(n), np.empty(R), np.empty((R, n))
+    cost = 0.0
+    info[0] = np.inf
+    for i in range(-1, N):  # the samples of the step from row i (qs when -1) to row i + 1 (qe when N)
+        for k in range(sub):
+            t = k / sub
+            if (i < 0 and (not has_start or k == 0)) or (i == N - 1 and k > 0 and not has_end):
+                continue
+            for j in range(n):
+                x0 = qs[j] if i < 0 else Q[i, j]
+                x1 = x0 if k == 0 else (Q[i + 1, j] if i + 1 < N else qe[j])
+                qx[j] = (1.0 - t) * x0 + t * x1
+            d = collision_residual(G, joints, qx, spheres, frames, start, pairs, w_sph, w_box, w_cap, self_on, margin,
+                                   rr, Jr)  # fmt: skip
+            info[0] = min(info[0], d)
+            a, wa = (i, sc * (1.0 - t)) if i >= 0 else (-1, 0.0)
+            b, wb = (i + 1, sc * t) if (k > 0 and i + 1 < N) else (-1, 0.0)
+            for row in range(R):
+                res = sc * rr[row]
+                if keep:
+                    r[at] = res
+                    at += 1
+                if res > 0.0:
+                    cost += res * res
+                    if build:
+                        _add_row(H, g, Jr[row], res, a, wa, b, wb)
+    return cost
+
+
+@kernel
+def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, pos, rot, col, info):
     """The residual and, with ``build``, the band ``H = J^T J`` and ``g = -J^T r`` (zeroed here). ``r``: the residual
     vector written in the order of the module docstring when its length is > 0 (:func:`residuals`). Fills
-    ``pos, rot: (N,)`` (metres, radians); returns the cost ``|r|^2``."""
+    ``pos, rot: (N,)`` (metres, radians) and ``info[0]``, the smallest signed distance of the collision samples
+    (``inf`` without collision rows); returns the cost ``|r|^2``. ``col``: the collision arrays after ``q`` of
+    :func:`nik.kernels.collision.collision_residual` (an empty model: no rows)."""
     N, n = Q.shape
     rw = opts[ROT_WEIGHT]
     sv, sa, sh, sl = math.sqrt(opts[W_VEL]), math.sqrt(opts[W_ACC]), math.sqrt(opts[W_STEP]), math.sqrt(opts[W_LIM])
@@ -211,32 +289,64 @@ def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, po
                 if above > 0.0:
                     H[f, 0] += sl * sl
                     g[f] -= sl * res_hi
+    info[0] = np.inf
+    if opts[W_COL] > 0.0 and col[3].shape[0] + col[2].shape[0] > 1:
+        cost += _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g, r, at, col, info)
     return cost
+
+
+@kernel
+def _no_collision():
+    """The collision arguments of no model (no rows)."""
+    return (
+        np.empty((0, 4)),
+        np.empty(0, dtype=np.int64),
+        np.zeros(1, dtype=np.int64),
+        np.empty((0, 2), dtype=np.int64),
+        np.empty((0, 4)),
+        np.empty((0, 15)),
+        np.empty((0, 7)),
+        False,
+    )
 
 
 @kernel
 def residuals(G, joints, T, Q, qs, has_start, qe, has_end, opts, r):
     """The residual vector ``r`` (its length: :func:`nik.paths.trajopt.residual_count`) of ``Q: (N, n)``; returns
     ``|r|^2`` (for tests: finite differences of it check :func:`normal_equations`)."""
+    return residuals_collision(G, joints, T, Q, qs, has_start, qe, has_end, opts, _no_collision(), r)
+
+
+@kernel
+def residuals_collision(G, joints, T, Q, qs, has_start, qe, has_end, opts, col, r):
+    """:func:`residuals` with the collision rows of ``col`` (the arrays after ``q`` of
+    :func:`nik.kernels.collision.collision_residual`, as a tuple) appended."""
     N = Q.shape[0]
     H = np.empty((1, 1))
     g = np.empty(1)
-    pos, rot = np.empty(N), np.empty(N)
-    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, False, H, g, r, pos, rot)
+    pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
+    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, False, H, g, r, pos, rot, col, info)
 
 
 @kernel
 def normal_equations(G, joints, T, Q, qs, has_start, qe, has_end, opts, H, g):
     """The band ``H: (N n, 3 n)`` of ``J^T J`` and ``g = -J^T r: (N n,)`` at ``Q``; returns ``|r|^2``."""
-    N = Q.shape[0]
-    pos, rot = np.empty(N), np.empty(N)
-    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, np.empty(0), pos, rot)
+    return normal_equations_collision(G, joints, T, Q, qs, has_start, qe, has_end, opts, _no_collision(), H, g)
 
 
 @kernel
-def _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot):
-    """Every waypoint within ``TOL_POS`` / ``TOL_ROT`` (by ``pos, rot``) and every step at most ``PATH_STEP``."""
-    if not opts[TOL_POS] > 0.0:
+def normal_equations_collision(G, joints, T, Q, qs, has_start, qe, has_end, opts, col, H, g):
+    """:func:`normal_equations` with the collision rows of ``col`` (as :func:`residuals_collision`)."""
+    N = Q.shape[0]
+    pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
+    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, np.empty(0), pos, rot, col, info)
+
+
+@kernel
+def _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot, info):
+    """Every waypoint within ``TOL_POS`` / ``TOL_ROT`` (by ``pos, rot``), every step at most ``PATH_STEP`` and every
+    collision sample (``info[0]``, its smallest distance) at least ``COL_MARGIN / 2`` clear."""
+    if not opts[TOL_POS] > 0.0 or info[0] < 0.5 * opts[COL_MARGIN]:
         return False
     N, n = Q.shape
     for i in range(N):
@@ -254,12 +364,13 @@ def _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot):
 
 
 @kernel
-def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, pos, rot):
+def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, col, pos, rot, info):
     """Optimise ``Q: (N, n)`` in place (inside the limits on entry and on return) towards the poses ``T: (N, 4, 4)``.
 
     ``qs: (n,)`` the joints before the path, counted when ``has_start``; ``qe: (n,)`` those after it, counted when
-    ``has_end``. ``pos, rot: (N,)`` out, the pose errors of
-    the returned ``Q`` (metres, radians). Returns ``(factorisations, final cost)``."""
+    ``has_end``. ``col``: the collision arrays (:func:`residuals_collision`; no rows: ``_no_collision()``, or
+    ``W_COL`` 0). ``pos, rot: (N,)`` out, the pose errors of the returned ``Q`` (metres, radians); ``info[0]`` its
+    smallest collision distance. Returns ``(factorisations, final cost)``."""
     N, n = Q.shape
     M, b = N * n, 3 * n - 1
     H = np.zeros((M, b + 1))
@@ -270,7 +381,8 @@ def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, pos, rot):
     pt, rt = np.empty(N), np.empty(N)
     none = np.empty(0)
     lam = opts[LAMBDA0]
-    cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot)
+    inf2 = np.empty(1)
+    cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot, col, info)
     it = 0
     while it < iters:
         it += 1
@@ -290,13 +402,13 @@ def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, pos, rot):
             for j in range(n):
                 x = Q[i, j] + scale * dq[i * n + j]
                 X[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
-        new = _terms(G, joints, T, X, qs, has_start, qe, has_end, opts, False, H, g, none, pt, rt)
+        new = _terms(G, joints, T, X, qs, has_start, qe, has_end, opts, False, H, g, none, pt, rt, col, inf2)
         if new < cost:
             Q[:] = X
             drop = cost - new
-            cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot)
+            cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot, col, info)
             lam = max(lam * 0.3, 1e-12)
-            if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot):
+            if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot, info):
                 break
         else:
             lam *= 5.0

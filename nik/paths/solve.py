@@ -120,6 +120,9 @@ PATH_CLOSE_TOL = 1e-9
 #: Most entries of one of the dynamic programming's ``(N, K, K)`` tables (with a free tool axis, K grows with the
 #: sampled angles: :func:`_free_samples`).
 PATH_DP_CELLS = 30_000_000
+#: The last polish aims at this fraction of the tolerances (every reached waypoint whose error is above it), so that a
+#: path's worst error is not at the threshold; a waypoint moves at most this fraction of ``max_step`` for it.
+PATH_MARGIN = 0.5
 
 
 def solve_path(
@@ -150,9 +153,10 @@ def solve_path(
         seed: seeds the uniform starts and restarts.
         representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
         max_step: steps above it are reconfigurations (reported, warned about), radians.
-        world: a :class:`nik.World` (else the solver's): a waypoint whose answer collides is infeasible, reason
-            ``"colliding"`` (:func:`nik.ik.collide.path_waypoints`; the trajectory itself is not re-planned around
-            obstacles).
+        world: a :class:`nik.World` (else the solver's; with self-collision by :func:`nik.ik.collide.setup`'s rule):
+            the path's colliding stretches (waypoints, or samples inside the steps) are re-planned by the path
+            optimisation with collision rows (:func:`_avoid`); what still collides is infeasible, reason
+            ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"`` (the motion).
         closed: None: the path is closed when its last pose equals its first within the tolerances (position and
             rotation); True / False force it. A closed path returns joints whose last row equals its first (module
             docstring, "closed loops").
@@ -220,12 +224,24 @@ def solve_path(
         q, _, _ = polish_path(
             model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
         )
+    check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
+    if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
+        q = _avoid(solver, run, q, check, max_step)
     if is_closed:
         q, its = _close_loop(run, q, its, max_step)
+    if run.refine and run.half is None:
+        q = _inside_margin(run, q, max_step, check, is_closed)
     pos, rot, within = _final_check(run, q)
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
     success = within & inside
     success, free, colliding = collide.path_waypoints(solver, q, world, success)
+    if check is not None:  # the motion between waypoints: samples inside each step (the sphere check)
+        from nik.paths.trajopt import TrajCfg, path_collisions
+
+        _, between = path_collisions(model, q, q0, check.arguments(robot)[1], TrajCfg.col_sub)
+        for i in np.nonzero(between & free)[0]:
+            colliding[i] = "colliding on the way from the waypoint before"
+        success = success & ~between
     reasons = [""] * len(success)
     for i in np.nonzero(~success)[0]:
         why = "" if found is None else found[i]
@@ -466,6 +482,86 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     if (before & ~(after & inside)).any() or new_step > max(max_step, old_step):
         return q, its
     return new, its + new_its
+
+
+def _inside_margin(run: _Run, q: np.ndarray, max_step: float, check, closed: bool) -> np.ndarray:
+    """``q: (N, dof)`` with each waypoint that is reached but not within :data:`PATH_MARGIN` of the tolerances polished
+    by LM (no restarts) from its row towards that fraction of them, kept where its error falls, it moves less than
+    :data:`PATH_MARGIN` ``x max_step`` and (with ``check``) comes out free where it was: a path's worst error is not at
+    the threshold. A closed path's last row follows its first."""
+    pos, rot = _errors(run.model, run.T, q)
+    tp, tr = PATH_MARGIN * run.tol_pos, PATH_MARGIN * run.tol_rot
+    idx = np.nonzero((pos <= run.tol_pos) & (rot <= run.tol_rot) & ((pos > tp) | (rot > tr)))[0]
+    if closed:
+        idx = idx[idx != q.shape[0] - 1]  # the last row follows the first
+    if not idx.size:
+        return q
+    res = run.model.lm.solve(run.T[idx], q[idx], tol_pos=tp, tol_rot=tr, seed=run.seed, restarts=False)
+    keep = (score(res.pos_err, res.rot_err) < score(pos[idx], rot[idx])) & (
+        np.abs(res.q - q[idx]).max(axis=1) <= PATH_MARGIN * max_step
+    )
+    if check is not None:
+        from nik.paths.trajopt import path_collisions
+
+        col = check.arguments(run.model.robot)[1]
+        keep &= (
+            ~path_collisions(run.model, res.q, None, col, 1)[0] | path_collisions(run.model, q[idx], None, col, 1)[0]
+        )
+    out = q.copy()
+    out[idx[keep]] = res.q[keep]
+    if closed:
+        out[-1] = q[-1] + (out[0] - q[0])
+    return out
+
+
+def _avoid(solver, run: _Run, q: np.ndarray, check, max_step: float) -> np.ndarray:
+    """``q: (N, dof)`` re-planned around the obstacles of ``check`` (:func:`nik.paths.trajopt.avoid_path`: the
+    whole-path optimisation with collision rows over each colliding stretch), each optimised stretch then polished
+    waypoint by waypoint from its rows: LM towards half the tolerances, and where a row collides, LM with collision
+    rows (:func:`nik.ik.collide.resolve`: from the row first, then the network's hypotheses or the closed form's
+    branches, then uniform restarts)."""
+    from nik.ik.result import IKResult
+    from nik.paths.trajopt import TrajCfg, _windows, avoid_path, path_collisions
+
+    col = check.arguments(solver.robot)[1]
+
+    def polish(a: int, rows: np.ndarray) -> np.ndarray:
+        """LM with collision rows from each row of waypoints ``a ...`` (:func:`nik.ik.collide.resolve`), kept where
+        it reaches the pose within half ``max_step`` of the row (no jump to another posture)."""
+        idx = a + np.arange(rows.shape[0])
+        pos, rot = _errors(run.model, run.T[idx], rows)
+        miss = np.nonzero((pos > 0.5 * run.tol_pos) | (rot > 0.5 * run.tol_rot))[0]
+        if miss.size:
+            lm = run.model.lm.solve(run.T[idx[miss]], rows[miss], tol_pos=0.5 * run.tol_pos,
+                                    tol_rot=0.5 * run.tol_rot, seed=run.seed, restarts=False)  # fmt: skip
+            rows = rows.copy()
+            rows[miss] = lm.q
+            pos[miss], rot[miss] = lm.pos_err, lm.rot_err
+        ok = (pos <= run.tol_pos) & (rot <= run.tol_rot)
+        res = IKResult(rows, pos, rot, ok, np.zeros(rows.shape[0], dtype=np.int64), "path",
+                       reachable=run.reachable[idx])  # fmt: skip
+        out = collide.resolve(solver.robot, run.plan, torch.from_numpy(run.T[idx]), res, check)
+        good = np.asarray(out.success) & (np.abs(np.asarray(out.q) - rows).max(axis=1) <= 0.5 * max_step)  # no jump
+        return np.where(good[:, None], np.asarray(out.q), rows)
+
+    kw = {"tol_pos": run.tol_pos, "tol_rot": run.tol_rot, "max_step": max_step, "collision": col, "polish": polish}
+    q = avoid_path(run.model, run.T, q, run.q0, **kw)
+    at, between = path_collisions(run.model, q, run.q0, col, TrajCfg.col_sub)
+    bad = np.nonzero(at | between)[0]
+    if not bad.size:
+        return q
+    # more candidates: a chain of collision-free answers over each stretch still colliding (each waypoint's LM seeded
+    # by the previous free answer, then the collision LM where it collides), the optimisation's other warm start
+    seeds = q.copy()
+    for a, b in _windows(bad, q.shape[0]):
+        prev = (q[a - 1] if a else q[0]) if run.q0 is None or a else run.q0
+        for i in range(a, b):
+            lm = run.model.lm.solve(run.T[i : i + 1], prev[None], tol_pos=0.5 * run.tol_pos,
+                                    tol_rot=0.5 * run.tol_rot, seed=run.seed, restarts=False)  # fmt: skip
+            row = polish(i, lm.q)[0]
+            if np.abs(row - prev).max() <= max_step:
+                seeds[i] = prev = row
+    return avoid_path(run.model, run.T, q, run.q0, seeds=seeds, **kw)
 
 
 def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limits) -> None:

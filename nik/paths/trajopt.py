@@ -16,12 +16,22 @@ as reached inside the call's tolerances (``tol_pos``, ``tol_rot``), as everywher
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TrajCfg", "TrajResult", "optimise_path", "polish_path", "residual_count", "trajopt_options"]
+__all__ = [
+    "TrajCfg",
+    "TrajResult",
+    "avoid_path",
+    "optimise_path",
+    "path_collisions",
+    "polish_path",
+    "residual_count",
+    "trajopt_options",
+]
 
 
 #: The second stage of :func:`optimise_path` scales the shape weights by this: the poses are brought inside their
@@ -31,6 +41,9 @@ FINISH = 1e-3
 #: ``max_step``; windows that overlap merge), the rows outside fixed: a 60-waypoint path is one window, a long one
 #: costs in proportion to its problems.
 WINDOW = 40
+#: :func:`avoid_path`: the step hinge's weight and where it starts (a fraction of ``max_step``) when the collision
+#: rows pull (weight 1 per metre of penetration): the path goes round an obstacle in small steps, not in a jump.
+AVOID_W_STEP, AVOID_STEP_FRAC = 100.0, 0.3
 
 
 @dataclass(frozen=True)
@@ -50,16 +63,21 @@ class TrajCfg:
     eps: float = 1e-9
     stall_rel: float = 1e-7
     iters: int = 100
+    w_col: float = 1.0
+    col_margin: float = 0.005
+    col_sub: int = 4
 
 
 @dataclass
 class TrajResult:
-    """``q: (N, dof)`` the optimised path, ``pos_err, rot_err: (N,)`` (m, rad), ``iterations`` (factorisations)."""
+    """``q: (N, dof)`` the optimised path, ``pos_err, rot_err: (N,)`` (m, rad), ``iterations`` (factorisations),
+    ``clearance`` the smallest signed distance of the collision samples (m; ``inf`` without collision rows)."""
 
     q: np.ndarray
     pos_err: np.ndarray
     rot_err: np.ndarray
     iterations: int
+    clearance: float = math.inf
 
 
 def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot: float = 0.0) -> np.ndarray:
@@ -73,14 +91,16 @@ def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot
     opts[k.W_LIM], opts[k.MARGIN], opts[k.LAMBDA0] = cfg.w_lim, cfg.margin, cfg.lambda0
     opts[k.MAX_STEP_LM], opts[k.EPS], opts[k.STALL_REL] = cfg.max_step_lm, cfg.eps, cfg.stall_rel
     opts[k.TOL_POS], opts[k.TOL_ROT], opts[k.PATH_STEP] = tol_pos, tol_rot, max_step
+    opts[k.W_COL], opts[k.COL_MARGIN], opts[k.COL_SUB] = cfg.w_col, cfg.col_margin, cfg.col_sub
     return opts
 
 
-def residual_count(N: int, dof: int, has_start: bool, has_end: bool = False) -> int:
+def residual_count(N: int, dof: int, has_start: bool, has_end: bool = False, rows: int = 0, sub: int = 1) -> int:
     """Rows of the residual of :func:`nik.kernels.trajopt.residuals`: pose, velocity + step cap, acceleration,
-    limits."""
+    limits; with ``rows`` collision rows per sample (:func:`nik.kernels.trajopt.residuals_collision`), those of
+    every waypoint and of ``sub - 1`` samples inside every step."""
     steps = N - 1 + int(has_start) + int(has_end)
-    return 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N
+    return 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N + rows * (N + steps * (max(sub, 1) - 1))
 
 
 def optimise_path(
@@ -94,6 +114,7 @@ def optimise_path(
     tol_pos: float = 0.0,
     tol_rot: float = 0.0,
     cfg: TrajCfg | None = None,
+    collision: tuple | None = None,
 ) -> TrajResult:
     """The joint path ``Q0: (N, dof)`` optimised as one problem towards the poses ``T: (N, 4, 4)`` (float64, metres).
 
@@ -101,7 +122,10 @@ def optimise_path(
     joints before the path (its first step counts); ``q_end: (dof,)`` those after it (the step to them counts: a
     window of a longer path). ``Q0`` is clamped into the limits first; the answer is inside
     them. With ``tol_pos > 0`` (and ``tol_rot``) each stage stops as soon as the path is feasible: every waypoint
-    within the tolerances, every step at most ``max_step``."""
+    within the tolerances, every step at most ``max_step`` (and, with ``collision``, every sample clear). ``collision``:
+    the arrays after ``q`` of :func:`nik.kernels.collision.collision_residual` (``Setup.arguments(robot)[1]`` of
+    :mod:`nik.ik.collide`): collision rows at the waypoints and inside the steps (``cfg.w_col``, ``cfg.col_margin``,
+    ``cfg.col_sub``). ``TrajResult.clearance``: the smallest signed distance of those samples (``inf`` without)."""
     from nik.kernels import trajopt as k
 
     cfg = _default_cfg(model) if cfg is None else cfg
@@ -114,15 +138,16 @@ def optimise_path(
     qs = np.zeros(n) if q_start is None else np.ascontiguousarray(q_start, dtype=np.float64)
     qe = np.zeros(n) if q_end is None else np.ascontiguousarray(q_end, dtype=np.float64)
     ends = (qs, q_start is not None, qe, q_end is not None)
-    pos, rot = np.empty(N), np.empty(N)
+    pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
     opts = trajopt_options(cfg, max_step, tol_pos, tol_rot)
-    its, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, pos, rot)
+    col = k._no_collision() if collision is None else tuple(collision)
+    its, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
     feasible = (pos <= tol_pos).all() and (rot <= tol_rot).all() and _largest_step(Q, q_start, q_end) <= max_step
-    if tol_pos > 0.0 and feasible:
-        return TrajResult(Q, pos, rot, int(its))  # feasible already
+    if tol_pos > 0.0 and feasible and info[0] >= 0.5 * opts[k.COL_MARGIN]:
+        return TrajResult(Q, pos, rot, int(its), float(info[0]))  # feasible already
     opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM]] *= FINISH  # the finish: the poses first, the shape kept
-    more, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, pos, rot)
-    return TrajResult(Q, pos, rot, int(its + more))
+    more, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
+    return TrajResult(Q, pos, rot, int(its + more), float(info[0]))
 
 
 def _default_cfg(model) -> TrajCfg:
@@ -242,3 +267,76 @@ def _windows(bad: np.ndarray, N: int) -> list[tuple[int, int]]:
         else:
             out.append((a, b))
     return out
+
+
+def path_collisions(model, Q: np.ndarray, q_start: np.ndarray | None, collision: tuple, sub: int):
+    """``(at (N,), between (N,))`` bool for ``Q: (N, dof)``: waypoint ``i`` collides; some of the ``sub - 1`` evenly
+    spaced samples inside the step into waypoint ``i`` (from ``q_start``, for ``i = 0``, where given) collides. The
+    sphere check (:func:`nik.kernels.collision.collides_batch`, margin 0) of ``collision``, the arrays after ``q``."""
+    from nik.kernels.collision import collides_batch
+
+    N, n = Q.shape
+    prev = np.concatenate([Q[:1] if q_start is None else q_start[None], Q[:-1]])
+    t = np.arange(1, max(sub, 1)) / max(sub, 1)
+    inside = prev[:, None] + t[None, :, None] * (Q - prev)[:, None]
+    pts = np.ascontiguousarray(np.concatenate([Q[:, None], inside], axis=1).reshape(-1, n), dtype=np.float64)
+    hit = np.empty(len(pts), dtype=bool)
+    collides_batch(model.G, model.joints, pts, *collision, 0.0, hit)
+    hit = hit.reshape(N, -1)
+    return hit[:, 0], hit[:, 1:].any(axis=1)
+
+
+def avoid_path(
+    model,
+    T: np.ndarray,
+    Q: np.ndarray,
+    q_start: np.ndarray | None,
+    *,
+    tol_pos: float,
+    tol_rot: float,
+    max_step: float,
+    collision: tuple,
+    seeds: np.ndarray | None = None,
+    polish=None,
+    cfg: TrajCfg | None = None,
+) -> np.ndarray:
+    """``Q: (N, dof)`` with its colliding stretches (waypoints, or samples inside the steps: :func:`path_collisions`)
+    optimised with the collision rows (:func:`optimise_path` with ``collision``, in windows of :data:`WINDOW`
+    waypoints either side of each, aiming at half the tolerances). ``seeds: (N, dof)``: other answers of the
+    waypoints (collision-free ones, where the caller has them), the windows' warm start instead of the path's rows.
+    ``polish(a, rows) -> rows``: a last per-waypoint step on each optimised window (waypoints
+    ``a ...``; the caller's LM with collision rows: the optimisation trades millimetres of pose for clearance, the
+    polish gives them back). A window is kept when it collides at fewer samples, every waypoint reached before still
+    is, and its largest step is not above ``max(max_step, the largest step before)``."""
+    if cfg is None:  # a stiff step hinge: clearance bought by one joint's jump is no answer
+        cfg = dataclasses.replace(_default_cfg(model), w_step=AVOID_W_STEP, step_frac=AVOID_STEP_FRAC)
+    Q = np.ascontiguousarray(Q, dtype=np.float64).copy()
+    T = np.ascontiguousarray(T, dtype=np.float64)
+    at, between = path_collisions(model, Q, q_start, collision, cfg.col_sub)
+    if not (at | between).any():
+        return Q
+    from nik.kernels.lm import pose_errors
+
+    def judged(rows, a, b):
+        """(colliding samples, reached (b - a,), largest step) of ``rows`` as waypoints ``a:b``."""
+        before = q_start if a == 0 else Q[a - 1]
+        x, y = path_collisions(model, rows, before, collision, cfg.col_sub)
+        hits = int(x.sum() + y.sum())
+        if b < len(Q):
+            hits += int(path_collisions(model, Q[b : b + 1], rows[-1], collision, cfg.col_sub)[1][0])
+        pos, rot = np.empty(b - a), np.empty(b - a)
+        pose_errors(model.G, model.joints, T[a:b], np.ascontiguousarray(rows), pos, rot)
+        return hits, (pos <= tol_pos) & (rot <= tol_rot), _largest_step(rows, before, Q[b] if b < len(Q) else None)
+
+    for a, b in _windows(np.nonzero(at | between)[0], len(Q)):
+        hits, ok, step = judged(Q[a:b], a, b)
+        res = optimise_path(
+            model, T[a:b], Q[a:b] if seeds is None else seeds[a:b], q_start=q_start if a == 0 else Q[a - 1],
+            q_end=Q[b] if b < len(Q) else None, max_step=max_step, tol_pos=0.5 * tol_pos, tol_rot=0.5 * tol_rot,
+            cfg=cfg, collision=collision,
+        )  # fmt: skip
+        rows = res.q if polish is None else polish(a, res.q)
+        hits2, ok2, step2 = judged(rows, a, b)
+        if hits2 < hits and ok2[ok].all() and step2 <= max(max_step, step):
+            Q[a:b] = rows
+    return Q
