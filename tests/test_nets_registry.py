@@ -203,3 +203,24 @@ def test_an_install_whose_process_dies_after_its_commit_point_is_finished_by_the
     got, want = load_pair(found), load_pair(other)
     assert all(torch.equal(a, b) for a, b in zip(got.state_dict().values(), want.state_dict().values(), strict=True))
     assert [p.name for p in user_dir().iterdir() if p.name.startswith(".")] == []
+
+
+def test_a_missing_network_file_is_a_one_line_checkpoint_error_naming_it(tmp_path, capsys):
+    """docs/learned.md: any load failure is a nik.CheckpointError of one line naming the file; a missing file too
+    (still a FileNotFoundError for callers catching that)."""
+    from nik.cli import main
+    from nik.nets import load_checkpoint, load_network
+
+    robot = nik.load_robot("panda")
+    for missing in (tmp_path / "missing.safetensors", tmp_path / "missing.ckpt"):
+        with pytest.raises(nik.CheckpointError, match=str(missing.name)) as err:
+            nik.IKSolver(robot, checkpoint=missing)
+        assert isinstance(err.value, FileNotFoundError) and "\n" not in str(err.value)
+    with pytest.raises(nik.CheckpointError, match="missing.json"):
+        load_network(tmp_path / "missing.json")
+    with pytest.raises(nik.CheckpointError, match="missing.ckpt"):
+        load_checkpoint(tmp_path / "missing.ckpt")
+    missing = tmp_path / "missing.safetensors"
+    assert main(["solve", "--robot", "panda", "--pose", *"0.4 0 0.4 0 1 0 0".split(), "--checkpoint", str(missing)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(missing) in err and "Traceback" not in err
