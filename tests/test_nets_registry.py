@@ -221,7 +221,9 @@ def test_a_missing_network_file_is_a_one_line_checkpoint_error_naming_it(tmp_pat
     with pytest.raises(nik.CheckpointError, match="missing.ckpt"):
         load_checkpoint(tmp_path / "missing.ckpt")
     missing = tmp_path / "missing.safetensors"
-    assert main(["solve", "--robot", "panda", "--pose", *"0.4 0 0.4 0 1 0 0".split(), "--checkpoint", str(missing)]) == 2
+    assert (
+        main(["solve", "--robot", "panda", "--pose", *"0.4 0 0.4 0 1 0 0".split(), "--checkpoint", str(missing)]) == 2
+    )
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and str(missing) in err and "Traceback" not in err
 
