@@ -19,6 +19,11 @@ class CheckpointError(NikError):
     """A checkpoint is missing, corrupt, or was made for another robot."""
 
 
+class CheckpointNotFoundError(CheckpointError, FileNotFoundError):
+    """A network or checkpoint file that does not exist: a :class:`CheckpointError` (as every load failure is) and a
+    ``FileNotFoundError``, so callers catching either see it."""
+
+
 class RobotDefinitionWarning(UserWarning):
     """A robot loaded, with a choice the user should know of (the default tool link of a URDF left a gripper
     out of the arm, or several links fitted)."""

@@ -55,7 +55,8 @@ class IKSolver:
     Args:
         robot: a :class:`nik.Robot`, or a built-in name, YAML or URDF path for :func:`nik.load_robot`.
         checkpoint: ``"auto"`` (default): the network for this arm's definition hash without its base/tool frames
-            (:attr:`nik.Robot.arm_hash`), whatever its name: one installed in the user folder (``nik train
+            (:attr:`nik.Robot.arm_hash`), whatever its name (else the same arm by FK, from another file or with
+            another end link: :func:`nik.nets.registry.find_same_arm`): one installed in the user folder (``nik train
             --install``, :mod:`nik.nets.registry`), else the one shipped with nik (:func:`nik.models.load_pretrained`;
             on the CPU its small single-pose network where it has one), else none; on an arm with a closed form
             and ``analytic=True`` the closed form stays the guess and no network is loaded. A given or installed

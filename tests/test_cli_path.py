@@ -76,6 +76,15 @@ def test_a_timed_trajectory_round_trips_through_its_csv(tmp_path, capsys):
         assert next(csv.reader(fh))[:2] == ["index", "t_s"]
 
 
+def test_timing_says_in_one_line_when_accelerations_were_assumed(tmp_path, capsys):
+    """Issue 37 item 8: ur5 has speed limits but no acceleration limits; the CLI says what it assumed."""
+    pytest.importorskip("toppra")
+    _, _, poses = _ur5_poses(tmp_path)
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--out", str(tmp_path / "t.csv"), "--timing"]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "acceleration" in line]
+    assert len(notes) == 1 and "assumed 10x its speed limits" in notes[0]
+
+
 def test_a_timed_plot_writes_a_png(tmp_path):
     pytest.importorskip("toppra")
     pytest.importorskip("matplotlib")

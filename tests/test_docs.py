@@ -130,3 +130,52 @@ def test_every_evaluation_table_of_the_docs_has_the_default_pipeline_row_and_the
         assert rows[0].startswith("| default pipeline |"), rows[0]
         notes = [r.rstrip(" |").rsplit("|", 1)[1].strip() for r in rows if not r.startswith("| pytorch-kinematics |")]
         assert all(n.startswith("guess ") for n in notes), notes
+
+
+def test_view_page_documents_the_headless_browser_flags_of_its_test():
+    """Issue 37 item 8: a picture of the page without a display, with the Chromium flags tests/test_view.py uses."""
+    launch = (ROOT / "tests" / "test_view.py").read_text()
+    flags = re.findall(r'"(--(?:no-sandbox|use-gl=\w+|use-angle=\w+|enable-unsafe-swiftshader))"', launch)
+    assert len(flags) == 4, flags
+    page = (ROOT / "docs" / "view.md").read_text()
+    command = next(line for line in page.splitlines() if line.startswith("chromium-headless-shell "))
+    assert all(f in command for f in flags) and "--screenshot=" in page
+
+
+def test_collisions_page_says_that_fitting_spheres_to_meshes_needs_the_collision_check_extra():
+    text = (ROOT / "docs" / "collisions.md").read_text()
+    sentence = next((s for s in re.split(r"(?<=\.)\s", text) if "fitting spheres to meshes" in s.lower()), "")
+    assert "`collision-check` extra" in sentence and "trimesh" in sentence
+    extras = (ROOT / "pyproject.toml").read_text()
+    assert re.search(r'^collision-check = \[.*"trimesh', extras, re.M)  # the extra does install trimesh
+
+
+def test_readme_one_pose_figures_are_those_of_the_stored_run_it_cites():
+    """Issue 37 item 8: README's pose-by-pose speed against ik_LM and TRAC-IK, and its tight loop, are the ranges
+    over the arms of the stored result it names."""
+    text = (ROOT / "README.md").read_text()
+    m = re.search(
+        r"one\s+pose took (\d+)-(\d+) us, ([\d.]+)-([\d.]+)x the speed of Robotics Toolbox's C\+\+ `ik_LM` and "
+        r"([\d.]+)-([\d.]+)x that of TRAC-IK; in a tight\s+loop (\d+)-(\d+) us \(the latest stored run, "
+        r"\[(benchmarks/results/[\w.]+)\]",
+        text,
+    )
+    assert m, "README's one-pose sentence"
+    rows = [
+        [c.strip() for c in line.strip("|").split("|")]
+        for line in (ROOT / m.group(9)).read_text().splitlines()
+        if line.startswith("| ") and not line.startswith("| robot")
+    ]
+    per_arm = {}
+    for robot, solver, median, *rest in rows:
+        key = "nik" if "interleaved" in solver else "tight" if "tight" in solver else "trac" if "TRAC" in solver else ""
+        per_arm.setdefault(robot, {})[key] = (float(median), float(rest[-1].rstrip("x")))
+    us = [a["nik"][0] for a in per_arm.values()]
+    vs_lm = [a["nik"][1] for a in per_arm.values()]
+    vs_trac = [a["trac"][0] / a["nik"][0] for a in per_arm.values()]
+    tight = [a["tight"][0] for a in per_arm.values()]
+    assert len(per_arm) >= 4
+    assert (float(m.group(1)), float(m.group(2))) == (min(us), max(us))
+    assert (float(m.group(3)), float(m.group(4))) == (min(vs_lm), max(vs_lm))
+    assert (float(m.group(5)), float(m.group(6))) == (round(min(vs_trac), 1), round(max(vs_trac), 1))
+    assert (float(m.group(7)), float(m.group(8))) == (min(tight), max(tight))

@@ -98,8 +98,10 @@ def test_install_makes_auto_pick_the_network_for_the_arm_under_any_name(tmp_path
     assert nik.IKSolver(arm).initial_source == "multistart"
     args = ["train", str(arm), *TINY, "--no-eval", "--install", "--runs", str(tmp_path / "runs")]
     assert main(args) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert f"installed as {nik.nets.registry.user_dir() / 'test_arm.safetensors'}" in out
+    both = out + err
+    assert both.count("installed as") == 1 and both.count(f'nik.IKSolver("{arm.resolve()}")') == 1  # said once
     # what it says to run is true: the YAML by its absolute path (IKSolver('test_arm') is no built-in)
     assert out.rstrip().endswith(f'nik.IKSolver("{arm.resolve()}")') and "now uses it" not in out
     other = nik.load_robot(_arm(tmp_path, "same_arm_elsewhere"))

@@ -203,3 +203,85 @@ def test_an_install_whose_process_dies_after_its_commit_point_is_finished_by_the
     got, want = load_pair(found), load_pair(other)
     assert all(torch.equal(a, b) for a, b in zip(got.state_dict().values(), want.state_dict().values(), strict=True))
     assert [p.name for p in user_dir().iterdir() if p.name.startswith(".")] == []
+
+
+def test_a_missing_network_file_is_a_one_line_checkpoint_error_naming_it(tmp_path, capsys):
+    """docs/learned.md: any load failure is a nik.CheckpointError of one line naming the file; a missing file too
+    (still a FileNotFoundError for callers catching that)."""
+    from nik.cli import main
+    from nik.nets import load_checkpoint, load_network
+
+    robot = nik.load_robot("panda")
+    for missing in (tmp_path / "missing.safetensors", tmp_path / "missing.ckpt"):
+        with pytest.raises(nik.CheckpointError, match=str(missing.name)) as err:
+            nik.IKSolver(robot, checkpoint=missing)
+        assert isinstance(err.value, FileNotFoundError) and "\n" not in str(err.value)
+    with pytest.raises(nik.CheckpointError, match="missing.json"):
+        load_network(tmp_path / "missing.json")
+    with pytest.raises(nik.CheckpointError, match="missing.ckpt"):
+        load_checkpoint(tmp_path / "missing.ckpt")
+    missing = tmp_path / "missing.safetensors"
+    assert (
+        main(["solve", "--robot", "panda", "--pose", *"0.4 0 0.4 0 1 0 0".split(), "--checkpoint", str(missing)]) == 2
+    )
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(missing) in err and "Traceback" not in err
+
+
+def _erd_panda():
+    import importlib.metadata
+    from pathlib import Path
+
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip('example-robot-data not installed (pip install -e ".[urdf-tests]")')
+    path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")) / "panda_description/urdf/panda.urdf"
+    if not path.is_file():
+        pytest.skip("panda_description/urdf/panda.urdf is not in this version of example-robot-data")
+    return path
+
+
+@pytest.mark.parametrize("end_link", [None, "panda_link8", "panda_hand"])
+def test_the_same_arm_from_another_file_finds_its_network_whatever_its_end_link(end_link):
+    """Issue 37 item 7: example-robot-data's panda (other file, float noise in its placements; default end link
+    panda_hand_tcp, a fixed transform past the network's flange panda_link8) gets the shipped panda network."""
+    import warnings
+
+    import numpy as np
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = nik.load_robot(_erd_panda(), **({} if end_link is None else {"end_link": end_link}))
+    before = robot.definition_hash
+    q = robot.sample(40, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    T_before = robot.fk(q)
+    solver = nik.IKSolver(robot)
+    assert solver.net is not None and robot.arm_hash == nik.load_robot("panda").arm_hash
+    assert robot.definition_hash == before and torch.equal(robot.fk(q), T_before)  # the arm itself unchanged
+    T = T_before.numpy()
+    res = solver.solve(T)
+    assert res.source == "network" and bool(np.all(res.success))
+    qs = torch.as_tensor(np.asarray(res.q), dtype=torch.float64)
+    assert float((robot.fk(qs)[:, :3, 3] - T_before[:, :3, 3]).norm(dim=-1).max()) < 1e-3  # FK round trip
+    one = solver.solve(T[0])
+    assert one.source == "network" and bool(np.all(one.success))
+
+
+def test_another_arm_of_the_same_shape_finds_no_network():
+    from nik.nets.registry import find_same_arm
+    from nik.robots.frames import tool_between, with_frames
+
+    panda = nik.load_robot("panda")
+    limits = panda.limits.clone()
+    limits[0, 1] -= 0.01
+    other = nik.Robot("other", panda.G, panda.offsets, limits, panda.joint_names)
+    assert find_same_arm(other) is None
+    G = panda.G.clone()
+    G[3, 0, 3] += 0.01  # a link 1 cm longer
+    assert find_same_arm(nik.Robot("longer", G, panda.offsets, panda.limits, panda.joint_names)) is None
+    X = torch.eye(4, dtype=torch.float64)
+    X[:3, 3] = torch.tensor([0.0, 0.02, 0.1])
+    tooled = with_frames(panda.arm, tool=X.numpy())
+    bare = nik.Robot("bare", tooled.G, tooled.offsets, tooled.limits, tooled.joint_names)
+    assert torch.allclose(torch.as_tensor(tool_between(bare, panda.arm)), X, atol=1e-9)

@@ -122,6 +122,14 @@ def _cmd_path(args) -> int:
     for w in caught:
         if issubclass(w.category, UserWarning):
             print(f"nik path: warning: {w.message}", file=sys.stderr)
+    if res.path.timing is not None and res.path.timing.acc_assumed:
+        from nik.paths.timing import DEFAULT_ACC_PER_VEL
+
+        print(
+            f"nik path: note: {robot.name} has no joint acceleration limits: assumed {DEFAULT_ACC_PER_VEL:g}x its "
+            "speed limits (full speed within 0.1 s; give acc limits in its URDF or YAML)",
+            file=sys.stderr,
+        )
     if args.out:
         write_trajectory_csv(args.out, robot, res, q_start)
     if args.plot and res.path.timing is not None:

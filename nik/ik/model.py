@@ -45,7 +45,7 @@ import torch
 
 from nik.robots.reach import REACH_SLACK
 
-__all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "WRAP_MARGIN", "Model", "model_of"]
+__all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "WRAP_MARGIN", "Model", "forget_model", "model_of"]
 
 #: The FK check of a closed-form solution (metres, radians) by the targets' dtype: ``nik.analytic.solve``'s
 #: defaults (a float32 pose is a rotation only to about 1e-7).
@@ -241,6 +241,11 @@ def _build(robot, lm_cfg) -> Model:
 
 
 _MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def forget_model(robot) -> None:
+    """Drop the models kept for ``robot`` (its frames changed: :func:`nik.robots.frames.adopt_arm`)."""
+    _MODELS.pop(robot, None)
 
 
 def model_of(robot, lm_cfg=None) -> Model:

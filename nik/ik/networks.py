@@ -45,6 +45,8 @@ def known_network(robot, device, *, single_pose: bool = False) -> tuple[torch.nn
     from nik.nets.registry import SHIPPED_DIR, find_network, find_single_pose_network
 
     path = (find_single_pose_network if single_pose else find_network)(robot)
+    if path is None and robot.base is None and robot.tool is None:
+        path = _same_arm(robot, single_pose)
     if path is None:
         return None, False
     net = _load_once(path, robot, device, lambda: load_pair(path, robot=robot))
@@ -73,6 +75,24 @@ def checkpoint_network(path, robot, device) -> torch.nn.Module:
         except CheckpointError:
             pass
         raise
+
+
+def _same_arm(robot, single_pose: bool) -> Path | None:
+    """The network of the same arm under another definition (:func:`nik.nets.registry.find_same_arm`: another file
+    of the same robot, or another end link a fixed transform past the network's), or None. Found, ``robot`` records
+    that arm and the tool frame between (:func:`nik.robots.frames.adopt_arm`), so the network guesses in the arm's
+    frame, ``T @ tool^-1``, as for any robot with a tool."""
+    from nik.ik.model import forget_model
+    from nik.nets.registry import SINGLE_POSE, find_same_arm
+    from nik.robots.frames import adopt_arm
+
+    found = find_same_arm(robot, role=SINGLE_POSE if single_pose else None)
+    if found is None:
+        return None
+    path, arm, tool = found
+    adopt_arm(robot, arm, tool)
+    forget_model(robot)  # a model built before holds no tool frame
+    return path
 
 
 def clear() -> None:

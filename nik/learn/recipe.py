@@ -300,9 +300,6 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
         result.usage = network_usage(
             robot, result.installed, source=cfg.robot, end_link=cfg.end_link, root_link=cfg.root_link
         )
-        write(f"nik train: installed as {result.installed}")
-        for line in result.usage:
-            write(f"nik train: {line}")
     if cfg.evaluate:
         result.report = network_report(robot, out, n_batch=cfg.eval_batch, n_one=cfg.eval_one)
         (run_dir / "report.txt").write_text("\n".join(result.report.lines()) + "\n")

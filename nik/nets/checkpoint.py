@@ -13,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from nik.errors import CheckpointError
+from nik.errors import CheckpointError, CheckpointNotFoundError
 from nik.nets.mlp import IKNet
 from nik.nets.multi import build_net
 from nik.nets.pair import architecture_mismatch, load_pair
@@ -63,13 +63,13 @@ def load_checkpoint(
     Raises:
         CheckpointError: a folder, an unreadable or damaged file, no nik block, a robot mismatch (both
             robots named) or weights that do not fit the stored architecture (the field named); one line.
-        FileNotFoundError: no such file.
+        CheckpointNotFoundError: no such file (a CheckpointError and a FileNotFoundError).
     """
     path = Path(path)
     if path.is_dir():
         raise CheckpointError(f"{path} is a folder, not a checkpoint file")
     if not path.is_file():
-        raise FileNotFoundError(f"checkpoint not found: {path}")
+        raise CheckpointNotFoundError(f"checkpoint not found: {path}")
     try:
         with warnings.catch_warnings():  # torch warns about the pickle protocol of files it then refuses
             warnings.simplefilter("ignore")
@@ -111,7 +111,7 @@ def load_checkpoint(
 def load_network(path: str | Path, *, robot: Robot | str | Path | None = None):
     """Any network file: an exported pair (``NAME.safetensors`` or ``NAME.json``, :func:`nik.nets.pair.load_pair`,
     SHA-256 checked) or a Lightning / :func:`save_checkpoint` file (:func:`load_checkpoint`), matched to
-    ``robot`` by definition hash. Raises ``CheckpointError`` (one line) or ``FileNotFoundError``."""
+    ``robot`` by definition hash. Raises ``CheckpointError`` (one line; a missing file too)."""
     p = Path(path)
     if p.suffix in (".safetensors", ".json"):
         return load_pair(p, robot=robot)

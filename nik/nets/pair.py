@@ -35,7 +35,7 @@ from pathlib import Path
 import torch
 
 from nik.data.storage import _fsync_dir, _pid_alive  # the datasets' kill-safe writes, shared
-from nik.errors import CheckpointError
+from nik.errors import CheckpointError, CheckpointNotFoundError
 from nik.robots import Robot, load_robot
 
 __all__ = [
@@ -73,15 +73,16 @@ def read_pair_meta(path: str | Path) -> dict:
     """The JSON of the pair at ``path`` (either file), checked for the fields every pair has.
 
     Raises:
-        FileNotFoundError: neither file exists. CheckpointError: a folder, no JSON beside the weights,
-            unreadable JSON, a missing field, or format 1 (no SHA-256 recorded).
+        CheckpointNotFoundError (a CheckpointError and a FileNotFoundError): neither file exists.
+        CheckpointError: a folder, no JSON beside the weights, unreadable JSON, a missing field, or format 1 (no
+            SHA-256 recorded).
     """
     st, js = pair_paths(path)
     for p in (st, js):
         if p.is_dir():
             raise CheckpointError(f"{p} is a folder, not a network file (expected NAME.safetensors + NAME.json)")
     if not st.exists() and not js.exists():
-        raise FileNotFoundError(f"network file not found: {st}")
+        raise CheckpointNotFoundError(f"network file not found: {path}")
     if not js.exists():
         raise CheckpointError(f"{st}: no {js.name} beside it (the robot and architecture of the network)")
     try:
@@ -156,16 +157,17 @@ def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
             JSON.
 
     Raises:
-        FileNotFoundError: no such file. CheckpointError: anything else wrong (module docstring), one line.
+        CheckpointNotFoundError (a CheckpointError and a FileNotFoundError): no such file. CheckpointError: anything
+            else wrong (module docstring), one line.
     """
     from safetensors.torch import load as st_load
 
     from nik.nets.multi import build_net
 
     st, js = pair_paths(path)
-    meta = read_pair_meta(st)
+    meta = read_pair_meta(path)
     if not st.exists():
-        raise FileNotFoundError(f"network file not found: {st} (its {js.name} exists)")
+        raise CheckpointNotFoundError(f"network file not found: {st} (its {js.name} exists)")
     try:
         data = st.read_bytes()
     except OSError as err:

@@ -16,6 +16,12 @@ installed network replaces a shipped one for its arm. Within a folder a pair mad
 one made for its bare arm, then a pair named after the robot, then the newest. The index reads only the JSON files
 (a few kB each) and is cached per file (path, size, modification time).
 
+Where no hash matches, :func:`find_same_arm` finds a pair made for the same arm under another definition: an arm
+loaded from another file of the same robot (other link and joint names, float noise in the placements, another
+normal form) or ending at another link a fixed transform away (a hand or TCP link past the network's flange):
+compared by FK on a fixed set of configurations (:func:`nik.robots.frames.tool_between`), the difference of end
+links given back as a tool frame.
+
 A pair whose JSON says ``"role": "single_pose"`` is a small network made to guess poses cheaply on the CPU
 (:mod:`nik.ik.plan`): :func:`find_network` never returns it; :func:`find_single_pose_network` finds it,
 by the same rules.
@@ -41,6 +47,7 @@ __all__ = [
     "SINGLE_POSE",
     "NetworkInfo",
     "find_network",
+    "find_same_arm",
     "find_single_pose_network",
     "index",
     "install",
@@ -58,6 +65,7 @@ SINGLE_POSE = "single_pose"
 SHIPPED_DIR = Path(__file__).resolve().parent / "weights"
 
 _CACHE: dict[Path, tuple[tuple[int, int], str | None, str | None]] = {}
+_ARMS: dict[Path, tuple[tuple[int, int], object]] = {}
 
 
 def user_dir() -> Path:
@@ -152,6 +160,45 @@ def _find(robot, dirs, role) -> Path | None:
             if hits:
                 hits.sort(key=lambda p: (p.stem != robot.name, -p.stat().st_mtime_ns))
                 return hits[0]
+    return None
+
+
+def _stored_arm(js: Path):
+    """The robot a pair's JSON records (``robot_definition``; cached per file), or None where unreadable."""
+    from nik.robots.model import Robot
+
+    try:
+        st = js.stat()
+        key = (st.st_size, st.st_mtime_ns)
+        hit = _ARMS.get(js)
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        meta = json.loads(js.read_text())
+        arm = Robot.from_definition(meta["robot_definition"])
+        arm = arm if arm.definition_hash == meta.get("robot_hash") else None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        key, arm = None, None
+    if key is not None:
+        _ARMS[js] = (key, arm)
+    return arm
+
+
+def find_same_arm(robot, dirs: list[Path] | None = None, *, role: str | None = None):
+    """``(path, arm, tool)`` of a network made for the same arm as ``robot`` under another definition (module
+    docstring): ``robot`` is ``arm`` (the network's, rebuilt from its JSON) followed by the fixed ``(4, 4)``
+    ``tool``; None where there is none. ``role``: as :func:`find_single_pose_network` (None: the main network)."""
+    from nik.robots.frames import tool_between
+
+    for d in search_dirs() if dirs is None else dirs:
+        for st, h in index([d]):
+            if h is None or role_of(st) != role:
+                continue
+            arm = _stored_arm(st.with_suffix(".json"))
+            if arm is None or arm.dof != robot.dof:
+                continue
+            tool = tool_between(robot, arm)
+            if tool is not None:
+                return st, arm, tool
     return None
 
 

@@ -1,5 +1,5 @@
 """Timing of a joint path: the time-optimal trajectory through its waypoints within joint speed and acceleration
-limits (and, as an option, a speed limit of the tool), computed by TOPP-RA (``toppra``, the ``timing`` extra).
+limits (and, as an option, a speed limit of the tool), computed by TOPP-RA (``toppra``, a core dependency).
 
 One job: waypoints ``q: (N, dof)`` in, :class:`Timing` out: ``t: (N,)`` seconds at each waypoint, ``qd, qdd:
 (N, dof)`` the joint velocities and accelerations there, the duration, and the trajectory to sample between.

@@ -20,7 +20,7 @@ import torch
 from nik.errors import RobotDefinitionError
 from nik.poses import ORTHONORMAL_TOL, quaternion_to_matrix, validate_pose
 
-__all__ = ["QUATERNION_TOL", "as_frame", "with_frames"]
+__all__ = ["QUATERNION_TOL", "SAME_ARM_TOL", "adopt_arm", "as_frame", "tool_between", "with_frames"]
 
 #: Largest accepted ``| |quaternion| - 1 |`` (four decimals typed by hand); the quaternion is then normalised.
 QUATERNION_TOL = 1e-3
@@ -28,6 +28,14 @@ QUATERNION_TOL = 1e-3
 #: Rotations that depart from orthonormal by more than this (but within the accepted ORTHONORMAL_TOL)
 #: are projected onto the nearest rotation, so the stored frame is a rigid transform to float64 rounding.
 _PROJECT_ABOVE = 1e-12
+
+#: Largest difference (metres, and entries of the rotation) between two arms' poses, on every configuration of
+#: :func:`tool_between`'s fixed set, for them to count as the same arm: far above the float noise of equivalent
+#: files (1e-9: the panda of example-robot-data against the built-in one), far below any real difference.
+SAME_ARM_TOL = 1e-6
+
+#: How many fixed configurations (seeded, uniform within the limits) :func:`tool_between` compares FK on.
+_SAME_ARM_CONFIGS = 16
 
 
 def as_frame(value, *, name: str = "tool") -> np.ndarray | None:
@@ -117,3 +125,31 @@ def _compose(new: np.ndarray | None, old: torch.Tensor | None, *, left: bool) ->
         return torch.from_numpy(new)
     old = old.numpy()
     return torch.from_numpy(new @ old if left else old @ new)
+
+
+def tool_between(robot, arm, *, tol: float = SAME_ARM_TOL) -> np.ndarray | None:
+    """The fixed ``(4, 4)`` transform ``X`` with ``robot.fk(q) == arm.fk(q) @ X`` for every ``q``, or None where
+    ``robot`` is not ``arm`` with a tool (other joints, types, limits or placements, or another base): the same arm
+    whatever file, names or normal form it came from. Compared by FK on a fixed, seeded set of configurations
+    within the limits (within ``tol``: float noise of equivalent files passes); ``X`` from the first of them."""
+    if robot.dof != arm.dof or not torch.equal(robot.prismatic, arm.prismatic):
+        return None
+    if float((robot.limits - arm.limits).abs().max()) > tol:
+        return None
+    q = robot.sample(_SAME_ARM_CONFIGS, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    mine, theirs = robot.fk(q).numpy(), arm.fk(q).numpy()
+    X = np.linalg.inv(theirs[0]) @ mine[0]
+    X[3] = (0.0, 0.0, 0.0, 1.0)
+    if np.abs(theirs @ X - mine).max() > tol:
+        return None
+    return X
+
+
+def adopt_arm(robot, arm, tool: np.ndarray) -> None:
+    """Record that ``robot`` (a robot without frames of its own) is ``arm`` with the tool frame ``tool``
+    (:func:`tool_between`): :attr:`Robot.tool` becomes ``tool`` and :attr:`Robot.arm` becomes ``arm``, so the
+    networks made for ``arm`` serve ``robot`` in the arm's frame. ``G`` (its FK and definition hash) is unchanged."""
+    if robot.base is not None or robot.tool is not None:
+        raise ValueError(f"robot {robot.name!r} has frames of its own; adopt_arm takes a bare robot")
+    robot.tool = torch.as_tensor(tool, dtype=torch.float64).clone()
+    robot._arm = arm
