@@ -38,6 +38,7 @@ from nik.kernels.lm import (
     _tool_error,
     _work_size,
     lm_solve,
+    turns_toward,
 )
 from nik.kernels.poses import reach_flags
 from nik.kernels.seeded import lm_starts, merge, ranked_hypotheses
@@ -197,6 +198,8 @@ def solve(
     if use_near and near:
         b_all = _budgets(reachable, budget if restarts and fallback != FALLBACK_NONE else 0)
         rq, rit, rpos, rrot = _lm(G, joints, T, q_near, opts, iopts, b_all, seed)
+        turns_toward(joints, q, q_near)
+        turns_toward(joints, rq, q_near)
         for b in range(B):
             ok_b = rpos[b] <= tol_pos and rrot[b] <= tol_rot
             da, db = 0.0, 0.0

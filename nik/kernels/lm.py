@@ -184,6 +184,23 @@ def _bounds(joints, q):
 
 
 @kernel
+def turns_toward(joints, q, target):
+    """``q: (B, n)`` in place: each wrapping joint moved by whole turns, inside its limits, as near ``target: (B, n)``
+    as it goes (the same poses; a joint that crossed a limit of a range of 2 pi or more comes back)."""
+    for b in range(q.shape[0]):
+        for i in range(q.shape[1]):
+            if joints[i, WRAPS] == 0.0:
+                continue
+            lo, hi = joints[i, LOWER], joints[i, UPPER]
+            x = q[b, i] + _TWO_PI * math.floor((target[b, i] - q[b, i]) / _TWO_PI + 0.5)
+            if x > hi:
+                x -= _TWO_PI
+            elif x < lo:
+                x += _TWO_PI
+            q[b, i] = min(max(x, lo), hi)
+
+
+@kernel
 def _residual(Tt, T, rw, e):
     """Weighted error ``e (6,)`` of the pose ``T (3, 4)`` against ``Tt (4, 4)``; returns
     ``(|e|^2, position error m, rotation angle rad)``."""

@@ -71,6 +71,7 @@ def _kernels():
             merge=seeded.merge,
             closed_guess=closed.guess,
             pose_errors=lm.pose_errors,
+            turns_toward=lm.turns_toward,
         )
     return _KERNELS
 
@@ -131,6 +132,13 @@ class CompiledBackend:
     @staticmethod
     def zeros_long(n: int, like=None):
         return np.zeros(n, dtype=np.int64)
+
+    @staticmethod
+    def turns_toward(job: Job, q):
+        """``q`` with its wrapping joints moved by whole turns towards ``job.q_near`` (a copy)."""
+        q = q.copy()
+        _kernels().turns_toward(job.model.joints, q, job.q_near)
+        return q
 
     @staticmethod
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> int:

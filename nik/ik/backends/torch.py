@@ -18,6 +18,7 @@ from nik.ik.refiners import lm_refine, swarm_refine
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near
 from nik.poses import pose_error
+from nik.robots.joints import turns_toward, wrap_mask
 from nik.robots.reach import unreachable_message, within_reach
 from nik.tolerances import score
 
@@ -59,6 +60,13 @@ class TorchBackend:
     @staticmethod
     def zeros_long(n: int, like=None):
         return torch.zeros(n, dtype=torch.long, device=None if like is None else like.device)
+
+    @staticmethod
+    def turns_toward(job: Job, q):
+        """``q`` with its wrapping joints moved by whole turns towards ``job.q_near``."""
+        lo, hi = job.robot.limits_as(q)
+        wrap = wrap_mask(job.robot.limits.double(), prismatic=job.robot.prismatic).to(q.device)
+        return turns_toward(q, job.q_near.to(q.dtype), lo, hi, wrap)
 
     @staticmethod
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
