@@ -267,11 +267,11 @@ class CompiledBackend:
         return q, pos, rot
 
     # -- refiners ----------------------------------------------------------------------
-    def refine(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
+    def refine(self, plan, job: Job, idx, q0, restarts: bool, local: bool = False) -> Refined:
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
         run = job.model.lm.solve(
             T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters,
-            restarts=restarts, reachable=reachable,
+            restarts=restarts, reachable=reachable, local=local,
         )  # fmt: skip
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
 
