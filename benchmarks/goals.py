@@ -4,10 +4,16 @@ Rows: success and median us/target over 3 repeats, 1,000 random reachable target
 ``bounds="position"``, ``bounds="axis_z"``, full pose with ``q_rest="mid"``; then, with a tool 0.25 m off the
 flange and the targets turned about their tool z by a random angle, the share solved with a fixed orientation, with
 z free, and solved only with z free. Run: ``OMP_NUM_THREADS=1 python benchmarks/goals.py`` (about a minute).
+
+``--urdf PATH [--root-link A] --end-link B`` times a URDF arm instead (the speed rows only), with a row
+``axis_z (turned)``: the targets turned about their tool z by a random angle (a closed-form arm then searches the free
+angle), e.g. example-robot-data's Kinova Gen2:
+``python benchmarks/goals.py --urdf .../kinova_description/robots/kinova.urdf --end-link j2s6s200_end_effector``.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import time
 import warnings
@@ -26,28 +32,36 @@ def _median_time(solver, T, bounds, q_rest, reps: int = 3):
     return res, sorted(times)[reps // 2]
 
 
-def speed(name: str, n: int = 1000) -> None:
-    robot = nik.load_robot(name)
+def _turned(T: torch.Tensor, g: torch.Generator) -> torch.Tensor:
+    """``T: (n, 4, 4)`` turned about each tool z by a random angle."""
+    n = T.shape[0]
+    angle = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
+    R = torch.eye(4, dtype=torch.float64).repeat(n, 1, 1)
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = angle.cos(), -angle.sin(), angle.sin(), angle.cos()
+    return T @ R
+
+
+def speed(name, n: int = 1000, turned: bool = False) -> None:
+    robot = nik.load_robot(name) if isinstance(name, str) else name
     g = torch.Generator().manual_seed(0)
-    T = robot.fk(robot.sample(n, generator=g, dtype=torch.float64)).numpy()
+    T = robot.fk(robot.sample(n, generator=g, dtype=torch.float64))
     solver = nik.IKSolver(robot, backend="compiled")
-    cases = [(None, None), ("position", None), ("axis_z", None), (None, "mid")]
-    for bounds, q_rest in cases:  # warm-up (compilation)
-        solver.solve(T[:5], bounds=bounds, q_rest=q_rest)
-    for bounds, q_rest in cases:
-        res, dt = _median_time(solver, T, bounds, q_rest)
-        goal = (bounds or "pose") + (" + q_rest=mid" if q_rest else "")
-        print(f"| {name} | {goal} | {res.success.mean() * 100:.2f} % | {dt / n * 1e6:.1f} |")
+    cases = [(None, None, T), ("position", None, T), ("axis_z", None, T), (None, "mid", T)]
+    if turned:
+        cases.append(("axis_z", None, _turned(T, g)))
+    cases = [(b, r, t.numpy()) for b, r, t in cases]
+    for bounds, q_rest, Tc in cases:  # warm-up (compilation)
+        solver.solve(Tc[:5], bounds=bounds, q_rest=q_rest)
+    for i, (bounds, q_rest, Tc) in enumerate(cases):
+        res, dt = _median_time(solver, Tc, bounds, q_rest)
+        goal = (bounds or "pose") + (" + q_rest=mid" if q_rest else "") + (" (turned)" if i == 4 else "")
+        print(f"| {robot.name} | {goal} | {res.success.mean() * 100:.2f} % | {dt / n * 1e6:.1f} |")
 
 
 def free_axis(name: str, n: int = 1000) -> None:
     robot = nik.load_robot(name, tool=[0.25, 0, 0.1, 1, 0, 0, 0])
     g = torch.Generator().manual_seed(1)
-    T = robot.fk(robot.sample(n, generator=g, dtype=torch.float64))
-    angle = (torch.rand(n, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
-    R = torch.eye(4, dtype=torch.float64).repeat(n, 1, 1)
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = angle.cos(), -angle.sin(), angle.sin(), angle.cos()
-    T = (T @ R).numpy()
+    T = _turned(robot.fk(robot.sample(n, generator=g, dtype=torch.float64)), g).numpy()
     solver = nik.IKSolver(robot, backend="compiled")
     fixed, free = solver.solve(T).success, solver.solve(T, bounds="axis_z").success
     only = (free & ~fixed).mean() * 100
@@ -56,7 +70,16 @@ def free_axis(name: str, n: int = 1000) -> None:
 
 if __name__ == "__main__":
     warnings.simplefilter("ignore")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--urdf")
+    ap.add_argument("--root-link")
+    ap.add_argument("--end-link")
+    ap.add_argument("--n", type=int, default=1000)
+    args = ap.parse_args()
     print("| robot | goal | success | us/target |\n|---|---|---|---|")
+    if args.urdf:
+        speed(nik.load_robot(args.urdf, root_link=args.root_link, end_link=args.end_link), args.n, turned=True)
+        raise SystemExit
     for robot_name in ("panda", "ur5"):
         speed(robot_name)
     print("\n| robot (tool 0.25 m off the flange) | fixed orientation | z free | only with z free |\n|---|---|---|---|")

@@ -161,16 +161,20 @@ def lm_solve_one(
             if pos <= tol_pos and rot <= tol_rot:
                 return q, total
             JT = J.T
-            A = JT @ J
-            g = JT @ e
             at_lo, at_hi = q <= model.lo, q >= model.hi
-            if at_lo.any() or at_hi.any():  # active set (as in the batched version)
-                free = ~((at_lo & (g < 0)) | (at_hi & (g > 0)))
-                A = A * np.outer(free, free) + np.diag(~free * 1.0)
-                g = g * free
-            A[diag] += lam * (A[diag] + cfg.eps) + cfg.eps
+            held = np.zeros(q.shape[0], dtype=bool)
             try:  # (one LAPACK call: two triangular solves after a Cholesky cost more in numpy at n <= 7)
-                dq = np.linalg.solve(A, g)
+                for _pass in range(2):  # active set: held where g pushes out of a limit, then where the step does
+                    A, g = JT @ J, JT @ e
+                    free = ~(held | (at_lo & (g < 0)) | (at_hi & (g > 0)))
+                    A = A * np.outer(free, free) + np.diag(~free * 1.0)
+                    g = g * free
+                    A[diag] += lam * (A[diag] + cfg.eps) + cfg.eps
+                    dq = np.linalg.solve(A, g)
+                    out = (at_lo & (dq < 0)) | (at_hi & (dq > 0))
+                    if not out.any():
+                        break
+                    held |= out
                 big = float(np.abs(dq).max())
                 if big > cfg.max_step:
                     dq = dq * (cfg.max_step / big)

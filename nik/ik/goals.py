@@ -10,8 +10,9 @@ error:
 - a network: all its hypotheses;
 - an arm with a closed form: its solutions of the pose as given (they meet any goal where they exist), and with one
   rotation axis free, for the targets none of those reach, the closed form at the free angle of
-  :func:`nik.ik.free_axis.closed_form_free_axis` (36 angles searched); with the orientation free (``"position"``)
-  the closed form has no angle to search: LM does the rest from those starts and uniform ones;
+  :func:`nik.ik.free_axis.closed_form_free_axis` (36 angles searched; compiled: the same search on the numba closed
+  form); with the orientation free (``"position"``) the closed form has no angle to search: LM does the rest from
+  those starts and uniform ones;
 - ``q_near`` when given (an extra start; no second refinement).
 
 Then LM towards the bounds from each start in turn until one lands inside (compiled:
@@ -90,17 +91,29 @@ def _closed_starts(robot, model, plan, T: np.ndarray) -> list[np.ndarray]:
     out.append(np.where(valid[..., None], q, np.nan))
     modes = plan.bounds.modes(T.shape[0])
     if ((modes >= 0) & (modes <= 2)).all() and len(set(modes.tolist())) == 1:
-        from nik.ik.free_axis import closed_form_free_axis
-
         todo = np.flatnonzero(~valid.any(1))  # a valid solution of the pose as given meets the goal already
         extra = np.full((T.shape[0], 1, q.shape[-1]), np.nan)
         if todo.size:
-            bounds = plan.bounds if not plan.bounds.per_target else plan.bounds.expand(T.shape[0])[todo]
-            fa = closed_form_free_axis(robot, torch.from_numpy(T[todo]), bounds=bounds, refine=False)
-            found = ~torch.isnan(fa.gamma).numpy()
-            extra[todo[found], 0] = fa.q.double().numpy()[found]
+            extra[todo, 0] = _free_axis_start(model, T[todo], int(modes[0]))
         out.insert(0, extra)
     return out
+
+
+def _free_axis_start(model, T: np.ndarray, k: int, samples: int = 36) -> np.ndarray:
+    """``(m, 6)``: the compiled closed form's valid solution of ``T Rk(gamma)`` (``T: (m, 4, 4)``) of the smallest
+    ``|gamma|`` over ``samples`` angles, NaN where none (the search of
+    :func:`nik.ik.free_axis.closed_form_free_axis`, on the numba closed form instead of torch's)."""
+    from nik.ik.free_axis import _about
+
+    m = T.shape[0]
+    gamma = 2.0 * np.pi * np.arange(samples) / samples
+    gamma = np.where(gamma > np.pi, gamma - 2.0 * np.pi, gamma)
+    Tm = T[:, None] @ _about(k, torch.from_numpy(gamma)).numpy()  # (m, S, 4, 4)
+    q, valid = model.closed_solutions(Tm.reshape(-1, 4, 4))
+    q, valid = q.reshape(m, samples * 8, -1), valid.reshape(m, samples * 8)
+    score = np.where(valid, np.repeat(np.abs(gamma), 8), np.inf)
+    best = score.argmin(1)
+    return np.where(valid.any(1)[:, None], q[np.arange(m), best], np.nan)
 
 
 def solve_compiled(backend, robot, plan, T_target, q_near, representation) -> IKResult:

@@ -43,12 +43,14 @@ def lm_refine(
     cfg=None,
     restarts: bool = True,
     reachable: torch.Tensor | None = None,
+    local: bool = False,
 ) -> RefineResult:
     """Levenberg-Marquardt from ``q0: (B, dof)`` (None: a multistart guess), restarting only the
-    targets that fail and are within reach (``restarts=False``: none). ``T: (B, 4, 4)``."""
+    targets that fail and are within reach (``restarts=False``: none). ``T: (B, 4, 4)``. ``local``: no joint
+    wraps (:func:`nik.lm.lm_solve`)."""
     cfg = cfg if isinstance(cfg, LMCfg) else LMCfg()
     if T.shape[0] == 1 and T.device.type == "cpu":
-        return _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, int(seed))
+        return _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, int(seed), local)
     g = torch.Generator(device=T.device).manual_seed(int(seed))
     q, it = lm_solve(
         robot,
@@ -61,13 +63,14 @@ def lm_refine(
         restarts=None if restarts else 0,
         generator=g,
         reachable=reachable,
+        wrap=not local,
     )
     q = robot.clamp(q)
     pos, rot = pose_error(T, robot.fk(q, check=False))
     return RefineResult(q, pos, rot, it)
 
 
-def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, seed) -> RefineResult:
+def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, seed, local) -> RefineResult:
     """:func:`lm_refine` for one pose on the CPU: the compiled kernel (:mod:`nik.lm.compiled`)."""
     from nik.lm.compiled import CompiledLM
 
@@ -82,6 +85,7 @@ def _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, rea
         max_iters=max_iters,
         restarts=restarts,
         reachable=None if reachable is None else reachable.numpy(),
+        local=local,
     )
     return RefineResult(
         torch.from_numpy(run.q).to(T.dtype),

@@ -185,13 +185,15 @@ def refine(plan: Plan, job: Job, answers: Answers | None) -> Answers:
 
 
 def near(plan: Plan, job: Job, answers: Answers) -> Answers:
-    """Stage 3 (``q_near`` given, ``plan.near``: no closed form): refine every target from ``q_near`` too; per
-    target a successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error."""
+    """Stage 3 (``q_near`` given, ``plan.near``: no closed form): refine every target from ``q_near`` too (no joint
+    wrapping: ``local``); both answers' wrapping joints moved by whole turns towards ``q_near``; per target a
+    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error."""
     if job.q_near is None or not plan.near:
         return answers
     be = job.backend
     idx = be.arange(job.size, job.T)
-    res = be.refine(plan, job, None, job.q_near, plan.restarts and plan.fallback != "none")
+    res = be.refine(plan, job, None, job.q_near, plan.restarts and plan.fallback != "none", local=True)
+    answers.q, res.q = be.turns_toward(job, answers.q), be.turns_toward(job, res.q)
     ok_a = answers.ok(job)
     ok_b = (res.pos_err <= job.tol_pos) & (res.rot_err <= job.tol_rot)
     dist_a = be.norm(answers.q - job.q_near)

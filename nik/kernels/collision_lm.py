@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import LOWER, UPPER, _chain
+from nik.kernels.chain import _chain
 from nik.kernels.collision import collision_residual
 from nik.kernels.lm import (
     _STREAM,
@@ -55,6 +55,8 @@ from nik.kernels.lm import (
     _draw,
     _eval,
     _score,
+    hold,
+    pushes_out,
 )
 
 __all__ = ["collision_lm"]
@@ -68,34 +70,32 @@ def _stacked_step(J, e, Jr, r, w2, q, joints, lam, eps, max_step, A, g, dq):
     n = q.shape[0]
     R = r.shape[0]
     for i in range(n):
-        v = 0.0
-        for k in range(6):
-            v += J[k, i] * e[k]
-        for k in range(R):
-            if r[k] != 0.0:
-                v -= w2 * Jr[k, i] * r[k]
-        g[i] = v
-        for m in range(i + 1):
-            a = 0.0
+        dq[i] = 0.0
+    for _ in range(2):  # the active set at the limits of nik.kernels.lm._step: hold, solve, once more if pushed out
+        for i in range(n):
+            v = 0.0
             for k in range(6):
-                a += J[k, i] * J[k, m]
+                v += J[k, i] * e[k]
             for k in range(R):
                 if r[k] != 0.0:
-                    a += w2 * Jr[k, i] * Jr[k, m]
-            A[i, m] = a
-            A[m, i] = a
-    for i in range(n):
-        held = (q[i] <= joints[i, LOWER] and g[i] < 0.0) or (q[i] >= joints[i, UPPER] and g[i] > 0.0)
-        if held:
-            for m in range(n):
-                A[i, m] = 0.0
-                A[m, i] = 0.0
-            A[i, i] = 1.0
-            g[i] = 0.0
-    for i in range(n):
-        A[i, i] += lam * (A[i, i] + eps) + eps
-    if not _cholesky_solve(A, g, dq):
-        return False
+                    v -= w2 * Jr[k, i] * r[k]
+            g[i] = v
+            for m in range(i + 1):
+                a = 0.0
+                for k in range(6):
+                    a += J[k, i] * J[k, m]
+                for k in range(R):
+                    if r[k] != 0.0:
+                        a += w2 * Jr[k, i] * Jr[k, m]
+                A[i, m] = a
+                A[m, i] = a
+        hold(q, joints, g, dq, A)
+        for i in range(n):
+            A[i, i] += lam * (A[i, i] + eps) + eps
+        if not _cholesky_solve(A, g, dq):
+            return False
+        if not pushes_out(q, joints, dq):
+            break
     big = 0.0
     for i in range(n):
         if not math.isfinite(dq[i]):

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import _chain
+from nik.kernels.chain import WRAPS, _chain
 from nik.kernels.closed import guess as closed_guess
 from nik.kernels.lm import (
     _STREAM,
@@ -38,6 +38,7 @@ from nik.kernels.lm import (
     _tool_error,
     _work_size,
     lm_solve,
+    turns_toward,
 )
 from nik.kernels.poses import reach_flags
 from nik.kernels.seeded import lm_starts, merge, ranked_hypotheses
@@ -196,7 +197,12 @@ def solve(
     # near
     if use_near and near:
         b_all = _budgets(reachable, budget if restarts and fallback != FALLBACK_NONE else 0)
-        rq, rit, rpos, rrot = _lm(G, joints, T, q_near, opts, iopts, b_all, seed)
+        local = joints.copy()  # from q_near no joint wraps: a turn across a limit lands a full turn away
+        for j in range(n):
+            local[j, WRAPS] = 0.0
+        rq, rit, rpos, rrot = _lm(G, local, T, q_near, opts, iopts, b_all, seed)
+        turns_toward(joints, q, q_near)
+        turns_toward(joints, rq, q_near)
         for b in range(B):
             ok_b = rpos[b] <= tol_pos and rrot[b] <= tol_rot
             da, db = 0.0, 0.0

@@ -16,9 +16,10 @@ with the rotation vector's angle taken as ``atan2(|sin|, cos)``. Step::
 by a Cholesky factorisation written out (a failed factorisation is a rejected step), scaled so that
 no joint moves more than ``max_step``, then brought inside the limits (a wrapping joint moves by whole
 turns, the others are clamped). A joint held at a limit that the descent direction pushes further out
-is left out of the step (active set). A step is kept only when it lowers ``|e|^2``; lambda then
-shrinks by ``lambda_down``, else grows by ``lambda_up``. A start is spent after ``stall_iters``
-iterations in a row that lower ``|e|^2`` by less than the fraction ``stall_rel``, or after its
+is left out of the step (active set), and so is one that the step solved without it would push out (the step is
+solved once more: the clamp would move that joint less than the others assumed). A step is kept only when it
+lowers ``|e|^2``; lambda then shrinks by ``lambda_down``, else grows by ``lambda_up``. A start is spent after
+``stall_iters`` iterations in a row that lower ``|e|^2`` by less than the fraction ``stall_rel``, or after its
 iteration limit; then, while restarts are left, a fresh start is drawn uniformly inside the limits.
 
 Random numbers come from a splitmix64 stream whose state (``rng: (1,) uint64``) the caller seeds:
@@ -181,6 +182,23 @@ def _bounds(joints, q):
             down = max(math.ceil((x - hi) / _TWO_PI), 0.0)
             x = x + _TWO_PI * (up - down)
         q[i] = min(max(x, lo), hi)
+
+
+@kernel
+def turns_toward(joints, q, target):
+    """``q: (B, n)`` in place: each wrapping joint moved by whole turns, inside its limits, as near ``target: (B, n)``
+    as it goes (the same poses; a joint that crossed a limit of a range of 2 pi or more comes back)."""
+    for b in range(q.shape[0]):
+        for i in range(q.shape[1]):
+            if joints[i, WRAPS] == 0.0:
+                continue
+            lo, hi = joints[i, LOWER], joints[i, UPPER]
+            x = q[b, i] + _TWO_PI * math.floor((target[b, i] - q[b, i]) / _TWO_PI + 0.5)
+            if x > hi:
+                x -= _TWO_PI
+            elif x < lo:
+                x += _TWO_PI
+            q[b, i] = min(max(x, lo), hi)
 
 
 @kernel
@@ -410,33 +428,56 @@ def _cholesky_solve(A, b, x):
 
 
 @kernel
-def _step(J, e, q, joints, lam, eps, max_step, A, g, dq):
-    """The damped, limit-aware step ``dq (n,)`` from ``J (6, n)`` and ``e (6,)``; False if it failed."""
+def hold(q, joints, g, dq, A):
+    """The active set at the limits, in place on the normal equations ``A (n, n) dq = g (n,)``: a joint on a limit
+    that the descent direction ``g`` or the previous solution ``dq`` (zeros on a first pass) pushes further out is
+    held (its row and column left out, ``g_i = 0``)."""
     n = q.shape[0]
     for i in range(n):
-        v = 0.0
-        for r in range(6):
-            v += J[r, i] * e[r]
-        g[i] = v
-        for k in range(i + 1):
-            a = 0.0
-            for r in range(6):
-                a += J[r, i] * J[r, k]
-            A[i, k] = a
-            A[k, i] = a
-    # active set: a joint at a limit pushed further out by the descent direction is held
-    for i in range(n):
-        held = (q[i] <= joints[i, LOWER] and g[i] < 0.0) or (q[i] >= joints[i, UPPER] and g[i] > 0.0)
-        if held:
+        lo, hi = q[i] <= joints[i, LOWER], q[i] >= joints[i, UPPER]
+        if (lo and (g[i] < 0.0 or dq[i] < 0.0)) or (hi and (g[i] > 0.0 or dq[i] > 0.0)):
             for k in range(n):
                 A[i, k] = 0.0
                 A[k, i] = 0.0
             A[i, i] = 1.0
             g[i] = 0.0
+
+
+@kernel
+def pushes_out(q, joints, dq):
+    """Whether the step ``dq (n,)`` moves a joint that sits on a limit further out (it would be clamped, and the
+    others moved as if it were not: the step is solved again with that joint held, :func:`hold`)."""
+    for i in range(q.shape[0]):
+        if (q[i] <= joints[i, LOWER] and dq[i] < 0.0) or (q[i] >= joints[i, UPPER] and dq[i] > 0.0):
+            return True
+    return False
+
+
+@kernel
+def _step(J, e, q, joints, lam, eps, max_step, A, g, dq):
+    """The damped, limit-aware step ``dq (n,)`` from ``J (6, n)`` and ``e (6,)``; False if it failed."""
+    n = q.shape[0]
     for i in range(n):
-        A[i, i] += lam * (A[i, i] + eps) + eps
-    if not _cholesky_solve(A, g, dq):
-        return False
+        dq[i] = 0.0
+    for _ in range(2):
+        for i in range(n):
+            v = 0.0
+            for r in range(6):
+                v += J[r, i] * e[r]
+            g[i] = v
+            for k in range(i + 1):
+                a = 0.0
+                for r in range(6):
+                    a += J[r, i] * J[r, k]
+                A[i, k] = a
+                A[k, i] = a
+        hold(q, joints, g, dq, A)
+        for i in range(n):
+            A[i, i] += lam * (A[i, i] + eps) + eps
+        if not _cholesky_solve(A, g, dq):
+            return False
+        if not pushes_out(q, joints, dq):
+            break
     big = 0.0
     for i in range(n):
         if not math.isfinite(dq[i]):

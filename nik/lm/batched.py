@@ -381,16 +381,12 @@ def lm_run(
             )
         A = (J[..., :, :, None] * J[..., :, None, :]).sum(-3)  # J^T J by broadcasting: faster than bmm here
         g = (J * e[..., :, None]).sum(-2).unsqueeze(-1)
-        # active set: a joint held at a limit that the descent direction pushes further out is left out
-        gs = g.squeeze(-1)
-        free = ~(((q <= lo) & (gs < 0)) | ((q >= hi) & (gs > 0)))
-        if not bool(free.all()):
-            f = free.to(dtype)
-            A = A * (f[..., :, None] * f[..., None, :]) + (1.0 - f).diag_embed()
-            g = g * f[..., None]
-        A = A + (lam[..., None] * (torch.diagonal(A, dim1=-2, dim2=-1) + cfg.eps)).diag_embed() + eye_eps
-        L, info = torch.linalg.cholesky_ex(A)
-        dq = torch.cholesky_solve(g, L).squeeze(-1)
+        # active set (nik.kernels.lm.hold): a joint on a limit that the descent direction pushes further out is
+        # left out, and so is one that the step solved without it pushes out (the step is solved once more)
+        dq, info = _held_step(A, g, q, lo, hi, torch.zeros_like(q), lam, cfg.eps, eye_eps)
+        out = ((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))
+        if bool(out.any()):
+            dq, info = _held_step(A, g, q, lo, hi, dq, lam, cfg.eps, eye_eps)
         big = dq.abs().amax(dim=-1, keepdim=True)
         dq = dq * torch.clamp(cfg.max_step / big.clamp_min(1e-30), max=1.0)
         dq = torch.where((info == 0)[..., None] & torch.isfinite(dq), dq, torch.zeros_like(dq))
@@ -428,6 +424,20 @@ def lm_run(
     return LMRun(out_q, out_E, out_conv, out_it)
 
 
+def _held_step(A, g, q, lo, hi, prev, lam, eps, eye_eps):
+    """``(dq (..., n), info)``: the damped step of ``A (..., n, n) dq = g (..., n, 1)`` with the joints on a limit
+    that ``g`` or ``prev`` (the step before, zeros at first) pushes further out held (:func:`nik.kernels.lm.hold`)."""
+    gs = g.squeeze(-1)
+    held = ((q <= lo) & ((gs < 0) | (prev < 0))) | ((q >= hi) & ((gs > 0) | (prev > 0)))
+    if bool(held.any()):
+        f = (~held).to(A.dtype)
+        A = A * (f[..., :, None] * f[..., None, :]) + (1.0 - f).diag_embed()
+        g = g * f[..., None]
+    A = A + (lam[..., None] * (torch.diagonal(A, dim1=-2, dim2=-1) + eps)).diag_embed() + eye_eps
+    L, info = torch.linalg.cholesky_ex(A)
+    return torch.cholesky_solve(g, L).squeeze(-1), info
+
+
 def lm_solve(
     robot: Robot,
     T_target: torch.Tensor,
@@ -441,6 +451,7 @@ def lm_solve(
     generator: torch.Generator | None = None,
     reachable: torch.Tensor | None = None,
     bounds: torch.Tensor | None = None,
+    wrap: bool = True,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Levenberg-Marquardt from guesses, with restarts only for the targets that fail.
 
@@ -458,6 +469,8 @@ def lm_solve(
             radians, ``inf`` = free; :meth:`nik.ik.bounds.Bounds.expand`), or None for ``tol_pos, tol_rot``.
             Targets stop when inside every bound; the reach test (a bound on the position only, never looser) is
             skipped when a position axis is free.
+        wrap: joints of a range of ``2 pi`` or more wrap (a step across a limit moves a whole turn); False: they are
+            clamped like the others (the answer stays near the start, as ``q_near`` asks).
 
     Returns:
         ``q: (B, dof)`` inside the limits, and ``iterations: (B,)`` long.
@@ -471,7 +484,7 @@ def lm_solve(
         generator = torch.Generator(device=device).manual_seed(0)
     G, off = robot._params(T_target)
     lo, hi = robot.limits_as(T_target)
-    wrap = wrap_mask(robot.limits, prismatic=robot.prismatic).to(device)
+    wraps = wrap_mask(robot.limits, prismatic=robot.prismatic).to(device) & wrap
     prismatic = robot.prismatic.to(device)
     if bounds is not None:
         bounds = torch.as_tensor(bounds, dtype=dtype, device=device).expand(T_target.shape[0], 6)
@@ -488,7 +501,7 @@ def lm_solve(
         offsets=off,
         lo=lo,
         hi=hi,
-        wrap=wrap,
+        wrap=wraps,
         cfg=cfg,
         tol_pos=tol_pos,
         tol_rot=tol_rot,

@@ -132,10 +132,12 @@ class CompiledLM:
         max_iters: int | None = None,
         restarts: bool = True,
         reachable: np.ndarray | None = None,
+        local: bool = False,
     ) -> CompiledRun:
         """LM for ``T: (B, 4, 4)`` float64 from ``q0: (B, dof)`` (None: the best of :data:`FIRST_STARTS` uniform
         configurations), restarting the targets that fail (``restarts=False``: none; none either where
-        ``reachable: (B,)`` is False)."""
+        ``reachable: (B,)`` is False). ``local``: no joint wraps (a step across a limit of a joint of a range of
+        ``2 pi`` or more is clamped, not moved a turn: the answer stays near ``q0``)."""
         klm = _klm()
         B, n = T.shape[0], self.joints.shape[0]
         opts, iopts = self.options(tol_pos, tol_rot, max_iters, multistart=q0 is None)
@@ -150,7 +152,13 @@ class CompiledLM:
         run = CompiledRun(
             np.empty((B, n)), np.empty(B, dtype=np.int64), np.empty(B, dtype=bool), np.empty(B), np.empty(B)
         )
-        klm.lm_solve(self.G, self.joints, T, q0, opts, iopts, budget, _seed(klm, seed), *astuple_run(run))
+        joints = self.joints
+        if local:
+            from nik.kernels.chain import WRAPS
+
+            joints = joints.copy()
+            joints[:, WRAPS] = 0.0
+        klm.lm_solve(self.G, joints, T, q0, opts, iopts, budget, _seed(klm, seed), *astuple_run(run))
         return run
 
     def solve_starts(

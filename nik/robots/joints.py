@@ -12,7 +12,7 @@ import math
 
 import torch
 
-__all__ = ["TWO_PI", "angle_diff", "wrap_into", "wrap_mask"]
+__all__ = ["TWO_PI", "angle_diff", "turns_toward", "wrap_into", "wrap_mask"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -34,6 +34,14 @@ def wrap_into(x: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tens
     down = torch.ceil((x - hi) / TWO_PI).clamp_min(0)
     x = x + TWO_PI * (up - down)
     return torch.minimum(torch.maximum(x, lo), hi)
+
+
+def turns_toward(x: torch.Tensor, target: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, wrap: torch.Tensor):
+    """``x: (..., n)`` with each wrapping joint (``wrap: (n,)``) moved by whole turns, inside ``[lo, hi]``, as near
+    ``target`` as it goes; the other joints as they are."""
+    y = x + TWO_PI * torch.round((target - x) / TWO_PI)
+    y = torch.where(y > hi, y - TWO_PI, torch.where(y < lo, y + TWO_PI, y))
+    return torch.where(wrap, torch.minimum(torch.maximum(y, lo), hi), x)
 
 
 def angle_diff(a: torch.Tensor, b: torch.Tensor, wrap: torch.Tensor) -> torch.Tensor:

@@ -28,13 +28,14 @@ Backend interface (``be``; arrays are numpy on the compiled backend, tensors on 
   ``(ok (B,), failing)`` where the backend measured them against the job's tolerances already, else None;
 - ``be.closed_form(plan, job, idx, q_near) -> (q, pos, rot)``;
 - ``be.uniform_guess(plan, job) -> q``: the best of 64 uniform configurations (a raw guess for ``refine="none"``);
-- ``be.refine(plan, job, idx, q0, restarts) -> Refined``: the plan's refiner (LM; on torch also a swarm) from
-  ``q0`` (None: uniform starts);
+- ``be.refine(plan, job, idx, q0, restarts, local=False) -> Refined``: the plan's refiner (LM; on torch also a
+  swarm) from ``q0`` (None: uniform starts); ``local``: no joint wraps (LM; the near stage);
 - ``be.lm(plan, job, idx, q0, restarts) -> Refined``: LM whatever the refine method (the multistart fallback);
 - ``be.lm_starts(plan, job, idx, starts (b, K, dof)) -> Refined``: LM from several starts per target in turn;
 - ``be.merge(answers, job, idx, refined, strict)``: answers take the refined rows that are better, in place;
 - ``be.result(job, answers, source) -> IKResult`` (numpy arrays for numpy input, else tensors);
-- array helpers: ``nonzero``, ``rows``, ``arange(n, like)``, ``copy``, ``put``, ``norm``, ``zeros_long(n, like)``
+- array helpers: ``nonzero``, ``rows``, ``arange(n, like)``, ``copy``, ``put``, ``norm``, ``zeros_long(n, like)``,
+  ``turns_toward(job, q)`` (the wrapping joints of ``q`` moved by whole turns towards ``job.q_near``)
   (``like``: an array whose device the result takes).
 """
 

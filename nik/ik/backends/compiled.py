@@ -71,6 +71,7 @@ def _kernels():
             merge=seeded.merge,
             closed_guess=closed.guess,
             pose_errors=lm.pose_errors,
+            turns_toward=lm.turns_toward,
         )
     return _KERNELS
 
@@ -131,6 +132,13 @@ class CompiledBackend:
     @staticmethod
     def zeros_long(n: int, like=None):
         return np.zeros(n, dtype=np.int64)
+
+    @staticmethod
+    def turns_toward(job: Job, q):
+        """``q`` with its wrapping joints moved by whole turns towards ``job.q_near`` (a copy)."""
+        q = q.copy()
+        _kernels().turns_toward(job.model.joints, q, job.q_near)
+        return q
 
     @staticmethod
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> int:
@@ -259,11 +267,11 @@ class CompiledBackend:
         return q, pos, rot
 
     # -- refiners ----------------------------------------------------------------------
-    def refine(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
+    def refine(self, plan, job: Job, idx, q0, restarts: bool, local: bool = False) -> Refined:
         T, reachable = self.rows(job.T, idx), self.rows(job.reachable, idx)
         run = job.model.lm.solve(
             T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters,
-            restarts=restarts, reachable=reachable,
+            restarts=restarts, reachable=reachable, local=local,
         )  # fmt: skip
         return Refined(run.q, run.pos_err, run.rot_err, run.iterations)
 

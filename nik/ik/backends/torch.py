@@ -18,6 +18,7 @@ from nik.ik.refiners import lm_refine, swarm_refine
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near
 from nik.poses import pose_error
+from nik.robots.joints import turns_toward, wrap_mask
 from nik.robots.reach import unreachable_message, within_reach
 from nik.tolerances import score
 
@@ -59,6 +60,13 @@ class TorchBackend:
     @staticmethod
     def zeros_long(n: int, like=None):
         return torch.zeros(n, dtype=torch.long, device=None if like is None else like.device)
+
+    @staticmethod
+    def turns_toward(job: Job, q):
+        """``q`` with its wrapping joints moved by whole turns towards ``job.q_near``."""
+        lo, hi = job.robot.limits_as(q)
+        wrap = wrap_mask(job.robot.limits.double(), prismatic=job.robot.prismatic).to(q.device)
+        return turns_toward(q, job.q_near.to(q.dtype), lo, hi, wrap)
 
     @staticmethod
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> None:
@@ -132,9 +140,9 @@ class TorchBackend:
         return multistart_guess(job.robot, job.T, seed=plan.seed)
 
     # -- refiners ----------------------------------------------------------------------
-    def refine(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
+    def refine(self, plan, job: Job, idx, q0, restarts: bool, local: bool = False) -> Refined:
         if plan.refine == "lm":
-            return self.lm(plan, job, idx, q0, restarts)
+            return self.lm(plan, job, idx, q0, restarts, local)
         T = self.rows(job.T, idx)
         res = swarm_refine(
             job.robot, T, q0, method=plan.refine, cfg=plan.swarm_cfg, polish=plan.polish, tol_pos=job.tol_pos,
@@ -143,13 +151,13 @@ class TorchBackend:
         dt = T.dtype
         return Refined(res.q.to(dt), res.pos_err.to(dt), res.rot_err.to(dt), res.iterations.long())
 
-    def lm(self, plan, job: Job, idx, q0, restarts: bool) -> Refined:
+    def lm(self, plan, job: Job, idx, q0, restarts: bool, local: bool = False) -> Refined:
         """Levenberg-Marquardt with the plan's settings and cap, whatever the refine method (the multistart
         fallback)."""
         T = self.rows(job.T, idx)
         res = lm_refine(
             job.robot, T, q0, tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed, max_iters=plan.max_iters,
-            cfg=plan.lm_cfg, restarts=restarts, reachable=self.rows(job.reachable, idx),
+            cfg=plan.lm_cfg, restarts=restarts, reachable=self.rows(job.reachable, idx), local=local,
         )  # fmt: skip
         return Refined(res.q.to(T.dtype), res.pos_err.to(T.dtype), res.rot_err.to(T.dtype), res.iterations.long())
 
