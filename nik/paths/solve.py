@@ -22,7 +22,9 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    total joint motion); with ``q_start`` the step from it to the first waypoint counts too, so the trajectory starts
    nearest it. With ``q_start`` on a closed-form arm the LM chain from ``q_start`` is tried first and kept when it
    follows every waypoint in steps of at most :data:`PATH_FOLLOW_STEP` (its branch meets no limit: nothing to look
-   ahead for).
+   ahead for); else that chain is one more candidate on an approximate closed form (whose branches may miss the
+   posture ``q_start`` is in), and the first waypoint's candidates are those within ``max_step`` of ``q_start``
+   where there are any (open or closed: a jump the path cannot avoid is not taken at the start).
 4. **refine**: a chosen branch that misses the tolerance (an approximate closed form) gets LM from it; a waypoint
    left without a valid branch gets LM seeded by its neighbour's answer (its best effort, flagged); the chains are
    that already.
@@ -207,15 +209,16 @@ def solve_path(
     half, modes = (None, None) if goal is None else (goal.expand(N), goal.modes(N))
     is_closed = _is_closed(Tn, tol_pos, tol_rot) if closed is None else closed
     run = _Run(plan, model, Tn, q0, reachable, half, modes)
-    follows = None
+    follows = chain = None
     free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
     closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
     if closed_form and q0 is not None and run.refine:  # the quick answer: LM from q_start, if it follows
-        follows = _follows_from_start(run, max_step)
+        chain = _chain_from_start(run)
+        follows = _follows(run, chain, max_step)
     if follows is not None:
         q, its, found, source = *follows, None, "q_start"
     elif closed_form:
-        q, its, found, source = _closed_form_path(run, is_closed)
+        q, its, found, source = _closed_form_path(run, is_closed, chain, max_step)
     else:
         q, its, source = _chain_path(run)
         found = None
@@ -575,30 +578,47 @@ def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limi
     report.t, report.qd, report.qdd = (torch.from_numpy(np.ascontiguousarray(a)) for a in (tm.t, tm.qd, tm.qdd))
 
 
-def _follows_from_start(run: _Run, max_step: float):
-    """``(q (N, dof), iterations (N,))`` of the LM chain from ``q0`` when it follows the whole path smoothly
-    (:data:`PATH_FOLLOW_STEP`), else None."""
+def _chain_from_start(run: _Run) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(q (N, dof), iterations (N,), ok (N,))``: the LM chain from ``q0``, each waypoint seeded by the answer before
+    (no restarts: a restart could only jump); ``ok`` where it reaches the waypoint inside the limits."""
     q, its, ok = run.chains(run.T, run.q0[None], run.reachable, pull=0.0, restarts=0)
-    q, its = q[0], its[0]
-    if not ok.all():
-        return None
+    inside = ((q[0] >= run.model.lo - 1e-9) & (q[0] <= run.model.hi + 1e-9)).all(axis=1)
+    return q[0], its[0], ok[0] & inside
+
+
+def _follows(run: _Run, chain, max_step: float):
+    """``(q (N, dof), iterations (N,))`` of the chain from ``q0`` (:func:`_chain_from_start`) when it follows the whole
+    path smoothly (:data:`PATH_FOLLOW_STEP`), else None."""
+    q, its, ok = chain
     steps = np.abs(np.diff(np.concatenate([run.q0[None], q]), axis=0)).max()
-    inside = ((q >= run.model.lo - 1e-9) & (q <= run.model.hi + 1e-9)).all()
-    return (q, its) if inside and steps <= min(PATH_FOLLOW_STEP, max_step) else None
+    return (q, its) if ok.all() and steps <= min(PATH_FOLLOW_STEP, max_step) else None
 
 
 # ---------------------------------------------------------------------------
 # arms with a closed form: every branch at every waypoint, the choice by dynamic programming
 # ---------------------------------------------------------------------------
-def _closed_form_path(run: _Run, closed: bool = False):
+def _closed_form_path(run: _Run, closed: bool = False, chain=None, max_step: float = math.inf):
     """``(q (N, 6), iterations (N,), reasons, source)`` of a closed-form arm: the guess stage (every branch of every
-    waypoint; with a free tool axis, every branch of every sampled angle: :func:`_branches`), the choice over the
-    whole path (a closed path ends on its start's branch: :func:`_choose`), then the refine stage (LM from the
-    chosen branch where it misses the tolerance: an approximate closed form, :mod:`nik.ik.model`; LM from the
-    neighbour's answer where no branch serves)."""
+    waypoint; with a free tool axis, every branch of every sampled angle: :func:`_branches`; with ``q_start``, the LM
+    chain from it as one more candidate on an approximate closed form, ``chain`` of :func:`_chain_from_start`: its
+    branches may miss the posture ``q_start`` is in, and the chain keeps it; the first waypoint's candidates within
+    ``max_step`` of ``q_start`` only, where there are any: a jump the path cannot avoid comes where it must, not at
+    the start), the choice over the whole path (a closed path ends on its start's branch: :func:`_choose`), then the
+    refine stage (LM from the chosen branch where it misses the tolerance: an approximate closed form,
+    :mod:`nik.ik.model`; LM from the neighbour's answer where no branch serves)."""
     model, Tn, q0 = run.model, run.T, run.q0
     N = Tn.shape[0]
     cand, valid = _branches(run)
+    if chain is not None and model.approximate:
+        cand = np.ascontiguousarray(np.concatenate([cand, chain[0][:, None]], axis=1))
+        valid = np.ascontiguousarray(np.concatenate([valid, chain[2][:, None]], axis=1))
+    if q0 is not None:
+        d = np.abs(cand[0] - q0)
+        d[:, model.wraps] = np.abs(np.remainder(d[:, model.wraps] + math.pi, 2 * math.pi) - math.pi)
+        near = valid[0] & (d.max(axis=1) <= max_step)
+        if near.any():
+            valid = valid.copy()
+            valid[0] = near
     wraps = model.wraps
     choice = _choose(cand, valid, wraps, q0, closed)
     have = choice >= 0
@@ -673,7 +693,7 @@ def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
     ends on its start's branch (the last waypoint's candidate nearest the first's, modulo whole turns on the joints
     that wrap): when the free choice does not, each start candidate (at most :data:`PATH_CLOSED_STARTS`) is tried
     with the end pinned to its match, and the least-motion sequence (largest step, then sum of squared steps) is
-    kept."""
+    kept (with ``q0``, the step from it counted)."""
     from nik.paths.kernels import path_dp
 
     N = cand.shape[0]
@@ -700,6 +720,8 @@ def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
         if (c < 0).any() and not ((c < 0) == (choice < 0)).all():
             continue
         seq = cand[np.nonzero(c >= 0)[0], c[c >= 0]]
+        if q0 is not None:  # the step from q_start counts: a start on another branch is a jump
+            seq = np.concatenate([q0[None], seq])
         d = np.abs(np.diff(seq, axis=0))
         d[:, wraps] = np.abs(np.remainder(d[:, wraps] + math.pi, 2 * math.pi) - math.pi)
         steps = d.max(axis=1) if d.size else np.zeros(1)
@@ -745,7 +767,8 @@ def _closed_form_reason(run: _Run, i: int, cand_i: np.ndarray) -> str:
     """Why no branch serves waypoint ``i``: some reaches the pose outside the limits, or none reaches it at all."""
     if not run.reachable[i]:
         return "out of reach"
-    pos, rot = _errors(run.model, np.repeat(run.T[i][None], 8, axis=0), cand_i)  # the branches before the limits
+    Ti = np.repeat(run.T[i][None], cand_i.shape[0], axis=0)
+    pos, rot = _errors(run.model, Ti, cand_i)  # the branches before the limits
     near = bool(((pos <= run.tol_pos) & (rot <= run.tol_rot)).any())
     return "beyond a joint limit on every branch" if near else "out of reach"
 
