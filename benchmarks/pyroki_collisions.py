@@ -45,15 +45,15 @@ TOL_POS, TOL_ROT = 1e-4, np.radians(0.1)
 
 def _missing() -> str | None:
     """Why the comparison cannot run here, or None."""
-    try:
-        import coal  # noqa: F401
-    except ImportError:
-        return "coal is not installed (pip install 'nik[collision-check]')"
-    try:
+    try:  # the peer first: without it there is no comparison, whatever else is installed
         import pyroki  # noqa: F401
         import yourdfpy  # noqa: F401
     except ImportError as err:
         return f"PyRoki is not installed ({err}; pip install almond-pyroki)"
+    try:
+        import coal  # noqa: F401
+    except ImportError:
+        return "coal is not installed (pip install 'nik[collision-check]')"
     return None
 
 

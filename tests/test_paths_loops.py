@@ -48,7 +48,7 @@ def _kinova():
     try:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data not installed")
+        pytest.skip('example-robot-data not installed (pip install -e ".[urdf-tests]")')
     robots = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
     path = robots / "kinova_description/robots/kinova.urdf"
     if not path.is_file():
