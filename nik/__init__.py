@@ -17,6 +17,7 @@ _SUBMODULES = {
     "analytic",
     "cli",
     "collision",
+    "costs",
     "data",
     "evaluate",
     "ik",

@@ -37,13 +37,13 @@ from pathlib import Path
 
 import torch
 
-from nik.ik import backends, collide, networks, stages
+from nik.ik import backends, collide, every, networks, stages
+from nik.ik.costs import solve as solve_costs
 from nik.ik.plan import REFINE_METHODS, Plan, check_settings, choose_network, in_arm_frame, resolve_fallback, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.lm.batched import LMCfg
 from nik.robots import Robot, load_robot
-from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["REFINE_METHODS", "IKSolver"]
@@ -220,6 +220,7 @@ class IKSolver:
         bounds=None,
         q_rest=None,
         rest_weight: float = 0.1,
+        costs=None,
     ) -> IKResult:
         """Joint angles that reach the target poses.
 
@@ -264,7 +265,7 @@ class IKSolver:
         if plan is None:
             plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
         plan = with_goal(plan, bounds, q_rest, rest_weight)
-        return collide.after_solve(self, be, plan, T_target, q_near, representation, world)
+        return solve_costs(self, be, plan, T_target, q_near, representation, world, costs)
 
     def solve_all(
         self,
@@ -277,6 +278,7 @@ class IKSolver:
         dedupe_tol: float = 1e-3,
         representation: str | None = None,
         bounds=None,
+        costs=None,
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
 
@@ -294,15 +296,10 @@ class IKSolver:
         path of targets on a GPU). Where a collision check is active (the solver's ``world`` and
         ``self_collision``), only the collision-free solutions.
         """
-        T = as_poses(T_target, representation)
-        if T.shape[0] != 1:
-            raise ValueError(f"solve_all: expected one pose, got {T.shape[0]}")
-        check_tolerances(tol_pos, tol_rot)
-        plan = with_goal(self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds)
-        job = stages.Job(backends.torch_backend(), self.robot, T, within_reach(self.robot, T), None, plan.tol_pos,
-                         plan.tol_rot, T.dtype, plan.tol_pos, plan.tol_rot)  # fmt: skip
-        Q = stages.all_solutions(plan, job, closed_form=self.closed_form, n_starts=n_starts, dedupe_tol=dedupe_tol)
-        return collide.free_solutions(self, Q)
+        return every.solve_all(
+            self, T_target, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, n_starts=n_starts, dedupe_tol=dedupe_tol,
+            representation=representation, bounds=bounds, costs=costs,
+        )  # fmt: skip
 
     def solve_path(
         self,
@@ -320,6 +317,7 @@ class IKSolver:
         vel_limits=None,
         acc_limits=None,
         bounds=None,
+        costs=None,
     ) -> IKResult:
         """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.paths.solve`).
 
@@ -348,11 +346,11 @@ class IKSolver:
             UserWarning: naming the first waypoint out of reach, beyond a joint limit on every branch, not reached,
             or forcing a reconfiguration.
         """
-        from nik.paths import solve as paths
+        from nik.paths import costs as paths
 
         step = paths.PATH_MAX_STEP if max_step is None else max_step
         return paths.solve_path(
             self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
             max_step=step, world=world, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits,
-            bounds=bounds,
+            bounds=bounds, costs=costs,
         )  # fmt: skip
