@@ -12,7 +12,7 @@ from that answer (its choices: :mod:`nik.lm.problem`):
 - the user's terms (:func:`nik.costs.custom`, or any :class:`nik.costs.Term`).
 
 The targets whose constraints still fail are solved again from the other starts the collision stage uses (the
-closed form's branches or the network's hypotheses, :func:`nik.ik.collide._starts`), then from
+closed form's branches or the network's hypotheses, :func:`nik.ik.collide._starts`; at most :data:`HYPOTHESES`), then from
 :data:`UNIFORM_STARTS` uniform configurations (seeded by the call's ``seed``), until one start meets them all.
 Where none does, the pipeline's answer stands (it reaches the pose where the pipeline succeeded), so what a failed
 answer misses is the user's term that cannot be met, not a compromise of every term.
@@ -31,10 +31,12 @@ import warnings
 import numpy as np
 import torch
 
-__all__ = ["UNIFORM_STARTS", "apply", "call_terms", "check_costs", "solve"]
+__all__ = ["HYPOTHESES", "UNIFORM_STARTS", "apply", "call_terms", "check_costs", "solve"]
 
 #: Uniform starts a target whose terms are still unmet draws after the pipeline's other starts.
 UNIFORM_STARTS = 4
+#: Most of the other branches or hypotheses a target whose terms are unmet is solved again from.
+HYPOTHESES = 8
 
 
 def check_costs(costs) -> list:
@@ -84,7 +86,7 @@ def _extra_starts(solver, plan, T: torch.Tensor, q: torch.Tensor, seed: int) -> 
 
     starts, count = _starts(solver.robot, plan, T.cpu().numpy(), q.cpu().numpy())
     out = []
-    for k in range(1, starts.shape[1]):
+    for k in range(1, min(starts.shape[1], 1 + HYPOTHESES)):
         sk = torch.from_numpy(starts[:, k]).to(q)
         out.append(torch.where(torch.from_numpy(count > k).to(q.device)[:, None], sk, q))
     g = torch.Generator().manual_seed(int(seed))

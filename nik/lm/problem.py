@@ -16,7 +16,8 @@ row that lower the cost by less than the fraction ``stall_rel``, at zero cost, o
 term (preferences such as a rest posture pull the answer, and may pull a constraint slightly out of its check),
 then, for the rows whose checks fail, the constraints alone (``hard`` terms) from there, so a preference never
 costs the goal: the second pass lands on the constraints nearest the first pass's answer (damped steps are the
-least-norm ones). Every row of the batch stays in the batch (rows that stopped are masked, not dropped), so a
+least-norm ones); where that fails too, from the start itself (a start that met the constraints before the
+preferences pulled it keeps meeting them). Every row of the batch stays in the batch (rows that stopped are masked, not dropped), so a
 user's term sees the rows in their order every time and may hold per-target data.
 
 :class:`Problem` has one configuration per row (``x: (B, dof)``); :class:`PathProblem` one path per problem
@@ -192,13 +193,26 @@ def lm_minimise(problem: Problem, x0: torch.Tensor, active: torch.Tensor, *, har
 
 def solve_problem(problem: Problem, x0: torch.Tensor, *, active: torch.Tensor | None = None,
                   cfg: ProblemCfg = ProblemCfg()) -> ProblemResult:  # fmt: skip
-    """The two passes of the module docstring from ``x0: (B, n)`` on the rows ``active`` (default all)."""
+    """The two passes of the module docstring from ``x0: (B, n)`` on the rows ``active`` (default all), with the
+    thread count of :func:`nik.threads.threads_for` (one thread for small batches: the ops are small)."""
+    from nik.threads import threads_for
+
     active = torch.ones(x0.shape[0], dtype=torch.bool, device=x0.device) if active is None else active
+    with threads_for(x0.shape[0]):
+        return _solve(problem, x0, active, cfg)
+
+
+def _solve(problem: Problem, x0: torch.Tensor, active: torch.Tensor, cfg: ProblemCfg) -> ProblemResult:
     x, its = lm_minimise(problem, x0, active, cfg=cfg)
     checks = problem.checks(x)
     fail = active & ~problem.row_ok(checks)
-    if bool(fail.any()):
-        x2, its2 = lm_minimise(problem, x, fail, hard_only=True, cfg=cfg)
+    if all(t.hard for t in problem.terms):  # no preference: the first pass was the constraints alone already
+        fail = fail & False
+    for start in (x, x0):  # the constraints alone: from the first pass's answer, then from the start itself
+        if not bool(fail.any()):
+            break
+        x2, its2 = lm_minimise(problem, start, fail, hard_only=True, cfg=cfg)
         x, its = torch.where(fail[:, None], x2, x), its + its2
         checks = problem.checks(x)
+        fail = active & ~problem.row_ok(checks)
     return ProblemResult(x, its, checks, torch.stack(list(checks.values())).all(0))
