@@ -292,3 +292,22 @@ def test_path_problem_block_jacobian_matches_finite_differences(panda):
     x = qs.reshape(1, -1)
     _, J = prob.evaluate(x)
     torch.testing.assert_close(J, _fd(lambda y: prob.evaluate(y)[0], x), atol=1e-6, rtol=0)
+
+
+def test_a_user_term_and_a_world_together(panda):
+    """The problem holds the collision rows beside the user's term: the answers are collision-free (the solver's
+    verdict), meet the term and reach the pose."""
+    world = nik.World().add_box([0.0, 0.0, -0.05], [2.0, 2.0, 0.1]).add_sphere([0.35, -0.3, 0.5], 0.06)
+    q_own = _configs(panda, 64, 18)
+    q_own = q_own[~torch.as_tensor(collides(panda, q_own, world))]
+    T = panda.fk(q_own)
+    solver = nik.IKSolver(panda, world=world)
+    plain = solver.solve(T)
+    z_own, z_plain = _elbow_z(panda, q_own), _elbow_z(panda, plain.q)
+    keep = (z_own > z_plain + 0.01).nonzero()[:, 0][:3]
+    assert keep.numel() == 3
+    T, h = T[keep], 0.5 * (z_own + z_plain)[keep]
+    term = nik.costs.custom(lambda q: (h - _elbow_z(panda, q)).clamp(min=0)[:, None], name="elbow_above")
+    res = solver.solve(T, costs=[term])
+    assert res.success.all() and res.collision_free.all() and not collides(panda, res.q, world).any()
+    assert (_elbow_z(panda, res.q) >= h - 1e-6).all() and (res.pos_err <= 1e-4).all()

@@ -12,8 +12,9 @@ from that answer (its choices: :mod:`nik.lm.problem`):
 - the user's terms (:func:`nik.costs.custom`, or any :class:`nik.costs.Term`).
 
 The targets whose constraints still fail are solved again from the other starts the collision stage uses (the
-closed form's branches or the network's hypotheses, :func:`nik.ik.collide._starts`; at most :data:`HYPOTHESES`), then from
-:data:`UNIFORM_STARTS` uniform configurations (seeded by the call's ``seed``), until one start meets them all.
+closed form's branches or the network's hypotheses, :func:`nik.ik.collide._starts`; at most :data:`HYPOTHESES`),
+then from :data:`UNIFORM_STARTS` uniform configurations (seeded by the call's ``seed``), until one start meets them
+all.
 Where none does, the pipeline's answer stands (it reaches the pose where the pipeline succeeded), so what a failed
 answer misses is the user's term that cannot be met, not a compromise of every term.
 

@@ -11,7 +11,8 @@
 A plain numpy implementation of the same algorithm, the tests' independent reference, lives in
 ``tests/lm_reference.py``.
 
-The room may import kinematics, poses, robots, collision and costs; never swarm, ik, learn or cli (the swarms import it).
+The room may import kinematics, poses, robots, collision and costs; never swarm, ik, learn or cli (the swarms
+import it).
 """
 
 from nik.lm.batched import LMCfg, LMRun, lm_run, lm_solve, so3_log

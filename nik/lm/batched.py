@@ -60,7 +60,6 @@ from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 __all__ = ["DEAD_ZONE", "LMCfg", "LMRun", "bounded_residual", "lm_run", "lm_solve", "so3_log"]
 
 
-
 @dataclass
 class LMCfg:
     """Levenberg-Marquardt settings (``method="lm"``, ``polish=True`` and the solver's default refinement)."""

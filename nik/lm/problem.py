@@ -17,8 +17,8 @@ term (preferences such as a rest posture pull the answer, and may pull a constra
 then, for the rows whose checks fail, the constraints alone (``hard`` terms) from there, so a preference never
 costs the goal: the second pass lands on the constraints nearest the first pass's answer (damped steps are the
 least-norm ones); where that fails too, from the start itself (a start that met the constraints before the
-preferences pulled it keeps meeting them). Every row of the batch stays in the batch (rows that stopped are masked, not dropped), so a
-user's term sees the rows in their order every time and may hold per-target data.
+preferences pulled it keeps meeting them). Every row of the batch stays in the batch (rows that stopped are
+masked, not dropped), so a user's term sees the rows in their order every time and may hold per-target data.
 
 :class:`Problem` has one configuration per row (``x: (B, dof)``); :class:`PathProblem` one path per problem
 (``x: (1, N * dof)``, the waypoints side by side): its per-waypoint terms give a block-diagonal Jacobian, the path

@@ -6,9 +6,9 @@ problem over every waypoint at once (:class:`nik.lm.problem.PathProblem`, solved
 :func:`nik.lm.problem.solve_problem`): per waypoint the pose (or the bounds), the limits, collisions where a check is
 active (:mod:`nik.ik.costs`, :func:`nik.ik.collide.setup`'s rule) and the user's per-configuration terms; over the
 path :func:`nik.costs.smoothness` from ``q_start`` (velocity and acceleration rows, a preference) and
-:func:`nik.costs.step_cap` (``max_step``, a constraint) and any path terms the user gives (``path = True``). The problem is solved only where
-the search's path misses a constraint or a user's term is a preference (a path that already meets everything is
-returned as the search made it).
+:func:`nik.costs.step_cap` (``max_step``, a constraint) and any path terms the user gives (``path = True``). The
+problem is solved only where the search's path misses a constraint or a user's term is a preference (a path that
+already meets everything is returned as the search made it).
 
 Each waypoint's success requires every constraint's check there (the step cap included: the step into it), the
 collision verdict of the waypoint and of the motion into it (samples inside the step, as the search's check), and
@@ -59,13 +59,14 @@ def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, a
             seed=0, representation=None, max_step=PATH_MAX_STEP, world=None, closed=None, bounds=None):  # fmt: skip
     from nik import costs as C
     from nik.costs.collision import CollisionTerm
-    from nik.ik.costs import call_terms, warn_unmet
+    from nik.ik.costs import _unmet, call_terms, warn_unmet
     from nik.ik.model import model_of
     from nik.ik.plan import with_goal
     from nik.ik.result import IKResult
     from nik.lm.problem import PathProblem, solve_problem
     from nik.paths.solve import _closure, _poses, _report, _time
     from nik.paths.trajopt import path_collisions
+    from nik.poses import pose_error
 
     robot = solver.robot
     Tn, dtype, device = _poses(T_path, representation)
@@ -94,8 +95,6 @@ def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, a
         free = ~hit
         for nm in names:
             checks[nm] = torch.from_numpy(~hit & ~between)
-    from nik.ik.costs import _unmet
-
     unmet = _unmet(terms, limits, checks)
     ok = torch.stack(list(checks.values())).all(0).numpy() & reachable
     reasons = ["" if ok[i] else "out of reach" if not reachable[i] else "; ".join(unmet[i] or ["not reached"])
@@ -110,11 +109,8 @@ def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, a
         warnings.warn(report.warning, UserWarning, stacklevel=4)
     else:
         warn_unmet(unmet, "waypoints")
-    pos = torch.linalg.vector_norm(robot.fk(q)[:, :3, 3] - T[:, :3, 3], dim=-1)
-    from nik.poses import pose_error
-
     pos, rot = pose_error(T, robot.fk(q))
     like = dict(dtype=dtype, device=device)
+    free = None if free is None else torch.from_numpy(free).to(device)
     return IKResult(q.to(**like), pos.to(**like), rot.to(**like), torch.from_numpy(ok).to(device), its.to(device),
-                    res.source, reachable=res.reachable, path=report,
-                    collision_free=None if free is None else torch.from_numpy(free).to(device), unmet=unmet)  # fmt: skip
+                    res.source, reachable=res.reachable, path=report, collision_free=free, unmet=unmet)  # fmt: skip
