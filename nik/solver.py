@@ -248,6 +248,10 @@ class IKSolver:
                 ranges), reached in the null space of the task without leaving the tolerance; moves the answers of
                 redundant arms (7 joints, or any arm under a free axis) only; rest_weight: the share of the way to
                 it each step asks (:mod:`nik.ik.goals`).
+            costs: the user's cost terms (:func:`nik.costs.custom`, any :class:`nik.costs.Term`): after the pipeline,
+                the call's terms (pose or bounds, limits, posture, collisions, these) are solved as one problem from
+                its answer (:mod:`nik.ik.costs`); success then needs every constraint's check, ``res.unmet`` names
+                what a failed target misses.
 
         Returns:
             :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``
@@ -294,7 +298,8 @@ class IKSolver:
         Cost: on the CPU the LM runs compiled from each start; panda and xarm7 with 256 starts take 50-100 ms a
         pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the
         path of targets on a GPU). Where a collision check is active (the solver's ``world`` and
-        ``self_collision``), only the collision-free solutions.
+        ``self_collision``), only the collision-free solutions. With ``costs`` (as :meth:`solve`), each solution
+        solved again under the call's terms, only those meeting every constraint kept (:mod:`nik.ik.every`).
         """
         return every.solve_all(
             self, T_target, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, n_starts=n_starts, dedupe_tol=dedupe_tol,
@@ -337,6 +342,8 @@ class IKSolver:
             timing: True (or a dict of :func:`nik.paths.timing.time_path` keywords) fills ``res.path.t``, ``qd``,
                 ``qdd``; vel_limits, acc_limits: ``(dof,)`` its limits (default the robot's).
             bounds: a tolerant goal per waypoint (:func:`nik.ik.bounds.parse_bounds`, e.g. ``"axis_z"``).
+            costs: the user's cost terms (as :meth:`solve`; path terms too): the path found is then solved as one
+                problem with them, smoothness and the ``max_step`` cap (:mod:`nik.paths.costs`).
 
         Returns:
             :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,

@@ -171,8 +171,7 @@ def solve(solver, backend, plan, T_target, q_near, representation, world, costs)
         out.axis_err = tool_error(T, Tq, rotation_modes(plan.bounds.as_tensor(T.shape[0], T)))
     ok = torch.stack(list(checks.values())).all(0)
     out.unmet = _unmet(terms, limits, checks)
-    warn_unmet([u if r else None for u, r in zip(out.unmet, reach if reach is not None else [True] * len(ok),
-                                                  strict=True)])  # fmt: skip
+    warn_unmet([u if reach is None or reach[i] else None for i, u in enumerate(out.unmet)])  # out of reach: warned
     out.q, out.pos_err, out.rot_err = q.to(dtype), pos.to(dtype), rot.to(dtype)
     out.success = ok if res.reachable is None else ok & torch.as_tensor(res.reachable).to(ok.device)
     out.iterations = torch.as_tensor(np.asarray(res.iterations) if isinstance(res.iterations, np.ndarray)

@@ -10,7 +10,8 @@ with the joints held at a limit that the descent pushes further out left out of 
 the step scaled so that no joint moves more than ``max_step``, then brought inside the box
 (:meth:`nik.costs.limits.LimitsTerm.project`). A step is kept only where it lowers the total cost ``|r|^2``;
 lambda then shrinks by ``lambda_down``, else grows by ``lambda_up``. A row stops after ``stall_iters`` steps in a
-row that lower the cost by less than the fraction ``stall_rel``, at zero cost, or after ``iters``.
+row that lower the cost by less than the fraction ``stall_rel``, at a cost of ``cost_tol`` or less, or after
+``iters``. Without preferences, rows that start meeting every constraint are not touched.
 
 :func:`solve_problem` runs two passes (the choice where a preference and a constraint disagree): first every
 term (preferences such as a rest posture pull the answer, and may pull a constraint slightly out of its check),
@@ -48,6 +49,7 @@ class ProblemCfg:
     max_step: float = 0.5  # rad, largest change of any joint in one step
     stall_iters: int = 4  # a row stops after this many steps in a row...
     stall_rel: float = 1e-4  # ...that lower its cost by less than this fraction
+    cost_tol: float = 1e-24  # a row whose cost |r|^2 is at most this is done
 
 
 @dataclass
@@ -160,7 +162,7 @@ def lm_minimise(problem: Problem, x0: torch.Tensor, active: torch.Tensor, *, har
     lam = torch.full((B,), cfg.lambda0, dtype=x.dtype, device=x.device)
     stall = torch.zeros(B, dtype=torch.long, device=x.device)
     its = torch.zeros(B, dtype=torch.long, device=x.device)
-    live = active.clone() & (E > 0)
+    live = active.clone() & (E > cfg.cost_tol)
     eye = torch.eye(n, dtype=x.dtype, device=x.device)
     for _ in range(cfg.iters):
         if not bool(live.any()):
@@ -187,7 +189,7 @@ def lm_minimise(problem: Problem, x0: torch.Tensor, active: torch.Tensor, *, har
         stall = torch.where(live & (~good | (rel < cfg.stall_rel)), stall + 1, torch.zeros_like(stall))
         E = torch.where(good, En, E)
         lam = torch.where(good, lam * cfg.lambda_down, lam * cfg.lambda_up).clamp(1e-12, cfg.lambda_max * 10)
-        live = live & (stall < cfg.stall_iters) & (E > 0) & (lam <= cfg.lambda_max)
+        live = live & (stall < cfg.stall_iters) & (E > cfg.cost_tol) & (lam <= cfg.lambda_max)
     return x, its
 
 
@@ -203,6 +205,8 @@ def solve_problem(problem: Problem, x0: torch.Tensor, *, active: torch.Tensor | 
 
 
 def _solve(problem: Problem, x0: torch.Tensor, active: torch.Tensor, cfg: ProblemCfg) -> ProblemResult:
+    if all(t.hard for t in problem.terms):  # no preference: rows that already meet every constraint stay as they are
+        active = active & ~problem.row_ok(problem.checks(x0))
     x, its = lm_minimise(problem, x0, active, cfg=cfg)
     checks = problem.checks(x)
     fail = active & ~problem.row_ok(checks)
