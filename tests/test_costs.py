@@ -311,3 +311,25 @@ def test_a_user_term_and_a_world_together(panda):
     res = solver.solve(T, costs=[term])
     assert res.success.all() and res.collision_free.all() and not collides(panda, res.q, world).any()
     assert (_elbow_z(panda, res.q) >= h - 1e-6).all() and (res.pos_err <= 1e-4).all()
+
+
+def test_solve_path_with_a_user_term_bounds_a_world_and_timing(panda):
+    world = nik.World().add_box([0.0, 0.0, -0.05], [2.0, 2.0, 0.1])
+    solver = nik.IKSolver(panda, world=world)
+    q0 = _configs(panda, 1, 1)[0]
+    T = panda.fk(panda.clamp(q0 + torch.linspace(0, 1, 10, dtype=torch.float64)[:, None] * 0.3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plain = solver.solve_path(T, q_start=q0, bounds="axis_z")
+    h = float(_elbow_z(panda, plain.q).min()) + 0.02
+    term = nik.costs.custom(lambda q: (h - _elbow_z(panda, q)).clamp(min=0)[:, None], name="elbow_above")
+    res = solver.solve_path(T, q_start=q0, bounds="axis_z", costs=[term], timing=True)
+    assert res.success.all() and res.collision_free.all() and not collides(panda, res.q, world).any()
+    assert (_elbow_z(panda, res.q) >= h - 1e-6).all() and res.path.t is not None
+    steps = torch.cat([res.q[:1] - q0, res.q[1:] - res.q[:-1]]).abs().amax(-1)
+    assert (steps <= res.path.max_step).all()
+    from nik.ik.bounds import parse_bounds
+    from nik.poses import within_bounds
+
+    half = torch.from_numpy(parse_bounds("axis_z").expand(10))
+    assert within_bounds(T, panda.fk(res.q), half).all()
