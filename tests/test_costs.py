@@ -52,9 +52,8 @@ def test_pose_term_matches_finite_differences_and_the_compiled_kernel(panda):
 
 
 def test_bounded_pose_term_matches_finite_differences_outside_its_zone_and_the_kernel(panda):
-    from nik.kernels.lm import DEAD_ZONE as KERNEL_DEAD_ZONE
-
     from nik.costs.pose import DEAD_ZONE
+    from nik.kernels.lm import DEAD_ZONE as KERNEL_DEAD_ZONE
 
     assert DEAD_ZONE == KERNEL_DEAD_ZONE
     q = _configs(panda, 6, 2)
