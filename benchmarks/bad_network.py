@@ -12,9 +12,9 @@ shipped architecture (``nik.models.load_pretrained``):
 - ``shipped, by path``: the shipped main network saved (:func:`nik.nets.checkpoint.save_checkpoint`) and given by
   path (``checkpoint=PATH``: judged, as any given network);
 - ``untrained``: fresh weights (``nik.nets.multi.build_net`` of the shipped config, ``torch.manual_seed(0)``) with
-  the shipped input normalisation; ``scrambled``: the shipped network with the units of its last layer permuted
-  (seeded); ``randomised``: every weight of the shipped network drawn again, normal at its tensor's standard deviation
-  (seeded); each given by path;
+  the shipped input normalisation; ``untrained, raw``: the same without it (mean 0, deviation 1);
+  ``scrambled``: the shipped network with the units of its last layer permuted (seeded); ``randomised``: every
+  weight of the shipped network drawn again, normal at its tensor's standard deviation (seeded); each given by path;
 - ``randomised, solver.net``: that network set on a solver (``solver.net = net``; panda only, as in the issue).
 
 Measured, one torch thread, one process, solvers interleaved (A B C ... A B C ...), medians: the wall time of a batch
@@ -43,14 +43,15 @@ from nik.nets.multi import build_net
 
 
 def useless(robot, kind: str, seed: int = 0):
-    """A useless network of the shipped architecture (module docstring): untrained, scrambled or randomised."""
+    """A useless network of the shipped architecture (module docstring), ``kind`` one of its names."""
     shipped = nik.models.load_pretrained(robot)
     g = torch.Generator().manual_seed(seed)
-    if kind == "untrained":
+    if kind.startswith("untrained"):
         torch.manual_seed(seed)
         net = build_net(robot, shipped.config())
-        net.in_mean.copy_(shipped.in_mean)
-        net.in_std.copy_(shipped.in_std)
+        if kind == "untrained":
+            net.in_mean.copy_(shipped.in_mean)
+            net.in_std.copy_(shipped.in_std)
         return net.eval()
     net = copy.deepcopy(shipped)
     with torch.no_grad():
@@ -72,8 +73,8 @@ def solvers(robot, folder: Path) -> dict:
     }
     shipped = save_checkpoint(nik.models.load_pretrained(robot), folder / f"{robot.name}_shipped.ckpt")
     out["shipped, by path"] = nik.IKSolver(robot, checkpoint=str(shipped), analytic=False)
-    for kind in ("untrained", "scrambled", "randomised"):
-        path = save_checkpoint(useless(robot, kind), folder / f"{robot.name}_{kind}.ckpt")
+    for kind in ("untrained", "untrained, raw", "scrambled", "randomised"):
+        path = save_checkpoint(useless(robot, kind), folder / f"{robot.name}_{kind.replace(', ', '_')}.ckpt")
         out[kind] = nik.IKSolver(robot, checkpoint=str(path), analytic=False)
     if robot.name == "panda":
         s = nik.IKSolver(robot, analytic=False)
@@ -89,20 +90,30 @@ def _time(fn) -> float:
 
 
 def judge_once(robot) -> str:
+    """The verdict's one-time cost on two fresh networks (the first one in the process pays torch's warm-up)."""
     try:
         from nik.ik import judge
     except ImportError:
         return "no judge (nik.ik.judge absent)"
-    net = useless(robot, "untrained", seed=99)
-    dt = _time(lambda: judge.verdict(net, robot))
-    return f"judge once: {dt * 1e3:.1f} ms"
+    nets = [useless(robot, "untrained", seed=s) for s in (98, 99)]
+    first, warm = (_time(lambda net=net: judge.verdict(net, robot)) for net in nets)
+    return f"judge once: {warm * 1e3:.1f} ms ({first * 1e3:.1f} ms the first time in this process)"
+
+
+def _wins(net, robot) -> str:
+    """The share of probe poses where the network's best hypothesis is the better start (:mod:`nik.ik.judge`)."""
+    try:
+        from nik.ik import judge
+    except ImportError:
+        return "-"
+    return "-" if net is None else f"{judge.verdict(net, robot).wins:.0%}"
 
 
 def run(name: str, n: int, reps: int, n_one: int) -> list[str]:
     robot = nik.load_robot(name)
     q = robot.sample(n, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     T = robot.fk(q).numpy()
-    lines = [f"### {name} (analytic=False), {judge_once(robot)}", ""]
+    lines = [f"### {name} (analytic=False); {judge_once(robot)}", ""]
     with tempfile.TemporaryDirectory() as tmp:
         S = solvers(robot, Path(tmp))
         rows = {}
@@ -121,14 +132,15 @@ def run(name: str, n: int, reps: int, n_one: int) -> list[str]:
             Ti = T[i : i + 1]
             for k, s in S.items():
                 one[k].append(_time(lambda s=s, Ti=Ti: s.solve(Ti)))
+    wins = {k: _wins(s.net, robot) for k, s in S.items()}
     med = {key: statistics.median(v) for key, v in batch.items()}
     med1 = {k: statistics.median(v) for k, v in one.items()}
-    head = f"| network | source | success | batch {n} ms | ratio |"
+    head = f"| network | judged: wins | source | success | batch {n} ms | ratio |"
     if len(sizes) > 1:
         head += " batch 1000 ms | ratio |"
     lines += [head + " one pose us | ratio |", "|" + "---|" * (head.count("|") + 1)]
     for k in S:
-        row = f"| {k} | {rows[k][1]} | {rows[k][0]:.4f} | {med[k, n] * 1e3:.1f} | {med[k, n] / med['none', n]:.2f}x |"
+        row = f"| {k} | {wins[k]} | {rows[k][1]} | {rows[k][0]:.4f} | {med[k, n] * 1e3:.1f} | {med[k, n] / med['none', n]:.2f}x |"
         if len(sizes) > 1:
             row += f" {med[k, 1000] * 1e3:.1f} | {med[k, 1000] / med['none', 1000]:.2f}x |"
         lines.append(row + f" {med1[k] * 1e6:.0f} | {med1[k] / med1['none']:.2f}x |")
@@ -144,6 +156,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     torch.set_num_threads(1)
+    torch.ones(8, 8) @ torch.ones(8, 8)  # torch's own first-use cost, out of every figure
     warnings.simplefilter("ignore")  # the judge's one warning per useless network
     lines = [f"# A useless network's cost ({nik.__file__})", ""]
     lines += [f"`python benchmarks/bad_network.py --n {args.n} --reps {args.reps} --n-one {args.n_one}`", ""]
