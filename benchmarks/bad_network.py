@@ -140,7 +140,8 @@ def run(name: str, n: int, reps: int, n_one: int) -> list[str]:
         head += " batch 1000 ms | ratio |"
     lines += [head + " one pose us | ratio |", "|" + "---|" * (head.count("|") + 1)]
     for k in S:
-        row = f"| {k} | {wins[k]} | {rows[k][1]} | {rows[k][0]:.4f} | {med[k, n] * 1e3:.1f} | {med[k, n] / med['none', n]:.2f}x |"
+        row = f"| {k} | {wins[k]} | {rows[k][1]} | {rows[k][0]:.4f} |"
+        row += f" {med[k, n] * 1e3:.1f} | {med[k, n] / med['none', n]:.2f}x |"
         if len(sizes) > 1:
             row += f" {med[k, 1000] * 1e3:.1f} | {med[k, 1000] / med['none', 1000]:.2f}x |"
         lines.append(row + f" {med1[k] * 1e6:.0f} | {med1[k] / med1['none']:.2f}x |")
