@@ -20,8 +20,11 @@ shipped architecture (``nik.models.load_pretrained``):
 Measured, one torch thread, one process, solvers interleaved (A B C ... A B C ...), medians: the wall time of a batch
 of ``--n`` (2,000) FK targets of uniform joints (seeded; ``--reps`` rounds; ``solver.net`` also on 1,000 poses),
 and of single poses (``--n-one`` poses, one call each, interleaved pose by pose); the ratio to ``none``; the success
-rate (0.1 mm / 0.1 deg) and the guess each result reports. Every solver is called once before timing (the verdict
-of :mod:`nik.ik.judge`, a one-time cost per network, is timed on its own: ``judge once``).
+rate (0.1 mm / 0.1 deg) and the guess each result reports; ``judged: wins``, the share of probe poses where the
+network's best hypothesis is the better start (:func:`nik.ik.judge.verdict`, printed for every network, the shipped
+ones included, which the solver does not judge). Every solver is called once before timing (the verdict, a one-time
+cost per network, is timed on its own: ``judge once``). The rows whose source is ``multistart`` run the very plan
+of ``none``: their spread around 1.00x is this machine's noise.
 """
 
 from __future__ import annotations
