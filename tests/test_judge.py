@@ -57,7 +57,7 @@ def test_a_useless_network_given_by_path_gives_way_and_answers_as_without_one(tm
     assert plan.source == "multistart" and plan.net is None
     assert judge.counts()["dropped"] == dropped + 1
     v = judge.verdict(solver.net, robot)
-    assert not v.earns and v.wins < judge.MIN_WINS and v.net_median > v.uniform_median
+    assert not v.earns and v.wins < judge.MIN_WINS
     T = _targets(robot, 60, seed=5)
     res = solver.solve(T)
     ref = nik.IKSolver(robot, checkpoint=None, analytic=False).solve(T)
