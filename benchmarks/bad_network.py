@@ -3,6 +3,7 @@
 
     python benchmarks/bad_network.py --out benchmarks/results/bad_network.md
     PYTHONPATH=/path/to/old/checkout python benchmarks/bad_network.py     # the figures before (no nik.ik.judge)
+    python benchmarks/bad_network.py --networks shipped "shipped, by path"  # the shipped ones only (old vs new)
 
 Per robot (panda, ur5; ``analytic=False``, so that ur5's closed form does not serve), the networks, all of the
 shipped architecture (``nik.models.load_pretrained``):
@@ -69,7 +70,8 @@ def useless(robot, kind: str, seed: int = 0):
     return net.eval()
 
 
-def solvers(robot, folder: Path) -> dict:
+def solvers(robot, folder: Path, only=None) -> dict:
+    """The solvers of the module docstring (``only``: those names and ``none``)."""
     out = {
         "none": nik.IKSolver(robot, checkpoint=None, analytic=False),
         "shipped": nik.IKSolver(robot, analytic=False),
@@ -83,7 +85,7 @@ def solvers(robot, folder: Path) -> dict:
         s = nik.IKSolver(robot, analytic=False)
         s.net = useless(robot, "randomised", seed=1)
         out["randomised, solver.net"] = s
-    return out
+    return {k: s for k, s in out.items() if only is None or k == "none" or k in only}
 
 
 def _time(fn) -> float:
@@ -112,13 +114,13 @@ def _wins(net, robot) -> str:
     return "-" if net is None else f"{judge.verdict(net, robot).wins:.0%}"
 
 
-def run(name: str, n: int, reps: int, n_one: int) -> list[str]:
+def run(name: str, n: int, reps: int, n_one: int, only=None) -> list[str]:
     robot = nik.load_robot(name)
     q = robot.sample(n, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     T = robot.fk(q).numpy()
     lines = [f"### {name} (analytic=False); {judge_once(robot)}", ""]
     with tempfile.TemporaryDirectory() as tmp:
-        S = solvers(robot, Path(tmp))
+        S = solvers(robot, Path(tmp), only)
         rows = {}
         for k, s in S.items():  # warm: kernels compiled, networks loaded and judged
             r = s.solve(T)
@@ -157,6 +159,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=2000)
     ap.add_argument("--reps", type=int, default=7)
     ap.add_argument("--n-one", type=int, default=300)
+    ap.add_argument("--networks", nargs="+", default=None, help="only these rows (and none), e.g. shipped")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -165,7 +168,7 @@ def main() -> None:
     lines = [f"# A useless network's cost ({nik.__file__})", ""]
     lines += [f"`python benchmarks/bad_network.py --n {args.n} --reps {args.reps} --n-one {args.n_one}`", ""]
     for name in args.robots:
-        lines += run(name, args.n, args.reps, args.n_one)
+        lines += run(name, args.n, args.reps, args.n_one, args.networks)
         print("\n".join(lines[-12:]), flush=True)
     if args.out is not None:
         args.out.write_text("\n".join(lines) + "\n")
