@@ -5,7 +5,8 @@ without them. Without a network the refiner starts each target from the best of 
 configurations and restarts it where it fails; with one, LM starts from the network's best hypothesis *without*
 restarts, then from each of its other hypotheses in turn, and only then falls back to uniform restarts. A useless
 network (untrained, its outputs scrambled, its weights randomised) therefore costs its forward pass, one LM run per
-hypothesis and the fallback: 1.4-5x the time of the same solver without it (``python benchmarks/bad_network.py``).
+hypothesis and the fallback: 1.2-2.2x the time of the same solver without it here, up to 5x as the issue measured
+it (``python benchmarks/bad_network.py``).
 
 :func:`verdict` judges a network once per robot, before its first call: on :data:`PROBES` seeded probe poses (FK of
 uniform configurations inside the limits; seed :data:`PROBE_SEED`, the same for every network) its best
@@ -25,7 +26,8 @@ where the issue is silent:
 
 - the verdict is a property of the network and the robot, not of a call: the same call gives the same answer
   whatever came before (the probes are fixed and seeded); it is kept per network object and its weights' version
-  counters (a network trained in place after it was judged is judged again when a plan is next resolved for it);
+  counters: a network trained in place is judged again by the next solver that resolves a plan for it (a solver
+  keeps its plans, and with them the verdict, for its life);
 - plans that ask for the network's own guess are never changed: ``refine="none"`` (the raw guess) and
   ``fallback="none"`` (what the network delivers alone, as the evaluation measures it); a plan built by hand
   (``solver.solve(T, plan=replace(plan, source="network", net=net))``) runs as written;
@@ -152,6 +154,6 @@ def earns(net, robot, arm_frame: bool = False) -> bool:
                 f"the better start on {v.wins:.0%} of {v.probes} probe poses; median error {v.net_median:.3f} "
                 f"against {v.uniform_median:.3f}, m + 0.1 rad): solving without it (nik.ik.judge)",
                 UserWarning,
-                stacklevel=4,
+                stacklevel=5,  # the caller of IKSolver.solve (or .initial_source)
             )
     return v.earns
