@@ -186,7 +186,7 @@ class IKSolver:
                id(self.swarm_cfg), self.polish, self.closed_form)  # fmt: skip
         plan = self._plans.get(key)
         if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
-            net = choose_network(self._net, self._net_one, self._given, backend)
+            net = choose_network(self._net, self._net_one, self._given, backend, self.robot, self.refine, self.fallback)
             src = "network" if net is not None else "analytic" if self.closed_form else "multistart"
             lm_cfg = self.swarm_cfg if isinstance(self.swarm_cfg, LMCfg) else None
             plan = Plan(
