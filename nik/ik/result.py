@@ -76,7 +76,6 @@ class IKResult:
         return IKResult(**moved)
 
 
-
 class _Tensor:
     """A field of :class:`TensorResult`: its numpy array until first read, then the tensor that shares its memory
     (``torch.from_numpy``), kept in the instance (a non-data descriptor: the instance's value wins once set)."""

@@ -46,11 +46,12 @@ _ORTHONORMAL_TOL = 0.0
 
 @dataclass(frozen=True)
 class Entry:
-    """What a one-pose call takes from the solver's settings, its tolerances, seed and the answer's dtype: the plan's
-    ``model``, the driver's four argument tuples ``a0..a3`` (:meth:`~nik.ik.backends.compiled.CompiledBackend.driver_args`),
-    the guess's ``source``, whether the network takes the targets in the arm's frame (``arm_frame``), whether the
-    answer is float32 (``f32``, with the asked tolerances ``tol_pos, tol_rot``), whether an attached collision model
-    must be looked for per call (``look_attached``), and the model generation it was made in."""
+    """What a one-pose call takes from the solver's settings, its tolerances, seed and the answer's dtype: the
+    plan's ``model``; the driver's four argument tuples ``a0..a3``
+    (:meth:`~nik.ik.backends.compiled.CompiledBackend.driver_args`); the guess's ``source``; whether the network
+    takes the targets in the arm's frame (``arm_frame``); whether the answer is float32 (``f32``, with the asked
+    tolerances ``tol_pos, tol_rot``); whether an attached collision model must be looked for per call
+    (``look_attached``); the model generation it was made in."""
 
     model: Any
     a0: tuple
