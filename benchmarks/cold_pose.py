@@ -1,7 +1,7 @@
 """One pose per call, warm and cold: nik with a numpy pose, nik with a torch pose, Robotics Toolbox ``ik_LM``.
 
 Issue 34 item 5: a pose crosses Python once, whether it comes as numpy or torch. For each arm, ``--n`` reachable poses
-(FK of seeded configurations inside the limits); the three solvers take each pose in turn (the order rotated pose by
+(FK of seeded configurations inside the limits); the solvers take each pose in turn (the order rotated pose by
 pose), interleaved in one process, in three settings:
 
 - ``tight``: call after call;
@@ -9,11 +9,12 @@ pose), interleaved in one process, in three settings:
 - ``busy``: 0.5 ms of other work before each call (numpy passes over a 4 MB buffer: the caches hold someone
   else's data when the call starts);
 
-and with 1 and 2 threads (``nik.set_threads``, torch's too). A nik call is timed with what a control loop reads:
-``res = solver.solve(T); res.q; res.success`` (a torch pose's result makes its tensors when first read). ``ik_LM`` is
-given nik's tolerance as in ``benchmarks/peers.py`` (``RTB_TOL``, ``RTB_MASK``: the ellipse inscribed in nik's
-0.1 mm / 0.1 deg box), joint limits on, its restarts seeded per pose. Medians (microseconds, ``perf_counter_ns``),
-success by nik's float64 FK, and the ratios: ``ik_LM / nik numpy`` and ``torch - numpy`` (us).
+and with 1 and 2 threads (``nik.set_threads``, torch's too). A numpy pose's call is timed with what a control loop
+reads, ``res = solver.solve(T); res.q; res.success``; a torch pose's twice, as two solvers in the rotation: the call
+alone (``solver.solve(T)``) and with the same reads (a torch pose's result makes its tensors when first read).
+``ik_LM`` is given nik's tolerance as in ``benchmarks/peers.py`` (``RTB_TOL``, ``RTB_MASK``: the ellipse inscribed
+in nik's 0.1 mm / 0.1 deg box), joint limits on, its restarts seeded per pose. Medians (microseconds,
+``perf_counter_ns``), success by nik's float64 FK, and the ratios: ``ik_LM / nik`` and ``torch - numpy`` (us).
 
 ``--fresh-cache`` also runs the arms once more in a child process on an empty ``NUMBA_CACHE_DIR`` (every kernel
 compiled first: the first call's seconds reported, then the same table).
@@ -42,8 +43,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import nik  # noqa: E402
 from peers import RTB_MASK, RTB_TOL, TOL_POS, TOL_ROT, latency_robot, rtb_from_file, score, targets  # noqa: E402
+
+import nik  # noqa: E402
 
 GAP_S = 0.0005  # the pause before each call in the idle and busy settings
 _BUF = np.zeros(512 * 1024)  # 4 MB: the busy setting's other work
@@ -55,7 +57,7 @@ def gap(mode: str) -> None:
     elif mode == "busy":
         end = time.perf_counter() + GAP_S
         while time.perf_counter() < end:
-            _BUF += 1.0
+            np.add(_BUF, 1.0, out=_BUF)
 
 
 def measure(name: str, n: int, seed: int, modes: list[str], threads: list[int]) -> list[dict]:
@@ -80,13 +82,16 @@ def measure(name: str, n: int, seed: int, modes: list[str], threads: list[int]) 
         return res.q, res.success
 
     def nik_t(i):
+        return solver.solve(poses_t[i], tol_pos=TOL_POS, tol_rot=TOL_ROT), None
+
+    def nik_t_read(i):
         res = solver.solve(poses_t[i], tol_pos=TOL_POS, tol_rot=TOL_ROT)
         return res.q, res.success
 
     def rtb(i):
         return ets.ik_LM(Tn[i], tol=RTB_TOL, mask=RTB_MASK, joint_limits=True).q, None
 
-    calls = {"nik numpy": nik_np, "nik torch": nik_t}
+    calls = {"nik numpy": nik_np, "nik torch": nik_t, "nik torch read": nik_t_read}
     if ets is not None:
         calls["rtb ik_LM"] = rtb
     labels = list(calls)
@@ -106,6 +111,7 @@ def measure(name: str, n: int, seed: int, modes: list[str], threads: list[int]) 
                         t = time.perf_counter_ns()
                         q, _ = calls[label](i)
                         times[label].append((time.perf_counter_ns() - t) / 1e3)
+                        q = q.q if label == "nik torch" else q  # the result, read after the timing
                         answers[label][i] = np.asarray(q, dtype=np.float64).reshape(-1)
             for label in labels:
                 succ, outside = score(robot, T, np.stack(answers[label]))
@@ -119,23 +125,24 @@ def measure(name: str, n: int, seed: int, modes: list[str], threads: list[int]) 
 
 
 def table(rows: list[dict]) -> list[str]:
-    """One line per arm, threads and setting: the three medians, ``ik_LM / nik numpy``, ``ik_LM / nik torch`` and
-    ``torch - numpy``."""
+    """One line per arm, threads and setting: the medians, ``ik_LM / nik`` (numpy pose; torch pose with its result
+    read) and the torch pose's extra microseconds over the numpy pose (solve only; solve and read)."""
     out = [
-        "| robot | threads | setting | nik numpy us | nik torch us | rtb ik_LM us | ik_LM / nik numpy | "
-        "ik_LM / nik torch | torch - numpy us | success % numpy / torch / ik_LM |",
+        "| robot | threads | setting | nik numpy us | nik torch us (solve / + read) | rtb ik_LM us | "
+        "ik_LM / nik numpy | ik_LM / nik torch + read | torch - numpy us (solve / + read) | "
+        "success % numpy / torch / ik_LM |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     keyed = {(r["robot"], r["threads"], r["mode"], r["solver"]): r for r in rows}
     for robot, th, mode in dict.fromkeys((r["robot"], r["threads"], r["mode"]) for r in rows):
         a, b = keyed[(robot, th, mode, "nik numpy")], keyed[(robot, th, mode, "nik torch")]
-        c = keyed.get((robot, th, mode, "rtb ik_LM"))
+        br, c = keyed[(robot, th, mode, "nik torch read")], keyed.get((robot, th, mode, "rtb ik_LM"))
         rtb_us = c["median_us"] if c else float("nan")
         succ = f"{a['success']:.1f} / {b['success']:.1f} / {c['success']:.1f}" if c else "-"
         out.append(
-            f"| {robot} | {th} | {mode} | {a['median_us']:.1f} | {b['median_us']:.1f} | {rtb_us:.1f} | "
-            f"{rtb_us / a['median_us']:.2f}x | {rtb_us / b['median_us']:.2f}x | "
-            f"{b['median_us'] - a['median_us']:+.1f} | {succ} |"
+            f"| {robot} | {th} | {mode} | {a['median_us']:.1f} | {b['median_us']:.1f} / {br['median_us']:.1f} | "
+            f"{rtb_us:.1f} | {rtb_us / a['median_us']:.2f}x | {rtb_us / br['median_us']:.2f}x | "
+            f"{b['median_us'] - a['median_us']:+.1f} / {br['median_us'] - a['median_us']:+.1f} | {succ} |"
         )
     return out
 
@@ -151,7 +158,8 @@ def fresh_cache(argv: list[str]) -> list[str]:
             "r = nik.load_robot(sys.argv[2].split(',')[0]); T = targets(r, 2, 0); s = nik.IKSolver(r); "
             "t = time.perf_counter(); s.solve(T[0].numpy().copy()); a = time.perf_counter() - t; "
             "t = time.perf_counter(); s.solve(T[1]); b = time.perf_counter() - t; "
-            "print(f'first call on an empty cache ({r.name}): numpy pose {a:.1f} s, then torch pose {b * 1e3:.1f} ms'); "
+            "print(f'first call on an empty cache ({r.name}): numpy pose {a:.1f} s, '"
+            "f'then torch pose {b * 1e3:.1f} ms'); "
             "import cold_pose; cold_pose.main(sys.argv[1:], child=True)"
         )  # fmt: skip
         done = subprocess.run([sys.executable, "-c", code, *argv], env=env, capture_output=True, text=True)
@@ -180,7 +188,8 @@ def main(argv=None, child: bool = False) -> int:
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     say(
-        f"nik {nik.__version__}, torch {torch.__version__}, numba cache {os.environ.get('NUMBA_CACHE_DIR', 'default')}, "
+        f"nik {nik.__version__}, torch {torch.__version__}, "
+        f"numba cache {os.environ.get('NUMBA_CACHE_DIR', 'default')}, "
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {load:.1f}, "
         f"{time.strftime('%Y-%m-%d %H:%M:%S %Z')}"
     )
