@@ -127,6 +127,8 @@ def one_pose(solver, T_target, tol_pos, tol_rot, seed) -> IKResult | None:
     except TypeError:  # an unhashable tolerance (a numpy array of one number): the general path
         return None
     if e is False or e is not None and e.generation != _models.generation:
+        if len(cache) >= 64:  # tolerances or seeds given as new objects each call (tensors hash by identity)
+            cache.clear()
         e = cache[key] = entry(solver, tol_pos, tol_rot, seed, f32)
     if e is None:
         return None
