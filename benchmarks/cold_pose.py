@@ -1,6 +1,6 @@
 """One pose per call, warm and cold: nik with a numpy pose, nik with a torch pose, Robotics Toolbox ``ik_LM``.
 
-Issue 34 item 5: a pose crosses Python once, whether it comes as numpy or torch. For each arm, ``--n`` reachable poses
+A pose should cross Python once, whether it comes as numpy or torch. For each arm, ``--n`` reachable poses
 (FK of seeded configurations inside the limits); the solvers take each pose in turn (the order rotated pose by
 pose), interleaved in one process, in three settings:
 
