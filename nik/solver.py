@@ -38,6 +38,7 @@ from pathlib import Path
 import torch
 
 from nik.ik import backends, collide, networks, stages
+from nik.ik.backends.one_pose import one_pose
 from nik.ik.plan import REFINE_METHODS, Plan, check_settings, choose_network, in_arm_frame, resolve_fallback, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
@@ -139,6 +140,13 @@ class IKSolver:
             self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
         self._plans, self.world, self.self_collision = {}, world, collide.check_self_collision(self_collision)
         self.mesh_verdict = collide.check_mesh_verdict(mesh_verdict)
+
+    def __setattr__(self, name: str, value) -> None:
+        """A setting changed (``solver.net = ...``, ``solver.world = ...``) drops the one-pose entries made from the
+        old ones (:mod:`nik.ik.backends.one_pose`)."""
+        object.__setattr__(self, name, value)
+        if name != "_plans":
+            self.__dict__["_one"] = {}
 
     @property
     def net(self):
@@ -259,6 +267,10 @@ class IKSolver:
         Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
+        if plan is None and q_near is None and max_iters is None and representation is None and world is None:
+            res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is None and q_rest is None else None
+            if res is not None:  # one pose in one kernel call (nik.ik.backends.one_pose)
+                return res
         check_tolerances(tol_pos, tol_rot)
         be = backends.choose(self, T_target)
         if plan is None:
