@@ -39,10 +39,9 @@ import torch
 
 from nik.ik import backends, collide, networks, stages
 from nik.ik.backends.one_pose import one_pose
-from nik.ik.plan import REFINE_METHODS, Plan, check_settings, choose_network, in_arm_frame, resolve_fallback, with_goal
+from nik.ik.plan import REFINE_METHODS, Plan, check_settings, resolve_fallback, solver_plan, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
-from nik.lm.batched import LMCfg
 from nik.robots import Robot, load_robot
 from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
@@ -125,19 +124,13 @@ class IKSolver:
         self.robot = load_robot(robot) if not isinstance(robot, Robot) else robot
         self.refine, self.polish = refine, bool(polish)
         self.swarm_cfg = swarm_cfg
-        self._net, self._net_one, self._given = None, None, checkpoint is not None and checkpoint != "auto"
         from nik.analytic import family
 
         self.closed_form = bool(analytic) and family(self.robot) is not None
         self.fallback = resolve_fallback(fallback, self.closed_form, self.robot.name)
-        if isinstance(checkpoint, str) and checkpoint == "auto":
-            if not self.closed_form:
-                # loaded (SHA-256 checked: a damaged file is refused here) once per process, shared by every solver
-                self._net, self._given = networks.known_network(self.robot, self.device)
-                if self._net is not None:
-                    self._net_one = networks.known_network(self.robot, self.device, single_pose=True)[0]
-        elif checkpoint is not None:
-            self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
+        self._net, self._net_one, self._given = networks.solver_networks(
+            checkpoint, self.robot, self.device, self.closed_form
+        )
         self._plans, self.world, self.self_collision = {}, world, collide.check_self_collision(self_collision)
         self.mesh_verdict = collide.check_mesh_verdict(mesh_verdict)
 
@@ -190,22 +183,7 @@ class IKSolver:
     ) -> Plan:
         """The :class:`~nik.ik.plan.Plan` of a call on ``backend`` (``"compiled"`` | ``"torch"``) with these
         tolerances, seed and iteration cap: resolved here, once, from the solver's settings (:mod:`nik.ik.plan`)."""
-        key = (backend, tol_pos, tol_rot, seed, max_iters, self._net, self._given, self.fallback, self.refine,
-               id(self.swarm_cfg), self.polish, self.closed_form)  # fmt: skip
-        plan = self._plans.get(key)
-        if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
-            net = choose_network(self._net, self._net_one, self._given, backend, self.robot, self.refine, self.fallback)
-            src = "network" if net is not None else "analytic" if self.closed_form else "multistart"
-            lm_cfg = self.swarm_cfg if isinstance(self.swarm_cfg, LMCfg) else None
-            plan = Plan(
-                src, net, in_arm_frame(self.robot, net), self.refine, lm_cfg, max_iters,
-                restarts=src == "multistart" or self.fallback == "multistart", near=not self.closed_form,
-                fallback=self.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
-                swarm_cfg=self.swarm_cfg, polish=self.polish,
-            )  # fmt: skip
-            self._plans = {} if len(self._plans) > 64 else self._plans
-            self._plans[key] = plan
-        return plan
+        return solver_plan(self, backend, tol_pos, tol_rot, seed, max_iters)
 
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:

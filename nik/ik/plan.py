@@ -150,6 +150,28 @@ def with_goal(plan: Plan, bounds=None, q_rest=None, rest_weight: float = 0.1, *,
 REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 
+def solver_plan(solver, backend: str, tol_pos: float, tol_rot: float, seed: int, max_iters) -> Plan:
+    """The plan of one :meth:`nik.IKSolver.plan` call: resolved once per settings and call arguments (a plan is
+    immutable) and kept on the solver (at most 65 kept)."""
+    s = solver
+    key = (backend, tol_pos, tol_rot, seed, max_iters, s._net, s._given, s.fallback, s.refine, id(s.swarm_cfg),
+           s.polish, s.closed_form)  # fmt: skip
+    plan = solver._plans.get(key)
+    if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
+        net = choose_network(s._net, s._net_one, s._given, backend, s.robot, s.refine, s.fallback)
+        src = "network" if net is not None else "analytic" if solver.closed_form else "multistart"
+        lm_cfg = solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None
+        plan = Plan(
+            src, net, in_arm_frame(solver.robot, net), solver.refine, lm_cfg, max_iters,
+            restarts=src == "multistart" or solver.fallback == "multistart", near=not solver.closed_form,
+            fallback=solver.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
+            swarm_cfg=solver.swarm_cfg, polish=solver.polish,
+        )  # fmt: skip
+        solver._plans = {} if len(solver._plans) > 64 else solver._plans
+        solver._plans[key] = plan
+    return plan
+
+
 def check_settings(backend: str, refine: str) -> None:
     """``IKSolver(backend=..., refine=...)`` checked: one-line ``ValueError`` for an unknown value, and for the
     compiled backend with a refinement other than LM (its only refiner)."""
