@@ -41,6 +41,7 @@ from nik.ik.guesses import LIMIT_ROUNDING
 from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, model_of
 from nik.ik.result import IKResult
 from nik.ik.targets import pose_array, q_near_array
+from nik.kernels import background as _bg
 from nik.robots.reach import REACH_SLACK
 
 __all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend"]
@@ -103,6 +104,12 @@ class CompiledBackend:
     """The compiled backend (see the module docstring and :mod:`nik.ik.backends` for the interface)."""
 
     name = "compiled"
+
+    def __init__(self, defer: bool = True):
+        #: answer from torch while the driver's first compile runs in the background (``backend="auto"``; see
+        #: :meth:`solve`); False: compile on the caller's thread (``backend="compiled"``, ``NIK_COMPILE=wait``)
+        self.defer = defer
+        self._looked = not defer  # whether the first call looked at the cache (background.cold)
 
     # -- arrays ------------------------------------------------------------------
     nonzero = staticmethod(np.flatnonzero)
@@ -177,6 +184,10 @@ class CompiledBackend:
             from nik.ik import goals
 
             return goals.solve_compiled(self, robot, plan, T_target, q_near, representation)
+        if not self._looked:  # the first call of the process: nothing compiled on this machine yet?
+            self._looked = True
+            if _bg.cold(_kernels().solve):
+                _bg.begin()  # the checks and the model on torch, no kernel compiled on this thread
         job = self.job(robot, plan, T_target, q_near, representation, reach=False)
         model = job.model
         packed = None
@@ -185,13 +196,33 @@ class CompiledBackend:
             if packed is None:
                 from nik.ik import stages
 
+                _bg.end_if_idle()  # the staged path compiles its kernels on this thread, as it always did
                 job.reachable, every = model.reach(job.T)
                 if not every:
                     warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=3)
                 return stages.run(plan, job)
-        return self._driver(plan, job, packed)
+        res = self._driver(plan, job, packed)
+        if isinstance(res, tuple):  # the driver is not compiled for this plan: torch answers meanwhile
+            return self._meanwhile(res, robot, plan, T_target, q_near, representation)
+        return res
 
-    def _driver(self, plan, job: Job, packed) -> IKResult:
+    @staticmethod
+    def _meanwhile(pending, robot, plan, T_target, q_near, representation) -> IKResult:
+        """The call answered by the torch backend (the same stages, tolerances and success contract) while the driver
+        compiles in a background thread, started after this answer (``pending``: what it compiles; module
+        :mod:`nik.kernels.background`)."""
+        from nik.ik.backends.torch import TorchBackend
+
+        try:
+            return TorchBackend().solve(robot, plan, T_target, q_near, representation)
+        finally:
+            _bg.compile_later(*pending)
+
+    def _driver(self, plan, job: Job, packed) -> IKResult | tuple:
+        """The plan in one call of :func:`nik.kernels.driver.solve`. Where ``self.defer`` and the driver's machine
+        code for these argument types is neither loaded nor cached (:func:`nik.kernels.background.ready`, asked once
+        per plan until it is), the compile is announced and ``(kernel, args, also)`` returned instead: what
+        :meth:`_meanwhile` compiles (``also``: the pose checks of :meth:`job`)."""
         model, B, n = job.model, job.size, job.model.dof
         k = _kernels()
         key = (plan, job.dtype)
@@ -210,6 +241,7 @@ class CompiledBackend:
                 (closed, check, LIMIT_ROUNDING),
                 (opts, iopts, iopts_multi, lm.budget, k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses,
                  plan.near, _FALLBACK[plan.fallback], job.tol_pos, job.tol_rot),
+                not self.defer,  # compiled: asked below, once, where it may answer from torch meanwhile
             )  # fmt: skip
             if len(model.driver_args) > 64:
                 model.driver_args.clear()
@@ -218,10 +250,20 @@ class CompiledBackend:
         use_near = job.q_near is not None
         q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
         ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
-        every = k.solve(
+        args = (
             *static[0], job.T, *static[1], Tin, *static[2], job.q_near if use_near else q, use_near, *static[3],
             q, pos, rot, ok, iters, job.reachable,
         )  # fmt: skip
+        if not static[4]:
+            if self.defer and not _bg.ready(k.solve, args):
+                _bg.begin()
+                _bg.announce(True)
+                from nik.ik.targets import ORTHONORMAL_TOL, _pose_kernels
+
+                return k.solve, args, [(_pose_kernels().poses_ok, (job.T, ORTHONORMAL_TOL))]
+            model.driver_args[key] = static[:4] + (True,)
+            _bg.end_if_idle()  # set by the first call's look at a cold cache, where this call compiles here after all
+        every = k.solve(*args)
         if not every:
             warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=4)
         from nik.ik.stages import Answers
