@@ -66,6 +66,7 @@ _LOCK = threading.Lock()
 _THREADS: dict = {}  # signature key -> running Thread
 _FAILED: dict = {}  # signature key -> the exception of a failed background compile
 _ANNOUNCED = False
+_ANNOUNCED_BACKGROUND = False
 
 
 def defer_allowed() -> bool:
@@ -106,11 +107,14 @@ def cold(dispatcher) -> bool:
 
 
 def announce(background: bool) -> None:
-    """Write the line that kernels are being compiled, once per process (see the module docstring)."""
-    global _ANNOUNCED
-    if _ANNOUNCED:
+    """Write the line that kernels are being compiled (see the module docstring): at most once per process, and once
+    more with its torch part (``background``) where a compile on the caller's thread (e.g. the FK kernel of
+    :meth:`nik.Robot.fk`) was announced first."""
+    global _ANNOUNCED, _ANNOUNCED_BACKGROUND
+    if _ANNOUNCED_BACKGROUND or (_ANNOUNCED and not background):
         return
     _ANNOUNCED = True
+    _ANNOUNCED_BACKGROUND = background
     more = "; answers meanwhile come from the torch backend" if background else ""
     print(f"nik: compiling kernels for this machine (once, ~{ESTIMATE_S} s{more})", file=sys.stderr, flush=True)
 
