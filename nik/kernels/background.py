@@ -2,15 +2,16 @@
 
 On an empty cache (a fresh install, a new ``NUMBA_CACHE_DIR``) the compiled solve of one arm's plan
 (:func:`nik.kernels.driver.solve`: every stage it might run, LM, closed forms, the network's forward pass, ...) is
-compiled before it can answer: 25-60 s of CPU, measured in ``benchmarks/cold_start.py``, and minutes for processes
-that start together on a few cores. Once compiled, it is cached for every later process of the machine.
+compiled before it can answer: 72.7 s of CPU for panda on a shared two-core machine (``benchmarks/cold_start.py``,
+``benchmarks/results/cold_start.txt``; 27.6 s wall on the machine of issue 37), about 128 s each for four processes
+that start together on two cores. Once compiled, it is cached for every later process of the machine.
 
 What nik does instead (the compiled backend, ``backend="auto"``; :mod:`nik.ik.backends.compiled`):
 
 1. :func:`ready` tells, without compiling, whether a kernel's machine code for the argument types of a call is loaded
    or in the cache (numba's cache index, read as numba reads it);
 2. where it is not, :func:`announce` writes one line on stderr, once per process: ``nik: compiling kernels for this
-   machine (once, ~N s; answers meanwhile come from the torch backend)``; the call is answered by the torch backend
+   machine (once, ~30-70 s; answers meanwhile come from the torch backend)``; the call is answered by the torch backend
    (the same stages in torch: same tolerances, same success contract) while :data:`BUSY` is set, which keeps the torch
    path off every kernel not yet loaded (one-pose LM, compiled FK): numba compiles under one process-wide lock, so a
    kernel compiled on the caller's thread would wait for the background compile;
@@ -19,9 +20,10 @@ What nik does instead (the compiled backend, ``backend="auto"``; :mod:`nik.ik.ba
 
 Why a thread and not only a smaller compile: the stages of a plan share most of the compile (the LM, about half of
 it), so compiling only what a call needs saves at most the closed form of a network arm (about a seventh); the torch
-backend answers one pose in tens of milliseconds without compiling anything. numba's compiler is mostly Python, so
-it shares the GIL with the caller's thread (the torch answers slow down by about 2x while it runs, still
-milliseconds); its LLVM passes release it. The thread is not a daemon: a process that ends before the compile is
+backend answers one pose in about 0.1 s without compiling anything (3.0 s of CPU from the process start to panda's
+first answer, ``import torch`` included, against 72.7 s). numba's compiler is mostly Python, so it shares the GIL
+with the caller's thread: the answers given while it runs took 2.9x as long (median 288 ms against 99 ms a pose, wall,
+on that busy machine), but they come, and the compile goes on meanwhile (its LLVM passes release the GIL). The thread is not a daemon: a process that ends before the compile is
 done waits for it (the cache is then written, so the next process starts warm) instead of compiling again next time.
 
 ``NIK_COMPILE=wait`` (or ``backend="compiled"``) compiles on the caller's thread as before (benchmarks and tests that
@@ -39,7 +41,7 @@ import time
 
 __all__ = [
     "BUSY",
-    "ESTIMATE_S",
+    "ESTIMATE",
     "THREAD_NAME",
     "announce",
     "announced",
@@ -55,9 +57,10 @@ __all__ = [
 #: compile has ended: the torch path then keeps off the kernels (one-pose LM, compiled FK).
 BUSY = False
 
-#: Seconds the first compile of one arm's compiled solve takes on one free core, measured
-#: (``benchmarks/cold_start.py``: 25-35 s for panda on the CPUs measured); the line on stderr quotes it.
-ESTIMATE_S = 30
+#: How long the first compile of one arm's compiled solve takes, as the line on stderr quotes it: 27.6 s wall for
+#: panda on the machine of issue 37, 62-71 s of CPU on a shared two-core machine (``benchmarks/cold_start.py``,
+#: ``benchmarks/results/cold_start.txt``).
+ESTIMATE = "30-70"
 
 #: The name of the background compile threads.
 THREAD_NAME = "nik-compile"
@@ -116,7 +119,7 @@ def announce(background: bool) -> None:
     _ANNOUNCED = True
     _ANNOUNCED_BACKGROUND = background
     more = "; answers meanwhile come from the torch backend" if background else ""
-    print(f"nik: compiling kernels for this machine (once, ~{ESTIMATE_S} s{more})", file=sys.stderr, flush=True)
+    print(f"nik: compiling kernels for this machine (once, ~{ESTIMATE} s{more})", file=sys.stderr, flush=True)
 
 
 def begin() -> None:
