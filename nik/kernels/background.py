@@ -18,13 +18,14 @@ What nik does instead (the compiled backend, ``backend="auto"``; :mod:`nik.ik.ba
 3. :func:`compile_later` then compiles the kernel for those types in a thread (once per signature); the calls that
    come meanwhile are answered by torch again, and the first after it is done by the compiled kernel.
 
-Why a thread and not only a smaller compile: the stages of a plan share most of the compile (the LM, about half of
-it), so compiling only what a call needs saves at most the closed form of a network arm (about a seventh); the torch
-backend answers one pose in about 0.1 s without compiling anything (3.0 s of CPU from the process start to panda's
-first answer, ``import torch`` included, against 72.7 s). numba's compiler is mostly Python, so it shares the GIL
-with the caller's thread: the answers given while it runs took 2.9x as long (median 288 ms against 99 ms a pose, wall,
-on that busy machine), but they come, and the compile goes on meanwhile (its LLVM passes release the GIL). The thread is not a daemon: a process that ends before the compile is
-done waits for it (the cache is then written, so the next process starts warm) instead of compiling again next time.
+Why a thread and not only a smaller compile: the stages of a plan share most of the compile (the LM and its
+multi-start variant, about 40 %), so compiling only what a call needs saves at most the closed form of a network arm
+(about 13 %); the torch backend answers one pose in about 0.1 s without compiling anything (3.0 s of CPU from the
+process start to panda's first answer, ``import torch`` included, against 72.7 s). numba's compiler is mostly Python,
+so it shares the GIL with the caller's thread: the answers given while it runs took 2.9x as long (median 288 ms
+against 99 ms a pose, wall, on that busy machine), but they come, and the compile goes on meanwhile (its LLVM passes
+release the GIL). The thread is not a daemon: a process that ends before the compile is done waits for it (the cache
+is then written, so the next process starts warm) instead of compiling again next time.
 
 ``NIK_COMPILE=wait`` (or ``backend="compiled"``) compiles on the caller's thread as before (benchmarks and tests that
 need the compiled answers from the first call); the same line is written (without the torch part) on the first

@@ -188,7 +188,11 @@ class CompiledBackend:
             self._looked = True
             if _bg.cold(_kernels().solve):
                 _bg.begin()  # the checks and the model on torch, no kernel compiled on this thread
-        job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        try:
+            job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        except Exception:
+            _bg.end_if_idle()  # bad input on the first call: BUSY set above is not left behind
+            raise
         model = job.model
         packed = None
         if plan.source == "network":
