@@ -81,9 +81,6 @@ class Model:
     _packed: Any = field(default_factory=weakref.WeakKeyDictionary, repr=False)
     #: the compiled backend's driver arguments per (plan, dtype), gathered once per plan (plans are immutable)
     driver_args: dict = field(default_factory=dict, repr=False)
-    #: the plans whose driver is compiled (loaded or cached): :meth:`nik.ik.backends.compiled.CompiledBackend.solve`
-    #: stops asking (:mod:`nik.kernels.background`)
-    driver_ready: set = field(default_factory=set, repr=False)
 
     @property
     def robot(self):
