@@ -87,7 +87,10 @@ class IKSolver:
             network's guess alone delivers.
         backend: ``"auto"`` (default: :func:`nik.ik.backends.choose` picks per call), ``"compiled"`` (numba
             kernels on numpy: CPU targets, ``refine="lm"`` only) or ``"torch"`` (every device and method). The
-            answers meet the same contract on both; benchmarks and tests use it to compare them.
+            answers meet the same contract on both; benchmarks and tests use it to compare them. On a kernel cache
+            that lacks the compiled solve (a machine's first use), ``"auto"`` answers from torch while it compiles in
+            a background thread, and one line on stderr says so; ``"compiled"`` (or ``NIK_COMPILE=wait``) waits for
+            the compile (:mod:`nik.kernels.background`).
         world: a :class:`nik.World` of obstacles (base frame) every call avoids (``solve(world=)`` replaces it for
             one call); a world turns the collision check on, the arm against itself included.
         self_collision: None (default): checked with a world, and without one where the robot has a collision model

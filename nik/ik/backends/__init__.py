@@ -47,18 +47,26 @@ from nik.ik.backends.base import Job, Refined
 
 __all__ = ["Job", "Refined", "choose", "compiled_backend", "torch_backend"]
 
-_COMPILED = None
+_COMPILED = {}
 _TORCH = None
 
 
-def compiled_backend():
-    """The compiled backend (one per process; it holds no per-call state)."""
-    global _COMPILED
-    if _COMPILED is None:
-        from nik.ik.backends.compiled import CompiledBackend
+def compiled_backend(*, defer: bool | None = None):
+    """The compiled backend (one per process and ``defer``; it holds no per-call state). ``defer``: on a kernel cache
+    that lacks the call's compiled solve, answer from torch while it compiles in the background
+    (:mod:`nik.kernels.background`); None: unless ``NIK_COMPILE=wait``."""
+    found = _COMPILED.get(defer)
+    if found is not None:
+        return found
+    if defer is None:  # NIK_COMPILE read once, on the first call
+        from nik.kernels.background import defer_allowed
 
-        _COMPILED = CompiledBackend()
-    return _COMPILED
+        _COMPILED[None] = compiled_backend(defer=defer_allowed())
+        return _COMPILED[None]
+    from nik.ik.backends.compiled import CompiledBackend
+
+    found = _COMPILED[defer] = CompiledBackend(defer=defer)
+    return found
 
 
 def torch_backend():
@@ -83,4 +91,4 @@ def choose(solver, T_target):
         if forced == "compiled":
             raise ValueError(f"IKSolver(backend='compiled'): targets on {T_target.device}, expected the CPU")
         return torch_backend()
-    return compiled_backend()
+    return compiled_backend(defer=False) if forced == "compiled" else compiled_backend()

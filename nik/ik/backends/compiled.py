@@ -41,6 +41,7 @@ from nik.ik.guesses import LIMIT_ROUNDING
 from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, model_of
 from nik.ik.result import IKResult
 from nik.ik.targets import pose_array, q_near_array
+from nik.kernels import background as _bg
 from nik.robots.reach import REACH_SLACK
 
 __all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend", "as_float32"]
@@ -103,6 +104,13 @@ class CompiledBackend:
     """The compiled backend (see the module docstring and :mod:`nik.ik.backends` for the interface)."""
 
     name = "compiled"
+
+    def __init__(self, defer: bool = True):
+        #: answer from torch while the driver's first compile runs in the background (``backend="auto"``; see
+        #: :meth:`solve`); False: compile on the caller's thread (``backend="compiled"``, ``NIK_COMPILE=wait``)
+        self.defer = defer
+        self._looked = not defer  # whether the first call looked at the cache (background.cold)
+        self._compiled = set()  # (plan, dtype, q_near given) whose driver runs without compiling
 
     # -- arrays ------------------------------------------------------------------
     nonzero = staticmethod(np.flatnonzero)
@@ -177,7 +185,15 @@ class CompiledBackend:
             from nik.ik import goals
 
             return goals.solve_compiled(self, robot, plan, T_target, q_near, representation)
-        job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        if not self._looked:  # the first call of the process: nothing compiled on this machine yet?
+            self._looked = True
+            if _bg.cold(_kernels().solve):
+                _bg.begin()  # the checks and the model on torch, no kernel compiled on this thread
+        try:
+            job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        except Exception:
+            _bg.end_if_idle()  # bad input on the first call: BUSY set above is not left behind
+            raise
         model = job.model
         packed = None
         if plan.source == "network":
@@ -185,11 +201,15 @@ class CompiledBackend:
             if packed is None:
                 from nik.ik import stages
 
+                _bg.end_if_idle()  # the staged path compiles its kernels on this thread, as it always did
                 job.reachable, every = model.reach(job.T)
                 if not every:
                     warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=3)
                 return stages.run(plan, job)
-        return self._driver(plan, job, packed)
+        res = self._driver(plan, job, packed)
+        if isinstance(res, tuple):  # the driver is not compiled for this plan: torch answers meanwhile
+            return self._meanwhile(res, robot, plan, T_target, q_near, representation)
+        return res
 
     def driver_args(self, plan, model, dtype, packed) -> tuple:
         """What :func:`nik.kernels.driver.solve` takes from ``plan`` and ``model`` for answers in ``dtype`` (with the
@@ -219,7 +239,11 @@ class CompiledBackend:
             model.driver_args[key] = static
         return static
 
-    def _driver(self, plan, job: Job, packed) -> IKResult:
+    def _driver(self, plan, job: Job, packed) -> IKResult | tuple:
+        """The plan in one call of :func:`nik.kernels.driver.solve`. Where ``self.defer`` and the driver's machine
+        code for these argument types is neither loaded nor cached (:func:`nik.kernels.background.ready`, asked once
+        per plan and dtype until it is), the compile is announced and ``(kernel, args, also)`` returned instead: what
+        :meth:`_meanwhile` compiles (``also``: the pose checks of :meth:`job`)."""
         model, B, n = job.model, job.size, job.model.dof
         k = _kernels()
         static = self.driver_args(plan, model, job.dtype, packed)
@@ -227,10 +251,23 @@ class CompiledBackend:
         use_near = job.q_near is not None
         q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
         ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
-        every = k.solve(
+        args = (
             *static[0], job.T, *static[1], Tin, *static[2], job.q_near if use_near else q, use_near, *static[3],
             q, pos, rot, ok, iters, job.reachable,
         )  # fmt: skip
+        key = (plan, job.dtype, use_near)
+        if key not in self._compiled:  # compiled: asked once per plan, where it may answer from torch meanwhile
+            if self.defer and not _bg.ready(k.solve, args):
+                _bg.begin()
+                _bg.announce(True)
+                from nik.ik.targets import ORTHONORMAL_TOL, _pose_kernels
+
+                return k.solve, args, [(_pose_kernels().poses_ok, (job.T, ORTHONORMAL_TOL))]
+            if len(self._compiled) > 256:
+                self._compiled.clear()
+            self._compiled.add(key)
+            _bg.end_if_idle()  # set by the first call's look at a cold cache, where this call compiles here after all
+        every = k.solve(*args)
         if not every:
             warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=4)
         from nik.ik.stages import Answers

@@ -73,9 +73,13 @@ class Entry:
     generation: int
 
 
-def entry(solver, tol_pos, tol_rot, seed, f32: bool) -> Entry | None:
-    """The :class:`Entry` of ``solver`` for these tolerances, seed and answer dtype, or None where the one-pose path
-    does not apply (module docstring). Raises the one-line ``ValueError`` of a bad tolerance."""
+_LATER = object()  # entry(): not yet (the driver not compiled); not kept
+
+
+def entry(solver, tol_pos, tol_rot, seed, f32: bool):
+    """The :class:`Entry` of ``solver`` for these tolerances, seed and answer dtype, None where the one-pose path
+    does not apply (module docstring), ``_LATER`` while the driver has nothing compiled (not kept). Raises the
+    one-line ``ValueError`` of a bad tolerance."""
     global _POSES_OK, _POSE_AT, _SOLVE, _ORTHONORMAL_TOL
     from nik.ik.backends import compiled_backend
     from nik.ik.targets import check_tolerances
@@ -88,6 +92,8 @@ def entry(solver, tol_pos, tol_rot, seed, f32: bool) -> Entry | None:
         from nik.poses import ORTHONORMAL_TOL
 
         _POSES_OK, _POSE_AT, _SOLVE, _ORTHONORMAL_TOL = poses.poses_ok, poses.pose_at, driver.solve, ORTHONORMAL_TOL
+    if not _SOLVE.signatures:  # nothing compiled or loaded yet: the general path loads it, or answers from torch
+        return _LATER  # while it compiles (nik.kernels.background); asked again on the next call
     generation = _models.generation
     plan = solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
     model = _models.model_of(solver.robot, plan.lm_cfg)
@@ -129,7 +135,10 @@ def one_pose(solver, T_target, tol_pos, tol_rot, seed) -> IKResult | None:
     if e is False or e is not None and e.generation != _models.generation:
         if len(cache) >= 64:  # tolerances or seeds given as new objects each call (tensors hash by identity)
             cache.clear()
-        e = cache[key] = entry(solver, tol_pos, tol_rot, seed, f32)
+        e = entry(solver, tol_pos, tol_rot, seed, f32)
+        if e is _LATER:
+            return None
+        cache[key] = e
     if e is None:
         return None
     if kind is torch.Tensor:
