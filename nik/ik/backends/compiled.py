@@ -211,6 +211,18 @@ class CompiledBackend:
             return self._meanwhile(res, robot, plan, T_target, q_near, representation)
         return res
 
+    @staticmethod
+    def _meanwhile(pending, robot, plan, T_target, q_near, representation) -> IKResult:
+        """The call answered by the torch backend (the same stages, tolerances and success contract) while the driver
+        compiles in a background thread, started after this answer (``pending``: what it compiles; module
+        :mod:`nik.kernels.background`)."""
+        from nik.ik.backends.torch import TorchBackend
+
+        try:
+            return TorchBackend().solve(robot, plan, T_target, q_near, representation)
+        finally:
+            _bg.compile_later(*pending)
+
     def driver_args(self, plan, model, dtype, packed) -> tuple:
         """What :func:`nik.kernels.driver.solve` takes from ``plan`` and ``model`` for answers in ``dtype`` (with the
         ``packed`` network, or None): four tuples around the call's own arrays, gathered once per plan and dtype and

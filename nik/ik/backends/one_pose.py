@@ -92,8 +92,11 @@ def entry(solver, tol_pos, tol_rot, seed, f32: bool):
         from nik.poses import ORTHONORMAL_TOL
 
         _POSES_OK, _POSE_AT, _SOLVE, _ORTHONORMAL_TOL = poses.poses_ok, poses.pose_at, driver.solve, ORTHONORMAL_TOL
-    if not _SOLVE.signatures:  # nothing compiled or loaded yet: the general path loads it, or answers from torch
-        return _LATER  # while it compiles (nik.kernels.background); asked again on the next call
+    if not _SOLVE.signatures and solver.backend != "compiled" and compiled_backend().defer:
+        from nik.kernels import background
+
+        if background.cold(_SOLVE):  # nothing compiled on this machine: the general path answers from torch while
+            return _LATER  # the driver compiles (nik.kernels.background); asked again on the next call
     generation = _models.generation
     plan = solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
     model = _models.model_of(solver.robot, plan.lm_cfg)
