@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["kernel_arguments", "signed_distances_compiled"]
+__all__ = ["blocked_targets", "kernel_arguments", "signed_distances_compiled"]
 
 _EMPTY = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
 
@@ -34,3 +34,23 @@ def signed_distances_compiled(robot, q, world=None, *, model=None, self_collisio
     D = np.empty((len(Q), len(model.pairs) + len(model.links)))
     collision_distances_batch(G, joints, Q, *rest, D)
     return D
+
+
+def blocked_targets(
+    robot, model, world, T, tol_pos: float, tol_rot: float, *, self_collision: bool = True, samples: int = 180
+) -> np.ndarray:
+    """``(B,)`` bool for targets ``T: (B, 4, 4)``: no configuration reaching ``T[b]`` within ``tol_pos`` (m) and
+    ``tol_rot`` (rad) is free, proven by the rows the pose fixes (:func:`nik.kernels.collision.blocked_poses`:
+    the tool's links against the base and the world, then the first joint's links swept over its range on
+    ``samples`` values). The slack is ``tol_pos + tol_rot * lever``, the lever the farthest a last-frame sphere
+    centre lies from the tool point (a rotation by ``a`` moves a point at ``l`` by at most ``a * l``)."""
+    from nik.kernels.collision import blocked_poses
+
+    (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
+    spheres, frames = rest[0], rest[1]
+    last = frames == joints.shape[0]
+    lever = float(np.linalg.norm(spheres[last, :3] - G[-1][:3, 3], axis=1).max()) if last.any() else 0.0
+    Tn = np.ascontiguousarray(np.asarray(T, dtype=np.float64).reshape(-1, 4, 4))
+    out = np.empty(len(Tn), dtype=np.bool_)
+    blocked_poses(G, joints, Tn, *rest, float(tol_pos + tol_rot * lever), int(samples), out)
+    return out

@@ -223,6 +223,13 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     hit = s.colliding(robot, q)
     reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
     idx = np.nonzero(hit & reach)[0]
+    if idx.size and s.mesh is None:  # a pose whose own rows collide has no free answer: not solved again
+        from nik.collision.compiled import blocked_targets
+
+        T_hit = _numpy(T)[idx]
+        idx = idx[
+            ~blocked_targets(robot, s.model, s.world, T_hit, plan.tol_pos, plan.tol_rot, self_collision=s.self_on)
+        ]
     success = _numpy(res.success).astype(bool).copy()
     pos, rot, it = (_numpy(x).copy() for x in (res.pos_err, res.rot_err, res.iterations))
     if idx.size:

@@ -31,9 +31,17 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import OFFSET, PRISMATIC, _joint, _start, _times
+from nik.kernels.chain import LOWER, OFFSET, PRISMATIC, UPPER, _joint, _start, _times
 
-__all__ = ["collides_batch", "collision_distances", "collision_distances_batch", "collision_residual"]
+__all__ = [
+    "blocked_poses",
+    "collides_batch",
+    "collision_distances",
+    "collision_distances_batch",
+    "collision_residual",
+    "collision_rows_batch",
+    "link_bounds",
+]
 
 
 @kernel
@@ -75,154 +83,229 @@ def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, row):
 
 
 @kernel
-def _obstacle(x, y, z, w_spheres, w_boxes, w_capsules, g):
-    """Smallest signed distance from the point ``(x, y, z)`` to the obstacles, and its gradient in ``g (3,)``."""
-    best = np.inf
-    for o in range(w_spheres.shape[0]):
-        dx, dy, dz = x - w_spheres[o, 0], y - w_spheres[o, 1], z - w_spheres[o, 2]
-        n = math.sqrt(dx * dx + dy * dy + dz * dz)
-        d = n - w_spheres[o, 3]
-        if d < best:
-            best = d
-            if n > 0:
-                g[0], g[1], g[2] = dx / n, dy / n, dz / n
-            else:
-                g[0], g[1], g[2] = 0.0, 0.0, 1.0
-    for o in range(w_capsules.shape[0]):
-        ax, ay, az = w_capsules[o, 0], w_capsules[o, 1], w_capsules[o, 2]
-        bx, by, bz = w_capsules[o, 3] - ax, w_capsules[o, 4] - ay, w_capsules[o, 5] - az
-        L2 = bx * bx + by * by + bz * bz
-        t = 0.0
-        if L2 > 0:
-            t = ((x - ax) * bx + (y - ay) * by + (z - az) * bz) / L2
-            t = min(1.0, max(0.0, t))
-        dx, dy, dz = x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz)
-        n = math.sqrt(dx * dx + dy * dy + dz * dz)
-        d = n - w_capsules[o, 6]
-        if d < best:
-            best = d
-            if n > 0:
-                g[0], g[1], g[2] = dx / n, dy / n, dz / n
-            else:
-                g[0], g[1], g[2] = 0.0, 0.0, 1.0
-    for o in range(w_boxes.shape[0]):
-        b = w_boxes[o]
-        px, py, pz = x - b[9], y - b[10], z - b[11]
-        lx = b[0] * px + b[3] * py + b[6] * pz  # R^T (p - c)
-        ly = b[1] * px + b[4] * py + b[7] * pz
-        lz = b[2] * px + b[5] * py + b[8] * pz
-        qx, qy, qz = abs(lx) - b[12], abs(ly) - b[13], abs(lz) - b[14]
-        qmax = max(qx, max(qy, qz))
-        if qmax > 0:
-            wx, wy, wz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
-            d = math.sqrt(wx * wx + wy * wy + wz * wz)
-            gx, gy, gz = math.copysign(wx / d, lx), math.copysign(wy / d, ly), math.copysign(wz / d, lz)
+def _sphere_distance(x, y, z, w, o, g):
+    """Signed distance from the point ``(x, y, z)`` to the world's sphere ``w[o]``, its gradient in ``g (3,)``."""
+    dx, dy, dz = x - w[o, 0], y - w[o, 1], z - w[o, 2]
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if n > 0:
+        g[0], g[1], g[2] = dx / n, dy / n, dz / n
+    else:
+        g[0], g[1], g[2] = 0.0, 0.0, 1.0
+    return n - w[o, 3]
+
+
+@kernel
+def _capsule_distance(x, y, z, w, o, g):
+    """Signed distance from the point ``(x, y, z)`` to the world's capsule ``w[o]``, its gradient in ``g (3,)``."""
+    ax, ay, az = w[o, 0], w[o, 1], w[o, 2]
+    bx, by, bz = w[o, 3] - ax, w[o, 4] - ay, w[o, 5] - az
+    L2 = bx * bx + by * by + bz * bz
+    t = 0.0
+    if L2 > 0:
+        t = ((x - ax) * bx + (y - ay) * by + (z - az) * bz) / L2
+        t = min(1.0, max(0.0, t))
+    dx, dy, dz = x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz)
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if n > 0:
+        g[0], g[1], g[2] = dx / n, dy / n, dz / n
+    else:
+        g[0], g[1], g[2] = 0.0, 0.0, 1.0
+    return n - w[o, 6]
+
+
+@kernel
+def _box_distance(x, y, z, w, o, g):
+    """Signed distance from the point ``(x, y, z)`` to the world's box ``w[o]`` (exact SDF), its gradient in ``g``."""
+    b = w[o]
+    px, py, pz = x - b[9], y - b[10], z - b[11]
+    lx = b[0] * px + b[3] * py + b[6] * pz  # R^T (p - c)
+    ly = b[1] * px + b[4] * py + b[7] * pz
+    lz = b[2] * px + b[5] * py + b[8] * pz
+    qx, qy, qz = abs(lx) - b[12], abs(ly) - b[13], abs(lz) - b[14]
+    qmax = max(qx, max(qy, qz))
+    if qmax > 0:
+        wx, wy, wz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+        d = math.sqrt(wx * wx + wy * wy + wz * wz)
+        gx, gy, gz = math.copysign(wx / d, lx), math.copysign(wy / d, ly), math.copysign(wz / d, lz)
+    else:
+        d = qmax
+        gx, gy, gz = 0.0, 0.0, 0.0
+        if qx >= qy and qx >= qz:
+            gx = math.copysign(1.0, lx)
+        elif qy >= qz:
+            gy = math.copysign(1.0, ly)
         else:
-            d = qmax
-            gx, gy, gz = 0.0, 0.0, 0.0
-            if qx >= qy and qx >= qz:
-                gx = math.copysign(1.0, lx)
-            elif qy >= qz:
-                gy = math.copysign(1.0, ly)
-            else:
-                gz = math.copysign(1.0, lz)
-        if d < best:
-            best = d
-            g[0] = b[0] * gx + b[1] * gy + b[2] * gz
-            g[1] = b[3] * gx + b[4] * gy + b[5] * gz
-            g[2] = b[6] * gx + b[7] * gy + b[8] * gz
-    return best
+            gz = math.copysign(1.0, lz)
+    g[0] = b[0] * gx + b[1] * gy + b[2] * gz
+    g[1] = b[3] * gx + b[4] * gy + b[5] * gz
+    g[2] = b[6] * gx + b[7] * gy + b[8] * gz
+    return d
+
+
+@kernel
+def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g):
+    """Signed distance from ``(x, y, z)`` to obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule), gradient in
+    ``g``."""
+    if kind == 0:
+        return _sphere_distance(x, y, z, w_spheres, o, g)
+    if kind == 1:
+        return _box_distance(x, y, z, w_boxes, o, g)
+    return _capsule_distance(x, y, z, w_capsules, o, g)
+
+
+@kernel
+def link_bounds(spheres, body_start, bounds):
+    """``bounds (L, 4)``: each link's bounding sphere in its own frame (the mean of its centres, and the radius
+    reaching every one of its spheres; radius -1 for a link without spheres). A link rides on one frame, so the
+    bound placed with that frame holds the placed spheres (a rigid motion keeps distances)."""
+    for link in range(body_start.shape[0] - 1):
+        s0, s1 = body_start[link], body_start[link + 1]
+        for r in range(4):
+            bounds[link, r] = 0.0
+        if s1 <= s0:
+            bounds[link, 3] = -1.0
+            continue
+        for s in range(s0, s1):
+            for r in range(3):
+                bounds[link, r] += spheres[s, r]
+        for r in range(3):
+            bounds[link, r] /= s1 - s0
+        for s in range(s0, s1):
+            dx, dy, dz = (
+                spheres[s, 0] - bounds[link, 0],
+                spheres[s, 1] - bounds[link, 1],
+                spheres[s, 2] - bounds[link, 2],
+            )
+            bounds[link, 3] = max(bounds[link, 3], math.sqrt(dx * dx + dy * dy + dz * dz) + spheres[s, 3])
+
+
+@kernel
+def _place_link(F, spheres, sphere_frame, body_start, link, X, placed):
+    """The world positions of link ``link``'s spheres in ``X``, once per evaluation (``placed[link]``)."""
+    if placed[link]:
+        return
+    placed[link] = True
+    for s in range(body_start[link], body_start[link + 1]):
+        f = sphere_frame[s]
+        for r in range(3):
+            X[s, r] = F[f, r, 0] * spheres[s, 0] + F[f, r, 1] * spheres[s, 1] + F[f, r, 2] * spheres[s, 2] + F[f, r, 3]
 
 
 @kernel
 def _rows(
-    G,
-    joints,
-    q,
-    spheres,
-    sphere_frame,
-    body_start,
-    pairs,
-    w_spheres,
-    w_boxes,
-    w_capsules,
-    self_on,
-    d,
-    J,
-    want_jacobian,
-    cutoff,
-):
-    """The rows (module docstring). Broad phase: a row whose lower bound from the links' bounding spheres exceeds
-    ``cutoff`` is that bound (Jacobian row 0) instead of the exact minimum."""
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+    want_jacobian, cutoff, bounds, stop,
+):  # fmt: skip
+    """The rows (module docstring) with the broad phase: ``d[k]`` is exact wherever it is at most ``cutoff``, else
+    a lower bound above ``cutoff`` (Jacobian row 0). ``bounds (L, 4)``: :func:`link_bounds`. ``stop``: return at the
+    first row below ``cutoff`` (the rows after it are left unset). Returns whether a row is below ``cutoff``.
+
+    The broad phase, each test a lower bound of the distances it skips (a signed distance is 1-Lipschitz, so a
+    bounding sphere's distance minus its radius bounds every sphere inside it): a pair of links whose bounding
+    spheres are apart by more than ``cutoff`` is that bound; else a sphere of one link farther than ``cutoff``
+    from the other link's bounding sphere is skipped; a link and an obstacle whose bound is above ``cutoff``
+    likewise. A row is the smallest of its exact distances and its skipped bounds, so below ``cutoff`` it equals
+    the all-pairs minimum (the minimising pair is never skipped)."""
     n = q.shape[0]
     S = spheres.shape[0]
     P = pairs.shape[0]
     L = body_start.shape[0] - 1
+    No = w_spheres.shape[0] + w_boxes.shape[0] + w_capsules.shape[0]
     F = np.empty((n + 1, 3, 4))
     X = np.empty((S, 3))
+    placed = np.zeros(L, dtype=np.bool_)
     _frames(G, joints, q, F)
-    _place(F, spheres, sphere_frame, X)
-    Bc = np.zeros((L, 3))  # each link's bounding sphere: the mean of its centres, reaching all its spheres
-    Br = np.zeros(L)
+    Bc = np.empty((L, 3))  # each link's bounding sphere, placed
     for link in range(L):
-        s0, s1 = body_start[link], body_start[link + 1]
-        if s1 > s0:
-            for s in range(s0, s1):
-                for r in range(3):
-                    Bc[link, r] += X[s, r]
+        if bounds[link, 3] >= 0:
+            f = sphere_frame[body_start[link]]
             for r in range(3):
-                Bc[link, r] /= s1 - s0
-            for s in range(s0, s1):
-                dx, dy, dz = X[s, 0] - Bc[link, 0], X[s, 1] - Bc[link, 1], X[s, 2] - Bc[link, 2]
-                Br[link] = max(Br[link], math.sqrt(dx * dx + dy * dy + dz * dz) + spheres[s, 3])
+                Bc[link, r] = F[f, r, 0] * bounds[link, 0] + F[f, r, 1] * bounds[link, 1] + F[f, r, 2] * bounds[link, 2]
+                Bc[link, r] += F[f, r, 3]
     if want_jacobian:
         for r in range(P + L):
             for m in range(n):
                 J[r, m] = 0.0
+    g = np.empty(3)
+    gb = np.zeros(3)
+    hit = False
+    # the world first: a link and an obstacle are the likelier overlap, and the cheaper test
+    kinds = np.empty(No, dtype=np.int64)
+    which = np.empty(No, dtype=np.int64)
+    for link in range(L):
+        s0, s1 = body_start[link], body_start[link + 1]
+        if s1 <= s0 or sphere_frame[s0] == 0 or No == 0:
+            d[P + link] = np.inf  # the base's links never move: their contacts with the world are the user's set-up
+            continue
+        lower = np.inf  # the smallest bound of the obstacles skipped
+        m = 0
+        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+            for o in range(count):
+                bound = _obstacle_one(Bc[link, 0], Bc[link, 1], Bc[link, 2], kind, o, w_spheres, w_boxes, w_capsules,
+                                      g) - bounds[link, 3]  # fmt: skip
+                if bound > cutoff:
+                    lower = min(lower, bound)
+                else:
+                    kinds[m], which[m] = kind, o
+                    m += 1
+        best, bs = np.inf, -1
+        if m > 0:
+            _place_link(F, spheres, sphere_frame, body_start, link, X, placed)
+            for s in range(s0, s1):
+                for k in range(m):
+                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kinds[k], which[k], w_spheres, w_boxes,
+                                         w_capsules, g) - spheres[s, 3]  # fmt: skip
+                    if dist < best:
+                        best, bs = dist, s
+                        gb[0], gb[1], gb[2] = g[0], g[1], g[2]
+        d[P + link] = min(best, lower)
+        if want_jacobian and bs >= 0 and best <= lower:
+            _add_point_jacobian(
+                F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J[P + link]
+            )
+        if d[P + link] < cutoff:
+            hit = True
+            if stop:
+                return True
     for p in range(P):
+        if not self_on:
+            d[p] = np.inf
+            continue
+        a, b = pairs[p, 0], pairs[p, 1]
+        if bounds[a, 3] < 0 or bounds[b, 3] < 0:
+            d[p] = np.inf
+            continue
+        dx, dy, dz = Bc[a, 0] - Bc[b, 0], Bc[a, 1] - Bc[b, 1], Bc[a, 2] - Bc[b, 2]
+        lower = math.sqrt(dx * dx + dy * dy + dz * dz) - bounds[a, 3] - bounds[b, 3]
         best, bi, bj = np.inf, -1, -1
-        if self_on:
-            a, b = pairs[p, 0], pairs[p, 1]
-            dx, dy, dz = Bc[a, 0] - Bc[b, 0], Bc[a, 1] - Bc[b, 1], Bc[a, 2] - Bc[b, 2]
-            bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Br[a] - Br[b]
-            if bound > cutoff:
-                d[p] = bound
-                continue
+        if lower <= cutoff:
+            lower = np.inf
+            _place_link(F, spheres, sphere_frame, body_start, a, X, placed)
+            _place_link(F, spheres, sphere_frame, body_start, b, X, placed)
             for i in range(body_start[a], body_start[a + 1]):
+                dx, dy, dz = X[i, 0] - Bc[b, 0], X[i, 1] - Bc[b, 1], X[i, 2] - Bc[b, 2]
+                near = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - bounds[b, 3]
+                if near > cutoff:  # sphere i is farther than cutoff from every sphere of link b
+                    lower = min(lower, near)
+                    continue
                 for j in range(body_start[b], body_start[b + 1]):
                     dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
                     dist = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3]
                     if dist < best:
                         best, bi, bj = dist, i, j
-        d[p] = best
-        if want_jacobian and bi >= 0:
+        d[p] = min(best, lower)
+        if want_jacobian and bi >= 0 and best <= lower:
             dx, dy, dz = X[bi, 0] - X[bj, 0], X[bi, 1] - X[bj, 1], X[bi, 2] - X[bj, 2]
             nn = math.sqrt(dx * dx + dy * dy + dz * dz)
             if nn > 0:
                 vx, vy, vz = dx / nn, dy / nn, dz / nn
                 _add_point_jacobian(F, joints, sphere_frame[bi], X[bi, 0], X[bi, 1], X[bi, 2], vx, vy, vz, 1.0, J[p])
                 _add_point_jacobian(F, joints, sphere_frame[bj], X[bj, 0], X[bj, 1], X[bj, 2], vx, vy, vz, -1.0, J[p])
-    g = np.empty(3)
-    gb = np.zeros(3)
-    for link in range(L):
-        best, bs = np.inf, -1
-        if body_start[link] < body_start[link + 1] and sphere_frame[body_start[link]] == 0:
-            d[P + link] = np.inf  # the base's links never move: their contacts with the world are the user's set-up
-            continue
-        bound = _obstacle(Bc[link, 0], Bc[link, 1], Bc[link, 2], w_spheres, w_boxes, w_capsules, g) - Br[link]
-        if bound > cutoff:  # signed distances are 1-Lipschitz: no sphere of the link is nearer than this
-            d[P + link] = bound
-            continue
-        for s in range(body_start[link], body_start[link + 1]):
-            dist = _obstacle(X[s, 0], X[s, 1], X[s, 2], w_spheres, w_boxes, w_capsules, g) - spheres[s, 3]
-            if dist < best:
-                best, bs = dist, s
-                gb[0], gb[1], gb[2] = g[0], g[1], g[2]
-        d[P + link] = best
-        if want_jacobian and bs >= 0 and best < np.inf:
-            _add_point_jacobian(
-                F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J[P + link]
-            )
+        if d[p] < cutoff:
+            hit = True
+            if stop:
+                return True
+    return hit
 
 
 @kernel
@@ -230,23 +313,10 @@ def collision_distances(
     G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J
 ):
     """Rows ``d (P + L,)`` (metres) and their Jacobian ``J (P + L, n)`` for ``q: (n,)`` (module docstring)."""
-    _rows(
-        G,
-        joints,
-        q,
-        spheres,
-        sphere_frame,
-        body_start,
-        pairs,
-        w_spheres,
-        w_boxes,
-        w_capsules,
-        self_on,
-        d,
-        J,
-        True,
-        np.inf,
-    )
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
+    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+          True, np.inf, bounds, False)  # fmt: skip
 
 
 @kernel
@@ -255,25 +325,12 @@ def collision_residual(
 ):
     """LM rows ``r = max(0, margin - d)`` ``(P + L,)`` and ``Jr = dr/dq`` ``(P + L, n)`` for ``q: (n,)``; returns
     the smallest distance ``d`` where it is at most ``margin`` (metres), else a lower bound above ``margin``
-    (``inf`` when there is nothing to check). Rows whose links' bounding spheres are farther than ``margin``
-    apart are not computed sphere by sphere (their residual is 0 either way)."""
-    _rows(
-        G,
-        joints,
-        q,
-        spheres,
-        sphere_frame,
-        body_start,
-        pairs,
-        w_spheres,
-        w_boxes,
-        w_capsules,
-        self_on,
-        r,
-        Jr,
-        True,
-        margin,
-    )
+    (``inf`` when there is nothing to check). Rows the broad phase puts farther than ``margin`` are not computed
+    sphere by sphere (their residual is 0 either way)."""
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
+    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr,
+          True, margin, bounds, False)  # fmt: skip
     smallest = np.inf
     for k in range(r.shape[0]):
         dist = r[k]
@@ -293,57 +350,168 @@ def collision_residual(
 def collision_distances_batch(
     G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, D
 ):
-    """Rows ``D (B, P + L)`` for ``Q: (B, n)``, no Jacobian."""
+    """Rows ``D (B, P + L)`` for ``Q: (B, n)``, exact (every sphere pair), no Jacobian."""
+    collision_rows_batch(G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                         self_on, np.inf, D)  # fmt: skip
+
+
+@kernel
+def collision_rows_batch(
+    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, cutoff, D
+):
+    """Rows ``D (B, P + L)`` for ``Q: (B, n)`` through the broad phase of ``cutoff`` (metres): each row equal to
+    the exact one (:func:`collision_distances_batch`) wherever either is at most ``cutoff``, else a lower bound
+    above ``cutoff`` (what the tests compare)."""
     J = np.empty((0, Q.shape[1]))
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
     for b in range(Q.shape[0]):
-        _rows(
-            G,
-            joints,
-            Q[b],
-            spheres,
-            sphere_frame,
-            body_start,
-            pairs,
-            w_spheres,
-            w_boxes,
-            w_capsules,
-            self_on,
-            D[b],
-            J,
-            False,
-            np.inf,
-        )
+        _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+              D[b], J, False, cutoff, bounds, False)  # fmt: skip
 
 
 @kernel
 def collides_batch(
     G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, out
 ):
-    """``out (B,)`` bool: some row of ``Q[b]`` is below ``margin`` (metres)."""
+    """``out (B,)`` bool: some row of ``Q[b]`` is below ``margin`` (metres); each configuration stops at its first
+    such row."""
     R = pairs.shape[0] + body_start.shape[0] - 1
     d = np.empty(R)
     J = np.empty((0, Q.shape[1]))
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
     for b in range(Q.shape[0]):
-        _rows(
-            G,
-            joints,
-            Q[b],
-            spheres,
-            sphere_frame,
-            body_start,
-            pairs,
-            w_spheres,
-            w_boxes,
-            w_capsules,
-            self_on,
-            d,
-            J,
-            False,
-            margin,
-        )
-        hit = False
-        for k in range(R):
-            if d[k] < margin:
-                hit = True
+        out[b] = _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                       self_on, d, J, False, margin, bounds, True)  # fmt: skip
+
+
+@kernel
+def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on, g):
+    """The smallest exact row among those whose links all have ``on[frame]`` (placed in ``X``): pairs with both
+    links on such frames, and such links (not on frame 0) against the world."""
+    L = body_start.shape[0] - 1
+    best = np.inf
+    for link in range(L):
+        s0, s1 = body_start[link], body_start[link + 1]
+        if s1 <= s0 or not on[sphere_frame[s0]] or sphere_frame[s0] == 0:
+            continue
+        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+            for o in range(count):
+                for s in range(s0, s1):
+                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                    best = min(best, dist - spheres[s, 3])
+    if self_on:
+        for p in range(pairs.shape[0]):
+            a, b = pairs[p, 0], pairs[p, 1]
+            if body_start[a] == body_start[a + 1] or body_start[b] == body_start[b + 1]:
+                continue
+            if not (on[sphere_frame[body_start[a]]] and on[sphere_frame[body_start[b]]]):
+                continue
+            for i in range(body_start[a], body_start[a + 1]):
+                for j in range(body_start[b], body_start[b + 1]):
+                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+    return best
+
+
+@kernel
+def blocked_poses(
+    G, joints, T, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, slack, samples,
+    out,
+):  # fmt: skip
+    """``out (B,)`` bool: no configuration whose tool pose is within ``slack`` of ``T[b] (4, 4)`` is free, proven
+    by the rows the pose alone fixes (metres; ``slack`` bounds how far a sphere on the last frame moves between two
+    such configurations: the position tolerance plus the rotation tolerance times the sphere's lever).
+
+    The links on the last frame (the frame after the last joint: a hand, its fingers) ride with the tool, the links
+    on frame 0 never move: their rows against each other and the world's against the former are fixed by the pose
+    (blocked where the smallest is below ``-slack``). Then the links on frame 1 move with the first joint alone:
+    the rows among frames {0, 1, last} are swept over the first joint's range on ``samples`` values (blocked where
+    even the largest of their smallest, plus what a sphere moves between samples and ``slack``, is below 0: every
+    value of the first joint collides). Never True for a pose that has a free configuration within ``slack``."""
+    n = joints.shape[0]
+    S = spheres.shape[0]
+    F = np.zeros((n + 1, 3, 4))
+    X = np.zeros((S, 3))
+    on = np.zeros(n + 1, dtype=np.bool_)
+    g = np.empty(3)
+    rho = 0.0  # the farthest a frame-1 sphere centre is from the first joint's axis (the lever of a turn)
+    for s in range(S):
+        if sphere_frame[s] == 1:
+            if joints[0, PRISMATIC] != 0.0:
+                rho = 1.0
+            else:
+                rho = max(rho, math.sqrt(spheres[s, 0] ** 2 + spheres[s, 1] ** 2))
+    Gn = G[n]
+    lo, hi = joints[0, LOWER], joints[0, UPPER]
+    span = min(hi - lo, 2.0 * math.pi) if joints[0, PRISMATIC] == 0.0 else hi - lo
+    h = span / (samples - 1) if samples > 1 else 0.0
+    for b in range(T.shape[0]):
+        out[b] = False
+        for r in range(3):  # F[n] = T G[n]^-1 (rigid), F[0] = identity
+            for k in range(3):
+                F[n, r, k] = T[b, r, 0] * Gn[k, 0] + T[b, r, 1] * Gn[k, 1] + T[b, r, 2] * Gn[k, 2]
+                F[0, r, k] = 1.0 if r == k else 0.0
+            F[0, r, 3] = 0.0
+        for r in range(3):
+            F[n, r, 3] = T[b, r, 3] - (F[n, r, 0] * Gn[0, 3] + F[n, r, 1] * Gn[1, 3] + F[n, r, 2] * Gn[2, 3])
+        for i in range(n + 1):
+            on[i] = i == 0 or i == n
+        _place(F, spheres, sphere_frame, X)  # frames 1..n-1 are zero: only the spheres on 0 and n are read
+        if _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on,
+                       g) < -slack:  # fmt: skip
+            out[b] = True
+            continue
+        if n < 2 or samples < 2 or rho == 0.0:
+            continue
+        on[1] = True
+        on[0] = False  # the fixed rows are free enough; frame 1's rows are the ones that sweep
+        on[n] = False
+        blocked = True
+        q1 = np.zeros(1)
+        for k in range(samples):
+            q1[0] = lo + ((k * 7919) % samples) * h  # a stride through the range: a free value is met early
+            Tj = np.empty((3, 4))
+            _start(Tj, G[0])
+            _joint(Tj, joints[0, PRISMATIC] != 0.0, q1[0] + joints[0, OFFSET])
+            for r in range(3):
+                for c in range(4):
+                    F[1, r, c] = Tj[r, c]
+            _place(F, spheres, sphere_frame, X)
+            worst = _frame_one_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                                    self_on, n, g)  # fmt: skip
+            if worst + rho * h / 2 + slack >= 0.0:
+                blocked = False
                 break
-        out[b] = hit
+        out[b] = blocked
+
+
+@kernel
+def _frame_one_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, n, g):
+    """The smallest exact row of the links on frame 1: against the world, and against links on frames 0, 1 and
+    ``n`` (placed in ``X``)."""
+    L = body_start.shape[0] - 1
+    best = np.inf
+    for link in range(L):
+        s0, s1 = body_start[link], body_start[link + 1]
+        if s1 <= s0 or sphere_frame[s0] != 1:
+            continue
+        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+            for o in range(count):
+                for s in range(s0, s1):
+                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                    best = min(best, dist - spheres[s, 3])
+    if self_on:
+        for p in range(pairs.shape[0]):
+            a, b = pairs[p, 0], pairs[p, 1]
+            if body_start[a] == body_start[a + 1] or body_start[b] == body_start[b + 1]:
+                continue
+            fa, fb = sphere_frame[body_start[a]], sphere_frame[body_start[b]]
+            if not ((fa == 1 and (fb <= 1 or fb == n)) or (fb == 1 and (fa <= 1 or fa == n))):
+                continue
+            for i in range(body_start[a], body_start[a + 1]):
+                for j in range(body_start[b], body_start[b + 1]):
+                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+    return best

@@ -117,6 +117,38 @@ def _sum_sq(r):
 
 
 @kernel
+def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame, body_start, pairs, w_spheres,
+                 w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr):  # fmt: skip
+    """How many of the given starts ``starts[:H] (H, n)`` LM runs from, their indices in ``order``: the free ones
+    (every row >= 0, brought inside the limits), nearest the pose first (the pose error of
+    :func:`nik.kernels.lm._score`), then the first start (the answer that collided) if it collides; the other
+    colliding ones are dropped before any iteration (a colliding hypothesis mostly lands on a colliding answer)."""
+    n = starts.shape[1]
+    q = np.empty(n)
+    m = 0
+    first_collides = False
+    for s in range(H):
+        _copy(starts[s], q)
+        _bounds(joints, q)
+        if collision_residual(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                              self_on, 0.0, r, Jr) >= 0.0:  # fmt: skip
+            _chain(G, joints, q, Tc)
+            e = _score(Tt, Tc, rw, bnd, mode, ec, d)
+            k = m  # insertion sort (stable): a handful of starts
+            while k > 0 and score[k - 1] > e:
+                score[k], order[k] = score[k - 1], order[k - 1]
+                k -= 1
+            score[k], order[k] = e, s
+            m += 1
+        elif s == 0:
+            first_collides = True
+    if first_collides:
+        order[m] = 0
+        m += 1
+    return m
+
+
+@kernel
 def collision_lm(
     G, joints, Tt, starts, n_starts, bounds, modes, opts, iopts, restarts, tries, seed,
     spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, weight,
@@ -150,20 +182,19 @@ def collision_lm(
     A, g, dq = np.empty((n, n)), np.empty(n), np.empty(n)
     qs, qc, best_q = np.empty(n), np.empty(n), np.empty(n)
     rng = np.empty(1, dtype=np.uint64)
+    order, score = np.empty(starts.shape[1], dtype=np.int64), np.empty(starts.shape[1])
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
         total = 0
         best_S, best_free, best_done = math.inf, False, False
         best_pos, best_rot = math.inf, math.inf
-        H = n_starts[b]
+        H = _rank_starts(G, joints, Tt[b], starts[b], n_starts[b], rw, bnd, mode, spheres, sphere_frame, body_start,
+                         pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr)  # fmt: skip
         for s in range(H + restarts[b]):
             if s < H:
-                _copy(starts[b, s], qs)
+                _copy(starts[b, order[s]], qs)
                 _bounds(joints, qs)
-                if s > 0 and collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs,
-                                                w_spheres, w_boxes, w_capsules, self_on, 0.0, r, Jr) < 0.0:  # fmt: skip
-                    continue  # a colliding hypothesis: dropped early
             else:  # the free draw nearest the pose (by its error) among `tries`
                 best_draw = math.inf
                 for _ in range(tries):
@@ -223,7 +254,7 @@ def collision_lm(
             if done:
                 break
         if best_S == math.inf:  # every start dropped: keep the first given start (or a draw) as it is
-            if H > 0:
+            if n_starts[b] > 0:
                 _copy(starts[b, 0], best_q)
             else:
                 _draw(joints, rng, best_q)
