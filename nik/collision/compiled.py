@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["blocked_targets", "kernel_arguments", "signed_distances_compiled"]
+__all__ = ["blocked_targets", "collision_names_compiled", "kernel_arguments", "signed_distances_compiled"]
 
 _EMPTY = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
 
@@ -54,3 +54,28 @@ def blocked_targets(
     out = np.empty(len(Tn), dtype=np.bool_)
     blocked_poses(G, joints, Tn, *rest, float(tol_pos + tol_rot * lever), int(samples), out)
     return out
+
+
+def collision_names_compiled(robot, q, world=None, *, model=None, self_collision: bool = True) -> list:
+    """:func:`nik.collision.collision_names` for ``q: (B, dof)`` (numpy) on the compiled kernels
+    (:func:`nik.kernels.collision.overlaps_batch`): per configuration the sorted names of what overlaps, or None."""
+    from nik.collision.check import OBSTACLE_KINDS
+    from nik.collision.model import collision_model
+    from nik.kernels.collision import overlaps_batch
+
+    model = collision_model(robot) if model is None else model
+    Q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, robot.dof))
+    (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
+    counts = [len(a) for a in rest[4:7]]
+    pair_hit = np.empty((len(Q), len(model.pairs)), dtype=np.bool_)
+    world_hit = np.empty((len(Q), len(model.links), sum(counts)), dtype=np.bool_)
+    overlaps_batch(G, joints, Q, *rest, pair_hit, world_hit)
+    obstacles = [f"{kind} {k}" for kind, c in zip(OBSTACLE_KINDS, counts, strict=True) for k in range(c)]
+    names = []
+    for b in range(len(Q)):
+        hits = [
+            f"{model.links[model.pairs[p][0]]}|{model.links[model.pairs[p][1]]}" for p in np.flatnonzero(pair_hit[b])
+        ]
+        hits += [f"{model.links[link]}|{obstacles[o]}" for link, o in zip(*np.nonzero(world_hit[b]), strict=True)]
+        names.append(sorted(set(hits)) or None)
+    return names

@@ -93,9 +93,9 @@ class Setup:
         """What overlaps in each of ``q: (B, dof)`` (:func:`nik.collision.collision_names`), by the verdict's check."""
         if self.mesh is not None:
             return self.mesh.collision_names(q, self.world, self_collision=self.self_on)
-        from nik.collision import collision_names
+        from nik.collision.compiled import collision_names_compiled
 
-        return collision_names(robot, q, self.world, model=self.model, self_collision=self.self_on)
+        return collision_names_compiled(robot, q, self.world, model=self.model, self_collision=self.self_on)
 
     def arguments(self, robot):
         """``(G, joints), rest``: :func:`nik.collision.compiled.kernel_arguments`."""

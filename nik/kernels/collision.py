@@ -41,6 +41,7 @@ __all__ = [
     "collision_residual",
     "collision_rows_batch",
     "link_bounds",
+    "overlaps_batch",
 ]
 
 
@@ -463,7 +464,7 @@ def blocked_poses(
                        g) < -slack:  # fmt: skip
             out[b] = True
             continue
-        if n < 2 or samples < 2 or rho == 0.0:
+        if n < 2 or samples < 2:
             continue
         on[1] = True
         on[0] = False  # the fixed rows are free enough; frame 1's rows are the ones that sweep
@@ -515,3 +516,46 @@ def _frame_one_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_bo
                     dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
                     best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
     return best
+
+
+@kernel
+def overlaps_batch(
+    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, pair_hit,
+    world_hit,
+):  # fmt: skip
+    """What overlaps (distance below 0) in each ``Q[b] (n,)``: ``pair_hit (B, P)`` bool, the pairs (False where
+    ``self_on`` is False); ``world_hit (B, L, No)`` bool, link ``l`` and obstacle ``o`` (numbered spheres, boxes,
+    capsules, as :meth:`nik.collision.World.packed`; False for the links on frame 0). The names of
+    :func:`nik.collision.collision_names`, compiled; the same broad phase (cutoff 0) as the check."""
+    n = Q.shape[1]
+    S, P, L = spheres.shape[0], pairs.shape[0], body_start.shape[0] - 1
+    Ns, Nb = w_spheres.shape[0], w_boxes.shape[0]
+    bounds = np.empty((L, 4))
+    link_bounds(spheres, body_start, bounds)
+    d = np.empty(P + L)
+    J = np.empty((0, n))
+    F = np.empty((n + 1, 3, 4))
+    X = np.empty((S, 3))
+    g = np.empty(3)
+    for b in range(Q.shape[0]):
+        _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d,
+              J, False, 0.0, bounds, False)  # fmt: skip
+        for p in range(P):
+            pair_hit[b, p] = d[p] < 0.0
+        world_hit[b, :, :] = False
+        _frames(G, joints, Q[b], F)
+        placed = False
+        for link in range(L):
+            s0, s1 = body_start[link], body_start[link + 1]
+            if s1 <= s0 or sphere_frame[s0] == 0 or not d[P + link] < 0.0:
+                continue
+            if not placed:
+                _place(F, spheres, sphere_frame, X)
+                placed = True
+            for kind, count, first in ((0, Ns, 0), (1, Nb, Ns), (2, w_capsules.shape[0], Ns + Nb)):
+                for o in range(count):
+                    for s in range(s0, s1):
+                        dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                        if dist - spheres[s, 3] < 0.0:
+                            world_hit[b, link, first + o] = True
+                            break
