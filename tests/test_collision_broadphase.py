@@ -173,3 +173,32 @@ def test_compiled_names_equal_the_torch_ones(self_on):
     ref = collision_names(robot, Q, world, model=model, self_collision=self_on)
     assert ours == ref
     assert sum(x is not None for x in ours) > 10
+
+
+def test_the_last_joints_sweep_blocks_a_pose_whose_wrist_link_always_collides():
+    """A ring of balls around the last joint's axis, where the links it turns pass: every configuration reaching the
+    pose collides, and the sweep over the last joint proves it (the hand itself stays free)."""
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    n = robot.dof
+    q = _q(robot, 1, seed=19)
+    on_wrist = np.asarray(model.sphere_frame) == n - 1
+    assert on_wrist.any()
+    F = nik.collision.link_frames(robot, torch.as_tensor(q))[0].numpy()  # (n + 1, 3, 4) frames, base first
+    c = sphere_centers(model, robot, torch.as_tensor(q))[0].numpy()[on_wrist]
+    axis, origin = F[n][:3, 2], F[n][:3, 3]
+    rel = c - origin
+    along = rel @ axis
+    radial = rel - along[:, None] * axis
+    k = int(np.argmax(np.linalg.norm(radial, axis=1)))
+    u = radial[k] / np.linalg.norm(radial[k])
+    v = np.cross(axis, u)
+    r, h = float(np.linalg.norm(radial[k])), float(along[k])
+    ring = nik.World()
+    for a in np.linspace(0, 2 * np.pi, 90, endpoint=False):
+        ring.add_sphere(origin + h * axis + r * (np.cos(a) * u + np.sin(a) * v), 0.01)
+    T = np.asarray(robot.fk(q))
+    fixed_only = blocked_targets(robot, model, ring, T, 1e-4, 1e-3, self_collision=False, samples=1)
+    assert not fixed_only.any()  # the hand is free of the ring: the sweep does the proving
+    assert blocked_targets(robot, model, ring, T, 1e-4, 1e-3, self_collision=False).all()
+    assert collides(robot, q, ring, model=model, self_collision=False).all()

@@ -41,15 +41,21 @@ def blocked_targets(
 ) -> np.ndarray:
     """``(B,)`` bool for targets ``T: (B, 4, 4)``: no configuration reaching ``T[b]`` within ``tol_pos`` (m) and
     ``tol_rot`` (rad) is free, proven by the rows the pose fixes (:func:`nik.kernels.collision.blocked_poses`:
-    the tool's links against the base and the world, then the first joint's links swept over its range on
-    ``samples`` values). The slack is ``tol_pos + tol_rot * lever``, the lever the farthest a last-frame sphere
-    centre lies from the tool point (a rotation by ``a`` moves a point at ``l`` by at most ``a * l``)."""
+    the tool's links against the base and the world, then the links of the first joint and of the last one swept
+    over its range on ``samples`` values). The slack is ``tol_pos + tol_rot * lever``, the lever the farthest a
+    sphere centre on the last two frames can lie from the tool point (a rotation by ``a`` moves a point at ``l``
+    by at most ``a * l``)."""
     from nik.kernels.collision import blocked_poses
 
     (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
-    spheres, frames = rest[0], rest[1]
-    last = frames == joints.shape[0]
-    lever = float(np.linalg.norm(spheres[last, :3] - G[-1][:3, 3], axis=1).max()) if last.any() else 0.0
+    spheres, frames, n = rest[0], rest[1], joints.shape[0]
+    tool = G[n][:3, 3]
+    levers = [0.0, *np.linalg.norm(spheres[frames == n, :3] - tool, axis=1)]
+    if n >= 2:  # frame n - 1 turns about the tool's last joint: bounded by its distance to that frame's origin
+        inv = np.linalg.inv(G[n - 1])
+        wrist = spheres[frames == n - 1, :3] @ inv[:3, :3].T + inv[:3, 3]
+        levers += list(np.linalg.norm(wrist, axis=1) + np.linalg.norm(tool))
+    lever = float(max(levers))
     Tn = np.ascontiguousarray(np.asarray(T, dtype=np.float64).reshape(-1, 4, 4))
     out = np.empty(len(Tn), dtype=np.bool_)
     blocked_poses(G, joints, Tn, *rest, float(tol_pos + tol_rot * lever), int(samples), out)

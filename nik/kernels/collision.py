@@ -417,86 +417,14 @@ def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
 
 
 @kernel
-def blocked_poses(
-    G, joints, T, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, slack, samples,
-    out,
-):  # fmt: skip
-    """``out (B,)`` bool: no configuration whose tool pose is within ``slack`` of ``T[b] (4, 4)`` is free, proven
-    by the rows the pose alone fixes (metres; ``slack`` bounds how far a sphere on the last frame moves between two
-    such configurations: the position tolerance plus the rotation tolerance times the sphere's lever).
-
-    The links on the last frame (the frame after the last joint: a hand, its fingers) ride with the tool, the links
-    on frame 0 never move: their rows against each other and the world's against the former are fixed by the pose
-    (blocked where the smallest is below ``-slack``). Then the links on frame 1 move with the first joint alone:
-    the rows among frames {0, 1, last} are swept over the first joint's range on ``samples`` values (blocked where
-    even the largest of their smallest, plus what a sphere moves between samples and ``slack``, is below 0: every
-    value of the first joint collides). Never True for a pose that has a free configuration within ``slack``."""
-    n = joints.shape[0]
-    S = spheres.shape[0]
-    F = np.zeros((n + 1, 3, 4))
-    X = np.zeros((S, 3))
-    on = np.zeros(n + 1, dtype=np.bool_)
-    g = np.empty(3)
-    rho = 0.0  # the farthest a frame-1 sphere centre is from the first joint's axis (the lever of a turn)
-    for s in range(S):
-        if sphere_frame[s] == 1:
-            if joints[0, PRISMATIC] != 0.0:
-                rho = 1.0
-            else:
-                rho = max(rho, math.sqrt(spheres[s, 0] ** 2 + spheres[s, 1] ** 2))
-    Gn = G[n]
-    lo, hi = joints[0, LOWER], joints[0, UPPER]
-    span = min(hi - lo, 2.0 * math.pi) if joints[0, PRISMATIC] == 0.0 else hi - lo
-    h = span / (samples - 1) if samples > 1 else 0.0
-    for b in range(T.shape[0]):
-        out[b] = False
-        for r in range(3):  # F[n] = T G[n]^-1 (rigid), F[0] = identity
-            for k in range(3):
-                F[n, r, k] = T[b, r, 0] * Gn[k, 0] + T[b, r, 1] * Gn[k, 1] + T[b, r, 2] * Gn[k, 2]
-                F[0, r, k] = 1.0 if r == k else 0.0
-            F[0, r, 3] = 0.0
-        for r in range(3):
-            F[n, r, 3] = T[b, r, 3] - (F[n, r, 0] * Gn[0, 3] + F[n, r, 1] * Gn[1, 3] + F[n, r, 2] * Gn[2, 3])
-        for i in range(n + 1):
-            on[i] = i == 0 or i == n
-        _place(F, spheres, sphere_frame, X)  # frames 1..n-1 are zero: only the spheres on 0 and n are read
-        if _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on,
-                       g) < -slack:  # fmt: skip
-            out[b] = True
-            continue
-        if n < 2 or samples < 2:
-            continue
-        on[1] = True
-        on[0] = False  # the fixed rows are free enough; frame 1's rows are the ones that sweep
-        on[n] = False
-        blocked = True
-        q1 = np.zeros(1)
-        for k in range(samples):
-            q1[0] = lo + ((k * 7919) % samples) * h  # a stride through the range: a free value is met early
-            Tj = np.empty((3, 4))
-            _start(Tj, G[0])
-            _joint(Tj, joints[0, PRISMATIC] != 0.0, q1[0] + joints[0, OFFSET])
-            for r in range(3):
-                for c in range(4):
-                    F[1, r, c] = Tj[r, c]
-            _place(F, spheres, sphere_frame, X)
-            worst = _frame_one_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                                    self_on, n, g)  # fmt: skip
-            if worst + rho * h / 2 + slack >= 0.0:
-                blocked = False
-                break
-        out[b] = blocked
-
-
-@kernel
-def _frame_one_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, n, g):
-    """The smallest exact row of the links on frame 1: against the world, and against links on frames 0, 1 and
-    ``n`` (placed in ``X``)."""
+def _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g):
+    """The smallest exact row of the links on frame ``k`` (placed in ``X``): against the world, and against the
+    links on frames 0, ``k`` and ``n``."""
     L = body_start.shape[0] - 1
     best = np.inf
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
-        if s1 <= s0 or sphere_frame[s0] != 1:
+        if s1 <= s0 or sphere_frame[s0] != k:
             continue
         for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
             for o in range(count):
@@ -509,13 +437,116 @@ def _frame_one_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_bo
             if body_start[a] == body_start[a + 1] or body_start[b] == body_start[b + 1]:
                 continue
             fa, fb = sphere_frame[body_start[a]], sphere_frame[body_start[b]]
-            if not ((fa == 1 and (fb <= 1 or fb == n)) or (fb == 1 and (fa <= 1 or fa == n))):
+            if not ((fa == k and (fb == 0 or fb == k or fb == n)) or (fb == k and (fa == 0 or fa == k or fa == n))):
                 continue
             for i in range(body_start[a], body_start[a + 1]):
                 for j in range(body_start[b], body_start[b + 1]):
                     dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
                     best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
     return best
+
+
+@kernel
+def _rigid_inverse_times(A, M, out):
+    """``out (3, 4) = A @ M^-1`` for rigid ``A (3, 4)`` and ``M (3, 4)`` (their top rows)."""
+    for r in range(3):
+        for c in range(3):
+            out[r, c] = A[r, 0] * M[c, 0] + A[r, 1] * M[c, 1] + A[r, 2] * M[c, 2]
+    for r in range(3):
+        out[r, 3] = A[r, 3] - (out[r, 0] * M[0, 3] + out[r, 1] * M[1, 3] + out[r, 2] * M[2, 3])
+
+
+@kernel
+def _lever(spheres, sphere_frame, k, M, prismatic):
+    """The farthest a sphere centre on frame ``k`` lies from the axis of the joint that turns it (the z axis of
+    ``M (3, 4)`` in frame ``k``'s coordinates): what a sphere moves per radian; 1 for a prismatic joint."""
+    rho = 0.0
+    for s in range(spheres.shape[0]):
+        if sphere_frame[s] != k:
+            continue
+        if prismatic:
+            return 1.0
+        vx, vy, vz = spheres[s, 0] - M[0, 3], spheres[s, 1] - M[1, 3], spheres[s, 2] - M[2, 3]
+        along = vx * M[0, 2] + vy * M[1, 2] + vz * M[2, 2]
+        rho = max(rho, math.sqrt(max(vx * vx + vy * vy + vz * vz - along * along, 0.0)))
+    return rho
+
+
+@kernel
+def blocked_poses(
+    G, joints, T, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, slack, samples,
+    out,
+):  # fmt: skip
+    """``out (B,)`` bool: no configuration whose tool pose is within ``slack`` of ``T[b] (4, 4)`` is free, proven
+    by the rows the pose fixes (metres; ``slack`` bounds how far a sphere on the last two frames moves between two
+    such configurations: the position tolerance plus the rotation tolerance times the sphere's lever).
+
+    The links on the last frame (the frame after the last joint: a hand, its fingers) ride with the tool, the links
+    on frame 0 never move: their rows against each other and the world's against the former are fixed by the pose
+    (blocked where the smallest is below ``-slack``). Then two sweeps over one joint each, on ``samples`` values of
+    its range: the links on frame 1 move with the first joint alone, the links on frame ``n - 1`` with the pose and
+    the last joint alone; their rows against the world and the links on frames 0, their own and ``n`` are swept
+    (blocked where, for every value, the smallest row plus what a sphere moves between two values and ``slack`` is
+    below 0). Never True for a pose that has a free configuration within the tolerances."""
+    n = joints.shape[0]
+    S = spheres.shape[0]
+    F = np.zeros((n + 1, 3, 4))
+    X = np.zeros((S, 3))
+    on = np.zeros(n + 1, dtype=np.bool_)
+    g = np.empty(3)
+    Tj = np.empty((3, 4))
+    Gn = np.empty((3, 4))
+    _start(Gn, G[n])
+    M0 = np.empty((3, 4))  # the first joint turns frame 1 about its own z axis (M0 = identity in its coordinates)
+    _start(M0, np.eye(4))
+    Mw = np.empty((3, 4))  # the last joint turns frame n - 1 about the z axis of G[n - 1]
+    _start(Mw, G[n - 1])
+    sweeps = 2 if n >= 3 else (1 if n == 2 else 0)
+    for b in range(T.shape[0]):
+        out[b] = False
+        for r in range(3):
+            for c in range(4):
+                F[0, r, c] = 1.0 if r == c else 0.0
+        _rigid_inverse_times(T[b], Gn, F[n])  # F[n] = T G[n]^-1
+        for i in range(n + 1):
+            on[i] = i == 0 or i == n
+        _place(F, spheres, sphere_frame, X)  # only the spheres on frames 0 and n are read
+        if _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on,
+                       g) < -slack:  # fmt: skip
+            out[b] = True
+            continue
+        if samples < 2:
+            continue
+        for sweep in range(sweeps):
+            j = 0 if sweep == 0 else n - 1  # the joint swept
+            k = 1 if sweep == 0 else n - 1  # the frame it moves
+            prismatic = joints[j, PRISMATIC] != 0.0
+            rho = _lever(spheres, sphere_frame, k, M0 if sweep == 0 else Mw, prismatic)
+            lo, hi = joints[j, LOWER], joints[j, UPPER]
+            span = hi - lo if prismatic else min(hi - lo, 2.0 * math.pi)
+            h = span / (samples - 1)
+            blocked = True
+            for i in range(samples):
+                x = lo + ((i * 7919) % samples) * h  # a stride through the range: a free value is met early
+                if sweep == 0:  # F[1] = G[0] J(q1)
+                    _start(Tj, G[0])
+                    _joint(Tj, prismatic, x + joints[j, OFFSET])
+                    for r in range(3):
+                        for c in range(4):
+                            F[1, r, c] = Tj[r, c]
+                else:  # F[n - 1] = F[n] (G[n - 1] J(qn))^-1
+                    _start(Tj, G[n - 1])
+                    _joint(Tj, prismatic, x + joints[j, OFFSET])
+                    _rigid_inverse_times(F[n], Tj, F[n - 1])
+                _place(F, spheres, sphere_frame, X)
+                worst = _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                                    self_on, k, n, g)  # fmt: skip
+                if worst + rho * h / 2 + slack >= 0.0:
+                    blocked = False
+                    break
+            if blocked:
+                out[b] = True
+                break
 
 
 @kernel
