@@ -417,9 +417,11 @@ def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
 
 
 @kernel
-def _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g):
+def _sweep_rows(
+    X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g, below
+):  # fmt: skip
     """The smallest exact row of the links on frame ``k`` (placed in ``X``): against the world, and against the
-    links on frames 0, ``k`` and ``n``."""
+    links on frames 0, ``k`` and ``n``; returned as soon as one is below ``below`` (then an upper bound of it)."""
     L = body_start.shape[0] - 1
     best = np.inf
     for link in range(L):
@@ -431,6 +433,8 @@ def _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
                 for s in range(s0, s1):
                     dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
                     best = min(best, dist - spheres[s, 3])
+                    if best < below:
+                        return best
     if self_on:
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
@@ -443,6 +447,8 @@ def _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
                 for j in range(body_start[b], body_start[b + 1]):
                     dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
                     best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+                    if best < below:
+                        return best
     return best
 
 
@@ -539,9 +545,10 @@ def blocked_poses(
                     _joint(Tj, prismatic, x + joints[j, OFFSET])
                     _rigid_inverse_times(F[n], Tj, F[n - 1])
                 _place(F, spheres, sphere_frame, X)
+                reach = rho * h / 2 + slack  # a row at least -reach here may be free somewhere near
                 worst = _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                                    self_on, k, n, g)  # fmt: skip
-                if worst + rho * h / 2 + slack >= 0.0:
+                                    self_on, k, n, g, -reach)  # fmt: skip
+                if worst >= -reach:
                     blocked = False
                     break
             if blocked:
