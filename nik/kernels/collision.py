@@ -42,6 +42,7 @@ __all__ = [
     "collision_rows_batch",
     "link_bounds",
     "overlaps_batch",
+    "residual_bounded",
 ]
 
 
@@ -84,10 +85,13 @@ def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, row):
 
 
 @kernel
-def _sphere_distance(x, y, z, w, o, g):
-    """Signed distance from the point ``(x, y, z)`` to the world's sphere ``w[o]``, its gradient in ``g (3,)``."""
+def _sphere_distance(x, y, z, w, o, g, want):
+    """Signed distance from the point ``(x, y, z)`` to the world's sphere ``w[o]``, its gradient in ``g (3,)``
+    where ``want``."""
     dx, dy, dz = x - w[o, 0], y - w[o, 1], z - w[o, 2]
     n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if not want:
+        return n - w[o, 3]
     if n > 0:
         g[0], g[1], g[2] = dx / n, dy / n, dz / n
     else:
@@ -96,8 +100,9 @@ def _sphere_distance(x, y, z, w, o, g):
 
 
 @kernel
-def _capsule_distance(x, y, z, w, o, g):
-    """Signed distance from the point ``(x, y, z)`` to the world's capsule ``w[o]``, its gradient in ``g (3,)``."""
+def _capsule_distance(x, y, z, w, o, g, want):
+    """Signed distance from the point ``(x, y, z)`` to the world's capsule ``w[o]``, its gradient in ``g (3,)``
+    where ``want``."""
     ax, ay, az = w[o, 0], w[o, 1], w[o, 2]
     bx, by, bz = w[o, 3] - ax, w[o, 4] - ay, w[o, 5] - az
     L2 = bx * bx + by * by + bz * bz
@@ -107,6 +112,8 @@ def _capsule_distance(x, y, z, w, o, g):
         t = min(1.0, max(0.0, t))
     dx, dy, dz = x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz)
     n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if not want:
+        return n - w[o, 6]
     if n > 0:
         g[0], g[1], g[2] = dx / n, dy / n, dz / n
     else:
@@ -115,8 +122,9 @@ def _capsule_distance(x, y, z, w, o, g):
 
 
 @kernel
-def _box_distance(x, y, z, w, o, g):
-    """Signed distance from the point ``(x, y, z)`` to the world's box ``w[o]`` (exact SDF), its gradient in ``g``."""
+def _box_distance(x, y, z, w, o, g, want):
+    """Signed distance from the point ``(x, y, z)`` to the world's box ``w[o]`` (exact SDF), its gradient in ``g``
+    where ``want``."""
     b = w[o]
     px, py, pz = x - b[9], y - b[10], z - b[11]
     lx = b[0] * px + b[3] * py + b[6] * pz  # R^T (p - c)
@@ -124,6 +132,11 @@ def _box_distance(x, y, z, w, o, g):
     lz = b[2] * px + b[5] * py + b[8] * pz
     qx, qy, qz = abs(lx) - b[12], abs(ly) - b[13], abs(lz) - b[14]
     qmax = max(qx, max(qy, qz))
+    if not want:
+        if qmax > 0:
+            wx, wy, wz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+            return math.sqrt(wx * wx + wy * wy + wz * wz)
+        return qmax
     if qmax > 0:
         wx, wy, wz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
         d = math.sqrt(wx * wx + wy * wy + wz * wz)
@@ -144,14 +157,14 @@ def _box_distance(x, y, z, w, o, g):
 
 
 @kernel
-def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g):
-    """Signed distance from ``(x, y, z)`` to obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule), gradient in
-    ``g``."""
+def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g, want=False):
+    """Signed distance from ``(x, y, z)`` to obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule), its gradient
+    in ``g`` where ``want`` (the scans skip it: computed once for the nearest)."""
     if kind == 0:
-        return _sphere_distance(x, y, z, w_spheres, o, g)
+        return _sphere_distance(x, y, z, w_spheres, o, g, want)
     if kind == 1:
-        return _box_distance(x, y, z, w_boxes, o, g)
-    return _capsule_distance(x, y, z, w_capsules, o, g)
+        return _box_distance(x, y, z, w_boxes, o, g, want)
+    return _capsule_distance(x, y, z, w_capsules, o, g, want)
 
 
 @kernel
@@ -233,6 +246,7 @@ def _rows(
     # the world first: a link and an obstacle are the likelier overlap, and the cheaper test
     kinds = np.empty(No, dtype=np.int64)
     which = np.empty(No, dtype=np.int64)
+    keep = np.empty(S, dtype=np.int64)
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or sphere_frame[s0] == 0 or No == 0:
@@ -249,7 +263,7 @@ def _rows(
                 else:
                     kinds[m], which[m] = kind, o
                     m += 1
-        best, bs = np.inf, -1
+        best, bs, bk = np.inf, -1, -1
         if m > 0:
             _place_link(F, spheres, sphere_frame, body_start, link, X, placed)
             for s in range(s0, s1):
@@ -257,10 +271,13 @@ def _rows(
                     dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kinds[k], which[k], w_spheres, w_boxes,
                                          w_capsules, g) - spheres[s, 3]  # fmt: skip
                     if dist < best:
-                        best, bs = dist, s
-                        gb[0], gb[1], gb[2] = g[0], g[1], g[2]
+                        best, bs, bk = dist, s, k
+                        if stop and best < cutoff:
+                            d[P + link] = best
+                            return True
         d[P + link] = min(best, lower)
         if want_jacobian and bs >= 0 and best <= lower:
+            _obstacle_one(X[bs, 0], X[bs, 1], X[bs, 2], kinds[bk], which[bk], w_spheres, w_boxes, w_capsules, gb, True)
             _add_point_jacobian(
                 F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J[P + link]
             )
@@ -283,17 +300,33 @@ def _rows(
             lower = np.inf
             _place_link(F, spheres, sphere_frame, body_start, a, X, placed)
             _place_link(F, spheres, sphere_frame, body_start, b, X, placed)
+            m = 0
+            for j in range(body_start[b], body_start[b + 1]):  # link b's spheres within reach of link a
+                dx, dy, dz = X[j, 0] - Bc[a, 0], X[j, 1] - Bc[a, 1], X[j, 2] - Bc[a, 2]
+                near = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[j, 3] - bounds[a, 3]
+                if near > cutoff:  # sphere j is farther than cutoff from every sphere of link a
+                    lower = min(lower, near)
+                else:
+                    keep[m] = j
+                    m += 1
             for i in range(body_start[a], body_start[a + 1]):
+                if m == 0:
+                    break
                 dx, dy, dz = X[i, 0] - Bc[b, 0], X[i, 1] - Bc[b, 1], X[i, 2] - Bc[b, 2]
                 near = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - bounds[b, 3]
                 if near > cutoff:  # sphere i is farther than cutoff from every sphere of link b
                     lower = min(lower, near)
                     continue
-                for j in range(body_start[b], body_start[b + 1]):
+                for t in range(m):
+                    j = keep[t]
+                    reach = best + spheres[i, 3] + spheres[j, 3]  # nearer than this beats the best so far
                     dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
-                    dist = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3]
-                    if dist < best:
-                        best, bi, bj = dist, i, j
+                    sq = dx * dx + dy * dy + dz * dz
+                    if reach > 0 and sq < reach * reach:
+                        best, bi, bj = math.sqrt(sq) - spheres[i, 3] - spheres[j, 3], i, j
+                        if stop and best < cutoff:
+                            d[p] = best
+                            return True
         d[p] = min(best, lower)
         if want_jacobian and bi >= 0 and best <= lower:
             dx, dy, dz = X[bi, 0] - X[bj, 0], X[bi, 1] - X[bj, 1], X[bi, 2] - X[bj, 2]
@@ -330,6 +363,17 @@ def collision_residual(
     sphere by sphere (their residual is 0 either way)."""
     bounds = np.empty((body_start.shape[0] - 1, 4))
     link_bounds(spheres, body_start, bounds)
+    return residual_bounded(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                            self_on, margin, r, Jr, bounds)  # fmt: skip
+
+
+@kernel
+def residual_bounded(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr,
+    bounds,
+):  # fmt: skip
+    """:func:`collision_residual` with the links' bounds ``(L, 4)`` of :func:`link_bounds` given (computed once by
+    a caller that evaluates many configurations of one model: the LM of :mod:`nik.kernels.collision_lm`)."""
     _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr,
           True, margin, bounds, False)  # fmt: skip
     smallest = np.inf

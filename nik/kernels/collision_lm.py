@@ -36,7 +36,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import _chain
-from nik.kernels.collision import collision_residual
+from nik.kernels.collision import link_bounds, residual_bounded
 from nik.kernels.lm import (
     _STREAM,
     EPS,
@@ -121,7 +121,7 @@ def _sum_sq(r):
 
 @kernel
 def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame, body_start, pairs, w_spheres,
-                 w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr):  # fmt: skip
+                 w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr, lb):  # fmt: skip
     """How many of the given starts ``starts[:H] (H, n)`` LM runs from, their indices in ``order``: the free ones
     (every row >= 0, brought inside the limits), nearest the pose first (the pose error of
     :func:`nik.kernels.lm._score`), then the first start (the answer that collided) if it collides; the other
@@ -133,8 +133,8 @@ def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame,
     for s in range(H):
         _copy(starts[s], q)
         _bounds(joints, q)
-        if collision_residual(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                              self_on, 0.0, r, Jr) >= 0.0:  # fmt: skip
+        if residual_bounded(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                              self_on, 0.0, r, Jr, lb) >= 0.0:  # fmt: skip
             _chain(G, joints, q, Tc)
             e = _score(Tt, Tc, rw, bnd, mode, ec, d)
             k = m  # insertion sort (stable): a handful of starts
@@ -186,6 +186,8 @@ def collision_lm(
     qs, qc, best_q = np.empty(n), np.empty(n), np.empty(n)
     rng = np.empty(1, dtype=np.uint64)
     order, score = np.empty(starts.shape[1], dtype=np.int64), np.empty(starts.shape[1])
+    lb = np.empty((body_start.shape[0] - 1, 4))  # the links' bounds, once per call (the broad phase)
+    link_bounds(spheres, body_start, lb)
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
@@ -193,7 +195,8 @@ def collision_lm(
         best_S, best_free, best_done = math.inf, False, False
         best_pos, best_rot = math.inf, math.inf
         H = _rank_starts(G, joints, Tt[b], starts[b], n_starts[b], rw, bnd, mode, spheres, sphere_frame, body_start,
-                         pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr)  # fmt: skip
+                         pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr,
+                         lb)  # fmt: skip
         for s in range(H + restarts[b]):
             if s < H:
                 _copy(starts[b, order[s]], qs)
@@ -204,16 +207,16 @@ def collision_lm(
                     _draw(joints, rng, qc)
                     _chain(G, joints, qc, Tc)
                     Ed = _score(Tt[b], Tc, rw, bnd, mode, ec, d)
-                    if Ed < best_draw and collision_residual(G, joints, qc, spheres, sphere_frame, body_start, pairs,
+                    if Ed < best_draw and residual_bounded(G, joints, qc, spheres, sphere_frame, body_start, pairs,
                                                              w_spheres, w_boxes, w_capsules, self_on, 0.0, r,
-                                                             Jr) >= 0.0:  # fmt: skip
+                                                             Jr, lb) >= 0.0:  # fmt: skip
                         best_draw = Ed
                         _copy(qc, qs)
                 if best_draw == math.inf:
                     continue
             E, p_e, r_e, reached = _eval(G, joints, qs, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
-            near = collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                                      w_capsules, self_on, margin, r, Jr)  # fmt: skip
+            near = residual_bounded(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                                      w_capsules, self_on, margin, r, Jr, lb)  # fmt: skip
             S = E + w2 * _sum_sq(r)
             done = reached and near >= 0.0
             lam = lambda0
@@ -231,8 +234,8 @@ def collision_lm(
                     _bounds(joints, qc)
                     Ec, p_c, r_c, reached_c = _eval(G, joints, qc, Tt[b], rw, bnd, mode, tol_pos, tol_rot, Tc, Jc,
                                                     ec, d)  # fmt: skip
-                    near_c = collision_residual(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
-                                                w_boxes, w_capsules, self_on, margin, rc, Jrc)  # fmt: skip
+                    near_c = residual_bounded(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
+                                                w_boxes, w_capsules, self_on, margin, rc, Jrc, lb)  # fmt: skip
                     Sc = Ec + w2 * _sum_sq(rc)
                     donec = reached_c and near_c >= 0.0
                 if good and (Sc < S or donec):
@@ -264,7 +267,7 @@ def collision_lm(
             _bounds(joints, best_q)
             _, best_pos, best_rot, _ = _eval(G, joints, best_q, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
             best_free = (
-                collision_residual(
+                residual_bounded(
                     G,
                     joints,
                     best_q,
@@ -279,6 +282,7 @@ def collision_lm(
                     0.0,
                     r,
                     Jr,
+                    lb,
                 )
                 >= 0.0  # fmt: skip
             )
