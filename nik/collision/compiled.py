@@ -65,7 +65,6 @@ def blocked_targets(
 def collision_names_compiled(robot, q, world=None, *, model=None, self_collision: bool = True) -> list:
     """:func:`nik.collision.collision_names` for ``q: (B, dof)`` (numpy) on the compiled kernels
     (:func:`nik.kernels.collision.overlaps_batch`): per configuration the sorted names of what overlaps, or None."""
-    from nik.collision.check import OBSTACLE_KINDS
     from nik.collision.model import collision_model
     from nik.kernels.collision import overlaps_batch
 
@@ -76,7 +75,8 @@ def collision_names_compiled(robot, q, world=None, *, model=None, self_collision
     pair_hit = np.empty((len(Q), len(model.pairs)), dtype=np.bool_)
     world_hit = np.empty((len(Q), len(model.links), sum(counts)), dtype=np.bool_)
     overlaps_batch(G, joints, Q, *rest, pair_hit, world_hit)
-    obstacles = [f"{kind} {k}" for kind, c in zip(OBSTACLE_KINDS, counts, strict=True) for k in range(c)]
+    kinds = ("sphere", "box", "capsule")  # World.packed()'s order, named as nik.collision.check.OBSTACLE_KINDS
+    obstacles = [f"{kind} {k}" for kind, c in zip(kinds, counts, strict=True) for k in range(c)]
     names = []
     for b in range(len(Q)):
         hits = [
