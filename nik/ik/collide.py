@@ -21,8 +21,8 @@ LM with collision rows (:mod:`nik.kernels.collision_lm`): from the network's oth
 form's other branches that are free, nearest the pose first, then the answer (colliding hypotheses dropped before
 any iteration), then uniform restarts drawn collision-free. A target whose pose alone proves every answer
 colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first
-joint's links swept over its range) is not solved again (it would fail after the whole restart budget); with the
-meshes judging it is (the spheres' proof does not bind them). The torch backend runs the same compiled kernel on
+and the last joint's links swept over their range) is not solved again (it would fail after the whole restart
+budget); with the meshes judging, or a tolerant goal (``bounds``: no pose is fixed), it is. The torch backend runs the same compiled kernel on
 the CPU (the answers go there and back).
 
 **The verdict** ``res.collision_free``: the sphere check of the returned ``q`` (margin 0): conservative, so an
@@ -227,7 +227,8 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     hit = s.colliding(robot, q)
     reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
     idx = np.nonzero(hit & reach)[0]
-    if idx.size and s.mesh is None:  # a pose whose own rows collide has no free answer: not solved again
+    if idx.size and s.mesh is None and getattr(plan, "bounds", None) is None:
+        # a pose whose own rows collide has no free answer: not solved again (a tolerant goal fixes no pose)
         from nik.collision.compiled import blocked_targets
 
         T_hit = _numpy(T)[idx]
