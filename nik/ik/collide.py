@@ -22,8 +22,8 @@ form's other branches that are free, nearest the pose first, then the answer (co
 any iteration), then uniform restarts drawn collision-free. A target whose pose alone proves every answer
 colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first
 and the last joint's links swept over their range) is not solved again (it would fail after the whole restart
-budget); with the meshes judging, or a tolerant goal (``bounds``: no pose is fixed), it is. The torch backend runs the same compiled kernel on
-the CPU (the answers go there and back).
+budget); with the meshes judging, or a tolerant goal (``bounds``: no pose is fixed), it is. The torch backend
+runs the same compiled kernel on the CPU (the answers go there and back).
 
 **The verdict** ``res.collision_free``: the sphere check of the returned ``q`` (margin 0): conservative, so an
 answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it. With a mesh
