@@ -17,9 +17,9 @@ today, and fit a model (seconds) inside a solve. A world or an attached model is
 
 **What the stage does** (:func:`resolve`, after the main pipeline, both backends): every answer is checked
 (:func:`nik.kernels.collision.collides_batch`, margin 0); the ones that collide (within reach) are solved again by
-LM with collision rows (:mod:`nik.kernels.collision_lm`): from the network's other hypotheses or the closed
-form's other branches that are free, nearest the pose first, then the answer (colliding hypotheses dropped before
-any iteration), then uniform restarts drawn collision-free. A target whose pose alone proves every answer
+LM with collision rows (:mod:`nik.kernels.collision_lm`): from the answer (it keeps a path or ``q_near`` on its
+branch), then the network's other hypotheses or the closed form's other branches that are free, nearest the pose
+first (colliding ones dropped before any iteration), then uniform restarts drawn collision-free. A target whose pose alone proves every answer
 colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first
 and the last joint's links swept over their range) is not solved again (it would fail after the whole restart
 budget); with the meshes judging, or a tolerant goal (``bounds``: no pose is fixed), it is. The torch backend

@@ -15,14 +15,13 @@ at the first done candidate matters: the margin rows still pull when ``0 <= d < 
 needs the arm closer than the margin the minimum of the sum is a compromise whose pose error may exceed the
 tolerance; the path to it passes through done points.
 
-Starts, per target, in order: the ``n_starts[b]`` given ones (the answer that collided, then the network's
-other hypotheses or the closed form's other branches) ranked by clearance before any iteration
-(:func:`_rank_starts`): the free ones first, nearest the pose first, then the answer; the other colliding ones
-are dropped (a colliding hypothesis mostly lands on a colliding answer; LM from it would spend the budget the
-uniform starts use better; a free hypothesis near the pose reaches it free in fewer iterations than the answer is
-pushed out: 8.7 against 11.3 on the panda's scene of ``benchmarks/collision_speed.py``); then up to
-``restarts[b]`` uniform starts, each the collision-free draw nearest the pose (lowest pose error) among ``tries``
-(a draw that collides is dropped before any iteration).
+Starts, per target, in order: the ``n_starts[b]`` given ones, the answer that collided first (near the caller's
+``q_near`` or a path's previous waypoint: LM from it keeps the answer on its branch), then the network's other
+hypotheses or the closed form's other branches ranked before any iteration (:func:`_rank_starts`): the free ones,
+nearest the pose first; the colliding ones dropped (a colliding hypothesis mostly lands on a colliding answer; LM
+from it would spend the budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the
+collision-free draw nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before
+any iteration).
 The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
 reached with the spheres overlapping by millimetres beats a free configuration far from the pose).
 Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
@@ -122,32 +121,30 @@ def _sum_sq(r):
 @kernel
 def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame, body_start, pairs, w_spheres,
                  w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr, lb):  # fmt: skip
-    """How many of the given starts ``starts[:H] (H, n)`` LM runs from, their indices in ``order``: the free ones
-    (every row >= 0, brought inside the limits), nearest the pose first (the pose error of
-    :func:`nik.kernels.lm._score`), then the first start (the answer that collided) if it collides; the other
-    colliding ones are dropped before any iteration (a colliding hypothesis mostly lands on a colliding answer)."""
+    """How many of the given starts ``starts[:H] (H, n)`` LM runs from, their indices in ``order``: the first (the
+    answer that collided: near the caller's ``q_near`` or the path's previous waypoint, it keeps an answer on its
+    branch), then the other free ones (every row >= 0, brought inside the limits) nearest the pose first (the pose
+    error of :func:`nik.kernels.lm._score`); the colliding ones are dropped before any iteration (a colliding
+    hypothesis mostly lands on a colliding answer)."""
     n = starts.shape[1]
     q = np.empty(n)
-    m = 0
-    first_collides = False
-    for s in range(H):
+    if H == 0:
+        return 0
+    order[0] = 0
+    m = 1
+    for s in range(1, H):
         _copy(starts[s], q)
         _bounds(joints, q)
         if residual_bounded(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                              self_on, 0.0, r, Jr, lb) >= 0.0:  # fmt: skip
+                            self_on, 0.0, r, Jr, lb) >= 0.0:  # fmt: skip
             _chain(G, joints, q, Tc)
             e = _score(Tt, Tc, rw, bnd, mode, ec, d)
-            k = m  # insertion sort (stable): a handful of starts
-            while k > 0 and score[k - 1] > e:
+            k = m  # insertion sort (stable) after the first: a handful of starts
+            while k > 1 and score[k - 1] > e:
                 score[k], order[k] = score[k - 1], order[k - 1]
                 k -= 1
             score[k], order[k] = e, s
             m += 1
-        elif s == 0:
-            first_collides = True
-    if first_collides:
-        order[m] = 0
-        m += 1
     return m
 
 
