@@ -19,11 +19,11 @@ today, and fit a model (seconds) inside a solve. A world or an attached model is
 (:func:`nik.kernels.collision.collides_batch`, margin 0); the ones that collide (within reach) are solved again by
 LM with collision rows (:mod:`nik.kernels.collision_lm`): from the answer (it keeps a path or ``q_near`` on its
 branch), then the network's other hypotheses or the closed form's other branches that are free, nearest the pose
-first (colliding ones dropped before any iteration), then uniform restarts drawn collision-free. A target whose pose alone proves every answer
-colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first
-and the last joint's links swept over their range) is not solved again (it would fail after the whole restart
-budget); with the meshes judging, or a tolerant goal (``bounds``: no pose is fixed), it is. The torch backend
-runs the same compiled kernel on the CPU (the answers go there and back).
+first (colliding ones dropped before any iteration), then uniform restarts drawn collision-free. A target whose
+pose alone proves every answer colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the
+world or the base, the first and the last joint's links swept over their range) is not solved again (it would
+fail after the whole restart budget); with the meshes judging, or a tolerant goal (``bounds``: no pose is fixed),
+it is. The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
 
 **The verdict** ``res.collision_free``: the sphere check of the returned ``q`` (margin 0): conservative, so an
 answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it. With a mesh
