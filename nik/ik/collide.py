@@ -17,9 +17,13 @@ today, and fit a model (seconds) inside a solve. A world or an attached model is
 
 **What the stage does** (:func:`resolve`, after the main pipeline, both backends): every answer is checked
 (:func:`nik.kernels.collision.collides_batch`, margin 0); the ones that collide (within reach) are solved again by
-LM with collision rows (:mod:`nik.kernels.collision_lm`): from the answer, then the network's other hypotheses
-or the closed form's other branches (colliding ones dropped before any iteration), then uniform restarts drawn
-collision-free. The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
+LM with collision rows (:mod:`nik.kernels.collision_lm`): from the answer (it keeps a path or ``q_near`` on its
+branch), then the network's other hypotheses or the closed form's other branches that are free, nearest the pose
+first (colliding ones dropped before any iteration), then uniform restarts drawn collision-free. A target whose
+pose alone proves every answer colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the
+world or the base, the first and the last joint's links swept over their range) is not solved again (it would
+fail after the whole restart budget); with the meshes judging, or a tolerant goal (``bounds``: no pose is fixed),
+it is. The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
 
 **The verdict** ``res.collision_free``: the sphere check of the returned ``q`` (margin 0): conservative, so an
 answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it. With a mesh
@@ -94,9 +98,9 @@ class Setup:
         """What overlaps in each of ``q: (B, dof)`` (:func:`nik.collision.collision_names`), by the verdict's check."""
         if self.mesh is not None:
             return self.mesh.collision_names(q, self.world, self_collision=self.self_on)
-        from nik.collision import collision_names
+        from nik.collision.compiled import collision_names_compiled
 
-        return collision_names(robot, q, self.world, model=self.model, self_collision=self.self_on)
+        return collision_names_compiled(robot, q, self.world, model=self.model, self_collision=self.self_on)
 
     def arguments(self, robot):
         """``(G, joints), rest``: :func:`nik.collision.compiled.kernel_arguments`."""
@@ -235,6 +239,14 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     hit = s.colliding(robot, q)
     reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
     idx = np.nonzero(hit & reach)[0]
+    if idx.size and s.mesh is None and getattr(plan, "bounds", None) is None:
+        # a pose whose own rows collide has no free answer: not solved again (a tolerant goal fixes no pose)
+        from nik.collision.compiled import blocked_targets
+
+        T_hit = _numpy(T)[idx]
+        idx = idx[
+            ~blocked_targets(robot, s.model, s.world, T_hit, plan.tol_pos, plan.tol_rot, self_collision=s.self_on)
+        ]
     success = _numpy(res.success).astype(bool).copy()
     pos, rot, it = (_numpy(x).copy() for x in (res.pos_err, res.rot_err, res.iterations))
     if idx.size:
