@@ -48,9 +48,11 @@ __all__ = [
     "Setup",
     "after_solve",
     "attached_model",
+    "all_solutions",
     "free_solutions",
     "path_waypoints",
     "resolve",
+    "rest_free",
     "setup",
 ]
 
@@ -141,13 +143,17 @@ def check_mesh_verdict(value):
 
 def after_solve(solver, backend, plan, T_target, q_near, representation, world):
     """:meth:`nik.IKSolver.solve` on ``backend``, then :func:`resolve` where a check is active (the call's
-    ``world``, else the solver's); without one the backend's result itself (``collision_free`` None)."""
-    res = backend.solve(solver.robot, plan, T_target, q_near, representation)
+    ``world``, else the solver's); without one the backend's result itself (``collision_free`` None). With a check,
+    the posture (``plan.q_rest``) is left to :func:`resolve` (after the collision re-solve, before the verdict)."""
     s = setup(solver.robot, solver.world if world is None else world, solver.self_collision, solver.mesh_verdict)
     if s is None:
-        return res
+        return backend.solve(solver.robot, plan, T_target, q_near, representation)
+    from dataclasses import replace
+
     from nik.ik.targets import as_poses
 
+    first = plan if plan.q_rest is None else replace(plan, q_rest=None)
+    res = backend.solve(solver.robot, first, T_target, q_near, representation)
     return resolve(solver.robot, plan, as_poses(T_target, representation), res, s, getattr(solver, "collide_cfg", None))
 
 
@@ -209,43 +215,128 @@ def _starts(robot, plan, T: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.n
     return starts, count + 1
 
 
+def _goal(robot, plan, B: int, float32: bool):
+    """``(model, half (B, 6), modes (B,), opts, iopts)`` of the call's pose term for the compiled kernels: the
+    bounded goal (bounds times the float32 margin for float32 targets) or the classic one (``modes == CLASSIC``,
+    the stage tolerances in ``opts``)."""
+    from nik.ik.goals import _modes_half
+    from nik.ik.model import model_of
+
+    model = model_of(robot, plan.lm_cfg)
+    half, modes = _modes_half(plan, B, plan.float32_margin if float32 else 1.0)
+    opts, iopts = model.lm.options(*plan.stage_tolerances(float32))
+    return model, np.ascontiguousarray(half), np.ascontiguousarray(modes), opts, iopts
+
+
+def _judge(model, plan, T: np.ndarray, q: np.ndarray):
+    """``(ok, pos, rot, d)`` of ``q: (k, n)`` against ``T: (k, 4, 4)`` by FK: the pose within the asked tolerances,
+    or (with ``plan.bounds``) every axis of ``d (k, 6)`` (:func:`nik.kernels.lm.bounded_errors`) inside the asked
+    bounds; ``d`` None without bounds."""
+    from nik.kernels import lm
+
+    k = q.shape[0]
+    pos, rot = np.empty(k), np.empty(k)
+    lm.pose_errors(model.G, model.joints, T, q, pos, rot)
+    if plan.bounds is None:
+        return (pos <= plan.tol_pos) & (rot <= plan.tol_rot), pos, rot, None
+    half, modes = plan.bounds.expand(k), plan.bounds.modes(k)
+    d = np.empty((k, 6))
+    lm.bounded_errors(model.G, model.joints, T, q, modes, d)
+    return (np.abs(d) <= half).all(1), pos, rot, d
+
+
+def rest_free(robot, s: Setup | None, goal, T: np.ndarray, q: np.ndarray, ok, q_rest, weight: float) -> np.ndarray:
+    """``(k,)`` bool, which rows moved: ``q: (k, n)`` in place, where ``ok (k,)``, moved towards ``q_rest: (k, n)`` in
+    the null space of the pose term ``goal`` (:func:`_goal`; :func:`nik.kernels.driver.rest_posture`: never leaving
+    the goal) **without leaving collision-free** under ``s`` (None: no check): an answer whose posture steps end
+    colliding takes the longest collision-free prefix of the same steps (:data:`nik.ik.goals.REST_ITERS` steps, then
+    half as many, ... down to one), else stays where it was. The steps are deterministic, so ``i`` steps are the
+    first ``i`` of the longer run."""
+    from nik.ik.goals import REST_DAMPING, REST_ITERS
+    from nik.kernels import driver
+
+    model, half, modes, opts, _ = goal
+    q0 = q.copy()  # s None: no collision check (the posture alone)
+    todo = np.flatnonzero(ok)
+    iters = REST_ITERS
+    while todo.size and iters >= 1:
+        qt = np.ascontiguousarray(q0[todo])
+        k = todo.size
+        driver.rest_posture(model.G, model.joints, np.ascontiguousarray(T[todo]), qt, half[todo], modes[todo], opts,
+                            np.ascontiguousarray(q_rest[todo]), float(weight), iters, REST_DAMPING,
+                            np.ones(k, dtype=bool), np.empty(k), np.empty(k), np.empty((k, 6)))  # fmt: skip
+        moved = (qt != q0[todo]).any(1)
+        hit = np.zeros(k, dtype=bool)
+        if s is not None and moved.any():
+            hit[moved] = s.colliding(robot, qt[moved])
+        keep = ~hit
+        q[todo[keep]] = qt[keep]
+        todo, iters = todo[hit], iters // 2
+    return (q != q0).any(1)
+
+
 def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None = None):
     """``res`` with colliding answers solved again and ``collision_free`` set (module docstring); ``T: (B, 4, 4)``
-    the validated targets, ``res`` of either kind (numpy or tensors: the result keeps its kind)."""
-    from nik.ik.model import model_of
+    the validated targets, ``res`` of either kind (numpy or tensors: the result keeps its kind).
+
+    Every term of the call composes: the re-solve keeps the call's goal (``plan.bounds``: the bounded residual with
+    its dead zones in the collision LM's pose rows, else the classic one); with ``plan.q_rest`` every successful
+    answer then moves towards the posture by :func:`rest_free` (inside the goal, never into a collision); an
+    answer that changed is judged again on its final ``q`` (as returned: float32 answers rounded and clamped into
+    the float32 limits) by each term's check: the goal (``pos_err``/``rot_err``, or ``axis_err`` inside the
+    bounds), the joint limits (kept by the kernels) and the collision verdict."""
     from nik.kernels.collision_lm import collision_lm
-    from nik.kernels.lm import CLASSIC, ITERS, STALL_ITERS, seed_state
+    from nik.kernels.lm import ITERS, STALL_ITERS, seed_state
 
     cfg = cfg or CollideCfg()
     (G, joints), rest = s.arguments(robot)
     q = np.ascontiguousarray(_numpy(res.q), dtype=np.float64)
     B = q.shape[0]
+    Tnp = np.ascontiguousarray(_numpy(T), dtype=np.float64)
+    float32 = _numpy(res.q).dtype == np.float32
+    goal = _goal(robot, plan, B, float32)
+    model, half, modes, opts, iopts = goal
     hit = s.colliding(robot, q)
     reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
     idx = np.nonzero(hit & reach)[0]
     success = _numpy(res.success).astype(bool).copy()
     pos, rot, it = (_numpy(x).copy() for x in (res.pos_err, res.rot_err, res.iterations))
+    axis = None if res.axis_err is None else _numpy(res.axis_err).copy()
+    changed = np.zeros(B, dtype=bool)
     if idx.size:
-        Tn = np.ascontiguousarray(_numpy(T)[idx], dtype=np.float64)
+        Tn = np.ascontiguousarray(Tnp[idx])
         starts, n_starts = _starts(robot, plan, Tn, q[idx])
-        tol_pos, tol_rot = plan.stage_tolerances(T.dtype == torch.float32)
-        opts, iopts = model_of(robot, plan.lm_cfg).lm.options(tol_pos, tol_rot)
         iopts = iopts.copy()
         iopts[ITERS], iopts[STALL_ITERS] = cfg.iters, cfg.stall_iters
         k, n = idx.size, q.shape[1]
-        bounds, modes = np.zeros((k, 6)), np.full(k, CLASSIC, dtype=np.int64)
         restarts = np.full(k, cfg.restarts, dtype=np.int64)
         qk, free, done = np.empty((k, n)), np.empty(k, dtype=bool), np.empty(k, dtype=bool)
         itk, pk, rk = np.empty(k, dtype=np.int64), np.empty(k), np.empty(k)
-        collision_lm(G, joints, Tn, starts, n_starts, bounds, modes, opts, iopts, restarts, cfg.tries,
-                     seed_state(plan.seed), *rest, cfg.margin, cfg.weight, qk, free, done, itk, pk, rk)  # fmt: skip
-        q[idx], pos[idx], rot[idx], it[idx] = qk, pk, rk, it[idx] + itk
-        success[idx] = (pk <= plan.tol_pos) & (rk <= plan.tol_rot)
-        hit[idx] = s.colliding(robot, q[idx])  # the verdict of the new answers (the others' stands)
+        collision_lm(G, joints, Tn, starts, n_starts, np.ascontiguousarray(half[idx]), np.ascontiguousarray(modes[idx]),
+                     opts, iopts, restarts, cfg.tries, seed_state(plan.seed), *rest, cfg.margin, cfg.weight, qk, free,
+                     done, itk, pk, rk)  # fmt: skip
+        q[idx], it[idx] = qk, it[idx] + itk
+        hit[idx] = s.colliding(robot, qk)  # the verdict of the new answers (the others' stands)
+        success[idx] = done & ~hit[idx]
+        changed[idx] = True
+    if plan.q_rest is not None:
+        from nik.ik.goals import rest_target
+
+        ok = success & ~hit
+        changed |= rest_free(robot, s, goal, Tnp, q, ok, rest_target(robot, plan.q_rest, B), plan.rest_weight)
+    if changed.any():
+        if float32:  # rounded and clamped into the float32 limits, as the answer is returned, then judged
+            q[changed] = np.clip(q[changed].astype(np.float32), model.lo32, model.hi32)
+        ok, pk, rk, dk = _judge(model, plan, np.ascontiguousarray(Tnp[changed]), np.ascontiguousarray(q[changed]))
+        pos[changed], rot[changed], success[changed] = pk, rk, ok
+        if axis is not None and dk is not None:
+            axis[changed] = dk
     free = ~hit
     out = type(res)(**{**res.__dict__})
     out.q, out.pos_err, out.rot_err = _like(q, res.q), _like(pos, res.pos_err), _like(rot, res.rot_err)
     out.iterations, out.success = _like(it, res.iterations), _like(success & free, res.success)
+    if axis is not None:
+        out.axis_err = _like(axis, res.axis_err)
     out.collision_free = _like(free, res.success)
     out.collisions = [None] * B
     for i, names in zip(np.nonzero(hit)[0], s.names(robot, q[hit]), strict=True):
@@ -273,3 +364,68 @@ def free_solutions(solver, Q: torch.Tensor) -> torch.Tensor:
         return Q
     hit = s.colliding(robot, _numpy(Q))
     return Q[torch.from_numpy(~hit).to(Q.device)]
+
+
+def all_solutions(solver, plan, T: torch.Tensor, Q: torch.Tensor, world=None, dedupe_tol: float = 1e-3):
+    """:meth:`nik.IKSolver.solve_all`'s terms after the search: ``Q: (K, dof)`` the solutions found for the one pose
+    ``T: (1, 4, 4)`` (within the goal, without a world), returned as ``(K', dof)`` of ``Q``'s kind.
+
+    Where a check is active (the call's ``world``, else the solver's; the rule of :func:`setup`), a colliding solution
+    is solved again by the collision LM from itself (the call's goal kept; no restarts: a solution that stays colliding
+    is dropped), and one more row from collision-free uniform starts (:attr:`CollideCfg.restarts`) adds a free
+    solution where every one found collides; only the free ones that meet the goal are kept. With ``plan.q_rest``
+    each solution moves towards the posture in the null space (:func:`rest_free`: inside the goal, never into a
+    collision), and the solutions come nearest ``q_rest`` first. De-duplicated again at ``dedupe_tol``."""
+    from nik.ik.guesses import dedupe
+
+    robot = solver.robot
+    s = setup(robot, solver.world if world is None else world, solver.self_collision, solver.mesh_verdict)
+    if s is None and plan.q_rest is None:
+        return Q
+    q = np.ascontiguousarray(_numpy(Q), dtype=np.float64).reshape(-1, robot.dof)
+    Tq = np.ascontiguousarray(np.repeat(_numpy(T).astype(np.float64).reshape(1, 4, 4), q.shape[0] + 1, axis=0))
+    float32 = Q.dtype == torch.float32
+    if s is not None:
+        from nik.kernels.collision_lm import collision_lm
+        from nik.kernels.lm import ITERS, STALL_ITERS, seed_state
+
+        cfg = getattr(solver, "collide_cfg", None) or CollideCfg()
+        hit = s.colliding(robot, q) if q.shape[0] else np.zeros(0, dtype=bool)
+        idx = np.flatnonzero(hit)
+        k, n = idx.size + 1, robot.dof
+        model, half, modes, opts, iopts = _goal(robot, plan, k, float32)
+        iopts = iopts.copy()
+        iopts[ITERS], iopts[STALL_ITERS] = cfg.iters, cfg.stall_iters
+        starts = np.zeros((k, 1, n))
+        starts[:-1, 0] = q[idx]
+        n_starts = np.ones(k, dtype=np.int64)
+        n_starts[-1] = 0
+        restarts = np.zeros(k, dtype=np.int64)
+        restarts[-1] = cfg.restarts
+        qk, free, done = np.empty((k, n)), np.empty(k, dtype=bool), np.empty(k, dtype=bool)
+        itk, pk, rk = np.empty(k, dtype=np.int64), np.empty(k), np.empty(k)
+        (G, joints), rest = s.arguments(robot)
+        collision_lm(G, joints, Tq[:k], starts, n_starts, half, modes, opts, iopts, restarts, cfg.tries,
+                     seed_state(plan.seed), *rest, cfg.margin, cfg.weight, qk, free, done, itk, pk, rk)  # fmt: skip
+        q = np.concatenate([q[~hit], qk])
+        q = q[~s.colliding(robot, q)]
+    model, half, modes, opts, iopts = goal = _goal(robot, plan, q.shape[0], float32)
+    if float32:
+        q = np.clip(q.astype(np.float32), model.lo32, model.hi32).astype(np.float64)
+    Tk = np.ascontiguousarray(Tq[:1].repeat(q.shape[0], axis=0))
+    ok = _judge(model, plan, Tk, q)[0]
+    q = np.ascontiguousarray(q[ok])
+    Tk = np.ascontiguousarray(Tk[ok])
+    if plan.q_rest is not None and q.shape[0]:
+        from nik.ik.goals import rest_target
+
+        qr = rest_target(robot, plan.q_rest, 1).repeat(q.shape[0], axis=0)
+        goal = _goal(robot, plan, q.shape[0], float32)
+        rest_free(robot, s, goal, Tk, q, np.ones(q.shape[0], dtype=bool), qr, plan.rest_weight)
+        if float32:
+            q = np.clip(q.astype(np.float32), model.lo32, model.hi32).astype(np.float64)
+        keep = _judge(model, plan, Tk, q)[0]
+        q, qr = q[keep], qr[keep]
+        q = q[np.argsort(((q - qr) ** 2).sum(1), kind="stable")]
+    out = torch.from_numpy(np.ascontiguousarray(q)).to(dtype=Q.dtype, device=Q.device)
+    return dedupe(out, tol=dedupe_tol, prismatic=robot.prismatic)
