@@ -27,14 +27,26 @@ def _world() -> nik.World:
     return world.add_capsule([0.2, 0.4, 0.6], [-0.1, 0.45, 0.55], 0.05)
 
 
+def _free_targets(name: str, n: int):
+    """The robot, the world, and the poses of ``n`` random configurations free of the world and of the arm itself
+    (every target has a collision-free answer: its own configuration)."""
+    robot, world = nik.load_robot(name), _world()
+    q = robot.sample(8 * n, generator=torch.Generator().manual_seed(4), dtype=torch.float64).numpy()
+    q = q[~collides(robot, q, world)][:n]
+    return robot, world, np.ascontiguousarray(robot.fk(torch.from_numpy(q)).numpy())
+
+
 @pytest.fixture(scope="module")
 def panda():
-    """The panda, its world, and the poses of 12 random configurations free of the world and of the arm itself
-    (every target has a collision-free answer: its own configuration)."""
-    robot, world = nik.load_robot("panda"), _world()
-    q = robot.sample(96, generator=torch.Generator().manual_seed(4), dtype=torch.float64).numpy()
-    q = q[~collides(robot, q, world)][:12]
-    return robot, world, np.ascontiguousarray(robot.fk(torch.from_numpy(q)).numpy())
+    """A redundant arm (7 joints: ``q_rest`` moves its answers) and 12 free targets."""
+    return _free_targets("panda", 12)
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    """An arm with a closed form (``solve_all``: its 8 branches; with ``axis_z`` the free angle sampled) and a free
+    target."""
+    return _free_targets("ur5", 1)
 
 
 def _honest(robot, T: np.ndarray, q: np.ndarray, bounds, world, self_on: bool) -> np.ndarray:
@@ -89,18 +101,22 @@ def test_solve_composes_every_mix(panda, backend, bounds, rest, use_world, self_
         assert d_rest.mean() < d_plain.mean() - 0.05
 
 
-def test_the_world_bites(panda):
-    """Without the world some of the answers collide: the matrix above tests the collision re-solve."""
+def test_the_world_bites(panda, ur5):
+    """Without the world some of the answers collide: the matrices test the collision re-solve."""
     robot, world, T = panda
     for bounds in (None, "axis_z"):
         q = np.asarray(nik.IKSolver(robot, self_collision=False).solve(T, bounds=bounds, q_rest="mid").q)
         assert collides(robot, q, world).any()
+    robot, world, T = ur5
+    for bounds in (None, "axis_z"):
+        q = nik.IKSolver(robot, self_collision=False).solve_all(T, bounds=bounds, n_starts=32).numpy()
+        assert collides(robot, q, world).any() and not collides(robot, q, world).all()
 
 
 @pytest.mark.parametrize("backend", ["compiled", "torch"])
 @pytest.mark.parametrize(("bounds", "rest", "use_world", "self_on"), SUBSETS)
-def test_solve_all_composes_every_mix(panda, backend, bounds, rest, use_world, self_on):
-    robot, world, T = panda
+def test_solve_all_composes_every_mix(ur5, backend, bounds, rest, use_world, self_on):
+    robot, world, T = ur5
     world = world if use_world else None
     solver = nik.IKSolver(robot, backend=backend, self_collision=self_on)
     Tin = torch.from_numpy(T[:1]) if backend == "torch" else T[:1]
@@ -108,7 +124,7 @@ def test_solve_all_composes_every_mix(panda, backend, bounds, rest, use_world, s
     q = Q.numpy()
     assert q.shape[0] >= 1  # the target's own configuration is free: some free solution is found
     assert _honest(robot, np.repeat(T[:1], len(q), 0), q, bounds, world, self_on).all()
-    if rest is not None:  # nearest first, and the nearest at least as near as without the posture
+    if rest is not None:  # nearest first, and the nearest at least as near as without the posture (a free axis moves)
         mid = robot.limits.double().mean(1).numpy()
         d = _near(q, mid)
         assert (np.diff(d) >= 0).all()

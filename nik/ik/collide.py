@@ -402,7 +402,9 @@ def all_solutions(solver, plan, T: torch.Tensor, Q: torch.Tensor, world=None, de
     Where a check is active (the call's ``world``, else the solver's; the rule of :func:`setup`), a colliding solution
     is solved again by the collision LM from itself (the call's goal kept; no restarts: a solution that stays colliding
     is dropped), and one more row from collision-free uniform starts (:attr:`CollideCfg.restarts`) adds a free
-    solution where every one found collides; only the free ones that meet the goal are kept. With ``plan.q_rest``
+    solution where every one found collides; under the classic goal these are then driven to rounding level (the
+    collision LM at margin 0, kept where the position error is not larger), as the search's survivors are, so that a
+    branch found twice meets in the de-duplication; only the free ones that meet the goal are kept. With ``plan.q_rest``
     each solution moves towards the posture in the null space (:func:`rest_free`: inside the goal, never into a
     collision), and the solutions come nearest ``q_rest`` first. De-duplicated again at ``dedupe_tol``."""
     from nik.ik.guesses import dedupe
@@ -422,7 +424,15 @@ def all_solutions(solver, plan, T: torch.Tensor, Q: torch.Tensor, world=None, de
         starts[:-1, 0] = q[hit]
         n_starts, restarts = np.ones(k), np.zeros(k)
         n_starts[-1], restarts[-1] = 0, cfg.restarts
-        qk = _solve_free(robot, s, plan, cfg, _goal(robot, plan, k, float32), Tq[:k], starts, n_starts, restarts)[0]
+        goal = _goal(robot, plan, k, float32)
+        qk = _solve_free(robot, s, plan, cfg, goal, Tq[:k], starts, n_starts, restarts)[0]
+        if plan.bounds is None:  # to rounding level, as the search's survivors (the branches meet in dedupe)
+            tight = np.finfo(np.float64).eps ** 0.75
+            model, half, modes, _, iopts = goal
+            polish = (model, half, modes, model.lm.options(tight, tight)[0], iopts)
+            qp = _collision_solve(robot, s, plan, cfg, polish, Tq[:k], qk[:, None], np.ones(k), np.zeros(k), 0.0)[0]
+            better = _judge(model, plan, Tq[:k], qp)[1] <= _judge(model, plan, Tq[:k], qk)[1]
+            qk[better] = qp[better]
         q = np.concatenate([q[~hit], qk])
         q = q[~s.colliding(robot, q)]
     model = _goal(robot, plan, 1, float32)[0]
