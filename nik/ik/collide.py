@@ -54,6 +54,7 @@ __all__ = [
     "resolve",
     "rest_free",
     "setup",
+    "solve_all",
 ]
 
 
@@ -393,6 +394,22 @@ def free_solutions(solver, Q: torch.Tensor) -> torch.Tensor:
         return Q
     hit = s.colliding(robot, _numpy(Q))
     return Q[torch.from_numpy(~hit).to(Q.device)]
+
+
+def solve_all(solver, plan, T: torch.Tensor, world=None, *, n_starts: int = 256, dedupe_tol: float = 1e-3):
+    """:meth:`nik.IKSolver.solve_all` for the one pose ``T: (1, 4, 4)`` (validated) under ``plan`` (its goal and
+    posture): the search of :func:`nik.ik.stages.all_solutions`, then :func:`all_solutions` (world and posture)."""
+    from nik.ik import stages
+    from nik.ik.backends import torch_backend
+    from nik.robots.reach import within_reach
+
+    if T.shape[0] != 1:
+        raise ValueError(f"solve_all: expected one pose, got {T.shape[0]}")
+    robot = solver.robot
+    job = stages.Job(torch_backend(), robot, T, within_reach(robot, T), None, plan.tol_pos, plan.tol_rot, T.dtype,
+                     plan.tol_pos, plan.tol_rot)  # fmt: skip
+    Q = stages.all_solutions(plan, job, closed_form=solver.closed_form, n_starts=n_starts, dedupe_tol=dedupe_tol)
+    return all_solutions(solver, plan, T, Q, world, dedupe_tol)
 
 
 def all_solutions(solver, plan, T: torch.Tensor, Q: torch.Tensor, world=None, dedupe_tol: float = 1e-3):
