@@ -3,16 +3,16 @@ targets without the world, and the collision-free time against no world.
 
     python benchmarks/compose.py [--targets 500] [--time-targets 1000] [--seed 0] [--robots panda xarm7 ur5]
 
-Per robot (nik's built-ins; their collision model: :func:`nik.collision.collision_model`), a clutter
-(:func:`scene`: a table under the arm and 12 seeded obstacles 0.3-0.6 m from its base), and targets that are the
-poses of random configurations the sphere check calls free of the scene and of the arm itself (the spheres are
-conservative: free by them is free on the meshes, docs/collisions.md), so every target has a collision-free answer:
-its own configuration. Each mix of ``bounds`` (none, ``"position"``, ``"axis_z"``) and ``q_rest`` (none, ``"mid"``) is solved
-without the world (``self_collision=False``), with the world and self-collision (the default with a world) and
-with the world alone (``self_collision=False``); success is re-checked here by FK (the pose within tolerance, or
-every axis inside the bounds by :func:`nik.poses.tool_error`), the joint limits and the sphere check
-(:func:`nik.collision.collides`), not read from ``res.success``. Then the time per target of the panda with the
-world against without (``--time-targets``, interleaved, median of 3, one process). Prints a table; saves it to
+Per robot (nik's built-ins; their collision model: :func:`nik.collision.collision_model`), a clutter (:func:`scene`:
+a table under the arm and 12 seeded obstacles 0.3-0.6 m from its base), and targets that are the poses of random
+configurations the sphere check calls free of the scene and of the arm itself (the spheres are conservative: free by
+them is free on the meshes, docs/collisions.md), so every target has a collision-free answer: its own configuration.
+Each mix of ``bounds`` (none, ``"position"``, ``"axis_z"``) and ``q_rest`` (none, ``"mid"``) is solved without the
+world (``self_collision=False``), with the world and self-collision (the default with a world) and with the world
+alone (``self_collision=False``); success is re-checked here by FK (the pose within tolerance, or every axis inside
+the bounds by :func:`nik.poses.tool_error`), the joint limits and the sphere check (:func:`nik.collision.collides`),
+not read from ``res.success``. Then the time per target of the panda with the world against without
+(``--time-targets``, interleaved, median of 3, one process). Prints a table; saves it to
 benchmarks/results/compose.txt.
 """
 
