@@ -264,13 +264,15 @@ def _judge(model, plan, T: np.ndarray, q: np.ndarray):
     return (np.abs(d) <= half).all(1), pos, rot, d
 
 
-def rest_free(robot, s: Setup | None, goal, T: np.ndarray, q: np.ndarray, ok, q_rest, weight: float) -> np.ndarray:
+def rest_free(robot, s: Setup | None, goal, T: np.ndarray, q: np.ndarray, ok, q_rest, weight: float, push=None):
     """``(k,)`` bool, which rows moved: ``q: (k, n)`` in place, where ``ok (k,)``, moved towards ``q_rest: (k, n)`` in
     the null space of the pose term ``goal`` (:func:`_goal`; :func:`nik.kernels.driver.rest_posture`: never leaving
-    the goal) **without leaving collision-free** under ``s`` (None: no check): an answer whose posture steps end
-    colliding takes the longest collision-free prefix of the same steps (:data:`nik.ik.goals.REST_ITERS` steps, then
-    half as many, ... down to one), else stays where it was. The steps are deterministic, so ``i`` steps are the
-    first ``i`` of the longer run."""
+    the goal) **without leaving collision-free** under ``s`` (None: no check). An answer whose posture steps end
+    colliding takes the nearer ``q_rest`` of: the longest collision-free prefix of the same steps
+    (:data:`nik.ik.goals.REST_ITERS` steps, then half as many, ... down to one; the steps are deterministic, so ``i``
+    steps are the first ``i`` of the longer run), and ``push(rows, q_end)`` (the collision LM from the colliding end:
+    ``(q, done)``; :func:`_pusher`), moved on towards ``q_rest`` the same way, where that is done, free and nearer
+    ``q_rest`` than the answer was; else it stays where it was."""
     from nik.ik.goals import REST_DAMPING, REST_ITERS
     from nik.kernels import driver
 
@@ -278,6 +280,7 @@ def rest_free(robot, s: Setup | None, goal, T: np.ndarray, q: np.ndarray, ok, q_
     q0 = q.copy()  # s None: no collision check (the posture alone)
     todo = np.flatnonzero(ok)
     iters = REST_ITERS
+    pushed, q_push = np.zeros(0, dtype=np.int64), None
     while todo.size and iters >= 1:
         qt = np.ascontiguousarray(q0[todo])
         k = todo.size
@@ -290,8 +293,35 @@ def rest_free(robot, s: Setup | None, goal, T: np.ndarray, q: np.ndarray, ok, q_
             hit[moved] = s.colliding(robot, qt[moved])
         keep = ~hit
         q[todo[keep]] = qt[keep]
+        if iters == REST_ITERS and push is not None and hit.any():
+            pushed = todo[hit]
+            q_push, done = push(pushed, np.ascontiguousarray(qt[hit]))
+            done &= ~s.colliding(robot, q_push)
+            pushed, q_push = pushed[done], q_push[done]
         todo, iters = todo[hit], iters // 2
+    if pushed.size:  # the pushed end, moved on towards q_rest, where nearer it than the prefix (and the answer)
+        mask = np.zeros(q.shape[0], dtype=bool)
+        mask[pushed] = True
+        qp = q.copy()
+        qp[pushed] = q_push
+        rest_free(robot, s, goal, T, qp, mask, q_rest, weight)
+        near = ((qp[pushed] - q_rest[pushed]) ** 2).sum(1) < ((q[pushed] - q_rest[pushed]) ** 2).sum(1)
+        q[pushed[near]] = qp[pushed[near]]
     return (q != q0).any(1)
+
+
+def _pusher(robot, s: Setup, plan, cfg: CollideCfg, goal, T: np.ndarray):
+    """``push(rows, q) -> (q', done)`` for :func:`rest_free`: the collision LM (:func:`_solve_free`) for targets
+    ``T[rows]`` under rows ``rows`` of ``goal`` from ``q: (m, n)``, no restarts."""
+
+    def push(rows, q):
+        model, half, modes, opts, iopts = goal
+        m = rows.size
+        g = (model, half[rows], modes[rows], opts, iopts)
+        qp, done, _ = _solve_free(robot, s, plan, cfg, g, T[rows], q[:, None], np.ones(m), np.zeros(m))
+        return qp, done
+
+    return push
 
 
 def _collision_solve(robot, s: Setup, plan, cfg: CollideCfg, goal, T, starts, n_starts, restarts, margin: float):
@@ -362,6 +392,13 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
         starts, n_starts = _starts(robot, plan, Tn, q[idx])
         k = idx.size
         kgoal = (model, half[idx], modes[idx], opts, iopts)
+        if plan.q_rest is not None:  # the first start moved towards q_rest first (the re-solve lands nearer it)
+            from nik.ik.goals import rest_target
+
+            first = q[idx]
+            rest_free(robot, None, kgoal, Tn, first, success[idx], rest_target(robot, plan.q_rest, B)[idx],
+                      plan.rest_weight)  # fmt: skip
+            starts[:, 0] = first
         qk, done, itk = _solve_free(robot, s, plan, cfg, kgoal, Tn, starts, n_starts, np.full(k, cfg.restarts))
         q[idx], it[idx] = qk, it[idx] + itk
         hit[idx] = s.colliding(robot, qk)  # the verdict of the new answers (the others' stands)
@@ -371,7 +408,8 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
         from nik.ik.goals import rest_target
 
         ok = success & ~hit
-        changed |= rest_free(robot, s, goal, Tnp, q, ok, rest_target(robot, plan.q_rest, B), plan.rest_weight)
+        qr, push = rest_target(robot, plan.q_rest, B), _pusher(robot, s, plan, cfg, goal, Tnp)
+        changed |= rest_free(robot, s, goal, Tnp, q, ok, qr, plan.rest_weight, push)
     if changed.any():
         if float32:  # rounded and clamped into the float32 limits, as the answer is returned, then judged
             q[changed] = np.clip(q[changed].astype(np.float32), model.lo32, model.hi32)
@@ -482,7 +520,8 @@ def all_solutions(solver, plan, T: torch.Tensor, Q: torch.Tensor, world=None, de
 
         qr = rest_target(robot, plan.q_rest, 1).repeat(q.shape[0], axis=0)
         goal = _goal(robot, plan, q.shape[0], float32)
-        rest_free(robot, s, goal, Tk, q, np.ones(q.shape[0], dtype=bool), qr, plan.rest_weight)
+        push = None if s is None else _pusher(robot, s, plan, cfg, goal, Tk)
+        rest_free(robot, s, goal, Tk, q, np.ones(q.shape[0], dtype=bool), qr, plan.rest_weight, push)
         if float32:
             q = np.clip(q.astype(np.float32), model.lo32, model.hi32).astype(np.float64)
         keep = _judge(model, plan, Tk, q)[0]
