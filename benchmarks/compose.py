@@ -11,8 +11,9 @@ Each mix of ``bounds`` (none, ``"position"``, ``"axis_z"``) and ``q_rest`` (none
 world (``self_collision=False``), with the world and self-collision (the default with a world) and with the world
 alone (``self_collision=False``); success is re-checked here by FK (the pose within tolerance, or every axis inside
 the bounds by :func:`nik.poses.tool_error`), the joint limits and the sphere check (:func:`nik.collision.collides`),
-not read from ``res.success``. Then the time per target of the panda with the world against without
-(``--time-targets``, interleaved, median of 3, one process). Prints a table; saves it to
+not read from ``res.success``; the last column is the mean distance of the successful answers from the middle of the
+joint ranges (``q_rest="mid"``'s posture; also on the rows without it). Then the time per target of the panda with
+the world against without (``--time-targets``, interleaved, median of 3, one process). Prints a table; saves it to
 benchmarks/results/compose.txt.
 """
 
@@ -84,24 +85,30 @@ def honest(robot, T: np.ndarray, res, bounds, world, self_on: bool) -> np.ndarra
 def success_table(names, n: int, seed: int, lines: list) -> None:
     world = scene(seed)
     lines.append(f"success (%), {n} targets per robot from configurations free of the scene (table + 12), seed {seed}")
-    lines.append("| robot | bounds | q_rest | no world | world + self | world only | world + self - no world |")
-    lines.append("|---|---|---|---|---|---|---|")
+    lines.append(
+        "| robot | bounds | q_rest | no world | world + self | world only | world + self - no world "
+        "| mean |q - q_rest| rad: no world / world + self |"
+    )
+    lines.append("|---|---|---|---|---|---|---|---|")
     for name in names:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             robot = nik.load_robot(name)
             set_collision_model(robot, collision_model(robot))
             T = targets(robot, n, world, seed)
+            mid = robot.limits.double().mean(1).numpy()  # q_rest="mid"
             for bounds in BOUNDS:
                 for rest in RESTS:
-                    row = []
+                    row, dist = [], []
                     for w, self_on in ((None, False), (world, True), (world, False)):
                         s = nik.IKSolver(robot, self_collision=self_on)
                         res = s.solve(T, bounds=bounds, q_rest=rest, world=w, seed=seed)
-                        row.append(100.0 * honest(robot, T, res, bounds, w, self_on).mean())
+                        ok = honest(robot, T, res, bounds, w, self_on)
+                        row.append(100.0 * ok.mean())
+                        dist.append(np.linalg.norm(np.asarray(res.q)[ok] - mid, axis=1).mean())
                     lines.append(
                         f"| {name} | {bounds} | {rest} | {row[0]:.1f} | {row[1]:.1f} | {row[2]:.1f} "
-                        f"| {row[1] - row[0]:+.1f} |"
+                        f"| {row[1] - row[0]:+.1f} | {dist[0]:.3f} / {dist[1]:.3f} |"
                     )
                     print(lines[-1], flush=True)
 
