@@ -38,6 +38,7 @@ from pathlib import Path
 import torch
 
 from nik.ik import backends, collide, networks, stages
+from nik.ik.backends.one_pose import one_pose
 from nik.ik.plan import REFINE_METHODS, Plan, check_settings, choose_network, in_arm_frame, resolve_fallback, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
@@ -139,6 +140,13 @@ class IKSolver:
         self._plans, self.world, self.self_collision = {}, world, collide.check_self_collision(self_collision)
         self.mesh_verdict = collide.check_mesh_verdict(mesh_verdict)
 
+    def __setattr__(self, name: str, value) -> None:
+        """A setting changed (``solver.net = ...``, ``solver.world = ...``) drops the one-pose entries made from the
+        old ones (:mod:`nik.ik.backends.one_pose`)."""
+        object.__setattr__(self, name, value)
+        if name != "_plans":
+            self.__dict__["_one"] = {}
+
     @property
     def net(self):
         """The network (None without one): one given (``checkpoint=PATH``, or set here) or installed serves on every
@@ -185,7 +193,7 @@ class IKSolver:
                id(self.swarm_cfg), self.polish, self.closed_form)  # fmt: skip
         plan = self._plans.get(key)
         if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
-            net = choose_network(self._net, self._net_one, self._given, backend)
+            net = choose_network(self._net, self._net_one, self._given, backend, self.robot, self.refine, self.fallback)
             src = "network" if net is not None else "analytic" if self.closed_form else "multistart"
             lm_cfg = self.swarm_cfg if isinstance(self.swarm_cfg, LMCfg) else None
             plan = Plan(
@@ -258,6 +266,10 @@ class IKSolver:
         Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
+        if plan is None and q_near is None and max_iters is None and representation is None and world is None:
+            res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is None and q_rest is None else None
+            if res is not None:  # one pose in one kernel call (nik.ik.backends.one_pose)
+                return res
         check_tolerances(tol_pos, tol_rot)
         be = backends.choose(self, T_target)
         if plan is None:

@@ -68,6 +68,7 @@ __all__ = [
     "attached_model",
     "all_solutions",
     "free_solutions",
+    "has_attached",
     "path_waypoints",
     "resolve",
     "rest_free",
@@ -139,9 +140,20 @@ def attached_model(robot):
 
         beside = _beside(robot)
         found = robot.__dict__["_collision_beside"] = beside is not None and beside.is_file()
+    if not found:
+        return None
     from nik.collision.model import collision_model
 
-    return collision_model(robot) if found else None
+    return collision_model(robot)
+
+
+def has_attached(robot) -> bool:
+    """Whether ``robot`` has a collision model attached (:func:`attached_model`), told without loading it."""
+    d = robot.__dict__
+    if d.get("_collision_model") is not None:
+        return True
+    found = d.get("_collision_beside")
+    return attached_model(robot) is not None if found is None else found
 
 
 def check_self_collision(value):

@@ -21,7 +21,9 @@ Backend interface (``be``; arrays are numpy on the compiled backend, tensors on 
 
 - ``be.solve(robot, plan, T_target, q_near, representation) -> IKResult``: one call: the torch backend validates and
   runs the stages in a Python loop (:func:`nik.ik.stages.run`), the compiled one validates and runs them all in one
-  kernel call (:mod:`nik.kernels.driver`);
+  kernel call (:mod:`nik.kernels.driver`); a single pose with nothing but tolerances and seed does not come here:
+  :func:`nik.ik.backends.one_pose.one_pose` gives it the same kernel call with the arguments kept per solver
+  settings, the same answer for a fraction of the Python;
 - ``be.job(robot, plan, T_target, q_near, representation) -> Job``: validated targets (:mod:`nik.ik.targets`),
   reach flags, the unreachable warning;
 - ``be.network(plan, job) -> (hyp (B, K, dof) ranked best first, pos (B,), rot (B,), checked)``: ``checked`` is
