@@ -43,7 +43,6 @@ from nik.ik.plan import REFINE_METHODS, Plan, check_settings, resolve_fallback, 
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.robots import Robot, load_robot
-from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["REFINE_METHODS", "IKSolver"]
@@ -270,6 +269,9 @@ class IKSolver:
         dedupe_tol: float = 1e-3,
         representation: str | None = None,
         bounds=None,
+        world=None,
+        q_rest=None,
+        rest_weight: float = 0.1,
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
 
@@ -284,18 +286,15 @@ class IKSolver:
         simply how many distinct samples of it the starts found.
         Cost: on the CPU the LM runs compiled from each start; panda and xarm7 with 256 starts take 50-100 ms a
         pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the
-        path of targets on a GPU). Where a collision check is active (the solver's ``world`` and
-        ``self_collision``), only the collision-free solutions.
+        path of targets on a GPU). Where a collision check is active (``world``, else the solver's, and
+        ``self_collision``), only the collision-free solutions (colliding ones solved again with collision rows); with
+        ``q_rest`` each moved towards it in the null space, nearest first (:func:`nik.ik.collide.solve_all`).
         """
         T = as_poses(T_target, representation)
-        if T.shape[0] != 1:
-            raise ValueError(f"solve_all: expected one pose, got {T.shape[0]}")
         check_tolerances(tol_pos, tol_rot)
-        plan = with_goal(self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds)
-        job = stages.Job(backends.torch_backend(), self.robot, T, within_reach(self.robot, T), None, plan.tol_pos,
-                         plan.tol_rot, T.dtype, plan.tol_pos, plan.tol_rot)  # fmt: skip
-        Q = stages.all_solutions(plan, job, closed_form=self.closed_form, n_starts=n_starts, dedupe_tol=dedupe_tol)
-        return collide.free_solutions(self, Q)
+        plan = with_goal(self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds, q_rest,
+                         rest_weight)  # fmt: skip
+        return collide.solve_all(self, plan, T, world, n_starts=n_starts, dedupe_tol=dedupe_tol)
 
     def solve_path(
         self,
