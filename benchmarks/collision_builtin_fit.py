@@ -2,14 +2,14 @@
 
     python benchmarks/collision_builtin_fit.py                   # fit panda, ur5, xarm7; write the JSON files
     python benchmarks/collision_builtin_fit.py --check           # measure the shipped files only (no fitting)
-    python benchmarks/collision_builtin_fit.py --arms panda --tolerance 0.004 --max-spheres 40 --refine 6 --dry
+    python benchmarks/collision_builtin_fit.py --arms panda --tolerance 0.004 --max-spheres 48 --dry
 
 What it does (choices): the collision meshes are example-robot-data's (``pip install -e ".[urdf-tests]"`` for the
 URDFs and meshes, ``".[collision-check]"`` for trimesh and coal): the same arms as the built-ins (their links move
 as the built-in's frames, checked by :func:`nik.collision.urdf.urdf_bodies`; the built-in is taken without its
 flange/tool, whose frame does not move any link). Each link's surface is covered by spheres
-(:func:`nik.collision.fit.fit_spheres`: greedy cover at ``--tolerance``, at most ``--max-spheres`` a link, then
-``--refine`` rounds of the smallest-ball optimisation; seeded), the link pairs are those of nik's rules with the
+(:func:`nik.collision.fit.fit_spheres`: greedy cover at ``--tolerance``, at most ``--max-spheres`` a link,
+among random and medial-axis candidates; seeded), the link pairs are those of nik's rules with the
 vendor's MoveIt SRDF (:func:`nik.collision.collision_model`'s defaults: 1000 samples, 2 cm never-clearance, seed 0),
 and the model is written to ``configs/robots/collision/NAME.collision.json`` for the bare arm's hash, its SHA-256
 printed for :data:`nik.collision.builtin.CHECKSUMS`.
@@ -44,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from collisions import scene  # noqa: E402  (the same scene as benchmarks/collisions.py)
 
 
-def fit(name: str, tolerance: float, max_spheres: int, refine: int, seed: int) -> CollisionModel:
+def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int) -> CollisionModel:
     """The model of the built-in ``name`` fitted to example-robot-data's meshes (module docstring)."""
     urdf_rel, srdf_rel = BUILTIN_MESHES[name]
     urdf, srdf = erd_path(urdf_rel), erd_path(srdf_rel)
@@ -55,7 +55,7 @@ def fit(name: str, tolerance: float, max_spheres: int, refine: int, seed: int) -
     fits = []
     for b in bodies:
         t = time.perf_counter()
-        f = fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, refine=refine, seed=seed)
+        f = fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, medial=medial, seed=seed)
         fits.append(f)
         print(
             f"  {b.name}: {len(f.radii)} spheres, overreach {1000 * f.gap:.1f} mm, volume x{f.volume_ratio:.2f} "
@@ -81,7 +81,7 @@ def fit(name: str, tolerance: float, max_spheres: int, refine: int, seed: int) -
     model.radii = np.ceil((np.concatenate([f.radii for f in fits]) + 1e-6) * 1e6) / 1e6
     model.options = {
         "source": "builtin",
-        "fit": {"tolerance": tolerance, "max_spheres": max_spheres, "refine": refine, "seed": seed},
+        "fit": {"tolerance": tolerance, "max_spheres": max_spheres, "medial": medial, "seed": seed},
         "samples": 1000,
         "never_clearance": 0.02,
         "srdf": True,
@@ -114,7 +114,7 @@ def main(argv=None) -> None:
     ap.add_argument("--arms", nargs="*", default=sorted(BUILTIN_MESHES))
     ap.add_argument("--tolerance", type=float, default=0.004)
     ap.add_argument("--max-spheres", type=int, default=32)
-    ap.add_argument("--refine", type=int, default=4)
+    ap.add_argument("--no-medial", action="store_true", help="without the medial-axis candidates")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--samples", type=int, default=2000)
     ap.add_argument("--check", action="store_true", help="measure the shipped models, fit nothing")
@@ -128,11 +128,11 @@ def main(argv=None) -> None:
         else:
             print(
                 f"{name}: fitting (tolerance {args.tolerance} m, <= {args.max_spheres} spheres a link, "
-                f"{args.refine} rounds, seed {args.seed})",
+                f"{'no ' if args.no_medial else ''}medial candidates, seed {args.seed})",
                 flush=True,
             )
             t = time.perf_counter()
-            model = fit(name, args.tolerance, args.max_spheres, args.refine, args.seed)
+            model = fit(name, args.tolerance, args.max_spheres, not args.no_medial, args.seed)
             print(f"  {model} in {time.perf_counter() - t:.0f} s; pairs {len(model.pairs)}")
             if not args.dry:
                 path = model.save(MODEL_DIR / f"{name}.collision.json")

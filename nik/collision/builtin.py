@@ -40,7 +40,7 @@ MODEL_DIR = _model_dir()
 #: built-in name -> (URDF, SRDF) inside example-robot-data's ``robots`` folder, the meshes they were fitted to
 BUILTIN_MESHES = {
     "panda": ("panda_description/urdf/panda.urdf", "panda_description/srdf/panda.srdf"),
-    "ur5": ("ur_description/urdf/ur5_robot.urdf", "ur_description/srdf/ur5.srdf"),
+    "ur5": ("ur_description/urdf/ur5_joint_limited_robot.urdf", "ur_description/srdf/ur5_joint_limited_robot.srdf"),
     "xarm7": ("xarm_description/urdf/xarm7.urdf", "xarm_description/srdf/xarm7.srdf"),
 }
 

@@ -486,8 +486,9 @@ def collision_model(
         source: ``"urdf"`` (fit spheres to the URDF's collision geometry), ``"builtin"`` (the shipped model of a
             built-in arm, :mod:`nik.collision.builtin`), ``"capsules"`` (capsules along the links), or None: the
             URDF's geometry where the robot has it, else the shipped model, else capsules (with a
-            :class:`nik.errors.CollisionModelWarning`, once per robot).
-        radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base).
+            :class:`nik.errors.CollisionModelWarning` once per robot, unless ``radius`` is given).
+        radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base); not used by a
+            fitted or shipped model.
         tolerance: sphere fitting stops once a link's spheres overreach it by at most this (metres).
         max_spheres: at most this many spheres per link.
         samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
@@ -552,7 +553,7 @@ def collision_model(
         _find_pairs(robot, model, samples, never_clearance, seed, srdf_path)
         if cache:
             _store(model, path)
-    if model.source == "capsules" and source is None:
+    if model.source == "capsules" and source is None and options["radius"] == 0.05:  # radii given: no warning
         _warn_capsules(robot, radius)
     memo[memo_key] = model
     return model
