@@ -46,7 +46,7 @@ BUILTIN_MESHES = {
 
 #: SHA-256 of each shipped file (``benchmarks/collision_builtin_fit.py`` prints them)
 CHECKSUMS = {
-    "panda": "",
+    "panda": "b07cb52451d7a6c79798ae76d0cc961a0a9656a26e6d1189c59597aa9a7ea411",
     "ur5": "",
     "xarm7": "",
 }
