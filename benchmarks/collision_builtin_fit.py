@@ -44,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from collisions import scene  # noqa: E402  (the same scene as benchmarks/collisions.py)
 
 
-def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int) -> CollisionModel:
+def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, max_edge=None) -> CollisionModel:
     """The model of the built-in ``name`` fitted to example-robot-data's meshes (module docstring)."""
     urdf_rel, srdf_rel = BUILTIN_MESHES[name]
     urdf, srdf = erd_path(urdf_rel), erd_path(srdf_rel)
@@ -55,7 +55,9 @@ def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int) 
     fits = []
     for b in bodies:
         t = time.perf_counter()
-        f = fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, medial=medial, seed=seed)
+        f = fit_spheres(
+            b.triangles, tolerance=tolerance, max_spheres=max_spheres, medial=medial, seed=seed, max_edge=max_edge
+        )
         fits.append(f)
         print(
             f"  {b.name}: {len(f.radii)} spheres, overreach {1000 * f.gap:.1f} mm, volume x{f.volume_ratio:.2f} "
@@ -81,7 +83,13 @@ def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int) 
     model.radii = np.ceil((np.concatenate([f.radii for f in fits]) + 1e-6) * 1e6) / 1e6
     model.options = {
         "source": "builtin",
-        "fit": {"tolerance": tolerance, "max_spheres": max_spheres, "medial": medial, "seed": seed},
+        "fit": {
+            "tolerance": tolerance,
+            "max_spheres": max_spheres,
+            "medial": medial,
+            "max_edge": max_edge,
+            "seed": seed,
+        },
         "samples": 1000,
         "never_clearance": 0.02,
         "srdf": True,
@@ -114,6 +122,7 @@ def main(argv=None) -> None:
     ap.add_argument("--arms", nargs="*", default=sorted(BUILTIN_MESHES))
     ap.add_argument("--tolerance", type=float, default=0.004)
     ap.add_argument("--max-spheres", type=int, default=32)
+    ap.add_argument("--max-edge", type=float, default=None, help="split triangles to this edge (m; default: fit's)")
     ap.add_argument("--no-medial", action="store_true", help="without the medial-axis candidates")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--samples", type=int, default=2000)
@@ -132,15 +141,16 @@ def main(argv=None) -> None:
                 flush=True,
             )
             t = time.perf_counter()
-            model = fit(name, args.tolerance, args.max_spheres, not args.no_medial, args.seed)
+            model = fit(name, args.tolerance, args.max_spheres, not args.no_medial, args.seed, args.max_edge)
             print(f"  {model} in {time.perf_counter() - t:.0f} s; pairs {len(model.pairs)}")
             if not args.dry:
                 path = model.save(MODEL_DIR / f"{name}.collision.json")
                 digest = hashlib.sha256(path.read_bytes()).hexdigest()
                 print(f"  wrote {path} ({path.stat().st_size // 1024} kB) sha256 {digest}")
+        per_link = ", ".join(f"{n} {k}" for n, k in zip(model.links, np.diff(model.body_start), strict=True))
         print(
-            f"  spheres {len(model.radii)} ({', '.join(f'{n} {k}' for n, k in zip(model.links, np.diff(model.body_start), strict=True))}); "
-            f"overreach mm: max {1000 * np.max(model.gaps):.1f}, median {1000 * np.median(model.gaps):.1f}"
+            f"  spheres {len(model.radii)} ({per_link}); overreach mm: max {1000 * np.max(model.gaps):.1f}, "
+            f"median {1000 * np.median(model.gaps):.1f}"
         )
         for label, (missed, extra, free) in measure(name, model, args.samples, args.seed).items():
             print(

@@ -13,8 +13,8 @@ import pytest
 import torch
 
 import nik
-from nik.collision import collides, collision_model, sphere_centers
 from nik.collision import builtin as shipped
+from nik.collision import collides, collision_model, sphere_centers
 from nik.errors import CollisionModelWarning
 
 WITH_MESHES = ["panda", "ur5", "xarm7"]

@@ -47,7 +47,7 @@ BUILTIN_MESHES = {
 #: SHA-256 of each shipped file (``benchmarks/collision_builtin_fit.py`` prints them)
 CHECKSUMS = {
     "panda": "b07cb52451d7a6c79798ae76d0cc961a0a9656a26e6d1189c59597aa9a7ea411",
-    "ur5": "",
+    "ur5": "7cb5f18be7be0888ea2ca888a07ccf17b9ec926b416a7724bff79377702aa549",
     "xarm7": "",
 }
 
