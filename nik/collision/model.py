@@ -485,10 +485,10 @@ def collision_model(
     Args:
         source: ``"urdf"`` (fit spheres to the URDF's collision geometry), ``"builtin"`` (the shipped model of a
             built-in arm, :mod:`nik.collision.builtin`), ``"capsules"`` (capsules along the links), or None: the
-            URDF's geometry where the robot has it, else the shipped model, else capsules (with a
-            :class:`nik.errors.CollisionModelWarning` once per robot, unless ``radius`` is given).
-        radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base); not used by a
-            fitted or shipped model.
+            URDF's geometry where the robot has it, else (``radius`` not given) the shipped model, else capsules
+            (with a :class:`nik.errors.CollisionModelWarning` once per robot, unless ``radius`` is given).
+        radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base); a value other
+            than the default asks for capsules where the robot has no URDF geometry (not the shipped model).
         tolerance: sphere fitting stops once a link's spheres overreach it by at most this (metres).
         max_spheres: at most this many spheres per link.
         samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
@@ -520,7 +520,8 @@ def collision_model(
         model = CollisionModel.load(beside, robot)
         memo[memo_key] = model
         return model
-    if source in (None, "builtin") and not model_source_is_urdf(robot, None):
+    radii_given = options["radius"] != 0.05  # capsules of the radii given, where the robot has no URDF geometry
+    if (source == "builtin" or (source is None and not radii_given)) and not model_source_is_urdf(robot, None):
         shipped = _builtin(robot, source, samples, never_clearance, srdf, seed)
         if shipped is not None:
             memo[memo_key] = shipped
@@ -553,7 +554,7 @@ def collision_model(
         _find_pairs(robot, model, samples, never_clearance, seed, srdf_path)
         if cache:
             _store(model, path)
-    if model.source == "capsules" and source is None and options["radius"] == 0.05:  # radii given: no warning
+    if model.source == "capsules" and source is None and not radii_given:
         _warn_capsules(robot, radius)
     memo[memo_key] = model
     return model
