@@ -48,7 +48,7 @@ BUILTIN_MESHES = {
 CHECKSUMS = {
     "panda": "b07cb52451d7a6c79798ae76d0cc961a0a9656a26e6d1189c59597aa9a7ea411",
     "ur5": "7cb5f18be7be0888ea2ca888a07ccf17b9ec926b416a7724bff79377702aa549",
-    "xarm7": "",
+    "xarm7": "f856a8b622b574025daaf0efd492523792a1f67f3d3501128c951cc6d39208d4",
 }
 
 
