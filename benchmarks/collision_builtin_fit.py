@@ -33,8 +33,8 @@ import numpy as np
 import torch
 
 import nik
-from nik.collision import collides
-from nik.collision.builtin import BUILTIN_MESHES, MODEL_DIR, builtin_collision_model, erd_path, frames_key
+from nik.collision import collides, collision_model
+from nik.collision.builtin import BUILTIN_MESHES, MODEL_DIR, erd_path, frames_key
 from nik.collision.fit import fit_spheres
 from nik.collision.meshcheck import MeshCheck
 from nik.collision.model import CollisionModel, _find_pairs
@@ -132,7 +132,7 @@ def main(argv=None) -> None:
     warnings.simplefilter("ignore")
     for name in args.arms:
         if args.check:
-            model = builtin_collision_model(nik.load_robot(name))
+            model = collision_model(nik.load_robot(name), source="builtin")
             print(f"{name}: shipped {model}")
         else:
             print(

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BUILTIN_MESHES", "CHECKSUMS", "MODEL_DIR", "builtin_collision_model", "erd_path", "frames_key"]
+__all__ = ["BUILTIN_MESHES", "CHECKSUMS", "MODEL_DIR", "builtin_model_data", "erd_path", "frames_key"]
 
 
 def _model_dir() -> Path:
@@ -75,13 +75,11 @@ def frames_key(robot) -> str:
     return h.hexdigest()[:16]
 
 
-_SHIPPED: dict[str, object] = {}
+_SHIPPED: dict[str, dict | None] = {}
 
 
-def _shipped(name: str):
-    """The shipped model ``name`` as read from its file (checked), memoised; None where the file is absent."""
-    from nik.collision.model import CollisionModel
-
+def _shipped(name: str) -> dict | None:
+    """The shipped model ``name`` as its file's JSON (checked), memoised; None where the file is absent."""
     if name not in _SHIPPED:
         path = MODEL_DIR / f"{name}.collision.json"
         if not path.is_file():
@@ -94,27 +92,16 @@ def _shipped(name: str):
                     f"shipped collision model {path}: checksum {digest[:16]}... is not the one recorded "
                     f"({CHECKSUMS.get(name, '')[:16]}...); reinstall nik or rerun benchmarks/collision_builtin_fit.py"
                 )
-            _SHIPPED[name] = CollisionModel.from_dict(json.loads(data), source=f"shipped collision model {path}")
+            _SHIPPED[name] = json.loads(data)
     return _SHIPPED[name]
 
 
-def builtin_collision_model(robot):
-    """The shipped :class:`nik.collision.CollisionModel` of ``robot``'s arm (module docstring), made for
-    ``robot`` (its definition hash; base-link spheres moved by its base), or None where none matches."""
-    from nik.collision.model import CollisionModel
-
+def builtin_model_data(robot) -> tuple[str, dict] | None:
+    """``(name, JSON)`` of the shipped model of ``robot``'s arm (matched by :func:`frames_key`), or None;
+    :func:`nik.collision.collision_model` makes it ``robot``'s (its hash; base-link spheres moved by its base)."""
     key = frames_key(robot)
     for name in CHECKSUMS:
-        model = _shipped(name)
-        if model is None or model.options.get("frames_key") != key:
-            continue
-        centers = np.array(model.centers, dtype=np.float64)
-        if robot.base is not None:
-            B = robot.base.numpy().astype(np.float64)
-            on_base = model.sphere_frame == 0
-            centers[on_base] = centers[on_base] @ B[:3, :3].T + B[:3, 3]
-        copy = CollisionModel(**{**model.__dict__, "robot_hash": robot.definition_hash, "centers": centers})
-        copy.__dict__.pop("_sphere_pairs", None)
-        copy.options = {**model.options, "builtin": name}
-        return copy
+        data = _shipped(name)
+        if data is not None and (data.get("options") or {}).get("frames_key") == key:
+            return name, data
     return None

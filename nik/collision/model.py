@@ -563,15 +563,23 @@ def collision_model(
 def _builtin(robot, source, samples, never_clearance, srdf, seed) -> CollisionModel | None:
     """The shipped model of a built-in arm (:mod:`nik.collision.builtin`), its pairs found again where the pair
     options are not the defaults it was shipped with; None where there is none (an error for ``"builtin"``)."""
-    from nik.collision.builtin import CHECKSUMS, builtin_collision_model
+    from nik.collision.builtin import CHECKSUMS, MODEL_DIR, builtin_model_data
 
-    model = builtin_collision_model(robot)
-    if model is None:
+    found = builtin_model_data(robot)
+    if found is None:
         if source == "builtin":
             raise ValueError(
                 f"robot {robot.name!r}: no shipped collision model (the built-ins with one: {', '.join(CHECKSUMS)})"
             )
         return None
+    name, data = found
+    model = CollisionModel.from_dict(data, source=f"shipped collision model {MODEL_DIR / name}.collision.json")
+    model.robot_hash = robot.definition_hash
+    model.options = {**model.options, "builtin": name}
+    if robot.base is not None:  # nik's frame 0 is the world's: the base link's spheres ride on the base
+        B = robot.base.numpy().astype(np.float64)
+        on_base = model.sphere_frame == 0
+        model.centers[on_base] = model.centers[on_base] @ B[:3, :3].T + B[:3, 3]
     if (samples, never_clearance, srdf, seed) == (1000, 0.02, True, 0):
         return model
     disabled = {
