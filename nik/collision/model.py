@@ -6,6 +6,8 @@ Where the spheres come from (choices):
   body per link that has some, riding on the frame of its joint (:mod:`nik.collision.urdf`), covered by spheres
   fitted by :func:`nik.collision.fit.fit_spheres` (conservative: every surface point is inside; the overreach
   per link is reported in :attr:`CollisionModel.gaps` and :attr:`CollisionModel.volume_ratios`);
+- otherwise, a built-in arm with a shipped model (``panda``, ``ur5``, ``xarm7``: spheres fitted to their vendors'
+  meshes, :mod:`nik.collision.builtin`) gets that model, unless ``radius`` is given;
 - otherwise (DH / MDH / screw-axis files, or a URDF without collision geometry): a capsule of ``radius`` metres
   along each link, from one joint's origin to the next (the last to the tool point; frame 0 from the base to
   joint 1), covered exactly by spheres of radius ``sqrt(r^2 + (s/2)^2)`` spaced ``s = radius`` along it. A
