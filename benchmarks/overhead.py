@@ -10,7 +10,10 @@ sensitive to other processes than the wall clock):
 - **result**: building the ``IKResult`` of tensors;
 - **other Python**: the rest (choosing the backend, the stages' bookkeeping, the wrappers around the kernels).
 
-The timers cost about 0.1 us each; the total is measured without them, in separate interleaved rounds.
+The calls name their representation (``representation="matrix"``), so that they take the general path of the
+compiled backend that these pieces make up; a single pose without it takes the one-kernel-call path of
+:mod:`nik.ik.backends.one_pose` (``benchmarks/cold_pose.py``). The timers cost about 0.1 us each; the total is
+measured without them, in separate interleaved rounds.
 
     python benchmarks/overhead.py                       # panda, xarm7, ur5, kuka_kr; 2,000 poses each
 """
@@ -51,11 +54,11 @@ def measure(name: str, n: int, seed: int) -> dict:
     poses_list = [T[i] for i in range(n)]
     solver.solve(T[:64])
     for t in poses_list[:50]:
-        solver.solve(t)
+        solver.solve(t, representation="matrix")
     plain = []
     for t in poses_list:  # the total, no timers
         c0 = time.thread_time()
-        res = solver.solve(t)
+        res = solver.solve(t, representation="matrix")
         plain.append(time.thread_time() - c0)
     acc = {"kernels": 0.0, "validation": 0.0, "result": 0.0}
     kernel_names = [
@@ -73,7 +76,7 @@ def measure(name: str, n: int, seed: int) -> dict:
     total = 0.0
     for t in poses_list:
         c0 = time.thread_time()
-        solver.solve(t)
+        solver.solve(t, representation="matrix")
         total += time.thread_time() - c0
     for mod, attr, fn in originals:
         setattr(mod, attr, fn)

@@ -9,7 +9,14 @@ from __future__ import annotations
 
 import importlib
 
-from nik.errors import CheckpointError, DatasetError, NikError, RobotDefinitionError, RobotDefinitionWarning
+from nik.errors import (
+    CheckpointError,
+    CollisionModelWarning,
+    DatasetError,
+    NikError,
+    RobotDefinitionError,
+    RobotDefinitionWarning,
+)
 
 __version__ = "0.1.0"
 
@@ -49,6 +56,7 @@ _LAZY = {
 
 __all__ = [
     "CheckpointError",
+    "CollisionModelWarning",
     "DatasetError",
     "IKResult",
     "IKSolver",

@@ -1,4 +1,4 @@
-"""Error classes of nik. All derive from ``ValueError`` so callers may catch either; and its one warning class."""
+"""Error classes of nik. All derive from ``ValueError`` so callers may catch either; and its warning classes."""
 
 from __future__ import annotations
 
@@ -27,3 +27,8 @@ class CheckpointNotFoundError(CheckpointError, FileNotFoundError):
 class RobotDefinitionWarning(UserWarning):
     """A robot loaded, with a choice the user should know of (the default tool link of a URDF left a gripper
     out of the arm, or several links fitted)."""
+
+
+class CollisionModelWarning(RobotDefinitionWarning):
+    """A robot's collision model is an approximation (capsules along the links: no collision meshes known for it);
+    the message says how to give radii or meshes."""

@@ -38,11 +38,11 @@ from pathlib import Path
 import torch
 
 from nik.ik import backends, collide, every, networks, stages
+from nik.ik.backends.one_pose import one_pose
 from nik.ik.costs import solve as solve_costs
-from nik.ik.plan import REFINE_METHODS, Plan, check_settings, choose_network, in_arm_frame, resolve_fallback, with_goal
+from nik.ik.plan import REFINE_METHODS, Plan, check_settings, resolve_fallback, solver_plan, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
-from nik.lm.batched import LMCfg
 from nik.robots import Robot, load_robot
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
@@ -87,7 +87,10 @@ class IKSolver:
             network's guess alone delivers.
         backend: ``"auto"`` (default: :func:`nik.ik.backends.choose` picks per call), ``"compiled"`` (numba
             kernels on numpy: CPU targets, ``refine="lm"`` only) or ``"torch"`` (every device and method). The
-            answers meet the same contract on both; benchmarks and tests use it to compare them.
+            answers meet the same contract on both; benchmarks and tests use it to compare them. On a kernel cache
+            that lacks the compiled solve (a machine's first use), ``"auto"`` answers from torch while it compiles in
+            a background thread, and one line on stderr says so; ``"compiled"`` (or ``NIK_COMPILE=wait``) waits for
+            the compile (:mod:`nik.kernels.background`).
         world: a :class:`nik.World` of obstacles (base frame) every call avoids (``solve(world=)`` replaces it for
             one call); a world turns the collision check on, the arm against itself included.
         self_collision: None (default): checked with a world, and without one where the robot has a collision model
@@ -124,21 +127,22 @@ class IKSolver:
         self.robot = load_robot(robot) if not isinstance(robot, Robot) else robot
         self.refine, self.polish = refine, bool(polish)
         self.swarm_cfg = swarm_cfg
-        self._net, self._net_one, self._given = None, None, checkpoint is not None and checkpoint != "auto"
         from nik.analytic import family
 
         self.closed_form = bool(analytic) and family(self.robot) is not None
         self.fallback = resolve_fallback(fallback, self.closed_form, self.robot.name)
-        if isinstance(checkpoint, str) and checkpoint == "auto":
-            if not self.closed_form:
-                # loaded (SHA-256 checked: a damaged file is refused here) once per process, shared by every solver
-                self._net, self._given = networks.known_network(self.robot, self.device)
-                if self._net is not None:
-                    self._net_one = networks.known_network(self.robot, self.device, single_pose=True)[0]
-        elif checkpoint is not None:
-            self._net = networks.checkpoint_network(checkpoint, self.robot, self.device)
+        self._net, self._net_one, self._given = networks.solver_networks(
+            checkpoint, self.robot, self.device, self.closed_form
+        )
         self._plans, self.world, self.self_collision = {}, world, collide.check_self_collision(self_collision)
         self.mesh_verdict = collide.check_mesh_verdict(mesh_verdict)
+
+    def __setattr__(self, name: str, value) -> None:
+        """A setting changed (``solver.net = ...``, ``solver.world = ...``) drops the one-pose entries made from the
+        old ones (:mod:`nik.ik.backends.one_pose`)."""
+        object.__setattr__(self, name, value)
+        if name != "_plans":
+            self.__dict__["_one"] = {}
 
     @property
     def net(self):
@@ -182,22 +186,7 @@ class IKSolver:
     ) -> Plan:
         """The :class:`~nik.ik.plan.Plan` of a call on ``backend`` (``"compiled"`` | ``"torch"``) with these
         tolerances, seed and iteration cap: resolved here, once, from the solver's settings (:mod:`nik.ik.plan`)."""
-        key = (backend, tol_pos, tol_rot, seed, max_iters, self._net, self._given, self.fallback, self.refine,
-               id(self.swarm_cfg), self.polish, self.closed_form)  # fmt: skip
-        plan = self._plans.get(key)
-        if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
-            net = choose_network(self._net, self._net_one, self._given, backend)
-            src = "network" if net is not None else "analytic" if self.closed_form else "multistart"
-            lm_cfg = self.swarm_cfg if isinstance(self.swarm_cfg, LMCfg) else None
-            plan = Plan(
-                src, net, in_arm_frame(self.robot, net), self.refine, lm_cfg, max_iters,
-                restarts=src == "multistart" or self.fallback == "multistart", near=not self.closed_form,
-                fallback=self.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
-                swarm_cfg=self.swarm_cfg, polish=self.polish,
-            )  # fmt: skip
-            self._plans = {} if len(self._plans) > 64 else self._plans
-            self._plans[key] = plan
-        return plan
+        return solver_plan(self, backend, tol_pos, tol_rot, seed, max_iters)
 
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
@@ -264,6 +253,10 @@ class IKSolver:
         Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
+        if plan is None and q_near is None and max_iters is None and representation is None and world is None:
+            res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is q_rest is costs is None else None
+            if res is not None:  # one pose in one kernel call (nik.ik.backends.one_pose)
+                return res
         check_tolerances(tol_pos, tol_rot)
         be = backends.choose(self, T_target)
         if plan is None:
@@ -282,6 +275,9 @@ class IKSolver:
         dedupe_tol: float = 1e-3,
         representation: str | None = None,
         bounds=None,
+        world=None,
+        q_rest=None,
+        rest_weight: float = 0.1,
         costs=None,
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
@@ -297,14 +293,18 @@ class IKSolver:
         simply how many distinct samples of it the starts found.
         Cost: on the CPU the LM runs compiled from each start; panda and xarm7 with 256 starts take 50-100 ms a
         pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the
-        path of targets on a GPU). Where a collision check is active (the solver's ``world`` and
-        ``self_collision``), only the collision-free solutions. With ``costs`` (as :meth:`solve`), each solution
-        solved again under the call's terms, only those meeting every constraint kept (:mod:`nik.ik.every`).
+        path of targets on a GPU). Where a collision check is active (``world``, else the solver's, and
+        ``self_collision``), only the collision-free solutions (colliding ones solved again with collision rows); with
+        ``q_rest`` each moved towards it in the null space, nearest first (:func:`nik.ik.collide.solve_all`). With
+        ``costs`` (as :meth:`solve`), each solution solved again under the call's terms, only those meeting every
+        constraint kept (:mod:`nik.ik.every`).
         """
-        return every.solve_all(
-            self, T_target, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, n_starts=n_starts, dedupe_tol=dedupe_tol,
-            representation=representation, bounds=bounds, costs=costs,
-        )  # fmt: skip
+        T = as_poses(T_target, representation)
+        check_tolerances(tol_pos, tol_rot)
+        plan = with_goal(self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds, q_rest,
+                         rest_weight)  # fmt: skip
+        Q = collide.solve_all(self, plan, T, world, n_starts=n_starts, dedupe_tol=dedupe_tol)
+        return every.with_costs(self, plan, T, world, costs, Q, dedupe_tol)
 
     def solve_path(
         self,

@@ -1,8 +1,15 @@
-"""Shared test set-up: every test sees an empty user network folder (``NIK_HOME``), never the real one."""
+"""Shared test set-up: every test sees an empty user network folder (``NIK_HOME``), never the real one; the kernels
+compile on the caller's thread (``NIK_COMPILE=wait``: on a cold kernel cache ``backend="auto"`` would otherwise answer
+from torch until the compiled solve is ready, :mod:`nik.kernels.background`, and tests that compare the compiled
+answers with the staged ones need them from the first call; ``tests/test_kernels_background.py`` unsets it)."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+os.environ.setdefault("NIK_COMPILE", "wait")
 
 
 @pytest.fixture(autouse=True)

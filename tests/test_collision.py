@@ -134,8 +134,8 @@ def test_pairs_an_srdf_disables_are_left_out(prims):
 
 def test_always_and_never_pairs_hold_on_fresh_samples():
     robot = nik.load_robot("ur5")
-    model = collision_model(robot, samples=400, seed=0)
-    full = collision_model(robot, samples=0)
+    model = collision_model(robot, source="capsules", samples=400, seed=0)  # the capsules' pairs: some always touch
+    full = collision_model(robot, source="capsules", samples=0)
     q = _q(robot, 300, 7)
     d = signed_distances(robot, q, model=full)[:, : len(full.pairs)]
     for p, (a, b) in enumerate(full.pair_names()):

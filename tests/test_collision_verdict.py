@@ -61,9 +61,10 @@ def test_collisions_name_the_pairs_and_the_obstacles():
 def test_bad_mesh_verdict_is_one_line():
     with pytest.raises(ValueError, match="mesh_verdict must be"):
         nik.IKSolver("ur5", mesh_verdict="yes")
+    # puma560: no meshes anywhere (the built-in ur5's model names example-robot-data's meshes now)
     with pytest.raises(ValueError, match="no URDF with collision meshes"):
-        nik.IKSolver("ur5", world=nik.World(), mesh_verdict=True).solve(np.eye(4))
-    res = nik.IKSolver("ur5", world=nik.World(), mesh_verdict="auto").solve(np.eye(4))  # no meshes: the spheres
+        nik.IKSolver("puma560", world=nik.World(), mesh_verdict=True).solve(np.eye(4))
+    res = nik.IKSolver("puma560", world=nik.World(), mesh_verdict="auto").solve(np.eye(4))  # no meshes: the spheres
     assert res.collision_free is not None
 
 

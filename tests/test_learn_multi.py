@@ -62,7 +62,8 @@ def test_shipped_config_trains_in_two_phases_and_exports(robot, cls, tmp_path):
     net = load_checkpoint(ckpt, robot=robot)  # loadable as a solver checkpoint too
     T = cli.datamodule.val_data[0][:20].double()
     torch.testing.assert_close(net.hypotheses(T), model.net.eval().hypotheses(T))
-    assert nik.IKSolver(robot, checkpoint=ckpt, analytic=False).initial_source == "network"
+    # fallback="none": the network itself, whatever nik.ik.judge makes of a network trained for 4 short epochs
+    assert nik.IKSolver(robot, checkpoint=ckpt, analytic=False, fallback="none").initial_source == "network"
     out = tmp_path / "pretrained"
     assert export_main([str(ckpt), "--robot", robot, "--out", str(out)]) == 0
     shipped = load(robot, out)

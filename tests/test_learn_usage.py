@@ -66,9 +66,12 @@ def test_on_a_closed_form_arm_the_default_keeps_the_closed_form_and_the_printed_
     assert f'end_link="{robot.end_link}"' in network_line and f'checkpoint="{installed}"' in network_line
     T = _poses(robot)
     assert default.solve(T).source == "analytic" and not default.has_network
-    res = with_net.solve(T)
-    assert res.source == "network" and bool(res.success.all())
-    assert with_net.solve(T[:1]).source == "network"  # one CPU pose too
+    assert with_net.has_network and with_net.net.robot.definition_hash == robot.definition_hash
+    # this network is untrained (8 units): no better a start than uniform ones, it gives way (nik.ik.judge)
+    with pytest.warns(UserWarning, match="no better than uniform starts"):
+        res = with_net.solve(T)
+    assert res.source == "analytic" and bool(res.success.all())
+    assert with_net.solve(T[:1]).source == "analytic"  # one CPU pose too
 
 
 @pytest.mark.parametrize(

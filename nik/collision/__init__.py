@@ -3,7 +3,8 @@
 The room sits between robots and data (it imports kernels, kinematics / poses and robots only):
 
 - :func:`collision_model`: spheres per link fitted to a URDF's collision
-  geometry (or capsules along the links), the link pairs worth checking, cached per robot (:mod:`.model`);
+  geometry, the shipped spheres of a built-in arm fitted to its vendor's meshes (:mod:`.builtin`), or capsules
+  along the links; the link pairs worth checking; cached per robot (:mod:`.model`);
 - :class:`World`: spheres, boxes, capsules and point clouds in the base frame (:mod:`.world`);
 - :func:`signed_distances`, :func:`collision_residual`, :func:`collides`: batched, differentiable (torch,
   :mod:`.distance`, :mod:`.check`); the compiled kernels with their Jacobians are :mod:`nik.kernels.collision`.

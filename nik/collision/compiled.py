@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["kernel_arguments", "signed_distances_compiled"]
+__all__ = ["blocked_targets", "collision_names_compiled", "kernel_arguments", "signed_distances_compiled"]
 
 _EMPTY = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
 
@@ -34,3 +34,54 @@ def signed_distances_compiled(robot, q, world=None, *, model=None, self_collisio
     D = np.empty((len(Q), len(model.pairs) + len(model.links)))
     collision_distances_batch(G, joints, Q, *rest, D)
     return D
+
+
+def blocked_targets(
+    robot, model, world, T, tol_pos: float, tol_rot: float, *, self_collision: bool = True, samples: int = 180
+) -> np.ndarray:
+    """``(B,)`` bool for targets ``T: (B, 4, 4)``: no configuration reaching ``T[b]`` within ``tol_pos`` (m) and
+    ``tol_rot`` (rad) is free, proven by the rows the pose fixes (:func:`nik.kernels.collision.blocked_poses`:
+    the tool's links against the base and the world, then the links of the first joint and of the last one swept
+    over its range on ``samples`` values). The slack is ``tol_pos + tol_rot * lever``, the lever the farthest a
+    sphere centre on the last two frames can lie from the tool point (a rotation by ``a`` moves a point at ``l``
+    by at most ``a * l``)."""
+    from nik.kernels.collision import blocked_poses
+
+    (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
+    spheres, frames, n = rest[0], rest[1], joints.shape[0]
+    tool = G[n][:3, 3]
+    levers = [0.0, *np.linalg.norm(spheres[frames == n, :3] - tool, axis=1)]
+    if n >= 2:  # frame n - 1 turns about the tool's last joint: bounded by its distance to that frame's origin
+        inv = np.linalg.inv(G[n - 1])
+        wrist = spheres[frames == n - 1, :3] @ inv[:3, :3].T + inv[:3, 3]
+        levers += list(np.linalg.norm(wrist, axis=1) + np.linalg.norm(tool))
+    lever = float(max(levers))
+    Tn = np.ascontiguousarray(np.asarray(T, dtype=np.float64).reshape(-1, 4, 4))
+    out = np.empty(len(Tn), dtype=np.bool_)
+    blocked_poses(G, joints, Tn, *rest, float(tol_pos + tol_rot * lever), int(samples), out)
+    return out
+
+
+def collision_names_compiled(robot, q, world=None, *, model=None, self_collision: bool = True) -> list:
+    """:func:`nik.collision.collision_names` for ``q: (B, dof)`` (numpy) on the compiled kernels
+    (:func:`nik.kernels.collision.overlaps_batch`): per configuration the sorted names of what overlaps, or None."""
+    from nik.collision.model import collision_model
+    from nik.kernels.collision import overlaps_batch
+
+    model = collision_model(robot) if model is None else model
+    Q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, robot.dof))
+    (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
+    counts = [len(a) for a in rest[4:7]]
+    pair_hit = np.empty((len(Q), len(model.pairs)), dtype=np.bool_)
+    world_hit = np.empty((len(Q), len(model.links), sum(counts)), dtype=np.bool_)
+    overlaps_batch(G, joints, Q, *rest, pair_hit, world_hit)
+    kinds = ("sphere", "box", "capsule")  # World.packed()'s order, named as nik.collision.check.OBSTACLE_KINDS
+    obstacles = [f"{kind} {k}" for kind, c in zip(kinds, counts, strict=True) for k in range(c)]
+    names = []
+    for b in range(len(Q)):
+        hits = [
+            f"{model.links[model.pairs[p][0]]}|{model.links[model.pairs[p][1]]}" for p in np.flatnonzero(pair_hit[b])
+        ]
+        hits += [f"{model.links[link]}|{obstacles[o]}" for link, o in zip(*np.nonzero(world_hit[b]), strict=True)]
+        names.append(sorted(set(hits)) or None)
+    return names

@@ -156,6 +156,10 @@ def mesh_urdf(robot, model, urdf=None) -> Path | None:
             raise ValueError(f"mesh verdict: {path} is not a URDF file with <collision> geometry")
         return path
     fitted = Path(model.source[len("urdf:") :]) if model.source.startswith("urdf:") else None
+    if model.source.startswith("example-robot-data:"):  # a shipped model (nik.collision.builtin)
+        from nik.collision.builtin import erd_path
+
+        fitted = erd_path(model.source[len("example-robot-data:") :])
     for path in (fitted, _urdf_of(robot)):
         if path is not None and path.is_file() and _has_collision(path):
             return path

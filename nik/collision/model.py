@@ -6,6 +6,8 @@ Where the spheres come from (choices):
   body per link that has some, riding on the frame of its joint (:mod:`nik.collision.urdf`), covered by spheres
   fitted by :func:`nik.collision.fit.fit_spheres` (conservative: every surface point is inside; the overreach
   per link is reported in :attr:`CollisionModel.gaps` and :attr:`CollisionModel.volume_ratios`);
+- otherwise, a built-in arm with a shipped model (``panda``, ``ur5``, ``xarm7``: spheres fitted to their vendors'
+  meshes, :mod:`nik.collision.builtin`) gets that model, unless ``radius`` is given;
 - otherwise (DH / MDH / screw-axis files, or a URDF without collision geometry): a capsule of ``radius`` metres
   along each link, from one joint's origin to the next (the last to the tool point; frame 0 from the base to
   joint 1), covered exactly by spheres of radius ``sqrt(r^2 + (s/2)^2)`` spaced ``s = radius`` along it. A
@@ -313,7 +315,7 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
         spheres = [(f.centers, f.radii) for f in fits]
         return bodies, spheres, [f.gap for f in fits], [f.volume_ratio for f in fits], f"urdf:{urdf}"
     if source not in (None, "capsules"):
-        raise ValueError(f"collision source must be 'urdf', 'capsules' or None, got {source!r}")
+        raise ValueError(f"collision source must be 'urdf', 'builtin', 'capsules' or None, got {source!r}")
     bodies = link_capsule_bodies(robot, radius)
     spheres = [_capsule_spheres(b.triangles, b.radius) for b in bodies]
     gaps = [float(r[0] - b.radius) for b, (_, r) in zip(bodies, spheres, strict=True)]
@@ -346,15 +348,17 @@ def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
     return out
 
 
-def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None):
-    """Active pairs and the reasons of the others (module docstring)."""
+def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None, disabled=None):
+    """Active pairs and the reasons of the others (module docstring); ``disabled``: ``{(a, b): reason}`` pairs
+    an SRDF disables, given instead of its file ``srdf``."""
     from nik.collision.distance import self_distances, sphere_centers
 
     L = len(model.links)
     names = list(model.links)
     frames = np.asarray(model.frames)
     parents = model.parents or [None] * L
-    disabled = srdf_disabled(srdf) if srdf is not None else {}
+    if disabled is None:
+        disabled = srdf_disabled(srdf) if srdf is not None else {}
     left, candidates = {}, []
     for a in range(L):
         for b in range(a + 1, L):
@@ -481,9 +485,12 @@ def collision_model(
     """The collision model of ``robot`` (module docstring), from a file beside the robot's, nik's cache, or built.
 
     Args:
-        source: ``"urdf"`` (fit spheres to the URDF's collision geometry), ``"capsules"`` (capsules along the
-            links), or None: the URDF's geometry where the robot has it, else capsules.
-        radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base).
+        source: ``"urdf"`` (fit spheres to the URDF's collision geometry), ``"builtin"`` (the shipped model of a
+            built-in arm, :mod:`nik.collision.builtin`), ``"capsules"`` (capsules along the links), or None: the
+            URDF's geometry where the robot has it, else (``radius`` not given) the shipped model, else capsules
+            (with a :class:`nik.errors.CollisionModelWarning` once per robot, unless ``radius`` is given).
+        radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base); a value other
+            than the default asks for capsules where the robot has no URDF geometry (not the shipped model).
         tolerance: sphere fitting stops once a link's spheres overreach it by at most this (metres).
         max_spheres: at most this many spheres per link.
         samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
@@ -515,6 +522,12 @@ def collision_model(
         model = CollisionModel.load(beside, robot)
         memo[memo_key] = model
         return model
+    radii_given = options["radius"] != 0.05  # capsules of the radii given, where the robot has no URDF geometry
+    if (source == "builtin" or (source is None and not radii_given)) and not model_source_is_urdf(robot, None):
+        shipped = _builtin(robot, source, samples, never_clearance, srdf, seed)
+        if shipped is not None:
+            memo[memo_key] = shipped
+            return shipped
     urdf = _urdf_of(robot)
     fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed")}
     h = hashlib.sha256(f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}".encode())
@@ -543,5 +556,63 @@ def collision_model(
         _find_pairs(robot, model, samples, never_clearance, seed, srdf_path)
         if cache:
             _store(model, path)
+    if model.source == "capsules" and source is None and not radii_given:
+        _warn_capsules(robot, radius)
     memo[memo_key] = model
     return model
+
+
+def _builtin(robot, source, samples, never_clearance, srdf, seed) -> CollisionModel | None:
+    """The shipped model of a built-in arm (:mod:`nik.collision.builtin`), its pairs found again where the pair
+    options are not the defaults it was shipped with; None where there is none (an error for ``"builtin"``)."""
+    from nik.collision.builtin import CHECKSUMS, MODEL_DIR, builtin_model_data
+
+    found = builtin_model_data(robot)
+    if found is None:
+        if source == "builtin":
+            raise ValueError(
+                f"robot {robot.name!r}: no shipped collision model (the built-ins with one: {', '.join(CHECKSUMS)})"
+            )
+        return None
+    name, data = found
+    model = CollisionModel.from_dict(data, source=f"shipped collision model {MODEL_DIR / name}.collision.json")
+    model.robot_hash = robot.definition_hash
+    model.options = {**model.options, "builtin": name}
+    if robot.base is not None:  # nik's frame 0 is the world's: the base link's spheres ride on the base
+        B = robot.base.numpy().astype(np.float64)
+        on_base = model.sphere_frame == 0
+        model.centers[on_base] = model.centers[on_base] @ B[:3, :3].T + B[:3, 3]
+    if (samples, never_clearance, srdf, seed) == (1000, 0.02, True, 0):
+        return model
+    disabled = {
+        tuple(sorted(k.split("|"))): why[len("srdf: ") :]
+        for k, why in model.left_out.items()
+        if srdf and why.startswith("srdf: ")
+    }
+    copy = CollisionModel(**{**model.__dict__, "options": {**model.options, "samples": samples, "srdf": srdf}})
+    copy.options.update(never_clearance=never_clearance, seed=seed)
+    copy.__dict__.pop("_sphere_pairs", None)
+    _find_pairs(robot, copy, samples, never_clearance, seed, disabled=disabled)
+    return copy
+
+
+def _warn_capsules(robot, radius) -> None:
+    """Say once per robot that its collision model is capsules, an approximation, and how to give better."""
+    if robot.__dict__.get("_capsules_warned"):
+        return
+    robot.__dict__["_capsules_warned"] = True
+    import warnings
+
+    from nik.errors import CollisionModelWarning
+
+    r = np.asarray(radius, dtype=float)
+    size = f"{1000 * float(r):.0f} mm" if r.ndim == 0 else "the given radii"
+    warnings.warn(
+        f"robot {robot.name!r}: no collision meshes, so its collision model is capsules of {size} along the links, "
+        "an approximation that may call colliding configurations free; give radii "
+        "(nik.collision.collision_model(robot, radius=[one per frame, metres]) passed to "
+        "nik.collision.set_collision_model) or meshes (load the arm from a URDF with <collision> geometry, or put "
+        f"a {Path(robot.source).stem if robot.source else robot.name}.collision.json beside its file)",
+        CollisionModelWarning,
+        stacklevel=3,
+    )

@@ -30,6 +30,8 @@ a kept one doubles it (at most 1)
 (:func:`nik.kernels.driver.rest_posture`; torch: :func:`rest_torch`, the same steps batched). ``q_rest="mid"`` is
 the middle of the joint ranges (distance from the limits). A 6-joint arm without a free axis has no null space: its
 answers do not move (to rounding; the residual step only polishes them). :data:`REST_ITERS` steps at most.
+Where a collision check is active the posture is applied by the collision stage instead, after its re-solve and
+before its verdict, never ending in a collision (:func:`nik.ik.collide.rest_free`).
 """
 
 from __future__ import annotations

@@ -241,11 +241,15 @@ def _build(robot, lm_cfg) -> Model:
 
 
 _MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Counts :func:`forget_model` calls: what keeps a model beyond a call (:mod:`nik.ik.backends.one_pose`) compares it.
+generation = 0
 
 
 def forget_model(robot) -> None:
     """Drop the models kept for ``robot`` (its frames changed: :func:`nik.robots.frames.adopt_arm`)."""
+    global generation
     _MODELS.pop(robot, None)
+    generation += 1
 
 
 def model_of(robot, lm_cfg=None) -> Model:

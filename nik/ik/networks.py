@@ -77,6 +77,21 @@ def checkpoint_network(path, robot, device) -> torch.nn.Module:
         raise
 
 
+def solver_networks(checkpoint, robot, device, closed_form: bool) -> tuple:
+    """``(net, single_pose_net, given)`` of an :class:`nik.IKSolver` built with ``checkpoint``: ``"auto"`` the
+    arm's installed or shipped networks where it has no closed form (loaded once per process, SHA-256 checked: a
+    damaged file is refused here), a path that network (``given``), None none."""
+    if isinstance(checkpoint, str) and checkpoint == "auto":
+        if closed_form:
+            return None, None, False
+        net, given = known_network(robot, device)
+        one = known_network(robot, device, single_pose=True)[0] if net is not None else None
+        return net, one, given
+    if checkpoint is not None:
+        return checkpoint_network(checkpoint, robot, device), None, True
+    return None, None, False
+
+
 def _same_arm(robot, single_pose: bool) -> Path | None:
     """The network of the same arm under another definition (:func:`nik.nets.registry.find_same_arm`: another file
     of the same robot, or another end link a fixed transform past the network's), or None. Found, ``robot`` records

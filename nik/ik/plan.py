@@ -15,7 +15,11 @@ A :class:`Plan` is data. The torch backend interprets it with a Python loop over
    small single-pose network where it has one (about a twentieth of the main network's multiply-adds for about one
    more LM iteration: docs/learned.md), on torch the main one;
 3. an arm with a closed form and ``analytic=True`` keeps the closed form as its guess unless a network was given
-   (``checkpoint="auto"`` loads none for it); else the refiner starts from uniform configurations (``multistart``).
+   (``checkpoint="auto"`` loads none for it); else the refiner starts from uniform configurations (``multistart``);
+4. a given or installed network that does not earn its place (:mod:`nik.ik.judge`: on seeded probe poses its best
+   hypothesis is a better start than the best of 16 uniform configurations less than half the time; judged once per
+   network and robot) gives way to the guess of 3 in the plans that refine and have a fallback (one warning per
+   network); ``refine="none"`` and ``fallback="none"`` keep it (they ask what the network delivers).
 
 **Tolerances.** ``tol_pos, tol_rot`` are the asked ones (success is measured against them). Float32 targets are
 refined to :data:`FLOAT32_MARGIN` times them on *both* backends (compiled: in float64, then rounded to float32; torch:
@@ -90,12 +94,20 @@ class Plan:
         return self.tol_pos * m, self.tol_rot * m
 
 
-def choose_network(main, single_pose, given: bool, backend: str):
+def choose_network(main, single_pose, given: bool, backend: str, robot=None, refine="none", fallback="none"):
     """The network that guesses (module docstring, "Which guess serves"): ``main`` (the solver's network) unless it
     is the shipped one (``given`` False) and the call runs on the compiled backend, where the arm's ``single_pose``
-    network serves when it has one."""
+    network serves when it has one. Where the plan refines and has a fallback (``refine``, ``fallback``: the
+    solver's settings), a given or installed network that does not earn its place on ``robot``
+    (:func:`nik.ik.judge.earns`: its best hypothesis no better a start than uniform ones) gives way: None
+    (the closed form or uniform starts serve)."""
     if main is not None and not given and single_pose is not None and backend == "compiled":
         return single_pose
+    if main is not None and given and robot is not None and "none" not in (refine, fallback):
+        from nik.ik.judge import earns
+
+        if not earns(main, robot, in_arm_frame(robot, main)):
+            return None
     return main
 
 
@@ -136,6 +148,28 @@ def with_goal(plan: Plan, bounds=None, q_rest=None, rest_weight: float = 0.1, *,
 
 #: Values of ``IKSolver(refine=...)``.
 REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
+
+
+def solver_plan(solver, backend: str, tol_pos: float, tol_rot: float, seed: int, max_iters) -> Plan:
+    """The plan of one :meth:`nik.IKSolver.plan` call: resolved once per settings and call arguments (a plan is
+    immutable) and kept on the solver (at most 65 kept)."""
+    s = solver
+    key = (backend, tol_pos, tol_rot, seed, max_iters, s._net, s._given, s.fallback, s.refine, id(s.swarm_cfg),
+           s.polish, s.closed_form)  # fmt: skip
+    plan = solver._plans.get(key)
+    if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
+        net = choose_network(s._net, s._net_one, s._given, backend, s.robot, s.refine, s.fallback)
+        src = "network" if net is not None else "analytic" if solver.closed_form else "multistart"
+        lm_cfg = solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None
+        plan = Plan(
+            src, net, in_arm_frame(solver.robot, net), solver.refine, lm_cfg, max_iters,
+            restarts=src == "multistart" or solver.fallback == "multistart", near=not solver.closed_form,
+            fallback=solver.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
+            swarm_cfg=solver.swarm_cfg, polish=solver.polish,
+        )  # fmt: skip
+        solver._plans = {} if len(solver._plans) > 64 else solver._plans
+        solver._plans[key] = plan
+    return plan
 
 
 def check_settings(backend: str, refine: str) -> None:

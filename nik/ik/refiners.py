@@ -2,7 +2,8 @@
 
 - :func:`lm_refine`: Levenberg-Marquardt (:func:`nik.lm.lm_solve`) with restarts only for the
   targets that fail and are within reach; one pose on the CPU takes the compiled kernel
-  (:mod:`nik.lm.compiled`), where torch's per-op overhead would dominate;
+  (:mod:`nik.lm.compiled`), where torch's per-op overhead would dominate, except while the kernels compile in the
+  background (:data:`nik.kernels.background.BUSY`: the torch LM answers meanwhile);
 - :func:`swarm_refine`: the swarm methods through :func:`nik.swarm.refine`, answers measured by FK.
 """
 
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from nik.kernels import background
 from nik.lm import LMCfg, lm_solve
 from nik.poses import pose_error
 from nik.robots import Robot
@@ -49,7 +51,7 @@ def lm_refine(
     targets that fail and are within reach (``restarts=False``: none). ``T: (B, 4, 4)``. ``local``: no joint
     wraps (:func:`nik.lm.lm_solve`)."""
     cfg = cfg if isinstance(cfg, LMCfg) else LMCfg()
-    if T.shape[0] == 1 and T.device.type == "cpu":
+    if T.shape[0] == 1 and T.device.type == "cpu" and not background.BUSY:  # not while kernels compile (background)
         return _lm_refine_one(robot, T, q0, tol_pos, tol_rot, max_iters, cfg, restarts, reachable, int(seed), local)
     g = torch.Generator(device=T.device).manual_seed(int(seed))
     q, it = lm_solve(

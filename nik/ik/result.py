@@ -8,7 +8,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
-__all__ = ["IKResult", "PathReport"]
+__all__ = ["IKResult", "PathReport", "TensorResult"]
 
 
 @dataclass
@@ -77,6 +77,47 @@ class IKResult:
         moved = {f.name: getattr(self, f.name) for f in fields(self)}
         moved = {k: v.detach().cpu().numpy() if isinstance(v, torch.Tensor) else v for k, v in moved.items()}
         return IKResult(**moved)
+
+
+class _Tensor:
+    """A field of :class:`TensorResult`: its numpy array until first read, then the tensor that shares its memory
+    (``torch.from_numpy``), kept in the instance (a non-data descriptor: the instance's value wins once set)."""
+
+    def __init__(self, index: int):
+        self.index = index
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj.__dict__[self.name] = torch.from_numpy(obj.__dict__["_arrays"][self.index])
+        return value
+
+
+class TensorResult(IKResult):
+    """An :class:`IKResult` of CPU tensors made from numpy arrays when first read: what one pose given as a tensor gets
+    from the one-pose path (:mod:`nik.ik.backends.one_pose`). Each array field (``q``, ``pos_err``, ``rot_err``,
+    ``success``, ``iterations``, ``reachable``) is ``torch.from_numpy`` of the kernel's output, as the batch path
+    returns it (same dtype, shape, memory), made on first read (a microsecond each) rather than for every field of
+    every call; the other fields are those of a plain result. Built by :meth:`of`; the dataclass constructor (and
+    ``dataclasses.replace``) gives one whose fields are all set."""
+
+    q = _Tensor(0)
+    pos_err = _Tensor(1)
+    rot_err = _Tensor(2)
+    success = _Tensor(3)
+    iterations = _Tensor(4)
+    reachable = _Tensor(5)
+
+    @classmethod
+    def of(cls, q, pos_err, rot_err, success, iterations, reachable, source: str) -> TensorResult:
+        """The result of the numpy arrays ``q: (B, dof)``, ``pos_err, rot_err, success, iterations, reachable: (B,)``
+        (kept; their tensors share their memory)."""
+        res = cls.__new__(cls)
+        res.__dict__.update(_arrays=(q, pos_err, rot_err, success, iterations, reachable), source=source)
+        return res
 
 
 @dataclass

@@ -18,6 +18,7 @@ import math
 import numpy as np
 import torch
 
+from nik.kernels import background as _background
 from nik.poses import (
     DEGREES_SUSPECT,
     ORTHONORMAL_TOL,
@@ -141,7 +142,7 @@ def pose_array(
             a = np.asarray(T_target, dtype=np.float64)
         except (TypeError, ValueError):
             a = None
-    T = None if a is None else _checked_poses(a, representation)
+    T = None if a is None or _background.BUSY else _checked_poses(a, representation)  # BUSY: kernels compile
     if T is None:  # the torch checks word the error, or accept with a warning (degrees?)
         T = as_poses(T_target, representation, name=name).detach().to(torch.float64).numpy()
     return np.ascontiguousarray(T), dtype

@@ -14,11 +14,14 @@ them; the torch code stays the reference they are tested against.
 - :mod:`nik.kernels.mlp`: forward pass of an MLP whose weights are one flat float64 (or float32) array;
 - :mod:`nik.kernels.seeded`: a network's hypotheses as LM seeds: forward pass and decoding, ranking by FK, LM from
   several starts in turn, merging refined answers;
-- :mod:`nik.kernels.cache`: where the compiled code is kept (imports no numba).
+- :mod:`nik.kernels.cache`: where the compiled code is kept (imports no numba);
+- :mod:`nik.kernels.background`: the first compile on a cold cache: one line on stderr, the compiled solve compiled in
+  a background thread while the torch backend answers (imports no numba).
 
 Every kernel is ``numba.njit(cache=True, nogil=True)``, and none writes memory shared between calls
 (scratch is allocated per call), so threads sharing a solver run their kernels in parallel. Compiled on
-first use (seconds, once per machine), then loaded from the cache folder chosen by
+first use (tens of seconds, once per machine, announced by one line on stderr; ``backend="auto"`` answers from torch
+meanwhile: :mod:`nik.kernels.background`), then loaded from the cache folder chosen by
 :mod:`nik.kernels.cache` (``nik/kernels/__pycache__`` when writable, else ``$XDG_CACHE_HOME/nik/numba``;
 ``NUMBA_CACHE_DIR`` overrides both).
 ``import nik`` does not import this room (nor numba): callers import it when the compiled path is

@@ -19,6 +19,10 @@ process). Compiled nopython code never reads those globals (only object mode doe
 the environment of a numba module not yet imported keeps the module's name in place of its globals
 (:func:`_rebuild_env_without_import`); a module already imported gives its globals as numba's own rebuild does.
 
+The first compile of a nik kernel in a process (a cache miss: nothing is compiled on a warm cache) writes one line on
+stderr, ``nik: compiling kernels for this machine (once, ~30-70 s)`` (:func:`nik.kernels.background.announce`; numba's
+``numba:compile`` event, :class:`_Announce`), so that tens of silent seconds say what they are.
+
 Building blocks (functions whose name starts with ``_``) are compiled into the kernels that call them, whose
 cached code holds them, so they are not cached on their own: each cached function costs numba a probe of
 its cache folder when it is decorated (a temporary file) and an index to read when it is first called.
@@ -29,11 +33,14 @@ from __future__ import annotations
 import contextlib
 import importlib
 import sys
+import threading
 import warnings
 
 import numba
 from numba.core import config as _numba_config
+from numba.core import event as _numba_event
 
+from nik.kernels import background
 from nik.kernels.cache import choose_cache, user_cache_folder
 
 __all__ = ["CACHE", "entry_point", "kernel"]
@@ -49,6 +56,25 @@ if not CACHE.cache:
         RuntimeWarning,
         stacklevel=2,
     )
+
+
+class _Announce(_numba_event.Listener):
+    """On the start of a compile of a nik kernel (numba's ``numba:compile`` event: a cache miss), the line of
+    :func:`nik.kernels.background.announce`, once per process; a compile on nik's background thread was announced
+    with its torch part already."""
+
+    def on_start(self, event):
+        if not background.announced():
+            dispatcher = (event.data or {}).get("dispatcher")
+            module = getattr(getattr(dispatcher, "py_func", None), "__module__", "") or ""
+            if module.startswith("nik."):
+                background.announce(threading.current_thread().name == background.THREAD_NAME)
+
+    def on_end(self, event):
+        pass
+
+
+_numba_event.register("numba:compile", _Announce())
 
 
 @contextlib.contextmanager

@@ -31,9 +31,19 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import OFFSET, PRISMATIC, _joint, _start, _times
+from nik.kernels.chain import LOWER, OFFSET, PRISMATIC, UPPER, _joint, _start, _times
 
-__all__ = ["collides_batch", "collision_distances", "collision_distances_batch", "collision_residual"]
+__all__ = [
+    "blocked_poses",
+    "collides_batch",
+    "collision_distances",
+    "collision_distances_batch",
+    "collision_residual",
+    "collision_rows_batch",
+    "link_bounds",
+    "overlaps_batch",
+    "residual_bounded",
+]
 
 
 @kernel
@@ -75,154 +85,261 @@ def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, row):
 
 
 @kernel
-def _obstacle(x, y, z, w_spheres, w_boxes, w_capsules, g):
-    """Smallest signed distance from the point ``(x, y, z)`` to the obstacles, and its gradient in ``g (3,)``."""
-    best = np.inf
-    for o in range(w_spheres.shape[0]):
-        dx, dy, dz = x - w_spheres[o, 0], y - w_spheres[o, 1], z - w_spheres[o, 2]
-        n = math.sqrt(dx * dx + dy * dy + dz * dz)
-        d = n - w_spheres[o, 3]
-        if d < best:
-            best = d
-            if n > 0:
-                g[0], g[1], g[2] = dx / n, dy / n, dz / n
-            else:
-                g[0], g[1], g[2] = 0.0, 0.0, 1.0
-    for o in range(w_capsules.shape[0]):
-        ax, ay, az = w_capsules[o, 0], w_capsules[o, 1], w_capsules[o, 2]
-        bx, by, bz = w_capsules[o, 3] - ax, w_capsules[o, 4] - ay, w_capsules[o, 5] - az
-        L2 = bx * bx + by * by + bz * bz
-        t = 0.0
-        if L2 > 0:
-            t = ((x - ax) * bx + (y - ay) * by + (z - az) * bz) / L2
-            t = min(1.0, max(0.0, t))
-        dx, dy, dz = x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz)
-        n = math.sqrt(dx * dx + dy * dy + dz * dz)
-        d = n - w_capsules[o, 6]
-        if d < best:
-            best = d
-            if n > 0:
-                g[0], g[1], g[2] = dx / n, dy / n, dz / n
-            else:
-                g[0], g[1], g[2] = 0.0, 0.0, 1.0
-    for o in range(w_boxes.shape[0]):
-        b = w_boxes[o]
-        px, py, pz = x - b[9], y - b[10], z - b[11]
-        lx = b[0] * px + b[3] * py + b[6] * pz  # R^T (p - c)
-        ly = b[1] * px + b[4] * py + b[7] * pz
-        lz = b[2] * px + b[5] * py + b[8] * pz
-        qx, qy, qz = abs(lx) - b[12], abs(ly) - b[13], abs(lz) - b[14]
-        qmax = max(qx, max(qy, qz))
+def _sphere_distance(x, y, z, w, o, g, want):
+    """Signed distance from the point ``(x, y, z)`` to the world's sphere ``w[o]``, its gradient in ``g (3,)``
+    where ``want``."""
+    dx, dy, dz = x - w[o, 0], y - w[o, 1], z - w[o, 2]
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if not want:
+        return n - w[o, 3]
+    if n > 0:
+        g[0], g[1], g[2] = dx / n, dy / n, dz / n
+    else:
+        g[0], g[1], g[2] = 0.0, 0.0, 1.0
+    return n - w[o, 3]
+
+
+@kernel
+def _capsule_distance(x, y, z, w, o, g, want):
+    """Signed distance from the point ``(x, y, z)`` to the world's capsule ``w[o]``, its gradient in ``g (3,)``
+    where ``want``."""
+    ax, ay, az = w[o, 0], w[o, 1], w[o, 2]
+    bx, by, bz = w[o, 3] - ax, w[o, 4] - ay, w[o, 5] - az
+    L2 = bx * bx + by * by + bz * bz
+    t = 0.0
+    if L2 > 0:
+        t = ((x - ax) * bx + (y - ay) * by + (z - az) * bz) / L2
+        t = min(1.0, max(0.0, t))
+    dx, dy, dz = x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz)
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if not want:
+        return n - w[o, 6]
+    if n > 0:
+        g[0], g[1], g[2] = dx / n, dy / n, dz / n
+    else:
+        g[0], g[1], g[2] = 0.0, 0.0, 1.0
+    return n - w[o, 6]
+
+
+@kernel
+def _box_distance(x, y, z, w, o, g, want):
+    """Signed distance from the point ``(x, y, z)`` to the world's box ``w[o]`` (exact SDF), its gradient in ``g``
+    where ``want``."""
+    b = w[o]
+    px, py, pz = x - b[9], y - b[10], z - b[11]
+    lx = b[0] * px + b[3] * py + b[6] * pz  # R^T (p - c)
+    ly = b[1] * px + b[4] * py + b[7] * pz
+    lz = b[2] * px + b[5] * py + b[8] * pz
+    qx, qy, qz = abs(lx) - b[12], abs(ly) - b[13], abs(lz) - b[14]
+    qmax = max(qx, max(qy, qz))
+    if not want:
         if qmax > 0:
             wx, wy, wz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
-            d = math.sqrt(wx * wx + wy * wy + wz * wz)
-            gx, gy, gz = math.copysign(wx / d, lx), math.copysign(wy / d, ly), math.copysign(wz / d, lz)
+            return math.sqrt(wx * wx + wy * wy + wz * wz)
+        return qmax
+    if qmax > 0:
+        wx, wy, wz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+        d = math.sqrt(wx * wx + wy * wy + wz * wz)
+        gx, gy, gz = math.copysign(wx / d, lx), math.copysign(wy / d, ly), math.copysign(wz / d, lz)
+    else:
+        d = qmax
+        gx, gy, gz = 0.0, 0.0, 0.0
+        if qx >= qy and qx >= qz:
+            gx = math.copysign(1.0, lx)
+        elif qy >= qz:
+            gy = math.copysign(1.0, ly)
         else:
-            d = qmax
-            gx, gy, gz = 0.0, 0.0, 0.0
-            if qx >= qy and qx >= qz:
-                gx = math.copysign(1.0, lx)
-            elif qy >= qz:
-                gy = math.copysign(1.0, ly)
-            else:
-                gz = math.copysign(1.0, lz)
-        if d < best:
-            best = d
-            g[0] = b[0] * gx + b[1] * gy + b[2] * gz
-            g[1] = b[3] * gx + b[4] * gy + b[5] * gz
-            g[2] = b[6] * gx + b[7] * gy + b[8] * gz
-    return best
+            gz = math.copysign(1.0, lz)
+    g[0] = b[0] * gx + b[1] * gy + b[2] * gz
+    g[1] = b[3] * gx + b[4] * gy + b[5] * gz
+    g[2] = b[6] * gx + b[7] * gy + b[8] * gz
+    return d
+
+
+@kernel
+def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g, want=False):
+    """Signed distance from ``(x, y, z)`` to obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule), its gradient
+    in ``g`` where ``want`` (the scans skip it: computed once for the nearest)."""
+    if kind == 0:
+        return _sphere_distance(x, y, z, w_spheres, o, g, want)
+    if kind == 1:
+        return _box_distance(x, y, z, w_boxes, o, g, want)
+    return _capsule_distance(x, y, z, w_capsules, o, g, want)
+
+
+@kernel
+def link_bounds(spheres, body_start, bounds):
+    """``bounds (L, 4)``: each link's bounding sphere in its own frame (the mean of its centres, and the radius
+    reaching every one of its spheres; radius -1 for a link without spheres). A link rides on one frame, so the
+    bound placed with that frame holds the placed spheres (a rigid motion keeps distances)."""
+    for link in range(body_start.shape[0] - 1):
+        s0, s1 = body_start[link], body_start[link + 1]
+        for r in range(4):
+            bounds[link, r] = 0.0
+        if s1 <= s0:
+            bounds[link, 3] = -1.0
+            continue
+        for s in range(s0, s1):
+            for r in range(3):
+                bounds[link, r] += spheres[s, r]
+        for r in range(3):
+            bounds[link, r] /= s1 - s0
+        for s in range(s0, s1):
+            dx, dy, dz = (
+                spheres[s, 0] - bounds[link, 0],
+                spheres[s, 1] - bounds[link, 1],
+                spheres[s, 2] - bounds[link, 2],
+            )
+            bounds[link, 3] = max(bounds[link, 3], math.sqrt(dx * dx + dy * dy + dz * dz) + spheres[s, 3])
+
+
+@kernel
+def _place_link(F, spheres, sphere_frame, body_start, link, X, placed):
+    """The world positions of link ``link``'s spheres in ``X``, once per evaluation (``placed[link]``)."""
+    if placed[link]:
+        return
+    placed[link] = True
+    for s in range(body_start[link], body_start[link + 1]):
+        f = sphere_frame[s]
+        for r in range(3):
+            X[s, r] = F[f, r, 0] * spheres[s, 0] + F[f, r, 1] * spheres[s, 1] + F[f, r, 2] * spheres[s, 2] + F[f, r, 3]
 
 
 @kernel
 def _rows(
-    G,
-    joints,
-    q,
-    spheres,
-    sphere_frame,
-    body_start,
-    pairs,
-    w_spheres,
-    w_boxes,
-    w_capsules,
-    self_on,
-    d,
-    J,
-    want_jacobian,
-    cutoff,
-):
-    """The rows (module docstring). Broad phase: a row whose lower bound from the links' bounding spheres exceeds
-    ``cutoff`` is that bound (Jacobian row 0) instead of the exact minimum."""
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+    want_jacobian, cutoff, bounds, stop,
+):  # fmt: skip
+    """The rows (module docstring) with the broad phase: ``d[k]`` is exact wherever it is at most ``cutoff``, else
+    a lower bound above ``cutoff`` (Jacobian row 0). ``bounds (L, 4)``: :func:`link_bounds`. ``stop``: return at the
+    first row below ``cutoff`` (the rows after it are left unset). Returns whether a row is below ``cutoff``.
+
+    The broad phase, each test a lower bound of the distances it skips (a signed distance is 1-Lipschitz, so a
+    bounding sphere's distance minus its radius bounds every sphere inside it): a pair of links whose bounding
+    spheres are apart by more than ``cutoff`` is that bound; else a sphere of one link farther than ``cutoff``
+    from the other link's bounding sphere is skipped; a link and an obstacle whose bound is above ``cutoff``
+    likewise. A row is the smallest of its exact distances and its skipped bounds, so below ``cutoff`` it equals
+    the all-pairs minimum (the minimising pair is never skipped)."""
     n = q.shape[0]
     S = spheres.shape[0]
     P = pairs.shape[0]
     L = body_start.shape[0] - 1
+    No = w_spheres.shape[0] + w_boxes.shape[0] + w_capsules.shape[0]
     F = np.empty((n + 1, 3, 4))
     X = np.empty((S, 3))
+    placed = np.zeros(L, dtype=np.bool_)
     _frames(G, joints, q, F)
-    _place(F, spheres, sphere_frame, X)
-    Bc = np.zeros((L, 3))  # each link's bounding sphere: the mean of its centres, reaching all its spheres
-    Br = np.zeros(L)
+    Bc = np.empty((L, 3))  # each link's bounding sphere, placed
     for link in range(L):
-        s0, s1 = body_start[link], body_start[link + 1]
-        if s1 > s0:
-            for s in range(s0, s1):
-                for r in range(3):
-                    Bc[link, r] += X[s, r]
+        if bounds[link, 3] >= 0:
+            f = sphere_frame[body_start[link]]
             for r in range(3):
-                Bc[link, r] /= s1 - s0
-            for s in range(s0, s1):
-                dx, dy, dz = X[s, 0] - Bc[link, 0], X[s, 1] - Bc[link, 1], X[s, 2] - Bc[link, 2]
-                Br[link] = max(Br[link], math.sqrt(dx * dx + dy * dy + dz * dz) + spheres[s, 3])
+                Bc[link, r] = F[f, r, 0] * bounds[link, 0] + F[f, r, 1] * bounds[link, 1] + F[f, r, 2] * bounds[link, 2]
+                Bc[link, r] += F[f, r, 3]
     if want_jacobian:
         for r in range(P + L):
             for m in range(n):
                 J[r, m] = 0.0
-    for p in range(P):
-        best, bi, bj = np.inf, -1, -1
-        if self_on:
-            a, b = pairs[p, 0], pairs[p, 1]
-            dx, dy, dz = Bc[a, 0] - Bc[b, 0], Bc[a, 1] - Bc[b, 1], Bc[a, 2] - Bc[b, 2]
-            bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Br[a] - Br[b]
-            if bound > cutoff:
-                d[p] = bound
-                continue
-            for i in range(body_start[a], body_start[a + 1]):
-                for j in range(body_start[b], body_start[b + 1]):
-                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
-                    dist = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3]
+    g = np.empty(3)
+    gb = np.zeros(3)
+    hit = False
+    # the world first: a link and an obstacle are the likelier overlap, and the cheaper test
+    kinds = np.empty(No, dtype=np.int64)
+    which = np.empty(No, dtype=np.int64)
+    keep = np.empty(S, dtype=np.int64)
+    for link in range(L):
+        s0, s1 = body_start[link], body_start[link + 1]
+        if s1 <= s0 or sphere_frame[s0] == 0 or No == 0:
+            d[P + link] = np.inf  # the base's links never move: their contacts with the world are the user's set-up
+            continue
+        lower = np.inf  # the smallest bound of the obstacles skipped
+        m = 0
+        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+            for o in range(count):
+                bound = _obstacle_one(Bc[link, 0], Bc[link, 1], Bc[link, 2], kind, o, w_spheres, w_boxes, w_capsules,
+                                      g) - bounds[link, 3]  # fmt: skip
+                if bound > cutoff:
+                    lower = min(lower, bound)
+                else:
+                    kinds[m], which[m] = kind, o
+                    m += 1
+        best, bs, bk = np.inf, -1, -1
+        if m > 0:
+            _place_link(F, spheres, sphere_frame, body_start, link, X, placed)
+            for s in range(s0, s1):
+                for k in range(m):
+                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kinds[k], which[k], w_spheres, w_boxes,
+                                         w_capsules, g) - spheres[s, 3]  # fmt: skip
                     if dist < best:
-                        best, bi, bj = dist, i, j
-        d[p] = best
-        if want_jacobian and bi >= 0:
+                        best, bs, bk = dist, s, k
+                        if stop and best < cutoff:
+                            d[P + link] = best
+                            return True
+        d[P + link] = min(best, lower)
+        if want_jacobian and bs >= 0 and best <= lower:
+            _obstacle_one(X[bs, 0], X[bs, 1], X[bs, 2], kinds[bk], which[bk], w_spheres, w_boxes, w_capsules, gb, True)
+            _add_point_jacobian(
+                F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J[P + link]
+            )
+        if d[P + link] < cutoff:
+            hit = True
+            if stop:
+                return True
+    for p in range(P):
+        if not self_on:
+            d[p] = np.inf
+            continue
+        a, b = pairs[p, 0], pairs[p, 1]
+        if bounds[a, 3] < 0 or bounds[b, 3] < 0:
+            d[p] = np.inf
+            continue
+        dx, dy, dz = Bc[a, 0] - Bc[b, 0], Bc[a, 1] - Bc[b, 1], Bc[a, 2] - Bc[b, 2]
+        lower = math.sqrt(dx * dx + dy * dy + dz * dz) - bounds[a, 3] - bounds[b, 3]
+        best, bi, bj = np.inf, -1, -1
+        if lower <= cutoff:
+            lower = np.inf
+            _place_link(F, spheres, sphere_frame, body_start, a, X, placed)
+            _place_link(F, spheres, sphere_frame, body_start, b, X, placed)
+            m = 0
+            for j in range(body_start[b], body_start[b + 1]):  # link b's spheres within reach of link a
+                dx, dy, dz = X[j, 0] - Bc[a, 0], X[j, 1] - Bc[a, 1], X[j, 2] - Bc[a, 2]
+                near = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[j, 3] - bounds[a, 3]
+                if near > cutoff:  # sphere j is farther than cutoff from every sphere of link a
+                    lower = min(lower, near)
+                else:
+                    keep[m] = j
+                    m += 1
+            for i in range(body_start[a], body_start[a + 1]):
+                if m == 0:
+                    break
+                dx, dy, dz = X[i, 0] - Bc[b, 0], X[i, 1] - Bc[b, 1], X[i, 2] - Bc[b, 2]
+                near = math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - bounds[b, 3]
+                if near > cutoff:  # sphere i is farther than cutoff from every sphere of link b
+                    lower = min(lower, near)
+                    continue
+                for t in range(m):
+                    j = keep[t]
+                    reach = best + spheres[i, 3] + spheres[j, 3]  # nearer than this beats the best so far
+                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+                    sq = dx * dx + dy * dy + dz * dz
+                    if reach > 0 and sq < reach * reach:
+                        best, bi, bj = math.sqrt(sq) - spheres[i, 3] - spheres[j, 3], i, j
+                        if stop and best < cutoff:
+                            d[p] = best
+                            return True
+        d[p] = min(best, lower)
+        if want_jacobian and bi >= 0 and best <= lower:
             dx, dy, dz = X[bi, 0] - X[bj, 0], X[bi, 1] - X[bj, 1], X[bi, 2] - X[bj, 2]
             nn = math.sqrt(dx * dx + dy * dy + dz * dz)
             if nn > 0:
                 vx, vy, vz = dx / nn, dy / nn, dz / nn
                 _add_point_jacobian(F, joints, sphere_frame[bi], X[bi, 0], X[bi, 1], X[bi, 2], vx, vy, vz, 1.0, J[p])
                 _add_point_jacobian(F, joints, sphere_frame[bj], X[bj, 0], X[bj, 1], X[bj, 2], vx, vy, vz, -1.0, J[p])
-    g = np.empty(3)
-    gb = np.zeros(3)
-    for link in range(L):
-        best, bs = np.inf, -1
-        if body_start[link] < body_start[link + 1] and sphere_frame[body_start[link]] == 0:
-            d[P + link] = np.inf  # the base's links never move: their contacts with the world are the user's set-up
-            continue
-        bound = _obstacle(Bc[link, 0], Bc[link, 1], Bc[link, 2], w_spheres, w_boxes, w_capsules, g) - Br[link]
-        if bound > cutoff:  # signed distances are 1-Lipschitz: no sphere of the link is nearer than this
-            d[P + link] = bound
-            continue
-        for s in range(body_start[link], body_start[link + 1]):
-            dist = _obstacle(X[s, 0], X[s, 1], X[s, 2], w_spheres, w_boxes, w_capsules, g) - spheres[s, 3]
-            if dist < best:
-                best, bs = dist, s
-                gb[0], gb[1], gb[2] = g[0], g[1], g[2]
-        d[P + link] = best
-        if want_jacobian and bs >= 0 and best < np.inf:
-            _add_point_jacobian(
-                F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J[P + link]
-            )
+        if d[p] < cutoff:
+            hit = True
+            if stop:
+                return True
+    return hit
 
 
 @kernel
@@ -230,23 +347,10 @@ def collision_distances(
     G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J
 ):
     """Rows ``d (P + L,)`` (metres) and their Jacobian ``J (P + L, n)`` for ``q: (n,)`` (module docstring)."""
-    _rows(
-        G,
-        joints,
-        q,
-        spheres,
-        sphere_frame,
-        body_start,
-        pairs,
-        w_spheres,
-        w_boxes,
-        w_capsules,
-        self_on,
-        d,
-        J,
-        True,
-        np.inf,
-    )
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
+    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+          True, np.inf, bounds, False)  # fmt: skip
 
 
 @kernel
@@ -255,25 +359,23 @@ def collision_residual(
 ):
     """LM rows ``r = max(0, margin - d)`` ``(P + L,)`` and ``Jr = dr/dq`` ``(P + L, n)`` for ``q: (n,)``; returns
     the smallest distance ``d`` where it is at most ``margin`` (metres), else a lower bound above ``margin``
-    (``inf`` when there is nothing to check). Rows whose links' bounding spheres are farther than ``margin``
-    apart are not computed sphere by sphere (their residual is 0 either way)."""
-    _rows(
-        G,
-        joints,
-        q,
-        spheres,
-        sphere_frame,
-        body_start,
-        pairs,
-        w_spheres,
-        w_boxes,
-        w_capsules,
-        self_on,
-        r,
-        Jr,
-        True,
-        margin,
-    )
+    (``inf`` when there is nothing to check). Rows the broad phase puts farther than ``margin`` are not computed
+    sphere by sphere (their residual is 0 either way)."""
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
+    return residual_bounded(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                            self_on, margin, r, Jr, bounds)  # fmt: skip
+
+
+@kernel
+def residual_bounded(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr,
+    bounds,
+):  # fmt: skip
+    """:func:`collision_residual` with the links' bounds ``(L, 4)`` of :func:`link_bounds` given (computed once by
+    a caller that evaluates many configurations of one model: the LM of :mod:`nik.kernels.collision_lm`)."""
+    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr,
+          True, margin, bounds, False)  # fmt: skip
     smallest = np.inf
     for k in range(r.shape[0]):
         dist = r[k]
@@ -293,57 +395,249 @@ def collision_residual(
 def collision_distances_batch(
     G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, D
 ):
-    """Rows ``D (B, P + L)`` for ``Q: (B, n)``, no Jacobian."""
+    """Rows ``D (B, P + L)`` for ``Q: (B, n)``, exact (every sphere pair), no Jacobian."""
+    collision_rows_batch(G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                         self_on, np.inf, D)  # fmt: skip
+
+
+@kernel
+def collision_rows_batch(
+    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, cutoff, D
+):
+    """Rows ``D (B, P + L)`` for ``Q: (B, n)`` through the broad phase of ``cutoff`` (metres): each row equal to
+    the exact one (:func:`collision_distances_batch`) wherever either is at most ``cutoff``, else a lower bound
+    above ``cutoff`` (what the tests compare)."""
     J = np.empty((0, Q.shape[1]))
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
     for b in range(Q.shape[0]):
-        _rows(
-            G,
-            joints,
-            Q[b],
-            spheres,
-            sphere_frame,
-            body_start,
-            pairs,
-            w_spheres,
-            w_boxes,
-            w_capsules,
-            self_on,
-            D[b],
-            J,
-            False,
-            np.inf,
-        )
+        _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+              D[b], J, False, cutoff, bounds, False)  # fmt: skip
 
 
 @kernel
 def collides_batch(
     G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, out
 ):
-    """``out (B,)`` bool: some row of ``Q[b]`` is below ``margin`` (metres)."""
+    """``out (B,)`` bool: some row of ``Q[b]`` is below ``margin`` (metres); each configuration stops at its first
+    such row."""
     R = pairs.shape[0] + body_start.shape[0] - 1
     d = np.empty(R)
     J = np.empty((0, Q.shape[1]))
+    bounds = np.empty((body_start.shape[0] - 1, 4))
+    link_bounds(spheres, body_start, bounds)
     for b in range(Q.shape[0]):
-        _rows(
-            G,
-            joints,
-            Q[b],
-            spheres,
-            sphere_frame,
-            body_start,
-            pairs,
-            w_spheres,
-            w_boxes,
-            w_capsules,
-            self_on,
-            d,
-            J,
-            False,
-            margin,
-        )
-        hit = False
-        for k in range(R):
-            if d[k] < margin:
-                hit = True
+        out[b] = _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                       self_on, d, J, False, margin, bounds, True)  # fmt: skip
+
+
+@kernel
+def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on, g):
+    """The smallest exact row among those whose links all have ``on[frame]`` (placed in ``X``): pairs with both
+    links on such frames, and such links (not on frame 0) against the world."""
+    L = body_start.shape[0] - 1
+    best = np.inf
+    for link in range(L):
+        s0, s1 = body_start[link], body_start[link + 1]
+        if s1 <= s0 or not on[sphere_frame[s0]] or sphere_frame[s0] == 0:
+            continue
+        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+            for o in range(count):
+                for s in range(s0, s1):
+                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                    best = min(best, dist - spheres[s, 3])
+    if self_on:
+        for p in range(pairs.shape[0]):
+            a, b = pairs[p, 0], pairs[p, 1]
+            if body_start[a] == body_start[a + 1] or body_start[b] == body_start[b + 1]:
+                continue
+            if not (on[sphere_frame[body_start[a]]] and on[sphere_frame[body_start[b]]]):
+                continue
+            for i in range(body_start[a], body_start[a + 1]):
+                for j in range(body_start[b], body_start[b + 1]):
+                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+    return best
+
+
+@kernel
+def _sweep_rows(
+    X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g, below
+):  # fmt: skip
+    """The smallest exact row of the links on frame ``k`` (placed in ``X``): against the world, and against the
+    links on frames 0, ``k`` and ``n``; returned as soon as one is below ``below`` (then an upper bound of it)."""
+    L = body_start.shape[0] - 1
+    best = np.inf
+    for link in range(L):
+        s0, s1 = body_start[link], body_start[link + 1]
+        if s1 <= s0 or sphere_frame[s0] != k:
+            continue
+        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+            for o in range(count):
+                for s in range(s0, s1):
+                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                    best = min(best, dist - spheres[s, 3])
+                    if best < below:
+                        return best
+    if self_on:
+        for p in range(pairs.shape[0]):
+            a, b = pairs[p, 0], pairs[p, 1]
+            if body_start[a] == body_start[a + 1] or body_start[b] == body_start[b + 1]:
+                continue
+            fa, fb = sphere_frame[body_start[a]], sphere_frame[body_start[b]]
+            if not ((fa == k and (fb == 0 or fb == k or fb == n)) or (fb == k and (fa == 0 or fa == k or fa == n))):
+                continue
+            for i in range(body_start[a], body_start[a + 1]):
+                for j in range(body_start[b], body_start[b + 1]):
+                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+                    if best < below:
+                        return best
+    return best
+
+
+@kernel
+def _rigid_inverse_times(A, M, out):
+    """``out (3, 4) = A @ M^-1`` for rigid ``A (3, 4)`` and ``M (3, 4)`` (their top rows)."""
+    for r in range(3):
+        for c in range(3):
+            out[r, c] = A[r, 0] * M[c, 0] + A[r, 1] * M[c, 1] + A[r, 2] * M[c, 2]
+    for r in range(3):
+        out[r, 3] = A[r, 3] - (out[r, 0] * M[0, 3] + out[r, 1] * M[1, 3] + out[r, 2] * M[2, 3])
+
+
+@kernel
+def _lever(spheres, sphere_frame, k, M, prismatic):
+    """The farthest a sphere centre on frame ``k`` lies from the axis of the joint that turns it (the z axis of
+    ``M (3, 4)`` in frame ``k``'s coordinates): what a sphere moves per radian; 1 for a prismatic joint."""
+    rho = 0.0
+    for s in range(spheres.shape[0]):
+        if sphere_frame[s] != k:
+            continue
+        if prismatic:
+            return 1.0
+        vx, vy, vz = spheres[s, 0] - M[0, 3], spheres[s, 1] - M[1, 3], spheres[s, 2] - M[2, 3]
+        along = vx * M[0, 2] + vy * M[1, 2] + vz * M[2, 2]
+        rho = max(rho, math.sqrt(max(vx * vx + vy * vy + vz * vz - along * along, 0.0)))
+    return rho
+
+
+@kernel
+def blocked_poses(
+    G, joints, T, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, slack, samples,
+    out,
+):  # fmt: skip
+    """``out (B,)`` bool: no configuration whose tool pose is within ``slack`` of ``T[b] (4, 4)`` is free, proven
+    by the rows the pose fixes (metres; ``slack`` bounds how far a sphere on the last two frames moves between two
+    such configurations: the position tolerance plus the rotation tolerance times the sphere's lever).
+
+    The links on the last frame (the frame after the last joint: a hand, its fingers) ride with the tool, the links
+    on frame 0 never move: their rows against each other and the world's against the former are fixed by the pose
+    (blocked where the smallest is below ``-slack``). Then two sweeps over one joint each, on ``samples`` values of
+    its range: the links on frame 1 move with the first joint alone, the links on frame ``n - 1`` with the pose and
+    the last joint alone; their rows against the world and the links on frames 0, their own and ``n`` are swept
+    (blocked where, for every value, the smallest row plus what a sphere moves between two values and ``slack`` is
+    below 0). Never True for a pose that has a free configuration within the tolerances."""
+    n = joints.shape[0]
+    S = spheres.shape[0]
+    F = np.zeros((n + 1, 3, 4))
+    X = np.zeros((S, 3))
+    on = np.zeros(n + 1, dtype=np.bool_)
+    g = np.empty(3)
+    Tj = np.empty((3, 4))
+    Gn = np.empty((3, 4))
+    _start(Gn, G[n])
+    M0 = np.empty((3, 4))  # the first joint turns frame 1 about its own z axis (M0 = identity in its coordinates)
+    _start(M0, np.eye(4))
+    Mw = np.empty((3, 4))  # the last joint turns frame n - 1 about the z axis of G[n - 1]
+    _start(Mw, G[n - 1])
+    sweeps = 2 if n >= 3 else (1 if n == 2 else 0)
+    for b in range(T.shape[0]):
+        out[b] = False
+        for r in range(3):
+            for c in range(4):
+                F[0, r, c] = 1.0 if r == c else 0.0
+        _rigid_inverse_times(T[b], Gn, F[n])  # F[n] = T G[n]^-1
+        for i in range(n + 1):
+            on[i] = i == 0 or i == n
+        _place(F, spheres, sphere_frame, X)  # only the spheres on frames 0 and n are read
+        if _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on,
+                       g) < -slack:  # fmt: skip
+            out[b] = True
+            continue
+        if samples < 2:
+            continue
+        for sweep in range(sweeps):
+            j = 0 if sweep == 0 else n - 1  # the joint swept
+            k = 1 if sweep == 0 else n - 1  # the frame it moves
+            prismatic = joints[j, PRISMATIC] != 0.0
+            rho = _lever(spheres, sphere_frame, k, M0 if sweep == 0 else Mw, prismatic)
+            lo, hi = joints[j, LOWER], joints[j, UPPER]
+            span = hi - lo if prismatic else min(hi - lo, 2.0 * math.pi)
+            h = span / (samples - 1)
+            blocked = True
+            for i in range(samples):
+                x = lo + ((i * 7919) % samples) * h  # a stride through the range: a free value is met early
+                if sweep == 0:  # F[1] = G[0] J(q1)
+                    _start(Tj, G[0])
+                    _joint(Tj, prismatic, x + joints[j, OFFSET])
+                    for r in range(3):
+                        for c in range(4):
+                            F[1, r, c] = Tj[r, c]
+                else:  # F[n - 1] = F[n] (G[n - 1] J(qn))^-1
+                    _start(Tj, G[n - 1])
+                    _joint(Tj, prismatic, x + joints[j, OFFSET])
+                    _rigid_inverse_times(F[n], Tj, F[n - 1])
+                _place(F, spheres, sphere_frame, X)
+                reach = rho * h / 2 + slack  # a row at least -reach here may be free somewhere near
+                worst = _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                                    self_on, k, n, g, -reach)  # fmt: skip
+                if worst >= -reach:
+                    blocked = False
+                    break
+            if blocked:
+                out[b] = True
                 break
-        out[b] = hit
+
+
+@kernel
+def overlaps_batch(
+    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, pair_hit,
+    world_hit,
+):  # fmt: skip
+    """What overlaps (distance below 0) in each ``Q[b] (n,)``: ``pair_hit (B, P)`` bool, the pairs (False where
+    ``self_on`` is False); ``world_hit (B, L, No)`` bool, link ``l`` and obstacle ``o`` (numbered spheres, boxes,
+    capsules, as :meth:`nik.collision.World.packed`; False for the links on frame 0). The names of
+    :func:`nik.collision.collision_names`, compiled; the same broad phase (cutoff 0) as the check."""
+    n = Q.shape[1]
+    S, P, L = spheres.shape[0], pairs.shape[0], body_start.shape[0] - 1
+    Ns, Nb = w_spheres.shape[0], w_boxes.shape[0]
+    bounds = np.empty((L, 4))
+    link_bounds(spheres, body_start, bounds)
+    d = np.empty(P + L)
+    J = np.empty((0, n))
+    F = np.empty((n + 1, 3, 4))
+    X = np.empty((S, 3))
+    g = np.empty(3)
+    for b in range(Q.shape[0]):
+        _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d,
+              J, False, 0.0, bounds, False)  # fmt: skip
+        for p in range(P):
+            pair_hit[b, p] = d[p] < 0.0
+        world_hit[b, :, :] = False
+        _frames(G, joints, Q[b], F)
+        placed = False
+        for link in range(L):
+            s0, s1 = body_start[link], body_start[link + 1]
+            if s1 <= s0 or sphere_frame[s0] == 0 or not d[P + link] < 0.0:
+                continue
+            if not placed:
+                _place(F, spheres, sphere_frame, X)
+                placed = True
+            for kind, count, first in ((0, Ns, 0), (1, Nb, Ns), (2, w_capsules.shape[0], Ns + Nb)):
+                for o in range(count):
+                    for s in range(s0, s1):
+                        dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                        if dist - spheres[s, 3] < 0.0:
+                            world_hit[b, link, first + o] = True
+                            break

@@ -15,11 +15,13 @@ at the first done candidate matters: the margin rows still pull when ``0 <= d < 
 needs the arm closer than the margin the minimum of the sum is a compromise whose pose error may exceed the
 tolerance; the path to it passes through done points.
 
-Starts, per target, in order: the ``n_starts[b]`` given ones (the answer that collided, then the network's
-other hypotheses or the closed form's other branches); a given start after the first that collides is dropped
-before any iteration (a colliding hypothesis mostly lands on a colliding answer; LM from it would spend the
-budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the collision-free draw
-nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before any iteration).
+Starts, per target, in order: the ``n_starts[b]`` given ones, the answer that collided first (near the caller's
+``q_near`` or a path's previous waypoint: LM from it keeps the answer on its branch), then the network's other
+hypotheses or the closed form's other branches ranked before any iteration (:func:`_rank_starts`): the free ones,
+nearest the pose first; the colliding ones dropped (a colliding hypothesis mostly lands on a colliding answer; LM
+from it would spend the budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the
+collision-free draw nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before
+any iteration).
 The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
 reached with the spheres overlapping by millimetres beats a free configuration far from the pose).
 Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
@@ -33,7 +35,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import _chain
-from nik.kernels.collision import collision_residual
+from nik.kernels.collision import link_bounds, residual_bounded
 from nik.kernels.lm import (
     _STREAM,
     EPS,
@@ -117,6 +119,36 @@ def _sum_sq(r):
 
 
 @kernel
+def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame, body_start, pairs, w_spheres,
+                 w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr, lb):  # fmt: skip
+    """How many of the given starts ``starts[:H] (H, n)`` LM runs from, their indices in ``order``: the first (the
+    answer that collided: near the caller's ``q_near`` or the path's previous waypoint, it keeps an answer on its
+    branch), then the other free ones (every row >= 0, brought inside the limits) nearest the pose first (the pose
+    error of :func:`nik.kernels.lm._score`); the colliding ones are dropped before any iteration (a colliding
+    hypothesis mostly lands on a colliding answer)."""
+    n = starts.shape[1]
+    q = np.empty(n)
+    if H == 0:
+        return 0
+    order[0] = 0
+    m = 1
+    for s in range(1, H):
+        _copy(starts[s], q)
+        _bounds(joints, q)
+        if residual_bounded(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                            self_on, 0.0, r, Jr, lb) >= 0.0:  # fmt: skip
+            _chain(G, joints, q, Tc)
+            e = _score(Tt, Tc, rw, bnd, mode, ec, d)
+            k = m  # insertion sort (stable) after the first: a handful of starts
+            while k > 1 and score[k - 1] > e:
+                score[k], order[k] = score[k - 1], order[k - 1]
+                k -= 1
+            score[k], order[k] = e, s
+            m += 1
+    return m
+
+
+@kernel
 def collision_lm(
     G, joints, Tt, starts, n_starts, bounds, modes, opts, iopts, restarts, tries, seed,
     spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, weight,
@@ -150,36 +182,38 @@ def collision_lm(
     A, g, dq = np.empty((n, n)), np.empty(n), np.empty(n)
     qs, qc, best_q = np.empty(n), np.empty(n), np.empty(n)
     rng = np.empty(1, dtype=np.uint64)
+    order, score = np.empty(starts.shape[1], dtype=np.int64), np.empty(starts.shape[1])
+    lb = np.empty((body_start.shape[0] - 1, 4))  # the links' bounds, once per call (the broad phase)
+    link_bounds(spheres, body_start, lb)
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
         total = 0
         best_S, best_free, best_done = math.inf, False, False
         best_pos, best_rot = math.inf, math.inf
-        H = n_starts[b]
+        H = _rank_starts(G, joints, Tt[b], starts[b], n_starts[b], rw, bnd, mode, spheres, sphere_frame, body_start,
+                         pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr,
+                         lb)  # fmt: skip
         for s in range(H + restarts[b]):
             if s < H:
-                _copy(starts[b, s], qs)
+                _copy(starts[b, order[s]], qs)
                 _bounds(joints, qs)
-                if s > 0 and collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs,
-                                                w_spheres, w_boxes, w_capsules, self_on, 0.0, r, Jr) < 0.0:  # fmt: skip
-                    continue  # a colliding hypothesis: dropped early
             else:  # the free draw nearest the pose (by its error) among `tries`
                 best_draw = math.inf
                 for _ in range(tries):
                     _draw(joints, rng, qc)
                     _chain(G, joints, qc, Tc)
                     Ed = _score(Tt[b], Tc, rw, bnd, mode, ec, d)
-                    if Ed < best_draw and collision_residual(G, joints, qc, spheres, sphere_frame, body_start, pairs,
+                    if Ed < best_draw and residual_bounded(G, joints, qc, spheres, sphere_frame, body_start, pairs,
                                                              w_spheres, w_boxes, w_capsules, self_on, 0.0, r,
-                                                             Jr) >= 0.0:  # fmt: skip
+                                                             Jr, lb) >= 0.0:  # fmt: skip
                         best_draw = Ed
                         _copy(qc, qs)
                 if best_draw == math.inf:
                     continue
             E, p_e, r_e, reached = _eval(G, joints, qs, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
-            near = collision_residual(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                                      w_capsules, self_on, margin, r, Jr)  # fmt: skip
+            near = residual_bounded(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                                      w_capsules, self_on, margin, r, Jr, lb)  # fmt: skip
             S = E + w2 * _sum_sq(r)
             done = reached and near >= 0.0
             lam = lambda0
@@ -197,8 +231,8 @@ def collision_lm(
                     _bounds(joints, qc)
                     Ec, p_c, r_c, reached_c = _eval(G, joints, qc, Tt[b], rw, bnd, mode, tol_pos, tol_rot, Tc, Jc,
                                                     ec, d)  # fmt: skip
-                    near_c = collision_residual(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
-                                                w_boxes, w_capsules, self_on, margin, rc, Jrc)  # fmt: skip
+                    near_c = residual_bounded(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
+                                                w_boxes, w_capsules, self_on, margin, rc, Jrc, lb)  # fmt: skip
                     Sc = Ec + w2 * _sum_sq(rc)
                     donec = reached_c and near_c >= 0.0
                 if good and (Sc < S or donec):
@@ -223,14 +257,14 @@ def collision_lm(
             if done:
                 break
         if best_S == math.inf:  # every start dropped: keep the first given start (or a draw) as it is
-            if H > 0:
+            if n_starts[b] > 0:
                 _copy(starts[b, 0], best_q)
             else:
                 _draw(joints, rng, best_q)
             _bounds(joints, best_q)
             _, best_pos, best_rot, _ = _eval(G, joints, best_q, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
             best_free = (
-                collision_residual(
+                residual_bounded(
                     G,
                     joints,
                     best_q,
@@ -245,6 +279,7 @@ def collision_lm(
                     0.0,
                     r,
                     Jr,
+                    lb,
                 )
                 >= 0.0  # fmt: skip
             )

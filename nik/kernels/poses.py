@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import math
 
-from nik.kernels._jit import kernel
+from numba import carray
 
-__all__ = ["poses_ok", "quat_poses", "reach_flags", "rpy_poses"]
+from nik.kernels._jit import kernel
+from nik.kernels.chain import _float64_at
+
+__all__ = ["pose_at", "poses_ok", "quat_poses", "reach_flags", "rpy_poses"]
 
 
 @kernel
@@ -40,6 +43,19 @@ def poses_ok(T, tol):
         if abs(det - 1.0) > tol:
             return False
     return True
+
+
+@kernel
+def pose_at(address, tol, T):
+    """One ``(4, 4)`` pose stored contiguously as float64 at ``address`` copied into ``T: (1, 4, 4)``; returns
+    :func:`poses_ok` of it. ``address`` is the ``data_ptr()`` of a contiguous float64 CPU tensor of 16 values that the
+    caller has checked and keeps alive during the call: a tensor pose read without the microseconds of
+    ``Tensor.numpy()`` (:mod:`nik.ik.backends.one_pose`)."""
+    P = carray(_float64_at(address), (4, 4))
+    for r in range(4):
+        for c in range(4):
+            T[0, r, c] = P[r, c]
+    return poses_ok(T, tol)
 
 
 @kernel

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from nik.kernels import background as _background
 from nik.kinematics import FKKernel, chain_jacobian, to_homogeneous
 from nik.poses import validate_joints
 from nik.robots.rates import check_rates
@@ -198,8 +199,11 @@ def _chain_kernels():
 def _fk_one_kernels(G: np.ndarray, joints: np.ndarray) -> None:
     """Set ``_fk_one`` and ``_fk_one_np`` on first use: the entry points of ``fk_one_at`` for (``G``, ``joints``, an
     address, a (4, 4) float64 array) and of ``fk`` for (``G``, ``joints``, a (dof,) float64 array, a (4, 4) float64
-    array); False without the kernels."""
+    array); False without the kernels. Left unset (None) while kernels compile in the background
+    (:data:`nik.kernels.background.BUSY`): the torch path answers meanwhile."""
     global _fk_one, _fk_one_np
+    if _background.BUSY:  # kernels compile in the background: not now (numba compiles under one lock)
+        return
     chain = _chain_kernels()
     if chain is None:
         _fk_one = _fk_one_np = False
@@ -487,7 +491,9 @@ class Robot:
         a = _joint_array(q)
         shape, dof = a.shape, self.dof
         B = a.size // dof if shape and shape[-1] == dof else 0
-        chain = None if compiled or not 0 < B <= FK_COMPILED_MAX else _chain_module or _chain_kernels()
+        chain = (
+            None if compiled or not 0 < B <= FK_COMPILED_MAX or _background.BUSY else _chain_module or _chain_kernels()
+        )
         if chain is None:
             return self.fk(_tensor_of(a), compiled=compiled, check=check).numpy()
         G, joints = self._arrays or self.chain_arrays()
@@ -528,7 +534,7 @@ class Robot:
         if not shape or shape[-1] != dof:
             return None
         B = q.numel() // dof
-        if not 0 < B <= FK_COMPILED_MAX:
+        if not 0 < B <= FK_COMPILED_MAX or _background.BUSY:  # BUSY: the torch path while kernels compile
             return None
         chain = _chain_module or _chain_kernels()
         if chain is None:

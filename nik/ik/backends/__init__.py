@@ -21,7 +21,9 @@ Backend interface (``be``; arrays are numpy on the compiled backend, tensors on 
 
 - ``be.solve(robot, plan, T_target, q_near, representation) -> IKResult``: one call: the torch backend validates and
   runs the stages in a Python loop (:func:`nik.ik.stages.run`), the compiled one validates and runs them all in one
-  kernel call (:mod:`nik.kernels.driver`);
+  kernel call (:mod:`nik.kernels.driver`); a single pose with nothing but tolerances and seed does not come here:
+  :func:`nik.ik.backends.one_pose.one_pose` gives it the same kernel call with the arguments kept per solver
+  settings, the same answer for a fraction of the Python;
 - ``be.job(robot, plan, T_target, q_near, representation) -> Job``: validated targets (:mod:`nik.ik.targets`),
   reach flags, the unreachable warning;
 - ``be.network(plan, job) -> (hyp (B, K, dof) ranked best first, pos (B,), rot (B,), checked)``: ``checked`` is
@@ -45,18 +47,26 @@ from nik.ik.backends.base import Job, Refined
 
 __all__ = ["Job", "Refined", "choose", "compiled_backend", "torch_backend"]
 
-_COMPILED = None
+_COMPILED = {}
 _TORCH = None
 
 
-def compiled_backend():
-    """The compiled backend (one per process; it holds no per-call state)."""
-    global _COMPILED
-    if _COMPILED is None:
-        from nik.ik.backends.compiled import CompiledBackend
+def compiled_backend(*, defer: bool | None = None):
+    """The compiled backend (one per process and ``defer``; it holds no per-call state). ``defer``: on a kernel cache
+    that lacks the call's compiled solve, answer from torch while it compiles in the background
+    (:mod:`nik.kernels.background`); None: unless ``NIK_COMPILE=wait``."""
+    found = _COMPILED.get(defer)
+    if found is not None:
+        return found
+    if defer is None:  # NIK_COMPILE read once, on the first call
+        from nik.kernels.background import defer_allowed
 
-        _COMPILED = CompiledBackend()
-    return _COMPILED
+        _COMPILED[None] = compiled_backend(defer=defer_allowed())
+        return _COMPILED[None]
+    from nik.ik.backends.compiled import CompiledBackend
+
+    found = _COMPILED[defer] = CompiledBackend(defer=defer)
+    return found
 
 
 def torch_backend():
@@ -81,4 +91,4 @@ def choose(solver, T_target):
         if forced == "compiled":
             raise ValueError(f"IKSolver(backend='compiled'): targets on {T_target.device}, expected the CPU")
         return torch_backend()
-    return compiled_backend()
+    return compiled_backend(defer=False) if forced == "compiled" else compiled_backend()

@@ -41,9 +41,10 @@ from nik.ik.guesses import LIMIT_ROUNDING
 from nik.ik.model import APPROXIMATE_CHECK_TOL, CLOSED_FORM_TOL, model_of
 from nik.ik.result import IKResult
 from nik.ik.targets import pose_array, q_near_array
+from nik.kernels import background as _bg
 from nik.robots.reach import REACH_SLACK
 
-__all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend"]
+__all__ = ["APPROXIMATE_CHECK_TOL", "CLOSED_FORM_TOL", "PACKED_MAX_BATCH", "CompiledBackend", "as_float32"]
 #: Most poses whose hypotheses the packed network's compiled forward pass computes; above, torch's batched
 #: forward pass (float32 matmuls) is cheaper per pose. Measured with panda's and xarm7's single-pose networks
 #: (whole solver, one thread, CPU us per target; kernel / torch): 16 poses 26 / 73, 100 poses 20 / 28,
@@ -103,6 +104,13 @@ class CompiledBackend:
     """The compiled backend (see the module docstring and :mod:`nik.ik.backends` for the interface)."""
 
     name = "compiled"
+
+    def __init__(self, defer: bool = True):
+        #: answer from torch while the driver's first compile runs in the background (``backend="auto"``; see
+        #: :meth:`solve`); False: compile on the caller's thread (``backend="compiled"``, ``NIK_COMPILE=wait``)
+        self.defer = defer
+        self._looked = not defer  # whether the first call looked at the cache (background.cold)
+        self._compiled = set()  # (plan, dtype, q_near given) whose driver runs without compiling
 
     # -- arrays ------------------------------------------------------------------
     nonzero = staticmethod(np.flatnonzero)
@@ -177,7 +185,15 @@ class CompiledBackend:
             from nik.ik import goals
 
             return goals.solve_compiled(self, robot, plan, T_target, q_near, representation)
-        job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        if not self._looked:  # the first call of the process: nothing compiled on this machine yet?
+            self._looked = True
+            if _bg.cold(_kernels().solve):
+                _bg.begin()  # the checks and the model on torch, no kernel compiled on this thread
+        try:
+            job = self.job(robot, plan, T_target, q_near, representation, reach=False)
+        except Exception:
+            _bg.end_if_idle()  # bad input on the first call: BUSY set above is not left behind
+            raise
         model = job.model
         packed = None
         if plan.source == "network":
@@ -185,43 +201,85 @@ class CompiledBackend:
             if packed is None:
                 from nik.ik import stages
 
+                _bg.end_if_idle()  # the staged path compiles its kernels on this thread, as it always did
                 job.reachable, every = model.reach(job.T)
                 if not every:
                     warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=3)
                 return stages.run(plan, job)
-        return self._driver(plan, job, packed)
+        res = self._driver(plan, job, packed)
+        if isinstance(res, tuple):  # the driver is not compiled for this plan: torch answers meanwhile
+            return self._meanwhile(res, robot, plan, T_target, q_near, representation)
+        return res
 
-    def _driver(self, plan, job: Job, packed) -> IKResult:
-        model, B, n = job.model, job.size, job.model.dof
-        k = _kernels()
-        key = (plan, job.dtype)
+    @staticmethod
+    def _meanwhile(pending, robot, plan, T_target, q_near, representation) -> IKResult:
+        """The call answered by the torch backend (the same stages, tolerances and success contract) while the driver
+        compiles in a background thread, started after this answer (``pending``: what it compiles; module
+        :mod:`nik.kernels.background`)."""
+        from nik.ik.backends.torch import TorchBackend
+
+        try:
+            return TorchBackend().solve(robot, plan, T_target, q_near, representation)
+        finally:
+            _bg.compile_later(*pending)
+
+    def driver_args(self, plan, model, dtype, packed) -> tuple:
+        """What :func:`nik.kernels.driver.solve` takes from ``plan`` and ``model`` for answers in ``dtype`` (with the
+        ``packed`` network, or None): four tuples around the call's own arrays, gathered once per plan and dtype and
+        kept on the model (:meth:`_driver`, :mod:`nik.ik.backends.one_pose`)."""
+        key = (plan, dtype)
         static = model.driver_args.get(key)
         if static is None:  # what the driver takes from the plan and the model, gathered once per plan
+            k = _kernels()
             lm = model.lm
-            opts, iopts = lm.options(job.tol_pos, job.tol_rot, plan.max_iters)
-            _, iopts_multi = lm.options(job.tol_pos, job.tol_rot, plan.max_iters, multistart=True)
+            tol_pos, tol_rot = plan.stage_tolerances(dtype == torch.float32)
+            opts, iopts = lm.options(tol_pos, tol_rot, plan.max_iters)
+            _, iopts_multi = lm.options(tol_pos, tol_rot, plan.max_iters, multistart=True)
             p = packed or _NO_NET
             closed = model.closed if model.closed is not None else _NO_CLOSED
-            check = model.closed_check[job.dtype] if model.closed_check is not None else 0.0
+            check = model.closed_check[dtype] if model.closed_check is not None else 0.0
             static = (
                 (model.G, model.joints),
                 (model.center, model.radius, REACH_SLACK, _SOURCE[plan.source], p.flat, p.layout, p.activation,
                  p.in_mean, p.in_std, p.out_center, p.out_half, p.prismatic, p.heads),
                 (closed, check, LIMIT_ROUNDING),
                 (opts, iopts, iopts_multi, lm.budget, k.seed(k.klm, plan.seed), plan.restarts, plan.hypotheses,
-                 plan.near, _FALLBACK[plan.fallback], job.tol_pos, job.tol_rot),
+                 plan.near, _FALLBACK[plan.fallback], tol_pos, tol_rot),
             )  # fmt: skip
             if len(model.driver_args) > 64:
                 model.driver_args.clear()
             model.driver_args[key] = static
+        return static
+
+    def _driver(self, plan, job: Job, packed) -> IKResult | tuple:
+        """The plan in one call of :func:`nik.kernels.driver.solve`. Where ``self.defer`` and the driver's machine
+        code for these argument types is neither loaded nor cached (:func:`nik.kernels.background.ready`, asked once
+        per plan and dtype until it is), the compile is announced and ``(kernel, args, also)`` returned instead: what
+        :meth:`_meanwhile` compiles (``also``: the pose checks of :meth:`job`)."""
+        model, B, n = job.model, job.size, job.model.dof
+        k = _kernels()
+        static = self.driver_args(plan, model, job.dtype, packed)
         Tin = model.arm_targets(job.T) if packed is not None and plan.net_in_arm_frame else job.T
         use_near = job.q_near is not None
         q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
         ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
-        every = k.solve(
+        args = (
             *static[0], job.T, *static[1], Tin, *static[2], job.q_near if use_near else q, use_near, *static[3],
             q, pos, rot, ok, iters, job.reachable,
         )  # fmt: skip
+        key = (plan, job.dtype, use_near)
+        if key not in self._compiled:  # compiled: asked once per plan, where it may answer from torch meanwhile
+            if self.defer and not _bg.ready(k.solve, args):
+                _bg.begin()
+                _bg.announce(True)
+                from nik.ik.targets import ORTHONORMAL_TOL, _pose_kernels
+
+                return k.solve, args, [(_pose_kernels().poses_ok, (job.T, ORTHONORMAL_TOL))]
+            if len(self._compiled) > 256:
+                self._compiled.clear()
+            self._compiled.add(key)
+            _bg.end_if_idle()  # set by the first call's look at a cold cache, where this call compiles here after all
+        every = k.solve(*args)
         if not every:
             warnings.warn(model.unreachable_message(job.T, job.reachable), UserWarning, stacklevel=4)
         from nik.ik.stages import Answers
@@ -293,13 +351,7 @@ class CompiledBackend:
     def result(self, job: Job, answers, source: str) -> IKResult:
         q, pos, rot = answers.q, answers.pos_err, answers.rot_err
         if job.dtype != torch.float64:  # the answer in the targets' dtype, inside the limits, its errors measured
-            pose_errors = _kernels().pose_errors
-            model = job.model
-            q = np.clip(q.astype(np.float32), model.lo32, model.hi32)
-            pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
-            pose_errors(model.G, model.joints, job.T, q.astype(np.float64), pos, rot)
-            ok = (pos <= job.success_pos) & (rot <= job.success_rot)
-            pos, rot = pos.astype(np.float32), rot.astype(np.float32)
+            q, pos, rot, ok = as_float32(job.model, job.T, q, job.success_pos, job.success_rot)
         else:  # the stages' tolerance is the asked one
             ok = answers.ok(job)
         if job.numpy_out:
@@ -313,3 +365,13 @@ class CompiledBackend:
             source,
             reachable=torch.from_numpy(job.reachable),
         )
+
+
+def as_float32(model, T: np.ndarray, q: np.ndarray, tol_pos: float, tol_rot: float):
+    """``(q, pos, rot, ok)``: the float64 answers ``q: (B, dof)`` to ``T: (B, 4, 4)`` rounded to float32, clamped into
+    the float32 limits, their errors measured again by FK (float32) and judged against the asked tolerances."""
+    q = np.clip(q.astype(np.float32), model.lo32, model.hi32)
+    pos, rot = np.empty(q.shape[0]), np.empty(q.shape[0])
+    _kernels().pose_errors(model.G, model.joints, T, q.astype(np.float64), pos, rot)
+    ok = (pos <= tol_pos) & (rot <= tol_rot)
+    return q, pos.astype(np.float32), rot.astype(np.float32), ok

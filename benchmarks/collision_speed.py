@@ -1,0 +1,160 @@
+"""Collision-free IK speed on the panda in a scene (issue 35 item 4): time per target against the same solver
+without a world, per stage, and the collision-free success.
+
+    python benchmarks/collision_speed.py [--targets 1000] [--seed 0] [--rounds 5]
+
+The panda of example-robot-data (its URDF with collision meshes: arm, hand, fingers), its sphere model fitted to
+the meshes (:func:`nik.collision.collision_model`, cached), the scene of ``benchmarks/collisions.py`` (a table and
+10 boxes, spheres and capsules), ``--targets`` poses of random configurations that the meshes call free (coal,
+MoveIt's pairs). Two solvers in one process, one thread (``nik.set_threads(1)``, torch one thread), interleaved
+``--rounds`` times: ``IKSolver(robot, self_collision=False)`` (no world) and ``IKSolver(robot, world=scene)`` (the
+world and the arm itself); medians of the CPU time of the process per target (fair on a machine shared with
+other jobs; the wall time beside it) and the median of the per-round ratios. Then one more call of the collision
+solver with each stage of :func:`nik.ik.collide.resolve` timed (the pipeline without a world, the first check, the
+blocked-pose proof where the code has it, the re-solve, the check of the new answers, the names), and the
+outcome: success, answers called free that collide on the meshes (must be 0), targets re-solved, blocked.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import nik  # noqa: E402
+
+
+class _Timer:
+    """CPU seconds spent in wrapped functions, by stage name."""
+
+    def __init__(self):
+        self.spent: dict[str, float] = {}
+        self.calls: dict[str, int] = {}
+        self.items: dict[str, int] = {}  # targets re-solved, targets blocked
+
+    def wrap(self, owner, attr: str, name: str):
+        fn = getattr(owner, attr)
+
+        def timed(*a, **k):
+            t = time.process_time()
+            try:
+                got = fn(*a, **k)
+                if name.startswith("blocked"):
+                    self.items[name] = self.items.get(name, 0) + int(np.sum(got))
+                return got
+            finally:
+                if name.startswith("re-solve"):
+                    self.items[name] = self.items.get(name, 0) + len(a[2])
+                self.spent[name] = self.spent.get(name, 0.0) + time.process_time() - t
+                self.calls[name] = self.calls.get(name, 0) + 1
+
+        setattr(owner, attr, timed)
+        return fn
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--targets", type=int, default=1000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--rounds", type=int, default=5, help="timed rounds per solver, interleaved")
+    args = ap.parse_args(argv)
+    from collisions import panda_urdf, scene
+
+    from nik.collision import collision_model
+    from nik.collision.meshcheck import MeshCheck
+    from nik.collision.model import srdf_disabled, srdf_of
+
+    nik.set_threads(1)
+    torch.set_num_threads(1)
+    urdf = panda_urdf()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = nik.load_robot(urdf, end_link="panda_hand")
+    model = collision_model(robot)
+    nik.collision.set_collision_model(robot, model)
+    srdf = srdf_of(urdf)
+    mesh = MeshCheck(robot, urdf, skip=list(srdf_disabled(srdf)) if srdf is not None else [])
+    world = scene(args.seed)
+    g = torch.Generator().manual_seed(args.seed)
+    Q = np.ascontiguousarray(robot.sample(4 * args.targets, generator=g, dtype=torch.float64).numpy())
+    T = np.ascontiguousarray(robot.fk(Q[~mesh.collides(Q, world)][: args.targets]))
+    plain = nik.IKSolver(robot, self_collision=False)
+    safe = nik.IKSolver(robot, world=world)
+    print(f"nik at {Path(nik.__file__).resolve().parent.parent}")
+    print(
+        f"panda (example-robot-data, arm + hand + fingers), {len(T)} targets from configurations the meshes call free"
+    )
+    print(f"in a scene of {sum(world.counts())} obstacles (table + 10), seed {args.seed}; model: {model}; one thread")
+    plain.solve(T), safe.solve(T)  # compile / load the kernels, and one full call each, before timing
+    cpu = {"plain": [], "safe": []}
+    wall = {"plain": [], "safe": []}
+    out = {}
+    for _ in range(args.rounds):
+        for name, solver in (("plain", plain), ("safe", safe)):
+            t, c = time.perf_counter(), time.process_time()
+            out[name] = solver.solve(T)
+            wall[name].append((time.perf_counter() - t) / len(T))
+            cpu[name].append((time.process_time() - c) / len(T))
+    ratios = [s / p for s, p in zip(cpu["safe"], cpu["plain"], strict=True)]
+    r0, r1 = out["plain"], out["safe"]
+    free = np.asarray(r1.collision_free)
+    false_free = int(mesh.collides(np.asarray(r1.q)[free], world).sum())
+    print("\n| solver | success | collision-free | called free, mesh colliding | us/target CPU | us/target wall |")
+    print("|---|---|---|---|---|---|")
+    for name, key, r in (("no world", "plain", r0), ("scene + self", "safe", r1)):
+        cf = "-" if r.collision_free is None else f"{np.mean(r.collision_free):.1%}"
+        ff = "-" if r.collision_free is None else str(false_free)
+        print(
+            f"| {name} | {np.mean(r.success):.1%} | {cf} | {ff} | {1e6 * statistics.median(cpu[key]):.0f} "
+            f"| {1e6 * statistics.median(wall[key]):.0f} |"
+        )
+    print(
+        f"ratio scene / no world (CPU, median of {args.rounds} interleaved rounds): {statistics.median(ratios):.2f}x "
+        f"(rounds: {', '.join(f'{x:.2f}' for x in ratios)})"
+    )
+    _stages(robot, safe, T, len(T))
+
+
+def _stages(robot, safe, T, B: int) -> None:
+    """One more call of the collision solver with each stage of :func:`nik.ik.collide.resolve` timed."""
+    import nik.collision.compiled as compiled
+    import nik.ik.collide as collide
+    import nik.kernels.collision_lm as clm
+
+    timer = _Timer()
+    originals = [
+        (collide.Setup, "colliding", timer.wrap(collide.Setup, "colliding", "check")),
+        (collide.Setup, "names", timer.wrap(collide.Setup, "names", "names")),
+        (collide, "_starts", timer.wrap(collide, "_starts", "starts (hypotheses)")),
+        (clm, "collision_lm", timer.wrap(clm, "collision_lm", "re-solve (LM with collision rows)")),
+    ]
+    if hasattr(compiled, "blocked_targets"):
+        originals.append((compiled, "blocked_targets", timer.wrap(compiled, "blocked_targets", "blocked-pose proof")))
+    c = time.process_time()
+    try:
+        res = safe.solve(T)
+    finally:
+        for owner, attr, fn in originals:
+            setattr(owner, attr, fn)
+    total = time.process_time() - c
+    inner = sum(timer.spent.values())
+    print(f"\nstages of one call ({B} targets), CPU us per target (of all targets):")
+    print("| stage | us/target | calls | targets |")
+    print("|---|---|---|---|")
+    print(f"| pipeline without a world (backend) | {1e6 * (total - inner) / B:.1f} | 1 | {B} |")
+    for name, spent in timer.spent.items():
+        print(f"| {name} | {1e6 * spent / B:.1f} | {timer.calls[name]} | {timer.items.get(name, '')} |")
+    print(f"| total | {1e6 * total / B:.1f} | | |")
+    print(f"success {np.mean(res.success):.1%}, collision-free {np.mean(res.collision_free):.1%}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""The broad phase of the compiled collision rows (nik/kernels/collision.py) and the shortcuts of the collision stage
+(nik/ik/collide.py, nik/kernels/collision_lm.py): below the cutoff the rows equal the all-pairs ones, above it they
+stay lower bounds above the cutoff; the verdict is that of the all-pairs rows; a pose called blocked has no free
+configuration; skipping blocked targets and ranking the starts by clearance change no answer's verdict."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.collision import collides, collision_model
+from nik.collision.compiled import blocked_targets, kernel_arguments
+from nik.collision.distance import sphere_centers
+from nik.kernels.collision import (
+    collides_batch,
+    collision_distances,
+    collision_distances_batch,
+    collision_residual,
+    collision_rows_batch,
+)
+
+
+def _scene(seed: int, n: int = 12) -> nik.World:
+    """A table under the arm and ``n`` seeded boxes, spheres and capsules within its reach."""
+    rng = np.random.default_rng(seed)
+    world = nik.World().add_box([0.4, 0.0, -0.05], [1.2, 1.2, 0.1])
+    for i in range(n):
+        angle, r = rng.uniform(-np.pi, np.pi), rng.uniform(0.25, 0.7)
+        c = np.array([r * np.cos(angle), r * np.sin(angle), rng.uniform(0.05, 0.8)])
+        if i % 3 == 0:
+            rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = rot * np.sign(np.linalg.det(rot)), c
+            world.add_box(pose, rng.uniform(0.04, 0.2, size=3))
+        elif i % 3 == 1:
+            world.add_sphere(c, rng.uniform(0.02, 0.1))
+        else:
+            world.add_capsule(c, c + rng.normal(size=3) * 0.15, rng.uniform(0.02, 0.06))
+    return world
+
+
+def _q(robot, n: int, seed: int) -> np.ndarray:
+    g = torch.Generator().manual_seed(seed)
+    return np.ascontiguousarray(robot.sample(n, generator=g, dtype=torch.float64).numpy())
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+@pytest.mark.parametrize("self_on", [True, False])
+def test_broad_phase_rows_equal_all_pairs_below_the_cutoff(name, self_on):
+    robot = nik.load_robot(name)
+    model = collision_model(robot)
+    Q = _q(robot, 400, seed=11)
+    for seed in range(3):
+        (G, joints), rest = kernel_arguments(robot, model, _scene(seed), self_collision=self_on)
+        exact = np.empty((len(Q), len(model.pairs) + len(model.links)))
+        collision_distances_batch(G, joints, Q, *rest, exact)
+        below_somewhere = 0
+        for cutoff in (0.0, 0.005, 0.05):
+            broad = np.empty_like(exact)
+            collision_rows_batch(G, joints, Q, *rest, cutoff, broad)
+            near = (exact <= cutoff) | (broad <= cutoff)
+            below_somewhere += int(near.sum())
+            np.testing.assert_allclose(broad[near], exact[near], rtol=0, atol=1e-12)
+            far = ~near
+            assert (broad[far] > cutoff).all()  # above the cutoff: still above it
+            assert (broad[far] <= exact[far] + 1e-12).all()  # ... and a lower bound of the exact row
+        assert below_somewhere > 0  # the scenes and configurations do bring rows below the cutoffs
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_the_verdict_is_that_of_the_all_pairs_rows(name):
+    robot = nik.load_robot(name)
+    model = collision_model(robot)
+    Q = _q(robot, 500, seed=12)
+    for seed in range(3):
+        for self_on in (True, False):
+            (G, joints), rest = kernel_arguments(robot, model, _scene(seed + 5), self_collision=self_on)
+            exact = np.empty((len(Q), len(model.pairs) + len(model.links)))
+            collision_distances_batch(G, joints, Q, *rest, exact)
+            for margin in (0.0, 0.01):
+                hit = np.empty(len(Q), dtype=bool)
+                collides_batch(G, joints, Q, *rest, margin, hit)
+                np.testing.assert_array_equal(hit, (exact < margin).any(axis=1))
+                assert 0 < hit.sum() < len(Q)
+
+
+def test_residual_rows_and_jacobian_equal_the_exact_ones_within_the_margin():
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    (G, joints), rest = kernel_arguments(robot, model, _scene(2))
+    R, n = len(model.pairs) + len(model.links), robot.dof
+    active = 0
+    for q in _q(robot, 60, seed=13):
+        d, J = np.empty(R), np.empty((R, n))
+        collision_distances(G, joints, q, *rest, d, J)
+        for margin in (0.005, 0.03):
+            r, Jr = np.empty(R), np.empty((R, n))
+            smallest = collision_residual(G, joints, q, *rest, margin, r, Jr)
+            np.testing.assert_allclose(r, np.maximum(0.0, margin - d), rtol=0, atol=1e-12)
+            np.testing.assert_allclose(Jr, np.where((margin - d > 0)[:, None], -J, 0.0), rtol=0, atol=1e-12)
+            assert smallest == pytest.approx(d.min(), abs=1e-12) if d.min() <= margin else smallest > margin
+            active += int((r > 0).sum())
+    assert active > 0
+
+
+def test_a_blocked_pose_has_no_free_configuration():
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    world = _scene(4, n=20)
+    Q = _q(robot, 3000, seed=14)
+    T = np.asarray(robot.fk(Q))
+    blocked = blocked_targets(robot, model, world, T, 1e-4, 1e-3)
+    hit = collides(robot, Q, world, model=model)
+    assert blocked.sum() >= 10  # the proof bites in a cluttered scene
+    assert hit[blocked].all()  # a pose called blocked: its own configuration collides too
+    assert not blocked[~hit].any()
+
+
+def test_the_first_joints_sweep_blocks_a_pose_whose_base_link_always_collides():
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    T = np.asarray(robot.fk(_q(robot, 50, seed=15)))
+    assert not blocked_targets(robot, model, nik.World(), T, 1e-4, 1e-3, self_collision=False).any()
+    on_one = np.asarray(model.sphere_frame) == 1
+    assert on_one.any()  # a link rides on the first joint
+    centres = sphere_centers(model, robot, torch.zeros(1, robot.dof, dtype=torch.float64))[0].numpy()[on_one]
+    height, radius = centres[:, 2].mean(), np.hypot(centres[:, 0], centres[:, 1]).mean()
+    ring = nik.World()  # balls around the first joint's axis at the height of its link: hit at every angle
+    for a in np.linspace(0, 2 * np.pi, 72, endpoint=False):
+        ring.add_sphere([radius * np.cos(a), radius * np.sin(a), height], 0.05)
+    blocked = blocked_targets(robot, model, ring, T, 1e-4, 1e-3, self_collision=False)
+    assert collides(robot, _q(robot, 200, seed=16), ring, model=model, self_collision=False).all()
+    assert blocked.all()
+
+
+def test_skipping_blocked_targets_and_ranking_starts_keep_the_verdicts(monkeypatch):
+    """Every answer called free is free by the all-pairs rows; a target the shortcut skips (a blocked pose) fails
+    without the shortcut too (the full re-solve finds no free answer for it either)."""
+    import nik.collision.compiled as compiled
+
+    robot = nik.load_robot("panda")
+    world = _scene(6)
+    Q = _q(robot, 400, seed=17)
+    T = np.ascontiguousarray(np.asarray(robot.fk(Q))[:120])
+    solver = nik.IKSolver(robot, world=world)
+    res = solver.solve(T)
+    model = collision_model(robot)
+    (G, joints), rest = kernel_arguments(robot, model, world)
+    exact = np.empty((len(T), len(model.pairs) + len(model.links)))
+    collision_distances_batch(G, joints, np.ascontiguousarray(res.q), *rest, exact)
+    np.testing.assert_array_equal(res.collision_free, (exact >= 0).all(axis=1))
+    plan = solver.plan()
+    blocked = blocked_targets(robot, model, world, T, plan.tol_pos, plan.tol_rot)
+    assert blocked.sum() >= 3  # the scene blocks some poses: the comparison covers the shortcut
+    monkeypatch.setattr(compiled, "blocked_targets", lambda robot, model, world, T, *a, **k: np.zeros(len(T), bool))
+    ref = nik.IKSolver(robot, world=world).solve(T)
+    assert not res.success[blocked].any() and not ref.success[blocked].any()
+    assert abs(int(res.success.sum()) - int(ref.success.sum())) <= 2  # the rest: other random streams, same rate
+
+
+@pytest.mark.parametrize("self_on", [True, False])
+def test_compiled_names_equal_the_torch_ones(self_on):
+    from nik.collision import collision_names
+    from nik.collision.compiled import collision_names_compiled
+
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    world = _scene(3)
+    Q = _q(robot, 300, seed=18)
+    ours = collision_names_compiled(robot, Q, world, model=model, self_collision=self_on)
+    ref = collision_names(robot, Q, world, model=model, self_collision=self_on)
+    assert ours == ref
+    assert sum(x is not None for x in ours) > 10
+
+
+def test_the_last_joints_sweep_blocks_a_pose_whose_wrist_link_always_collides():
+    """A ring of balls around the last joint's axis, where the links it turns pass: every configuration reaching the
+    pose collides, and the sweep over the last joint proves it (the hand itself stays free)."""
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    n = robot.dof
+    q = _q(robot, 1, seed=19)
+    on_wrist = np.asarray(model.sphere_frame) == n - 1
+    assert on_wrist.any()
+    F = nik.collision.link_frames(robot, torch.as_tensor(q))[0].numpy()  # (n + 1, 3, 4) frames, base first
+    c = sphere_centers(model, robot, torch.as_tensor(q))[0].numpy()[on_wrist]
+    axis, origin = F[n][:3, 2], F[n][:3, 3]
+    rel = c - origin
+    along = rel @ axis
+    radial = rel - along[:, None] * axis
+    k = int(np.argmax(np.linalg.norm(radial, axis=1)))
+    u = radial[k] / np.linalg.norm(radial[k])
+    v = np.cross(axis, u)
+    r, h = float(np.linalg.norm(radial[k])), float(along[k])
+    ring = nik.World()
+    for a in np.linspace(0, 2 * np.pi, 90, endpoint=False):
+        ring.add_sphere(origin + h * axis + r * (np.cos(a) * u + np.sin(a) * v), 0.01)
+    T = np.asarray(robot.fk(q))
+    fixed_only = blocked_targets(robot, model, ring, T, 1e-4, 1e-3, self_collision=False, samples=1)
+    assert not fixed_only.any()  # the hand is free of the ring: the sweep does the proving
+    assert blocked_targets(robot, model, ring, T, 1e-4, 1e-3, self_collision=False).all()
+    assert collides(robot, q, ring, model=model, self_collision=False).all()

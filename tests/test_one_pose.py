@@ -1,0 +1,195 @@
+"""nik.ik.backends.one_pose: one pose in one kernel call answers exactly as the general path (every field's kind,
+dtype, device, shape and value, numpy and torch poses), refuses bad input with the same line, and steps aside
+wherever it does not apply (a setting changed, a collision check, another form of pose)."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+import nik
+from nik.ik.result import IKResult, TensorResult
+
+FIELDS = ("q", "pos_err", "rot_err", "success", "iterations", "reachable")
+OTHERS = ("source", "path", "collision_free", "axis_err", "collisions")
+
+
+def _poses(robot, n, seed):
+    q = robot.sample(n, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    return robot.fk(q)
+
+
+def _assert_same(a, b):
+    """Every field of two results: the same kind, dtype, device, shape and values (bit for bit)."""
+    for name in FIELDS:
+        x, y = getattr(a, name), getattr(b, name)
+        assert type(x) is type(y), name
+        assert x.dtype == y.dtype and tuple(x.shape) == tuple(y.shape), name
+        if isinstance(x, torch.Tensor):
+            assert x.device == y.device, name
+            assert torch.equal(x, y), name
+        else:
+            np.testing.assert_array_equal(x, y, err_msg=name)
+    for name in OTHERS:
+        assert getattr(a, name) == getattr(b, name), name
+
+
+def _general(solver, T, **kw):
+    """The same call through the general path (``representation`` given: the one-pose path steps aside)."""
+    return solver.solve(T, representation="matrix", **kw)
+
+
+@pytest.mark.parametrize(
+    "name, checkpoint", [("ur5", "auto"), ("panda", "auto"), ("panda", None)], ids=["analytic", "network", "multistart"]
+)
+def test_one_pose_answers_as_the_general_path_for_every_kind_of_pose(name, checkpoint):
+    robot = nik.load_robot(name)
+    solver = nik.IKSolver(robot, checkpoint=checkpoint)
+    T = _poses(robot, 6, seed=4)
+    sources = set()
+    for i in range(T.shape[0]):
+        t = T[i]
+        for pose in (t, t[None], t.numpy().copy(), t.numpy()[None].copy(), t.float(), t.numpy().astype(np.float32)):
+            fast = solver.solve(pose, seed=2)
+            assert isinstance(fast, TensorResult) == isinstance(pose, torch.Tensor)  # the one-pose path answered
+            _assert_same(fast, _general(solver, pose, seed=2))
+            sources.add(fast.source)
+            assert bool(fast.success.all()) and bool(robot.within_limits(torch.as_tensor(fast.q)).all())
+        assert fast.q.shape == (1, robot.dof)
+    assert sources == {"analytic" if name == "ur5" else "network" if checkpoint else "multistart"}
+
+
+def test_tolerances_and_seed_reach_the_one_pose_path():
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot, checkpoint=None)  # multistart: the seed chooses the answer
+    t = _poses(robot, 1, seed=5)[0].numpy()
+    answers = {}
+    for seed in (0, 1):
+        for tol in (1e-4, 1e-7):
+            res = solver.solve(t, tol_pos=tol, tol_rot=tol, seed=seed)
+            _assert_same(res, _general(solver, t, tol_pos=tol, tol_rot=tol, seed=seed))
+            answers[seed, tol] = res
+    assert not np.array_equal(answers[0, 1e-4].q, answers[1, 1e-4].q)
+    assert answers[0, 1e-7].pos_err[0] <= 1e-7 and answers[1, 1e-7].success[0]
+
+
+def _bad_poses():
+    T = torch.eye(4, dtype=torch.float64)
+    nan, skew, row, scaled = T.clone(), T.clone(), T.clone(), T.clone()
+    nan[0, 3] = float("nan")
+    skew[0, 1] = 0.3
+    row[3, 0] = 1.0
+    scaled[:3, :3] *= 2.0
+    return {"nan": nan, "not_orthonormal": skew, "bottom_row": row, "scaled": scaled}
+
+
+@pytest.mark.parametrize("kind", ["nan", "not_orthonormal", "bottom_row", "scaled"])
+@pytest.mark.parametrize("as_numpy", [False, True], ids=["torch", "numpy"])
+def test_a_bad_pose_gets_the_general_paths_one_line_error(kind, as_numpy):
+    solver = nik.IKSolver("ur5")
+    solver.solve(_poses(solver.robot, 1, seed=0)[0])  # the one-pose entry exists
+    T = _bad_poses()[kind]
+    T = T.numpy() if as_numpy else T
+    with pytest.raises(ValueError) as general:
+        _general(solver, T)
+    with pytest.raises(ValueError) as fast:
+        solver.solve(T)
+    assert str(fast.value) == str(general.value)
+    assert "\n" not in str(fast.value) and "T_target" in str(fast.value)
+
+
+@pytest.mark.parametrize("tol", [-1.0, float("nan"), "a"])
+def test_a_bad_tolerance_gets_the_same_one_line_error(tol):
+    solver = nik.IKSolver("ur5")
+    t = _poses(solver.robot, 1, seed=0)[0]
+    with pytest.raises(ValueError, match="tol_pos: expected a number >= 0"):
+        solver.solve(t, tol_pos=tol)
+    with pytest.raises(ValueError, match="tol_pos: expected a number >= 0"):
+        solver.solve(t, tol_pos=tol)  # the second time too: a refused tolerance is not kept
+
+
+def test_an_unreachable_pose_warns_as_the_general_path():
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    t = _poses(robot, 1, seed=3)[0].clone()
+    t[:3, 3] += torch.tensor([3.0, 0.0, 0.0], dtype=t.dtype)
+    with pytest.warns(UserWarning, match="beyond the reach") as fast_w:
+        fast = solver.solve(t)
+    with pytest.warns(UserWarning, match="beyond the reach") as general_w:
+        general = _general(solver, t)
+    assert [str(w.message) for w in fast_w] == [str(w.message) for w in general_w]
+    assert fast_w[0].filename == __file__  # pointed at the caller's line
+    _assert_same(fast, general)
+    assert not bool(fast.reachable[0]) and not bool(fast.success[0])
+
+
+def test_odd_tensors_and_arrays_answer_as_the_general_path():
+    robot = nik.load_robot("ur5")
+    solver = nik.IKSolver(robot)
+    t = _poses(robot, 1, seed=6)[0]
+    grad = t.clone().requires_grad_(True)
+    strided = t.T.contiguous().T  # the same pose, not contiguous
+    readonly = t.numpy().copy()
+    readonly.setflags(write=False)
+    fortran = np.asfortranarray(t.numpy())
+    for pose in (grad, strided, readonly, fortran, t.tolist(), t.numpy().astype(np.int64) * 0 + np.eye(4, dtype=int)):
+        _assert_same(solver.solve(pose), _general(solver, pose))
+
+
+def test_a_changed_setting_reaches_the_next_one_pose_call():
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    t = _poses(robot, 1, seed=2)[0]
+    assert solver.solve(t).source == "network"
+    solver.net = None
+    res = solver.solve(t)
+    assert res.source == "multistart"
+    _assert_same(res, _general(solver, t))
+    solver.backend = "torch"
+    res = solver.solve(t)
+    assert type(res) is IKResult and res.source == "multistart"
+
+
+def test_a_collision_check_takes_the_general_path():
+    robot = nik.load_robot("ur5")
+    solver = nik.IKSolver(robot)
+    t = _poses(robot, 1, seed=2)[0]
+    assert solver.solve(t).collision_free is None
+    solver.world = nik.World().add_box([5.0, 5.0, 5.0], [0.1, 0.1, 0.1])  # far away: answers stay free
+    res = solver.solve(t)
+    assert res.collision_free is not None and bool(res.collision_free[0])
+
+
+def test_a_tensor_result_behaves_as_a_plain_one():
+    robot = nik.load_robot("ur5")
+    solver = nik.IKSolver(robot)
+    t = _poses(robot, 1, seed=9)[0]
+    res = solver.solve(t)
+    plain = _general(solver, t)
+    assert isinstance(res, TensorResult) and isinstance(res, IKResult) and len(res) == 1
+    assert res.q is res.q  # made once, then kept
+    assert res.q.data_ptr() == res.__dict__["_arrays"][0].ctypes.data  # shares the kernel's memory
+    for other in (pickle.loads(pickle.dumps(res)), copy.deepcopy(res), dataclasses.replace(res), res.to("cpu")):
+        _assert_same(other, plain)
+    _assert_same(res.numpy(), plain.numpy())
+    assert repr(res).replace("TensorResult", "IKResult") == repr(plain)
+    res.q = torch.zeros(1, robot.dof, dtype=torch.float64)  # a field set by hand stays set
+    assert torch.equal(res.q, torch.zeros(1, robot.dof, dtype=torch.float64))
+
+
+def test_threads_share_a_solver_on_the_one_pose_path():
+    from concurrent.futures import ThreadPoolExecutor
+
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 16, seed=12)
+    alone = [solver.solve(T[i]).q for i in range(16)]
+    with warnings.catch_warnings(), ThreadPoolExecutor(2) as pool:
+        together = list(pool.map(lambda i: solver.solve(T[i]).q, range(16)))
+    assert all(torch.equal(a, b) for a, b in zip(alone, together, strict=True))
