@@ -314,12 +314,21 @@ def test_a_user_term_and_a_world_together(panda):
 def test_solve_path_with_a_user_term_bounds_a_world_and_timing(panda):
     world = nik.World().add_box([0.0, 0.0, -0.05], [2.0, 2.0, 0.1])
     solver = nik.IKSolver(panda, world=world)
-    q0 = _configs(panda, 1, 1)[0]
-    T = panda.fk(panda.clamp(q0 + torch.linspace(0, 1, 10, dtype=torch.float64)[:, None] * 0.3))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        plain = solver.solve_path(T, q_start=q0, bounds="axis_z")
-    h = float(_elbow_z(panda, plain.q).min()) + 0.02
+    line = torch.linspace(0, 1, 10, dtype=torch.float64)[:, None] * 0.3
+    for q0 in _configs(panda, 32, 1):
+        # the path of a straight joint motion free of the table; the plane at its lowest elbow, so that the motion
+        # itself meets every term (a witness), and a path whose plain answer dips below the plane somewhere
+        qs = panda.clamp(q0 + line)
+        if collides(panda, qs, world).any():
+            continue
+        T, h = panda.fk(qs), float(_elbow_z(panda, qs).min()) - 1e-3
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            plain = solver.solve_path(T, q_start=q0, bounds="axis_z")
+        if plain.success.all() and (_elbow_z(panda, plain.q) < h).any():
+            break
+    else:
+        pytest.fail("no path among 32 whose plain answer dips below its plane")
     term = nik.costs.custom(lambda q: (h - _elbow_z(panda, q)).clamp(min=0)[:, None], name="elbow_above")
     res = solver.solve_path(T, q_start=q0, bounds="axis_z", costs=[term], timing=True)
     assert res.success.all() and res.collision_free.all() and not collides(panda, res.q, world).any()
