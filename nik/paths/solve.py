@@ -125,6 +125,14 @@ PATH_DP_CELLS = 30_000_000
 #: The last polish aims at this fraction of the tolerances (every reached waypoint whose error is above it), so that a
 #: path's worst error is not at the threshold; a waypoint moves at most this fraction of ``max_step`` for it.
 PATH_MARGIN = 0.5
+#: The global search's tracks (arms without a closed form): each waypoint's seed moves this fraction of the way from
+#: the previous answer towards the track's own posture ...
+SEARCH_PULL = 0.05
+#: ... by at most this much per joint and waypoint, radians (0.5 degrees).
+SEARCH_PULL_CAP = math.radians(0.5)
+#: The network's hypotheses (or uniform LM answers) per waypoint that the tracks drift towards (at the middle and the
+#: last waypoint), and how far apart two of them must be (largest joint difference, radians) to count twice.
+SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
 
 
 def solve_path(
@@ -221,6 +229,8 @@ def solve_path(
         q, its, found, source = _closed_form_path(run, is_closed, chain, max_step)
     else:
         q, its, source = _chain_path(run)
+        if run.half is None and run.refine and not _smooth(run, q, max_step, is_closed):
+            q, its, source = _search_path(run, max_step, is_closed, (q, its, source))
         found = None
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
@@ -364,6 +374,26 @@ class _Run:
             path_chains_bounded(
                 lm.G, lm.joints, T, starts, half, modes, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot
             )
+        return q, its, ok
+
+    def tracks(self, T, starts, targets, pull, cap, reachable, restarts: int):
+        """:func:`nik.paths.kernels.path_chains_toward` along ``T`` from ``starts: (K, dof)``, chain ``c`` drifting
+        towards ``targets[c]`` (``pull, cap: (K,)``): ``q (K, N, dof)``, iterations ``(K, N)``, ok ``(K, N)``."""
+        from nik.kernels.lm import seed_state
+        from nik.paths.kernels import path_chains_toward
+
+        lm = self.model.lm
+        K, n, N = starts.shape[0], starts.shape[1], T.shape[0]
+        opts, iopts = lm.options(self.tol_pos, self.tol_rot)
+        q = np.empty((K, N, n))
+        its, ok = np.empty((K, N), dtype=np.int64), np.empty((K, N), dtype=bool)
+        pos, rot = np.empty((K, N)), np.empty((K, N))
+        budget = np.where(reachable, restarts, 0).astype(np.int64)
+        c = np.ascontiguousarray
+        path_chains_toward(
+            lm.G, lm.joints, c(T), c(starts, dtype=np.float64), c(targets, dtype=np.float64), c(pull, dtype=np.float64),
+            c(cap, dtype=np.float64), opts, iopts, budget, seed_state(self.seed), q, its, ok, pos, rot,
+        )  # fmt: skip
         return q, its, ok
 
 
@@ -688,7 +718,7 @@ def _free_samples(N: int) -> int:
     return int(np.clip(math.isqrt(PATH_DP_CELLS // N) // 8, 4, 36))
 
 
-def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
+def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DEDUPE) -> np.ndarray:
     """``choice (N,)``: :func:`nik.paths.kernels.path_dp` over the candidates; on a closed path, the choice that
     ends on its start's branch (the last waypoint's candidate nearest the first's, modulo whole turns on the joints
     that wrap): when the free choice does not, each start candidate (at most :data:`PATH_CLOSED_STARTS`) is tried
@@ -710,7 +740,7 @@ def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
         gap = np.array([_closure(np.stack([cand[0, k], c]), wraps) for c in cand[-1]])
         gap[~valid[-1]] = math.inf
         end = int(np.argmin(gap))
-        if gap[end] > PATH_DEDUPE:
+        if gap[end] > close_within:
             continue
         pinned = valid.copy()
         pinned[0], pinned[-1] = False, False
@@ -889,6 +919,113 @@ def _chain_path(run: _Run):
     return q[choice, rows], its[choice, rows], sources[int(choice[0])]
 
 
+def _smooth(run: _Run, q: np.ndarray, max_step: float, closed: bool) -> bool:
+    """Whether the chain's answer ``q: (N, dof)`` needs no search: every waypoint reached inside the limits, no step
+    (from ``q0`` on) above :data:`PATH_FOLLOW_STEP` nor ``max_step``, and a closed path's last row within ``max_step``
+    of its first (:func:`_close_loop` closes the rest)."""
+    _, _, within = _final_check(run, q)
+    inside = ((q >= run.model.lo - 1e-9) & (q <= run.model.hi + 1e-9)).all()
+    _, _, step = _path_cost(q, within, run.q0)
+    closes = not closed or _closure(q, run.model.wraps) <= max_step
+    return bool(within.all() and inside and closes and step <= min(PATH_FOLLOW_STEP, max_step))
+
+
+def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarray | None = None):
+    """``(q (N, dof), iterations (N,), source)``: the global search of an arm without a closed form (module
+    docstring, "global search"). Tracks: LM chains (:func:`nik.paths.kernels.path_chains_toward`) from ``q0`` (else
+    from every distinct start posture, :func:`_start_postures`), each drifting along the self-motion towards a
+    posture of its own: the middle of the ranges (the plain chain, :func:`_chain_path`'s), its own start, no
+    posture, ``rest`` (``q_rest``), and the network's hypotheses (else uniform LM answers) at the middle and the last
+    waypoint. Every track's answer at every waypoint is a candidate; :func:`_choose` picks the sequence with the
+    smallest largest step, then the least sum of squared steps (from ``q0``; on a closed path, ending next to its
+    first row, within ``max_step``), switching tracks where they meet. Kept over ``chain`` (``(q, iterations, source)``
+    of :func:`_chain_path`) and the plain chains unless one of them reaches more waypoints, closes where the search
+    does not, or has the smaller largest step (the search never answers worse than the chain)."""
+    model, N = run.model, run.T.shape[0]
+    if run.q0 is not None:
+        starts, sources = run.q0[None], ["q_start"]
+    else:
+        starts, sources = _start_postures(run)
+    postures = _search_postures(run, rest)
+    mid = 0.5 * (model.lo + model.hi)
+    K0 = starts.shape[0]
+    tracks = [(k, mid, PATH_PULL, PATH_PULL_CAP) for k in range(K0)]  # track k < K0: start k's plain chain
+    for k in range(K0):
+        for target, pull in [(starts[k], SEARCH_PULL), (mid, 0.0), *((p, SEARCH_PULL) for p in postures)]:
+            tracks.append((k, target, pull, SEARCH_PULL_CAP))
+    of = np.array([t[0] for t in tracks])
+    q, its, ok = run.tracks(
+        run.T, starts[of], np.array([t[1] for t in tracks]), np.array([t[2] for t in tracks]),
+        np.array([t[3] for t in tracks]), run.reachable, run.restarts,
+    )  # fmt: skip
+    # backward tracks, from the last waypoint to the first: from the postures (and, on a closed path, from the start
+    # postures, which answer its last pose too), drifting towards the middle of the ranges or their own start
+    back = [*(starts if closed else []), *postures]
+    if back:
+        b_starts = np.repeat(np.array(back), 2, axis=0)
+        b_targets = np.stack([x for p in back for x in (mid, p)])
+        b_pull = np.tile([PATH_PULL, SEARCH_PULL], len(back))
+        b_cap = np.tile([PATH_PULL_CAP, SEARCH_PULL_CAP], len(back))
+        qb, itsb, okb = run.tracks(run.T[::-1], b_starts, b_targets, b_pull, b_cap, run.reachable[::-1], run.restarts)
+        q = np.concatenate([q, qb[:, ::-1]])
+        its, ok = np.concatenate([its, itsb[:, ::-1]]), np.concatenate([ok, okb[:, ::-1]])
+        of = np.concatenate([of, np.full(len(b_starts), -1)])
+    inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=-1)
+    ok = ok & inside
+    cand = np.ascontiguousarray(q.transpose(1, 0, 2))  # (N, K, dof): every track's answer at every waypoint
+    valid = np.ascontiguousarray(ok.T)
+    if run.q0 is not None:
+        near = valid[0] & (np.abs(cand[0] - run.q0).max(axis=1) <= max_step)
+        if near.any():
+            valid[0] = near
+    choice = _choose(cand, valid, model.wraps, run.q0, closed, close_within=max_step)
+    if (choice < 0).all():
+        return chain
+    chosen = np.nonzero(choice >= 0)[0]
+    for i in np.nonzero(choice < 0)[0]:  # a waypoint no track reaches: the track chosen before it continues
+        before = chosen[chosen < i]
+        choice[i] = choice[before[-1]] if before.size else choice[chosen[0]]
+    rows = np.arange(N)
+    found, found_its = cand[rows, choice], its.T[rows, choice]
+    wraps = model.wraps if closed else None
+    c_ok = _final_check(run, chain[0])[2] & ((chain[0] >= model.lo - 1e-9) & (chain[0] <= model.hi + 1e-9)).all(axis=1)
+    if _path_cost(chain[0], c_ok, run.q0, wraps, max_step) < _path_cost(
+        found, ok.T[rows, choice], run.q0, wraps, max_step
+    ):
+        return chain
+    return found, found_its, sources[int(of[choice[0]])] if of[choice[0]] >= 0 else "search"
+
+
+def _path_cost(q: np.ndarray, ok: np.ndarray, q0: np.ndarray | None, wraps=None, within: float = 0.0) -> tuple:
+    """``(waypoints missed, open, largest step)`` of a path ``q: (N, dof)`` (the first step from ``q0`` where given;
+    ``open``: with ``wraps``, a closed path whose last row is more than ``within`` from its first, else 0): the order
+    in which the search and the plain chain are compared."""
+    full = q if q0 is None else np.concatenate([q0[None], q])
+    step = float(np.abs(np.diff(full, axis=0)).max()) if full.shape[0] > 1 else 0.0
+    gap = 0 if wraps is None else int(_closure(q, wraps) > within)
+    return int((~ok).sum()), gap, round(step, 9)
+
+
+def _search_postures(run: _Run, rest: np.ndarray | None) -> list[np.ndarray]:
+    """The postures the search's tracks drift towards (beside the middle of the ranges and their own start): ``rest``,
+    then distinct answers at the middle and the last waypoint: the network's hypotheses there (ranked by FK,
+    :data:`SEARCH_HYPOTHESES` per waypoint) where the plan has a network, else LM from uniform starts."""
+    out = [] if rest is None else [np.asarray(rest, dtype=np.float64)]
+    N = run.T.shape[0]
+    at = np.array(sorted({N // 2, N - 1}))
+    hyp = _hypotheses(run, at)
+    if hyp is None:
+        lm = run.model.lm
+        T = np.repeat(run.T[at], SEARCH_HYPOTHESES, axis=0)
+        res = lm.solve(T, None, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False)
+        hyp = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
+    for h in hyp:
+        for p in h[:SEARCH_HYPOTHESES]:
+            if all(np.abs(p - o).max() > SEARCH_DISTINCT for o in out):
+                out.append(p)
+    return out
+
+
 def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
     """Distinct solutions of the first waypoint: ``(K, dof)`` and where each came from (``network`` for the
     network's hypotheses, the guess stage's packed network, polished by LM; ``multistart`` for LM from uniform
@@ -897,6 +1034,7 @@ def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
     seeds, sources = [], []
     hyp = _hypotheses(run)
     if hyp is not None:
+        hyp = hyp[0]
         seeds.append(hyp)
         sources += ["network"] * hyp.shape[0]
     uni = lm.solve(np.repeat(T0, PATH_STARTS, axis=0), None, restarts=False, **tol)
@@ -911,17 +1049,18 @@ def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
     return res.q[kept], [sources[i] for i in kept]
 
 
-def _hypotheses(run: _Run) -> np.ndarray | None:
-    """``(K, dof)`` the plan's network's hypotheses for the first waypoint, ranked by FK: the compiled backend's
-    guess stage (the packed network, targets in the arm's frame where the network was made for the bare arm), or
-    None where the plan has no network."""
+def _hypotheses(run: _Run, rows=None) -> np.ndarray | None:
+    """``(len(rows), K, dof)`` the plan's network's hypotheses for the waypoints ``rows`` (default the first), ranked
+    by FK: the compiled backend's guess stage (the packed network, targets in the arm's frame where the network was
+    made for the bare arm), or None where the plan has no network."""
     if run.plan.net is None:
         return None
     from nik.ik.backends import Job, compiled_backend
 
-    be, m, T0 = compiled_backend(), run.model, run.T[:1]
-    job = Job(be, m.robot, T0, run.reachable[:1], None, run.tol_pos, run.tol_rot, torch.float64, model=m)
-    return np.ascontiguousarray(be.network(run.plan, job)[0][0])
+    rows = np.array([0]) if rows is None else rows
+    be, m, T = compiled_backend(), run.model, np.ascontiguousarray(run.T[rows])
+    job = Job(be, m.robot, T, run.reachable[rows], None, run.tol_pos, run.tol_rot, torch.float64, model=m)
+    return np.ascontiguousarray(be.network(run.plan, job)[0])
 
 
 # ---------------------------------------------------------------------------
