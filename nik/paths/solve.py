@@ -133,6 +133,9 @@ SEARCH_PULL_CAP = math.radians(0.5)
 #: The network's hypotheses (or uniform LM answers) per waypoint that the tracks drift towards (at the middle and the
 #: last waypoint), and how far apart two of them must be (largest joint difference, radians) to count twice.
 SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
+#: The search's answer replaces the chain's where it reaches more waypoints, closes a loop the chain leaves open, or
+#: (else equal) cuts the largest step by more than this (radians, 0.5 degrees): on a tie the chain stays.
+SEARCH_GAIN = math.radians(0.5)
 
 
 def solve_path(
@@ -940,7 +943,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     smallest largest step, then the least sum of squared steps (from ``q0``; on a closed path, ending next to its
     first row, within ``max_step``), switching tracks where they meet. Kept over ``chain`` (``(q, iterations, source)``
     of :func:`_chain_path`) and the plain chains unless one of them reaches more waypoints, closes where the search
-    does not, or has the smaller largest step (the search never answers worse than the chain)."""
+    does not, or has the smaller largest step (by :data:`SEARCH_GAIN`: the search never answers worse than the
+    chain)."""
     model, N = run.model, run.T.shape[0]
     if run.q0 is not None:
         starts, sources = run.q0[None], ["q_start"]
@@ -978,7 +982,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         near = valid[0] & (np.abs(cand[0] - run.q0).max(axis=1) <= max_step)
         if near.any():
             valid[0] = near
-    choice = _choose(cand, valid, model.wraps, run.q0, closed, close_within=max_step)
+    raw = np.zeros_like(model.wraps)  # real joint motion: tracks are continuous in the joints' own values
+    choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step)
     if (choice < 0).all():
         return chain
     chosen = np.nonzero(choice >= 0)[0]
@@ -987,11 +992,11 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         choice[i] = choice[before[-1]] if before.size else choice[chosen[0]]
     rows = np.arange(N)
     found, found_its = cand[rows, choice], its.T[rows, choice]
-    wraps = model.wraps if closed else None
+    wraps = raw if closed else None
     c_ok = _final_check(run, chain[0])[2] & ((chain[0] >= model.lo - 1e-9) & (chain[0] <= model.hi + 1e-9)).all(axis=1)
-    if _path_cost(chain[0], c_ok, run.q0, wraps, max_step) < _path_cost(
-        found, ok.T[rows, choice], run.q0, wraps, max_step
-    ):
+    c_cost = _path_cost(chain[0], c_ok, run.q0, wraps, max_step)
+    s_cost = _path_cost(found, ok.T[rows, choice], run.q0, wraps, max_step)
+    if c_cost[:2] < s_cost[:2] or (c_cost[:2] == s_cost[:2] and s_cost[2] > c_cost[2] - SEARCH_GAIN):
         return chain
     return found, found_its, sources[int(of[choice[0]])] if of[choice[0]] >= 0 else "search"
 
