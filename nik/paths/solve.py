@@ -154,6 +154,7 @@ def solve_path(
     vel_limits=None,
     acc_limits=None,
     bounds=None,
+    q_rest=None,
 ) -> IKResult:
     """One continuous joint trajectory through the waypoints ``T_path`` (see :meth:`nik.IKSolver.solve_path`).
 
@@ -178,6 +179,8 @@ def solve_path(
         vel_limits, acc_limits: ``(dof,)`` joint speed / acceleration limits of the timing (default the robot's).
         bounds: a tolerant goal for every waypoint (:func:`nik.ik.bounds.parse_bounds`: ``"axis_z"``, 6 numbers,
             ``(N, 6)``); None: ``tol_pos`` / ``tol_rot``. Module docstring, "tolerant paths".
+        q_rest: ``(dof,)`` a preferred posture (radians) or ``"mid"`` (the middle of the ranges), or None. Module
+            docstring, "posture".
 
     Returns:
         :class:`IKResult` of N rows (``q: (N, dof)``) with ``path``: a :class:`PathReport`.
@@ -217,9 +220,10 @@ def solve_path(
     reach_note = None if every else model.unreachable_message(Tn, reachable)
     q0 = _q_start(robot, model, q_start)
     N = Tn.shape[0]
+    rest = None if q_rest is None else _q_rest(robot, q_rest)
     half, modes = (None, None) if goal is None else (goal.expand(N), goal.modes(N))
     is_closed = _is_closed(Tn, tol_pos, tol_rot) if closed is None else closed
-    run = _Run(plan, model, Tn, q0, reachable, half, modes)
+    run = _Run(plan, model, Tn, q0, reachable, half, modes, rest)
     follows = chain = None
     free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
     closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
@@ -233,7 +237,7 @@ def solve_path(
     else:
         q, its, source = _chain_path(run)
         if run.half is None and run.refine and not _smooth(run, q, max_step, is_closed):
-            q, its, source = _search_path(run, max_step, is_closed, (q, its, source))
+            q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest)
         found = None
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
@@ -328,6 +332,7 @@ class _Run:
     reachable: np.ndarray
     half: np.ndarray | None = None  # (N, 6) a tolerant goal's half-widths (nik.ik.bounds), None: the tolerances
     modes: np.ndarray | None = None  # (N,) its rotation modes
+    rest: np.ndarray | None = None  # (dof,) q_rest: the posture the chains drift towards (else the middle)
 
     @property
     def tol_pos(self) -> float:
@@ -369,7 +374,15 @@ class _Run:
         budget = np.where(reachable, restarts, 0).astype(np.int64)
         T, starts = np.ascontiguousarray(T), np.ascontiguousarray(starts, dtype=np.float64)
         rng, cap = seed_state(self.seed if seed is None else seed), PATH_PULL_CAP if pull > 0 else 0.0
-        if self.half is None:
+        if self.half is None and self.rest is not None:  # towards q_rest instead of the middle
+            from nik.paths.kernels import path_chains_toward
+
+            full = (np.full(K, pull), np.full(K, cap))
+            targets = np.ascontiguousarray(np.repeat(self.rest[None], K, axis=0))
+            path_chains_toward(
+                lm.G, lm.joints, T, starts, targets, *full, opts, iopts, budget, rng, q, its, ok, pos, rot
+            )
+        elif self.half is None:
             path_chains(lm.G, lm.joints, T, starts, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot)
         else:
             at = slice(offset, offset + T.shape[0])
@@ -398,6 +411,17 @@ class _Run:
             c(cap, dtype=np.float64), opts, iopts, budget, seed_state(self.seed), q, its, ok, pos, rot,
         )  # fmt: skip
         return q, its, ok
+
+
+def _q_rest(robot, q_rest) -> np.ndarray:
+    """``q_rest`` as ``(dof,)`` float64 (``"mid"``: the middle of the ranges), checked by
+    :func:`nik.ik.goals.rest_target` (one posture for the whole path)."""
+    from nik.ik.goals import rest_target
+
+    shape = np.shape(q_rest) if not isinstance(q_rest, str | torch.Tensor) else tuple(getattr(q_rest, "shape", ()))
+    if not isinstance(q_rest, str) and shape != (robot.dof,):
+        raise ValueError(f"q_rest: expected 'mid' or one posture of shape ({robot.dof},) for a path, got {shape}")
+    return np.ascontiguousarray(rest_target(robot, q_rest, 1)[0])
 
 
 def _q_start(robot, model, q_start) -> np.ndarray | None:
@@ -903,6 +927,9 @@ def _chain_path(run: _Run):
         q, its, _ = run.chains(run.T, run.q0[None], run.reachable, **kw)
         return q[0], its[0], "q_start"
     starts, sources = _start_postures(run)
+    if run.rest is not None:  # the start nearest q_rest first
+        order = np.argsort(np.abs(starts - run.rest).max(axis=1), kind="stable")
+        starts, sources = starts[order], [sources[i] for i in order]
     q, its, ok = run.chains(run.T, starts, run.reachable, **kw)
     if q.shape[0] == 1:
         return q[0], its[0], sources[0]
@@ -953,7 +980,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     postures = _search_postures(run, rest)
     mid = 0.5 * (model.lo + model.hi)
     K0 = starts.shape[0]
-    tracks = [(k, mid, PATH_PULL, PATH_PULL_CAP) for k in range(K0)]  # track k < K0: start k's plain chain
+    plain = mid if rest is None else rest
+    tracks = [(k, plain, PATH_PULL, PATH_PULL_CAP) for k in range(K0)]  # track k < K0: start k's plain chain
     for k in range(K0):
         for target, pull in [(starts[k], SEARCH_PULL), (mid, 0.0), *((p, SEARCH_PULL) for p in postures)]:
             tracks.append((k, target, pull, SEARCH_PULL_CAP))
