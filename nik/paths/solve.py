@@ -224,6 +224,7 @@ def solve_path(
     half, modes = (None, None) if goal is None else (goal.expand(N), goal.modes(N))
     is_closed = _is_closed(Tn, tol_pos, tol_rot) if closed is None else closed
     run = _Run(plan, model, Tn, q0, reachable, half, modes, rest)
+    check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
     follows = chain = None
     free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
     closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
@@ -236,15 +237,15 @@ def solve_path(
         q, its, found, source = _closed_form_path(run, is_closed, chain, max_step)
     else:
         q, its, source = _chain_path(run)
-        if run.half is None and run.refine and not _smooth(run, q, max_step, is_closed):
-            q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest)
+        col = None if check is None else check.arguments(robot)[1]
+        if run.half is None and run.refine and not _smooth(run, q, max_step, is_closed, col):
+            q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest, col)
         found = None
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
         q, _, _ = polish_path(
             model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
         )
-    check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
     if is_closed:
@@ -949,24 +950,38 @@ def _chain_path(run: _Run):
     return q[choice, rows], its[choice, rows], sources[int(choice[0])]
 
 
-def _smooth(run: _Run, q: np.ndarray, max_step: float, closed: bool) -> bool:
+def _smooth(run: _Run, q: np.ndarray, max_step: float, closed: bool, col=None) -> bool:
     """Whether the chain's answer ``q: (N, dof)`` needs no search: every waypoint reached inside the limits, no step
-    (from ``q0`` on) above :data:`PATH_FOLLOW_STEP` nor ``max_step``, and a closed path's last row within ``max_step``
-    of its first (:func:`_close_loop` closes the rest)."""
+    (from ``q0`` on) above :data:`PATH_FOLLOW_STEP` nor ``max_step``, a closed path's last row within ``max_step``
+    of its first (:func:`_close_loop` closes the rest) and, with ``col`` (the collision arrays of
+    :mod:`nik.ik.collide`), no waypoint colliding."""
     _, _, within = _final_check(run, q)
+    if col is not None:
+        within &= ~_colliding(run.model, q, col)
     inside = ((q >= run.model.lo - 1e-9) & (q <= run.model.hi + 1e-9)).all()
     _, _, step = _path_cost(q, within, run.q0)
     closes = not closed or _closure(q, run.model.wraps) <= max_step
     return bool(within.all() and inside and closes and step <= min(PATH_FOLLOW_STEP, max_step))
 
 
-def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarray | None = None):
+def _colliding(model, q: np.ndarray, col) -> np.ndarray:
+    """``(...)`` bool: configurations of ``q: (..., dof)`` that collide (the sphere check, margin 0)."""
+    from nik.kernels.collision import collides_batch
+
+    flat = np.ascontiguousarray(q.reshape(-1, q.shape[-1]), dtype=np.float64)
+    hit = np.empty(flat.shape[0], dtype=bool)
+    collides_batch(model.G, model.joints, flat, *col, 0.0, hit)
+    return hit.reshape(q.shape[:-1])
+
+
+def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarray | None = None, col=None):
     """``(q (N, dof), iterations (N,), source)``: the global search of an arm without a closed form (module
     docstring, "global search"). Tracks: LM chains (:func:`nik.paths.kernels.path_chains_toward`) from ``q0`` (else
     from every distinct start posture, :func:`_start_postures`), each drifting along the self-motion towards a
     posture of its own: the middle of the ranges (the plain chain, :func:`_chain_path`'s), its own start, no
     posture, ``rest`` (``q_rest``), and the network's hypotheses (else uniform LM answers) at the middle and the last
-    waypoint. Every track's answer at every waypoint is a candidate; :func:`_choose` picks the sequence with the
+    waypoint. Every track's answer at every waypoint is a candidate (among obstacles, ``col``: the collision arrays of
+    :mod:`nik.ik.collide`, one that collides is not); :func:`_choose` picks the sequence with the
     smallest largest step, then the least sum of squared steps (from ``q0``; on a closed path, ending next to its
     first row, within ``max_step``), switching tracks where they meet. Kept over ``chain`` (``(q, iterations, source)``
     of :func:`_chain_path`) and the plain chains unless one of them reaches more waypoints, closes where the search
@@ -1004,6 +1019,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         of = np.concatenate([of, np.full(len(b_starts), -1)])
     inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=-1)
     ok = ok & inside
+    if col is not None:  # among obstacles: a colliding answer is no candidate
+        ok &= ~_colliding(model, q, col)
     cand = np.ascontiguousarray(q.transpose(1, 0, 2))  # (N, K, dof): every track's answer at every waypoint
     valid = np.ascontiguousarray(ok.T)
     if run.q0 is not None:
@@ -1022,6 +1039,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     found, found_its = cand[rows, choice], its.T[rows, choice]
     wraps = raw if closed else None
     c_ok = _final_check(run, chain[0])[2] & ((chain[0] >= model.lo - 1e-9) & (chain[0] <= model.hi + 1e-9)).all(axis=1)
+    if col is not None:
+        c_ok &= ~_colliding(model, chain[0], col)
     c_cost = _path_cost(chain[0], c_ok, run.q0, wraps, max_step)
     s_cost = _path_cost(found, ok.T[rows, choice], run.q0, wraps, max_step)
     if c_cost[:2] < s_cost[:2] or (c_cost[:2] == s_cost[:2] and s_cost[2] > c_cost[2] - SEARCH_GAIN):
