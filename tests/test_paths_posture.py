@@ -1,5 +1,6 @@
-"""``solve_path(..., q_rest=)`` (issue 36 item 4): a redundant arm keeps to a preferred posture along the path (its
-chains and the search's tracks drift towards ``q_rest`` in the null space), the tool on the path all the same."""
+"""``solve_path(..., q_rest=)`` and ``bounds=`` in the global search (issue 36 item 4): a redundant arm keeps to a
+preferred posture along the path (its chains and the search's tracks drift towards ``q_rest`` in the null space), the
+tool on the path all the same; a tolerant goal's path is searched as the classic one is."""
 
 from __future__ import annotations
 
@@ -43,3 +44,36 @@ def test_a_bad_q_rest_is_one_line():
         solver.solve_path(T, q_rest=np.zeros(3))
     with pytest.raises(ValueError, match="q_rest"):
         solver.solve_path(T, q_rest="middle")
+
+
+def test_a_tolerant_goal_path_is_searched_too(monkeypatch):
+    """xarm7 circle from ``q_start`` with a free tool axis: the search's tracks run towards the bounds; the loop
+    closes with no step above ``max_step`` (the chain alone: a 360 deg jump and a loop 102 deg open)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    try:
+        from test_paths_loops import _circle, _closure_deg
+    finally:
+        sys.path.pop(0)
+    import warnings
+
+    import nik.paths.solve as P
+
+    robot = nik.load_robot("xarm7")
+    solver = nik.IKSolver(robot)
+    T, q0 = _circle(robot, 34, 0.05, n=60)
+
+    def run():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return solver.solve_path(T, q_start=q0, bounds="axis_z")
+
+    res = run()
+    assert bool(res.success.all()) and res.path.closed
+    assert _closure_deg(robot, res.q.numpy()) <= 0.1
+    assert res.path.largest_step <= res.path.max_step
+    monkeypatch.setattr(P, "_smooth", lambda *a, **k: True)  # the chain alone
+    chain = run()
+    assert chain.path.largest_step > res.path.largest_step

@@ -238,7 +238,7 @@ def solve_path(
     else:
         q, its, source = _chain_path(run)
         col = None if check is None else check.arguments(robot)[1]
-        if run.half is None and run.refine and not _smooth(run, q, max_step, is_closed, col):
+        if run.refine and not _smooth(run, q, max_step, is_closed, col):
             q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest, col)
         found = None
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
@@ -375,29 +375,39 @@ class _Run:
         budget = np.where(reachable, restarts, 0).astype(np.int64)
         T, starts = np.ascontiguousarray(T), np.ascontiguousarray(starts, dtype=np.float64)
         rng, cap = seed_state(self.seed if seed is None else seed), PATH_PULL_CAP if pull > 0 else 0.0
-        if self.half is None and self.rest is not None:  # towards q_rest instead of the middle
-            from nik.paths.kernels import path_chains_toward
-
-            full = (np.full(K, pull), np.full(K, cap))
-            targets = np.ascontiguousarray(np.repeat(self.rest[None], K, axis=0))
-            path_chains_toward(
-                lm.G, lm.joints, T, starts, targets, *full, opts, iopts, budget, rng, q, its, ok, pos, rot
-            )
-        elif self.half is None:
-            path_chains(lm.G, lm.joints, T, starts, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot)
-        else:
-            at = slice(offset, offset + T.shape[0])
-            half, modes = np.ascontiguousarray(self.half[at]), np.ascontiguousarray(self.modes[at])
-            path_chains_bounded(
-                lm.G, lm.joints, T, starts, half, modes, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot
-            )
+        if self.rest is None:
+            if self.half is None:
+                path_chains(lm.G, lm.joints, T, starts, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot)
+            else:
+                half, modes = self._goal(offset, T.shape[0], False)
+                path_chains_bounded(
+                    lm.G, lm.joints, T, starts, half, modes, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot
+                )
+            return q, its, ok
+        targets = np.repeat(self.rest[None], K, axis=0)  # towards q_rest instead of the middle
+        full = (np.full(K, pull), np.full(K, cap))
+        q, its, ok = self.tracks(T, starts, targets, *full, reachable, restarts, offset, seed=seed)
         return q, its, ok
 
-    def tracks(self, T, starts, targets, pull, cap, reachable, restarts: int):
+    def _goal(self, offset: int, N: int, backward: bool) -> tuple[np.ndarray, np.ndarray]:
+        """``(half (N, 6), modes (N,))`` of the tolerant goal at waypoints ``offset ... offset + N`` (reversed on a
+        backward chain)."""
+        at = slice(offset, offset + N)
+        half, modes = self.half[at], self.modes[at]
+        if backward:
+            half, modes = half[::-1], modes[::-1]
+        return np.ascontiguousarray(half), np.ascontiguousarray(modes)
+
+    def tracks(
+        self, T, starts, targets, pull, cap, reachable, restarts: int, offset: int = 0, backward: bool = False,
+        seed: int | None = None,
+    ):  # fmt: skip
         """:func:`nik.paths.kernels.path_chains_toward` along ``T`` from ``starts: (K, dof)``, chain ``c`` drifting
-        towards ``targets[c]`` (``pull, cap: (K,)``): ``q (K, N, dof)``, iterations ``(K, N)``, ok ``(K, N)``."""
+        towards ``targets[c]`` (``pull, cap: (K,)``): ``q (K, N, dof)``, iterations ``(K, N)``, ok ``(K, N)``; with a
+        tolerant goal, :func:`~nik.paths.kernels.path_chains_bounded_toward` towards the bounds of waypoints
+        ``offset ...`` (``backward``: ``T`` runs from the last of them to the first)."""
         from nik.kernels.lm import seed_state
-        from nik.paths.kernels import path_chains_toward
+        from nik.paths.kernels import path_chains_bounded_toward, path_chains_toward
 
         lm = self.model.lm
         K, n, N = starts.shape[0], starts.shape[1], T.shape[0]
@@ -407,10 +417,13 @@ class _Run:
         pos, rot = np.empty((K, N)), np.empty((K, N))
         budget = np.where(reachable, restarts, 0).astype(np.int64)
         c = np.ascontiguousarray
-        path_chains_toward(
-            lm.G, lm.joints, c(T), c(starts, dtype=np.float64), c(targets, dtype=np.float64), c(pull, dtype=np.float64),
-            c(cap, dtype=np.float64), opts, iopts, budget, seed_state(self.seed), q, its, ok, pos, rot,
-        )  # fmt: skip
+        head = (lm.G, lm.joints, c(T), c(starts, dtype=np.float64), c(targets, dtype=np.float64))
+        head += (c(pull, dtype=np.float64), c(cap, dtype=np.float64))
+        tail = (opts, iopts, budget, seed_state(self.seed if seed is None else seed), q, its, ok, pos, rot)
+        if self.half is None:
+            path_chains_toward(*head, *tail)
+        else:
+            path_chains_bounded_toward(*head, *self._goal(offset, N, backward), *tail)
         return q, its, ok
 
 
@@ -1013,7 +1026,9 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         b_targets = np.stack([x for p in back for x in (mid, p)])
         b_pull = np.tile([PATH_PULL, SEARCH_PULL], len(back))
         b_cap = np.tile([PATH_PULL_CAP, SEARCH_PULL_CAP], len(back))
-        qb, itsb, okb = run.tracks(run.T[::-1], b_starts, b_targets, b_pull, b_cap, run.reachable[::-1], run.restarts)
+        qb, itsb, okb = run.tracks(
+            run.T[::-1], b_starts, b_targets, b_pull, b_cap, run.reachable[::-1], run.restarts, backward=True
+        )
         q = np.concatenate([q, qb[:, ::-1]])
         its, ok = np.concatenate([its, itsb[:, ::-1]]), np.concatenate([ok, okb[:, ::-1]])
         of = np.concatenate([of, np.full(len(b_starts), -1)])
