@@ -29,10 +29,22 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    left without a valid branch gets LM seeded by its neighbour's answer (its best effort, flagged); the chains are
    that already.
 5. **redundant arms**: the extra freedom is resolved along the path by seeding each waypoint with its
-   predecessor's answer moved :data:`PATH_PULL` of the way towards the middle of the joint ranges (at most
-   :data:`PATH_PULL_CAP` per joint and waypoint): LM from that seed removes whatever would move the tool, the
-   rest is self-motion away from the limits, so the arm does not drift into a limit and then jump.
-6. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
+   predecessor's answer moved :data:`PATH_PULL` of the way towards the middle of the joint ranges (``q_rest``
+   where given; at most :data:`PATH_PULL_CAP` per joint and waypoint): LM from that seed removes whatever would move
+   the tool, the rest is self-motion away from the limits, so the arm does not drift into a limit and then jump.
+6. **global search** (arms without a closed form, :func:`_search_path`), where that chain does not follow the path
+   smoothly (a waypoint missed, a step above :data:`SEARCH_TRIGGER` or ``max_step``, a loop left more than
+   ``max_step`` open, a waypoint colliding): tracks, LM chains each drifting along the self-motion towards a posture
+   of its own (:data:`SEARCH_PULL`, at most :data:`SEARCH_PULL_CAP` per waypoint): from ``q_start`` (else from every
+   start posture) towards the middle of the ranges, its start, ``q_rest``, and the network's hypotheses at the
+   middle and the last waypoint (without a network: LM answers from uniform starts there); backward tracks from
+   those postures (and, on a loop, from the start, which answers its last pose too). Every track's answer at every
+   waypoint is a candidate (inside the limits, within the tolerances or the tolerant goal, free of collision among
+   obstacles); the dynamic programming (:func:`nik.paths.kernels.path_dp`, real joint motion) chooses the sequence,
+   switching tracks where they meet; a loop's end pinned next to its start. The chain's answer stays unless the
+   search reaches more waypoints, closes a loop the chain leaves open, or cuts the largest step by
+   :data:`SEARCH_GAIN`: the search never answers worse than the chain.
+7. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
    on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
 
@@ -51,6 +63,10 @@ are the closed form's branches at sampled angles about it (:func:`_branches`) an
 least-motion sequence; other goals and arms run the LM chains towards the bounds
 (:func:`nik.paths.kernels.path_chains_bounded`). Success is checked by FK in each waypoint's tool frame
 (:func:`_final_check`); ``rot_err`` is then the rotation error that counts (with a free axis, its swing).
+
+**Posture** (``q_rest=``: one posture ``(dof,)`` or ``"mid"``): on arms without a closed form the chains and the
+search's plain tracks drift towards it instead of the middle of the ranges (and the start posture nearest it comes
+first); the closed form's branches are chosen by motion alone, and the whole-path optimisation has no posture term.
 
 **Timing** (``timing=True`` or a dict of :func:`nik.paths.timing.time_path` keywords): the answer is timed after the
 path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
@@ -136,6 +152,10 @@ SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
 #: The search's answer replaces the chain's where it reaches more waypoints, closes a loop the chain leaves open, or
 #: (else equal) cuts the largest step by more than this (radians, 0.5 degrees): on a tie the chain stays.
 SEARCH_GAIN = math.radians(0.5)
+#: The search runs where the chain takes a step above this (radians, 2 degrees, as :data:`PATH_FOLLOW_STEP`; or above
+#: ``max_step``), misses a waypoint, collides, or leaves a loop open: below it a chain's path is taken as smooth (the
+#: search costs about 30 chains; at 3 degrees, one panda circle in 19 more keeps a 3.1 degree step).
+SEARCH_TRIGGER = math.radians(2.0)
 
 
 def solve_path(
@@ -168,9 +188,11 @@ def solve_path(
         representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
         max_step: steps above it are reconfigurations (reported, warned about), radians.
         world: a :class:`nik.World` (else the solver's; with self-collision by :func:`nik.ik.collide.setup`'s rule):
-            the path's colliding stretches (waypoints, or samples inside the steps) are re-planned by the path
-            optimisation with collision rows (:func:`_avoid`); what still collides is infeasible, reason
-            ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"`` (the motion).
+            on an arm without a closed form a chain that collides is searched again with colliding answers left out
+            (module docstring, "global search"); the path's colliding stretches (waypoints, or samples inside the
+            steps) are re-planned by the path optimisation with collision rows (:func:`_avoid`); what still collides
+            is infeasible, reason ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"``
+            (the motion).
         closed: None: the path is closed when its last pose equals its first within the tolerances (position and
             rotation); True / False force it. A closed path returns joints whose last row equals its first (module
             docstring, "closed loops").
@@ -965,7 +987,7 @@ def _chain_path(run: _Run):
 
 def _smooth(run: _Run, q: np.ndarray, max_step: float, closed: bool, col=None) -> bool:
     """Whether the chain's answer ``q: (N, dof)`` needs no search: every waypoint reached inside the limits, no step
-    (from ``q0`` on) above :data:`PATH_FOLLOW_STEP` nor ``max_step``, a closed path's last row within ``max_step``
+    (from ``q0`` on) above :data:`SEARCH_TRIGGER` nor ``max_step``, a closed path's last row within ``max_step``
     of its first (:func:`_close_loop` closes the rest) and, with ``col`` (the collision arrays of
     :mod:`nik.ik.collide`), no waypoint colliding."""
     _, _, within = _final_check(run, q)
@@ -974,7 +996,7 @@ def _smooth(run: _Run, q: np.ndarray, max_step: float, closed: bool, col=None) -
     inside = ((q >= run.model.lo - 1e-9) & (q <= run.model.hi + 1e-9)).all()
     _, _, step = _path_cost(q, within, run.q0)
     closes = not closed or _closure(q, run.model.wraps) <= max_step
-    return bool(within.all() and inside and closes and step <= min(PATH_FOLLOW_STEP, max_step))
+    return bool(within.all() and inside and closes and step <= min(SEARCH_TRIGGER, max_step))
 
 
 def _colliding(model, q: np.ndarray, col) -> np.ndarray:
