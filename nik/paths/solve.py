@@ -553,8 +553,10 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     turns on wrapping joints) is blended back over the path (row ``i`` seeded at ``q_i + w_i delta``,
     ``w = 3 s^2 - 2 s^3`` of ``s = i / (N - 1)``: no added motion at either end) and every row re-solved by LM from
     its seed (the tool stays, the null-space drift is undone). Kept only when every waypoint reached before is
-    still reached, inside the limits, and no step grows above ``max(max_step, the largest step before)``;
-    else ``q`` as it was (its closure is reported)."""
+    still reached, inside the limits, and no step grows above ``max(max_step, the largest step before)``; else the
+    last row alone is moved onto the first (``q_-1 + delta``) where that keeps its waypoint and its step within the
+    same bound (a path whose other rows LM would move, near a singularity); else ``q`` as it was (its closure is
+    reported)."""
     model = run.model
     if _closure(q, model.wraps) <= PATH_CLOSE_TOL:
         return q, its
@@ -576,6 +578,15 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     old_step = np.abs(np.diff(q, axis=0)).max()
     new_step = np.abs(np.diff(new, axis=0)).max()
     if (before & ~(after & inside)).any() or new_step > max(max_step, old_step):
+        last = q.copy()  # the blend refused: the last row alone moved onto the first, where its step stays small
+        last[-1] = q[-1] + delta
+        step = float(np.abs(last[-1] - last[-2]).max())
+        ok = _final_check(run, last)[2][-1]
+        inside = bool(((last[-1] >= model.lo - 1e-9) & (last[-1] <= model.hi + 1e-9)).all())
+        if (ok or not before[-1]) and inside and step <= max(max_step, old_step):
+            its = its.copy()
+            its[-1] += end_its[0]
+            return last, its
         return q, its
     return new, its + new_its
 
