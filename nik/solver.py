@@ -312,6 +312,7 @@ class IKSolver:
         vel_limits=None,
         acc_limits=None,
         bounds=None,
+        q_rest=None,
     ) -> IKResult:
         """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.paths.solve`).
 
@@ -331,6 +332,7 @@ class IKSolver:
             timing: True (or a dict of :func:`nik.paths.timing.time_path` keywords) fills ``res.path.t``, ``qd``,
                 ``qdd``; vel_limits, acc_limits: ``(dof,)`` its limits (default the robot's).
             bounds: a tolerant goal per waypoint (:func:`nik.ik.bounds.parse_bounds`, e.g. ``"axis_z"``).
+            q_rest: ``(dof,)`` or ``"mid"``: the posture a redundant arm keeps to along the path (null space).
 
         Returns:
             :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,
@@ -346,5 +348,5 @@ class IKSolver:
         return paths.solve_path(
             self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
             max_step=step, world=world, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits,
-            bounds=bounds,
+            bounds=bounds, q_rest=q_rest,
         )  # fmt: skip
