@@ -11,10 +11,18 @@ paths, the largest step (median over the problems, deg), the joint path length (
 worst error (mm), the time per path (median, s). Rows: nik with the world (network on: the default checkpoint;
 off: ``checkpoint=None``) and the plain answer (no world: what the straight motion does).
 
-    OMP_NUM_THREADS=1 python benchmarks/paths_obstacles.py --n 8
+The second table (free space, from ``q_start``): benchmarks/paths.py's stream of paths on the redundant arms (60
+waypoints; lines of 15 cm, circles of 5 cm radius, closed; from a configuration in the middle 60 % of the ranges);
+feasible: the per-pose solver reaches every waypoint (benchmarks/paths.py's rule); followed: every waypoint within
+0.1 mm / 0.1 deg, every step (the first from ``q_start``) <= 3 deg; closed: the last row within 0.1 deg of the first
+(modulo whole turns on joints wider than a turn), over every circle; the worst first step from ``q_start``; the
+median time per path. Rows: the search with the network, without it (``checkpoint=None``), and the plain chain alone
+(the search switched off: what main did). Kinova Gen2 (example-robot-data, where installed): circles only.
 
-Not measured here (issue 36, left to do): circles and letters among obstacles, xarm7 lines / circles and closed
-loops from q_start, a chain of ``solve(q_near=previous, world=w)`` as the peer.
+    OMP_NUM_THREADS=1 python benchmarks/paths_obstacles.py --n 8 --free 40
+
+Not measured here (issue 36, left to do): circles and letters among obstacles, a chain of
+``solve(q_near=previous, world=w)`` as the peer.
 """
 
 from __future__ import annotations
@@ -108,16 +116,114 @@ def bench(name: str, n: int) -> list[str]:
     return rows
 
 
+def _closure_deg(robot, q: np.ndarray) -> float:
+    """Last row vs first, degrees (modulo whole turns on joints whose range exceeds a turn)."""
+    d = np.abs(q[-1] - q[0])
+    lim = robot.limits.numpy()
+    w = lim[:, 1] - lim[:, 0] > 2 * math.pi
+    d[w] = np.abs(np.remainder(d[w] + math.pi, 2 * math.pi) - math.pi)
+    return math.degrees(float(d.max()))
+
+
+def _kinova():
+    """example-robot-data's Kinova Gen2, or None."""
+    import importlib.metadata
+
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/kinova_description/robots/kinova.urdf"))
+    return nik.load_robot(path, end_link="j2s6s200_end_effector") if path.is_file() else None
+
+
+def free_paths(name: str, n: int):
+    """``(robot, [(kind, T, q0, feasible)])``: benchmarks/paths.py's stream (module docstring); Kinova: circles."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from paths import PATH_SEED, circle, line, start_configuration
+
+    robot = _kinova() if name == "kinova" else nik.load_robot(name)
+    if robot is None:
+        return None, []
+    solver = nik.IKSolver(robot, checkpoint=None)
+    gen = torch.Generator().manual_seed(PATH_SEED + sum(map(ord, name)))
+    out = []
+    for k in range(2 * n):
+        kind = "circle" if (k % 2 or name == "kinova") else "line"
+        q0 = start_configuration(robot, gen, 0.6)
+        T = line(robot, q0, gen, 0.15) if kind == "line" else circle(robot, q0, gen)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            feasible = bool(solver.solve(T).success.all())
+        out.append((kind, T, q0, feasible))
+    return robot, out
+
+
+def bench_free(name: str, n: int) -> list[str]:
+    import nik.paths.solve as P
+
+    robot, probs = free_paths(name, n)
+    if robot is None:
+        return [f"| {name} | (not installed) | | | | | |"]
+    smooth = P._smooth
+    runs = {
+        "search, network on": (nik.IKSolver(robot), smooth),
+        "search, network off": (nik.IKSolver(robot, checkpoint=None), smooth),
+        "chain alone (main)": (nik.IKSolver(robot), lambda *a, **k: True),
+    }
+    rows = []
+    for label, (solver, sm) in runs.items():
+        P._smooth = sm
+        met = {"line": [0, 0], "circle": [0, 0]}
+        closed, first, dts = [], [], []
+        for kind, T, q0, feasible in probs:
+            t = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = solver.solve_path(T, q_start=q0)
+            dts.append(time.perf_counter() - t)
+            q = res.q.numpy()
+            pos, rot = nik.pose_error(T, robot.fk(res.q))
+            steps = np.abs(np.diff(np.concatenate([q0.numpy()[None], q]), axis=0)).max()
+            ok = bool(pos.max() <= 1e-4 and rot.max() <= math.radians(0.1) and steps <= math.radians(3.0))
+            if feasible:
+                met[kind][0] += 1
+                met[kind][1] += ok
+            if kind == "circle":
+                closed.append(_closure_deg(robot, q))
+            first.append(math.degrees(float(np.abs(q[0] - q0.numpy()).max())))
+        P._smooth = smooth
+        c = np.array(closed)
+        rows.append(
+            f"| {name} | {label} | {met['line'][1]}/{met['line'][0]} | {met['circle'][1]}/{met['circle'][0]} | "
+            f"{int((c <= 0.1).sum())}/{len(c)} | {c.max():.3g} | {max(first):.3g} | {1e3 * np.median(dts):.1f} |"
+        )
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=6, help="problems per robot")
+    ap.add_argument("--n", type=int, default=6, help="problems among obstacles per robot (0: none)")
     ap.add_argument("--robots", default="panda,xarm7")
+    ap.add_argument("--free", type=int, default=0, help="free-space lines + circles per arm from q_start (0: none)")
+    ap.add_argument("--free-robots", default="xarm7,panda,kinova")
     args = ap.parse_args()
-    print("| robot | solver | valid | largest step (deg) | path length (rad) | worst error (mm) | s / path |")
-    print("|---|---|---|---|---|---|---|")
-    for name in args.robots.split(","):
-        for row in bench(name, args.n):
-            print(row, flush=True)
+    if args.n:
+        print("| robot | solver | valid | largest step (deg) | path length (rad) | worst error (mm) | s / path |")
+        print("|---|---|---|---|---|---|---|")
+        for name in args.robots.split(","):
+            for row in bench(name, args.n):
+                print(row, flush=True)
+    if args.free:
+        print()
+        print(
+            "| robot | solver | lines followed (<= 3 deg) | circles followed | loops closed (0.1 deg) | "
+            "worst closure (deg) | worst first step (deg) | ms / path |"
+        )
+        print("|---|---|---|---|---|---|---|---|")
+        for name in args.free_robots.split(","):
+            for row in bench_free(name, args.free):
+                print(row, flush=True)
 
 
 if __name__ == "__main__":

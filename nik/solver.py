@@ -322,6 +322,7 @@ class IKSolver:
         vel_limits=None,
         acc_limits=None,
         bounds=None,
+        q_rest=None,
         costs=None,
     ) -> IKResult:
         """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.paths.solve`).
@@ -342,6 +343,7 @@ class IKSolver:
             timing: True (or a dict of :func:`nik.paths.timing.time_path` keywords) fills ``res.path.t``, ``qd``,
                 ``qdd``; vel_limits, acc_limits: ``(dof,)`` its limits (default the robot's).
             bounds: a tolerant goal per waypoint (:func:`nik.ik.bounds.parse_bounds`, e.g. ``"axis_z"``).
+            q_rest: ``(dof,)`` or ``"mid"``: the posture a redundant arm keeps to along the path (null space).
             costs: the user's cost terms (as :meth:`solve`; path terms too): the path found is then solved as one
                 problem with them, smoothness and the ``max_step`` cap (:mod:`nik.paths.costs`).
 
@@ -359,5 +361,5 @@ class IKSolver:
         return paths.solve_path(
             self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
             max_step=step, world=world, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits,
-            bounds=bounds, costs=costs,
+            bounds=bounds, q_rest=q_rest, costs=costs,
         )  # fmt: skip

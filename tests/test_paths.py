@@ -167,6 +167,7 @@ def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
         warnings.simplefilter("ignore")
         assert int(res.success.sum()) == int(panda.solve(T).success.sum())  # every waypoint any solve reaches
     monkeypatch.setattr(paths, "PATH_PULL", 0.0)
+    monkeypatch.setattr(paths, "_smooth", lambda *a: True)  # the chain alone, without the global search's rescue
     plain, plain_margin = run()  # the check can fail: nearest-to-the-predecessor alone drifts and jumps
     assert plain_margin < 0.05 and plain.path.largest_step > math.radians(90.0)
 

@@ -69,3 +69,48 @@ def test_a_kinova_loop_from_q_start_starts_without_a_jump_and_closes(seed, radiu
     assert np.abs(q[0] - q0.numpy()).max() <= res.path.max_step
     assert _closure_deg(robot, q) <= 0.1
     assert bool(res.success.all())
+
+
+@pytest.mark.parametrize("seed", [8, 18, 34])
+def test_a_redundant_arm_circle_from_q_start_closes_without_a_jump_at_the_start(seed):
+    """xarm7 (7 joints, no closed form): a full circle from ``q_start`` ends where it started (main: 16, 21, 12 deg
+    off, the chain drifting in the null space or jumping), every waypoint reached, the first waypoint within
+    ``max_step`` of ``q_start`` and no step above it (seed 34: main jumped 360 deg)."""
+    robot = nik.load_robot("xarm7")
+    T, q0 = _circle(robot, seed, 0.05, n=60)
+    res = _solve(nik.IKSolver(robot), T, q0)
+    q = res.q.numpy()
+    assert res.path.closed and bool(res.success.all())
+    assert _closure_deg(robot, q) <= 0.1
+    assert np.abs(q[0] - q0.numpy()).max() <= res.path.max_step
+    assert res.path.largest_step <= res.path.max_step
+
+
+def _chain_only(monkeypatch):
+    """solve_path without the global search: the plain LM chain's answer (main's), for comparison."""
+    import nik.paths.solve as P
+
+    monkeypatch.setattr(P, "_smooth", lambda *a: True)
+
+
+@pytest.mark.parametrize("arm", ["xarm7", "panda"])
+def test_the_search_is_never_worse_than_the_chain(arm, monkeypatch):
+    """On open paths (circles with ``closed=False``, from ``q_start``), the global search's answer reaches at least
+    as many waypoints as the plain chain and, where it reaches as many, its largest step is no larger; on some it is
+    strictly better (xarm7 seed 15: the chain jumps a full turn, the search 7 deg)."""
+    robot = nik.load_robot(arm)
+    solver = nik.IKSolver(robot)
+    better = 0
+    for seed in (4, 11, 15, 22, 34):
+        T, q0 = _circle(robot, seed, 0.05, n=60)
+        with monkeypatch.context() as m:
+            _chain_only(m)
+            chain = _solve(solver, T, q0, closed=False)
+        res = _solve(solver, T, q0, closed=False)
+        n_c, n_s = int(chain.success.sum()), int(res.success.sum())
+        assert n_s >= n_c
+        if n_s == n_c:
+            assert res.path.largest_step <= chain.path.largest_step + 1e-9
+        better += n_s > n_c or res.path.largest_step < chain.path.largest_step - math.radians(1.0)
+    if arm == "xarm7":
+        assert better >= 1

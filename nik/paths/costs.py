@@ -4,7 +4,8 @@ The path's own search (:func:`nik.paths.solve.solve_path`: branches, chains, tra
 avoidance) gives a continuous joint path first. Where the user's terms are given, that path is the start of one
 problem over every waypoint at once (:class:`nik.lm.problem.PathProblem`, solved by
 :func:`nik.lm.problem.solve_problem`): per waypoint the pose (or the bounds), the limits, collisions where a check is
-active (:mod:`nik.ik.costs`, :func:`nik.ik.collide.setup`'s rule) and the user's per-configuration terms; over the
+active (:mod:`nik.ik.costs`, :func:`nik.ik.collide.setup`'s rule), the posture with ``q_rest`` (a preference) and
+the user's per-configuration terms; over the
 path :func:`nik.costs.smoothness` from ``q_start`` (velocity and acceleration rows, a preference) and
 :func:`nik.costs.step_cap` (``max_step``, a constraint) and any path terms the user gives (``path = True``). The
 problem is solved only where the search's path misses a constraint or a user's term is a preference (a path that
@@ -56,7 +57,8 @@ def solve_path(solver, T_path, q_start=None, *, costs=None, timing=False, vel_li
 
 
 def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, acc_limits, *, tol_pos, tol_rot,
-            seed=0, representation=None, max_step=PATH_MAX_STEP, world=None, closed=None, bounds=None):  # fmt: skip
+            seed=0, representation=None, max_step=PATH_MAX_STEP, world=None, closed=None, bounds=None,
+            q_rest=None):  # fmt: skip
     from nik import costs as C
     from nik.costs.collision import CollisionTerm
     from nik.ik.costs import _unmet, call_terms, warn_unmet
@@ -71,7 +73,8 @@ def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, a
     robot = solver.robot
     Tn, dtype, device = _poses(T_path, representation)
     N, n = Tn.shape[0], robot.dof
-    plan = with_goal(solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds, batch=N)
+    plan = with_goal(solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds, q_rest,
+                     batch=N)  # fmt: skip
     T = torch.from_numpy(Tn)
     terms, limits, s = call_terms(solver, plan, T, world, per)
     q0 = None if q_start is None else torch.as_tensor(np.asarray(torch.as_tensor(q_start).cpu()), dtype=torch.float64)

@@ -27,7 +27,7 @@ from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER
 from nik.kernels.lm import _STREAM, _lm_one, _lm_one_bounded, _work_size
 
-__all__ = ["path_chains", "path_chains_bounded", "path_dp"]
+__all__ = ["path_chains", "path_chains_bounded", "path_chains_bounded_toward", "path_chains_toward", "path_dp"]
 
 _TWO_PI = 2.0 * math.pi
 #: Weight of the total joint motion (radians) beside the sum of squared steps (radians^2) in the second pass:
@@ -165,6 +165,25 @@ def path_chains(G, joints, T, starts, opts, iopts, restarts, seed, pull, pull_ca
         pos, rot: (K, N) out, metres and radians (the LM scratch is allocated here: threads never share it).
     """
     K, n = starts.shape
+    targets = np.empty((K, n))
+    for c in range(K):
+        for j in range(n):
+            targets[c, j] = 0.5 * (joints[j, LOWER] + joints[j, UPPER])
+    pulls, caps = np.full(K, pull), np.full(K, pull_cap)
+    args = (opts, iopts, restarts, seed, q, iterations, ok, pos, rot)
+    path_chains_toward(G, joints, T, starts, targets, pulls, caps, *args)
+
+
+@kernel
+def path_chains_toward(
+    G, joints, T, starts, targets, pull, pull_cap, opts, iopts, restarts, seed, q, iterations, ok, pos, rot
+):
+    """:func:`path_chains` with a posture of its own per chain: waypoint ``i`` of chain ``c`` is seeded by the
+    chain's answer at ``i - 1`` moved towards ``targets[c] (n,)`` by ``pull[c]`` times its distance from there (at
+    most ``pull_cap[c]`` per joint). On a redundant arm each chain drifts along the self-motion towards its own
+    posture (the global search's tracks: :func:`nik.paths.solve._search_path`). ``targets: (K, n)``, ``pull,
+    pull_cap: (K,)``; the other arguments and outputs as :func:`path_chains`."""
+    K, n = starts.shape
     N = T.shape[0]
     x = np.empty(n)
     work = np.empty(_work_size(n))
@@ -177,9 +196,8 @@ def path_chains(G, joints, T, starts, opts, iopts, restarts, seed, pull, pull_ca
                     x[j] = starts[c, j]
             else:
                 for j in range(n):
-                    lo, hi = joints[j, LOWER], joints[j, UPPER]
-                    d = -pull * (q[c, i - 1, j] - 0.5 * (lo + hi))
-                    x[j] = q[c, i - 1, j] + min(max(d, -pull_cap), pull_cap)
+                    d = -pull[c] * (q[c, i - 1, j] - targets[c, j])
+                    x[j] = q[c, i - 1, j] + min(max(d, -pull_cap[c]), pull_cap[c])
             it, good, p, r = _lm_one(G, joints, T[i], x, opts, iopts, 0, rng, q[c, i], work)
             if not good and i > 0:
                 total = it
@@ -201,6 +219,22 @@ def path_chains_bounded(
     :func:`nik.kernels.lm._lm_one_bounded`. Arguments and outputs otherwise as :func:`path_chains` (``pos, rot``:
     position error m, geodesic angle rad to the pose as given)."""
     K, n = starts.shape
+    targets = np.empty((K, n))
+    for c in range(K):
+        for j in range(n):
+            targets[c, j] = 0.5 * (joints[j, LOWER] + joints[j, UPPER])
+    pulls, caps = np.full(K, pull), np.full(K, pull_cap)
+    args = (opts, iopts, restarts, seed, q, iterations, ok, pos, rot)
+    path_chains_bounded_toward(G, joints, T, starts, targets, pulls, caps, half, modes, *args)
+
+
+@kernel
+def path_chains_bounded_toward(
+    G, joints, T, starts, targets, pull, pull_cap, half, modes, opts, iopts, restarts, seed, q, iterations, ok, pos, rot
+):
+    """:func:`path_chains_bounded` with a posture of its own per chain (``targets: (K, n)``, ``pull, pull_cap:
+    (K,)``, as :func:`path_chains_toward`)."""
+    K, n = starts.shape
     N = T.shape[0]
     x = np.empty(n)
     work = np.empty(_work_size(n))
@@ -213,9 +247,8 @@ def path_chains_bounded(
                     x[j] = starts[c, j]
             else:
                 for j in range(n):
-                    lo, hi = joints[j, LOWER], joints[j, UPPER]
-                    d = -pull * (q[c, i - 1, j] - 0.5 * (lo + hi))
-                    x[j] = q[c, i - 1, j] + min(max(d, -pull_cap), pull_cap)
+                    d = -pull[c] * (q[c, i - 1, j] - targets[c, j])
+                    x[j] = q[c, i - 1, j] + min(max(d, -pull_cap[c]), pull_cap[c])
             h, m = half[i], modes[i]
             it, good, p, r = _lm_one_bounded(G, joints, T[i], x, h, m, opts, iopts, 0, rng, q[c, i], work)
             if not good and (i > 0 or restarts[i] > 0):

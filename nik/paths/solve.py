@@ -29,10 +29,22 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    left without a valid branch gets LM seeded by its neighbour's answer (its best effort, flagged); the chains are
    that already.
 5. **redundant arms**: the extra freedom is resolved along the path by seeding each waypoint with its
-   predecessor's answer moved :data:`PATH_PULL` of the way towards the middle of the joint ranges (at most
-   :data:`PATH_PULL_CAP` per joint and waypoint): LM from that seed removes whatever would move the tool, the
-   rest is self-motion away from the limits, so the arm does not drift into a limit and then jump.
-6. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
+   predecessor's answer moved :data:`PATH_PULL` of the way towards the middle of the joint ranges (``q_rest``
+   where given; at most :data:`PATH_PULL_CAP` per joint and waypoint): LM from that seed removes whatever would move
+   the tool, the rest is self-motion away from the limits, so the arm does not drift into a limit and then jump.
+6. **global search** (arms without a closed form, :func:`_search_path`), where that chain does not follow the path
+   smoothly (a waypoint missed, a step above :data:`SEARCH_TRIGGER` or ``max_step``, a loop left more than
+   ``max_step`` open, a waypoint colliding): tracks, LM chains each drifting along the self-motion towards a posture
+   of its own (:data:`SEARCH_PULL`, at most :data:`SEARCH_PULL_CAP` per waypoint): from ``q_start`` (else from every
+   start posture) towards the middle of the ranges, its start, ``q_rest``, and the network's hypotheses at the
+   middle and the last waypoint (without a network: LM answers from uniform starts there); backward tracks from
+   those postures (and, on a loop, from the start, which answers its last pose too). Every track's answer at every
+   waypoint is a candidate (inside the limits, within the tolerances or the tolerant goal, free of collision among
+   obstacles); the dynamic programming (:func:`nik.paths.kernels.path_dp`, real joint motion) chooses the sequence,
+   switching tracks where they meet; a loop's end pinned next to its start. The chain's answer stays unless the
+   search reaches more waypoints, closes a loop the chain leaves open, or cuts the largest step by
+   :data:`SEARCH_GAIN`: the search never answers worse than the chain.
+7. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
    on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
 
@@ -51,6 +63,10 @@ are the closed form's branches at sampled angles about it (:func:`_branches`) an
 least-motion sequence; other goals and arms run the LM chains towards the bounds
 (:func:`nik.paths.kernels.path_chains_bounded`). Success is checked by FK in each waypoint's tool frame
 (:func:`_final_check`); ``rot_err`` is then the rotation error that counts (with a free axis, its swing).
+
+**Posture** (``q_rest=``: one posture ``(dof,)`` or ``"mid"``): on arms without a closed form the chains and the
+search's plain tracks drift towards it instead of the middle of the ranges (and the start posture nearest it comes
+first); the closed form's branches are chosen by motion alone, and the whole-path optimisation has no posture term.
 
 **Timing** (``timing=True`` or a dict of :func:`nik.paths.timing.time_path` keywords): the answer is timed after the
 path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
@@ -125,6 +141,21 @@ PATH_DP_CELLS = 30_000_000
 #: The last polish aims at this fraction of the tolerances (every reached waypoint whose error is above it), so that a
 #: path's worst error is not at the threshold; a waypoint moves at most this fraction of ``max_step`` for it.
 PATH_MARGIN = 0.5
+#: The global search's tracks (arms without a closed form): each waypoint's seed moves this fraction of the way from
+#: the previous answer towards the track's own posture ...
+SEARCH_PULL = 0.05
+#: ... by at most this much per joint and waypoint, radians (0.5 degrees).
+SEARCH_PULL_CAP = math.radians(0.5)
+#: The network's hypotheses (or uniform LM answers) per waypoint that the tracks drift towards (at the middle and the
+#: last waypoint), and how far apart two of them must be (largest joint difference, radians) to count twice.
+SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
+#: The search's answer replaces the chain's where it reaches more waypoints, closes a loop the chain leaves open, or
+#: (else equal) cuts the largest step by more than this (radians, 0.5 degrees): on a tie the chain stays.
+SEARCH_GAIN = math.radians(0.5)
+#: The search runs where the chain takes a step above this (radians, 2 degrees, as :data:`PATH_FOLLOW_STEP`; or above
+#: ``max_step``), misses a waypoint, collides, or leaves a loop open: below it a chain's path is taken as smooth (the
+#: search costs about 30 chains; at 3 degrees, one panda circle in 19 more keeps a 3.1 degree step).
+SEARCH_TRIGGER = math.radians(2.0)
 
 
 def solve_path(
@@ -143,6 +174,7 @@ def solve_path(
     vel_limits=None,
     acc_limits=None,
     bounds=None,
+    q_rest=None,
 ) -> IKResult:
     """One continuous joint trajectory through the waypoints ``T_path`` (see :meth:`nik.IKSolver.solve_path`).
 
@@ -156,9 +188,11 @@ def solve_path(
         representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
         max_step: steps above it are reconfigurations (reported, warned about), radians.
         world: a :class:`nik.World` (else the solver's; with self-collision by :func:`nik.ik.collide.setup`'s rule):
-            the path's colliding stretches (waypoints, or samples inside the steps) are re-planned by the path
-            optimisation with collision rows (:func:`_avoid`); what still collides is infeasible, reason
-            ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"`` (the motion).
+            on an arm without a closed form a chain that collides is searched again with colliding answers left out
+            (module docstring, "global search"); the path's colliding stretches (waypoints, or samples inside the
+            steps) are re-planned by the path optimisation with collision rows (:func:`_avoid`); what still collides
+            is infeasible, reason ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"``
+            (the motion).
         closed: None: the path is closed when its last pose equals its first within the tolerances (position and
             rotation); True / False force it. A closed path returns joints whose last row equals its first (module
             docstring, "closed loops").
@@ -167,6 +201,8 @@ def solve_path(
         vel_limits, acc_limits: ``(dof,)`` joint speed / acceleration limits of the timing (default the robot's).
         bounds: a tolerant goal for every waypoint (:func:`nik.ik.bounds.parse_bounds`: ``"axis_z"``, 6 numbers,
             ``(N, 6)``); None: ``tol_pos`` / ``tol_rot``. Module docstring, "tolerant paths".
+        q_rest: ``(dof,)`` a preferred posture (radians) or ``"mid"`` (the middle of the ranges), or None. Module
+            docstring, "posture".
 
     Returns:
         :class:`IKResult` of N rows (``q: (N, dof)``) with ``path``: a :class:`PathReport`.
@@ -206,9 +242,11 @@ def solve_path(
     reach_note = None if every else model.unreachable_message(Tn, reachable)
     q0 = _q_start(robot, model, q_start)
     N = Tn.shape[0]
+    rest = None if q_rest is None else _q_rest(robot, q_rest)
     half, modes = (None, None) if goal is None else (goal.expand(N), goal.modes(N))
     is_closed = _is_closed(Tn, tol_pos, tol_rot) if closed is None else closed
-    run = _Run(plan, model, Tn, q0, reachable, half, modes)
+    run = _Run(plan, model, Tn, q0, reachable, half, modes, rest)
+    check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
     follows = chain = None
     free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
     closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
@@ -221,13 +259,15 @@ def solve_path(
         q, its, found, source = _closed_form_path(run, is_closed, chain, max_step)
     else:
         q, its, source = _chain_path(run)
+        col = None if check is None else check.arguments(robot)[1]
+        if run.refine and not _smooth(run, q, max_step, is_closed, col):
+            q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest, col)
         found = None
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
         q, _, _ = polish_path(
             model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
         )
-    check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
     if is_closed:
@@ -315,6 +355,7 @@ class _Run:
     reachable: np.ndarray
     half: np.ndarray | None = None  # (N, 6) a tolerant goal's half-widths (nik.ik.bounds), None: the tolerances
     modes: np.ndarray | None = None  # (N,) its rotation modes
+    rest: np.ndarray | None = None  # (dof,) q_rest: the posture the chains drift towards (else the middle)
 
     @property
     def tol_pos(self) -> float:
@@ -356,15 +397,67 @@ class _Run:
         budget = np.where(reachable, restarts, 0).astype(np.int64)
         T, starts = np.ascontiguousarray(T), np.ascontiguousarray(starts, dtype=np.float64)
         rng, cap = seed_state(self.seed if seed is None else seed), PATH_PULL_CAP if pull > 0 else 0.0
-        if self.half is None:
-            path_chains(lm.G, lm.joints, T, starts, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot)
-        else:
-            at = slice(offset, offset + T.shape[0])
-            half, modes = np.ascontiguousarray(self.half[at]), np.ascontiguousarray(self.modes[at])
-            path_chains_bounded(
-                lm.G, lm.joints, T, starts, half, modes, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot
-            )
+        if self.rest is None:
+            if self.half is None:
+                path_chains(lm.G, lm.joints, T, starts, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot)
+            else:
+                half, modes = self._goal(offset, T.shape[0], False)
+                path_chains_bounded(
+                    lm.G, lm.joints, T, starts, half, modes, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot
+                )
+            return q, its, ok
+        targets = np.repeat(self.rest[None], K, axis=0)  # towards q_rest instead of the middle
+        full = (np.full(K, pull), np.full(K, cap))
+        q, its, ok = self.tracks(T, starts, targets, *full, reachable, restarts, offset, seed=seed)
         return q, its, ok
+
+    def _goal(self, offset: int, N: int, backward: bool) -> tuple[np.ndarray, np.ndarray]:
+        """``(half (N, 6), modes (N,))`` of the tolerant goal at waypoints ``offset ... offset + N`` (reversed on a
+        backward chain)."""
+        at = slice(offset, offset + N)
+        half, modes = self.half[at], self.modes[at]
+        if backward:
+            half, modes = half[::-1], modes[::-1]
+        return np.ascontiguousarray(half), np.ascontiguousarray(modes)
+
+    def tracks(
+        self, T, starts, targets, pull, cap, reachable, restarts: int, offset: int = 0, backward: bool = False,
+        seed: int | None = None,
+    ):  # fmt: skip
+        """:func:`nik.paths.kernels.path_chains_toward` along ``T`` from ``starts: (K, dof)``, chain ``c`` drifting
+        towards ``targets[c]`` (``pull, cap: (K,)``): ``q (K, N, dof)``, iterations ``(K, N)``, ok ``(K, N)``; with a
+        tolerant goal, :func:`~nik.paths.kernels.path_chains_bounded_toward` towards the bounds of waypoints
+        ``offset ...`` (``backward``: ``T`` runs from the last of them to the first)."""
+        from nik.kernels.lm import seed_state
+        from nik.paths.kernels import path_chains_bounded_toward, path_chains_toward
+
+        lm = self.model.lm
+        K, n, N = starts.shape[0], starts.shape[1], T.shape[0]
+        opts, iopts = lm.options(self.tol_pos, self.tol_rot)
+        q = np.empty((K, N, n))
+        its, ok = np.empty((K, N), dtype=np.int64), np.empty((K, N), dtype=bool)
+        pos, rot = np.empty((K, N)), np.empty((K, N))
+        budget = np.where(reachable, restarts, 0).astype(np.int64)
+        c = np.ascontiguousarray
+        head = (lm.G, lm.joints, c(T), c(starts, dtype=np.float64), c(targets, dtype=np.float64))
+        head += (c(pull, dtype=np.float64), c(cap, dtype=np.float64))
+        tail = (opts, iopts, budget, seed_state(self.seed if seed is None else seed), q, its, ok, pos, rot)
+        if self.half is None:
+            path_chains_toward(*head, *tail)
+        else:
+            path_chains_bounded_toward(*head, *self._goal(offset, N, backward), *tail)
+        return q, its, ok
+
+
+def _q_rest(robot, q_rest) -> np.ndarray:
+    """``q_rest`` as ``(dof,)`` float64 (``"mid"``: the middle of the ranges), checked by
+    :func:`nik.ik.goals.rest_target` (one posture for the whole path)."""
+    from nik.ik.goals import rest_target
+
+    shape = np.shape(q_rest) if not isinstance(q_rest, str | torch.Tensor) else tuple(getattr(q_rest, "shape", ()))
+    if not isinstance(q_rest, str) and shape != (robot.dof,):
+        raise ValueError(f"q_rest: expected 'mid' or one posture of shape ({robot.dof},) for a path, got {shape}")
+    return np.ascontiguousarray(rest_target(robot, q_rest, 1)[0])
 
 
 def _q_start(robot, model, q_start) -> np.ndarray | None:
@@ -460,8 +553,10 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     turns on wrapping joints) is blended back over the path (row ``i`` seeded at ``q_i + w_i delta``,
     ``w = 3 s^2 - 2 s^3`` of ``s = i / (N - 1)``: no added motion at either end) and every row re-solved by LM from
     its seed (the tool stays, the null-space drift is undone). Kept only when every waypoint reached before is
-    still reached, inside the limits, and no step grows above ``max(max_step, the largest step before)``;
-    else ``q`` as it was (its closure is reported)."""
+    still reached, inside the limits, and no step grows above ``max(max_step, the largest step before)``; else the
+    last row alone is moved onto the first (``q_-1 + delta``) where that keeps its waypoint and its step within the
+    same bound (a path whose other rows LM would move, near a singularity); else ``q`` as it was (its closure is
+    reported)."""
     model = run.model
     if _closure(q, model.wraps) <= PATH_CLOSE_TOL:
         return q, its
@@ -483,6 +578,15 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     old_step = np.abs(np.diff(q, axis=0)).max()
     new_step = np.abs(np.diff(new, axis=0)).max()
     if (before & ~(after & inside)).any() or new_step > max(max_step, old_step):
+        last = q.copy()  # the blend refused: the last row alone moved onto the first, where its step stays small
+        last[-1] = q[-1] + delta
+        step = float(np.abs(last[-1] - last[-2]).max())
+        ok = _final_check(run, last)[2][-1]
+        inside = bool(((last[-1] >= model.lo - 1e-9) & (last[-1] <= model.hi + 1e-9)).all())
+        if (ok or not before[-1]) and inside and step <= max(max_step, old_step):
+            its = its.copy()
+            its[-1] += end_its[0]
+            return last, its
         return q, its
     return new, its + new_its
 
@@ -688,7 +792,7 @@ def _free_samples(N: int) -> int:
     return int(np.clip(math.isqrt(PATH_DP_CELLS // N) // 8, 4, 36))
 
 
-def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
+def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DEDUPE) -> np.ndarray:
     """``choice (N,)``: :func:`nik.paths.kernels.path_dp` over the candidates; on a closed path, the choice that
     ends on its start's branch (the last waypoint's candidate nearest the first's, modulo whole turns on the joints
     that wrap): when the free choice does not, each start candidate (at most :data:`PATH_CLOSED_STARTS`) is tried
@@ -710,7 +814,7 @@ def _choose(cand, valid, wraps, q0, closed: bool) -> np.ndarray:
         gap = np.array([_closure(np.stack([cand[0, k], c]), wraps) for c in cand[-1]])
         gap[~valid[-1]] = math.inf
         end = int(np.argmin(gap))
-        if gap[end] > PATH_DEDUPE:
+        if gap[end] > close_within:
             continue
         pinned = valid.copy()
         pinned[0], pinned[-1] = False, False
@@ -870,6 +974,9 @@ def _chain_path(run: _Run):
         q, its, _ = run.chains(run.T, run.q0[None], run.reachable, **kw)
         return q[0], its[0], "q_start"
     starts, sources = _start_postures(run)
+    if run.rest is not None:  # the start nearest q_rest first
+        order = np.argsort(np.abs(starts - run.rest).max(axis=1), kind="stable")
+        starts, sources = starts[order], [sources[i] for i in order]
     q, its, ok = run.chains(run.T, starts, run.reachable, **kw)
     if q.shape[0] == 1:
         return q[0], its[0], sources[0]
@@ -889,6 +996,136 @@ def _chain_path(run: _Run):
     return q[choice, rows], its[choice, rows], sources[int(choice[0])]
 
 
+def _smooth(run: _Run, q: np.ndarray, max_step: float, closed: bool, col=None) -> bool:
+    """Whether the chain's answer ``q: (N, dof)`` needs no search: every waypoint reached inside the limits, no step
+    (from ``q0`` on) above :data:`SEARCH_TRIGGER` nor ``max_step``, a closed path's last row within ``max_step``
+    of its first (:func:`_close_loop` closes the rest) and, with ``col`` (the collision arrays of
+    :mod:`nik.ik.collide`), no waypoint colliding."""
+    _, _, within = _final_check(run, q)
+    if col is not None:
+        within &= ~_colliding(run.model, q, col)
+    inside = ((q >= run.model.lo - 1e-9) & (q <= run.model.hi + 1e-9)).all()
+    _, _, step = _path_cost(q, within, run.q0)
+    closes = not closed or _closure(q, run.model.wraps) <= max_step
+    return bool(within.all() and inside and closes and step <= min(SEARCH_TRIGGER, max_step))
+
+
+def _colliding(model, q: np.ndarray, col) -> np.ndarray:
+    """``(...)`` bool: configurations of ``q: (..., dof)`` that collide (the sphere check, margin 0)."""
+    from nik.kernels.collision import collides_batch
+
+    flat = np.ascontiguousarray(q.reshape(-1, q.shape[-1]), dtype=np.float64)
+    hit = np.empty(flat.shape[0], dtype=bool)
+    collides_batch(model.G, model.joints, flat, *col, 0.0, hit)
+    return hit.reshape(q.shape[:-1])
+
+
+def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarray | None = None, col=None):
+    """``(q (N, dof), iterations (N,), source)``: the global search of an arm without a closed form (module
+    docstring, "global search"). Tracks: LM chains (:func:`nik.paths.kernels.path_chains_toward`) from ``q0`` (else
+    from every distinct start posture, :func:`_start_postures`), each drifting along the self-motion towards a
+    posture of its own: the middle of the ranges (the plain chain, :func:`_chain_path`'s), its own start, no
+    posture, ``rest`` (``q_rest``), and the network's hypotheses (else uniform LM answers) at the middle and the last
+    waypoint. Every track's answer at every waypoint is a candidate (among obstacles, ``col``: the collision arrays of
+    :mod:`nik.ik.collide`, one that collides is not); :func:`_choose` picks the sequence with the
+    smallest largest step, then the least sum of squared steps (from ``q0``; on a closed path, ending next to its
+    first row, within ``max_step``), switching tracks where they meet. Kept over ``chain`` (``(q, iterations, source)``
+    of :func:`_chain_path`) and the plain chains unless one of them reaches more waypoints, closes where the search
+    does not, or has the smaller largest step (by :data:`SEARCH_GAIN`: the search never answers worse than the
+    chain)."""
+    model, N = run.model, run.T.shape[0]
+    if run.q0 is not None:
+        starts, sources = run.q0[None], ["q_start"]
+    else:
+        starts, sources = _start_postures(run)
+    postures = _search_postures(run, rest)
+    mid = 0.5 * (model.lo + model.hi)
+    K0 = starts.shape[0]
+    plain = mid if rest is None else rest
+    tracks = [(k, plain, PATH_PULL, PATH_PULL_CAP) for k in range(K0)]  # track k < K0: start k's plain chain
+    for k in range(K0):
+        for target, pull in [(starts[k], SEARCH_PULL), (mid, 0.0), *((p, SEARCH_PULL) for p in postures)]:
+            tracks.append((k, target, pull, SEARCH_PULL_CAP))
+    of = np.array([t[0] for t in tracks])
+    q, its, ok = run.tracks(
+        run.T, starts[of], np.array([t[1] for t in tracks]), np.array([t[2] for t in tracks]),
+        np.array([t[3] for t in tracks]), run.reachable, run.restarts,
+    )  # fmt: skip
+    # backward tracks, from the last waypoint to the first: from the postures (and, on a closed path, from the start
+    # postures, which answer its last pose too), drifting towards the middle of the ranges or their own start
+    back = [*(starts if closed else []), *postures]
+    if back:
+        b_starts = np.repeat(np.array(back), 2, axis=0)
+        b_targets = np.stack([x for p in back for x in (mid, p)])
+        b_pull = np.tile([PATH_PULL, SEARCH_PULL], len(back))
+        b_cap = np.tile([PATH_PULL_CAP, SEARCH_PULL_CAP], len(back))
+        qb, itsb, okb = run.tracks(
+            run.T[::-1], b_starts, b_targets, b_pull, b_cap, run.reachable[::-1], run.restarts, backward=True
+        )
+        q = np.concatenate([q, qb[:, ::-1]])
+        its, ok = np.concatenate([its, itsb[:, ::-1]]), np.concatenate([ok, okb[:, ::-1]])
+        of = np.concatenate([of, np.full(len(b_starts), -1)])
+    inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=-1)
+    ok = ok & inside
+    if col is not None:  # among obstacles: a colliding answer is no candidate
+        ok &= ~_colliding(model, q, col)
+    cand = np.ascontiguousarray(q.transpose(1, 0, 2))  # (N, K, dof): every track's answer at every waypoint
+    valid = np.ascontiguousarray(ok.T)
+    if run.q0 is not None:
+        near = valid[0] & (np.abs(cand[0] - run.q0).max(axis=1) <= max_step)
+        if near.any():
+            valid[0] = near
+    raw = np.zeros_like(model.wraps)  # real joint motion: tracks are continuous in the joints' own values
+    choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step)
+    if (choice < 0).all():
+        return chain
+    chosen = np.nonzero(choice >= 0)[0]
+    for i in np.nonzero(choice < 0)[0]:  # a waypoint no track reaches: the track chosen before it continues
+        before = chosen[chosen < i]
+        choice[i] = choice[before[-1]] if before.size else choice[chosen[0]]
+    rows = np.arange(N)
+    found, found_its = cand[rows, choice], its.T[rows, choice]
+    wraps = raw if closed else None
+    c_ok = _final_check(run, chain[0])[2] & ((chain[0] >= model.lo - 1e-9) & (chain[0] <= model.hi + 1e-9)).all(axis=1)
+    if col is not None:
+        c_ok &= ~_colliding(model, chain[0], col)
+    c_cost = _path_cost(chain[0], c_ok, run.q0, wraps, max_step)
+    s_cost = _path_cost(found, ok.T[rows, choice], run.q0, wraps, max_step)
+    if c_cost[:2] < s_cost[:2] or (c_cost[:2] == s_cost[:2] and s_cost[2] > c_cost[2] - SEARCH_GAIN):
+        return chain
+    return found, found_its, sources[int(of[choice[0]])] if of[choice[0]] >= 0 else "search"
+
+
+def _path_cost(q: np.ndarray, ok: np.ndarray, q0: np.ndarray | None, wraps=None, within: float = 0.0) -> tuple:
+    """``(waypoints missed, open, largest step)`` of a path ``q: (N, dof)`` (the first step from ``q0`` where given;
+    ``open``: with ``wraps``, a closed path whose last row is more than ``within`` from its first, else 0): the order
+    in which the search and the plain chain are compared."""
+    full = q if q0 is None else np.concatenate([q0[None], q])
+    step = float(np.abs(np.diff(full, axis=0)).max()) if full.shape[0] > 1 else 0.0
+    gap = 0 if wraps is None else int(_closure(q, wraps) > within)
+    return int((~ok).sum()), gap, round(step, 9)
+
+
+def _search_postures(run: _Run, rest: np.ndarray | None) -> list[np.ndarray]:
+    """The postures the search's tracks drift towards (beside the middle of the ranges and their own start): ``rest``,
+    then distinct answers at the middle and the last waypoint: the network's hypotheses there (ranked by FK,
+    :data:`SEARCH_HYPOTHESES` per waypoint) where the plan has a network, else LM from uniform starts."""
+    out = [] if rest is None else [np.asarray(rest, dtype=np.float64)]
+    N = run.T.shape[0]
+    at = np.array(sorted({N // 2, N - 1}))
+    hyp = _hypotheses(run, at)
+    if hyp is None:
+        lm = run.model.lm
+        T = np.repeat(run.T[at], SEARCH_HYPOTHESES, axis=0)
+        res = lm.solve(T, None, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False)
+        hyp = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
+    for h in hyp:
+        for p in h[:SEARCH_HYPOTHESES]:
+            if all(np.abs(p - o).max() > SEARCH_DISTINCT for o in out):
+                out.append(p)
+    return out
+
+
 def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
     """Distinct solutions of the first waypoint: ``(K, dof)`` and where each came from (``network`` for the
     network's hypotheses, the guess stage's packed network, polished by LM; ``multistart`` for LM from uniform
@@ -897,6 +1134,7 @@ def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
     seeds, sources = [], []
     hyp = _hypotheses(run)
     if hyp is not None:
+        hyp = hyp[0]
         seeds.append(hyp)
         sources += ["network"] * hyp.shape[0]
     uni = lm.solve(np.repeat(T0, PATH_STARTS, axis=0), None, restarts=False, **tol)
@@ -911,17 +1149,18 @@ def _start_postures(run: _Run) -> tuple[np.ndarray, list[str]]:
     return res.q[kept], [sources[i] for i in kept]
 
 
-def _hypotheses(run: _Run) -> np.ndarray | None:
-    """``(K, dof)`` the plan's network's hypotheses for the first waypoint, ranked by FK: the compiled backend's
-    guess stage (the packed network, targets in the arm's frame where the network was made for the bare arm), or
-    None where the plan has no network."""
+def _hypotheses(run: _Run, rows=None) -> np.ndarray | None:
+    """``(len(rows), K, dof)`` the plan's network's hypotheses for the waypoints ``rows`` (default the first), ranked
+    by FK: the compiled backend's guess stage (the packed network, targets in the arm's frame where the network was
+    made for the bare arm), or None where the plan has no network."""
     if run.plan.net is None:
         return None
     from nik.ik.backends import Job, compiled_backend
 
-    be, m, T0 = compiled_backend(), run.model, run.T[:1]
-    job = Job(be, m.robot, T0, run.reachable[:1], None, run.tol_pos, run.tol_rot, torch.float64, model=m)
-    return np.ascontiguousarray(be.network(run.plan, job)[0][0])
+    rows = np.array([0]) if rows is None else rows
+    be, m, T = compiled_backend(), run.model, np.ascontiguousarray(run.T[rows])
+    job = Job(be, m.robot, T, run.reachable[rows], None, run.tol_pos, run.tol_rot, torch.float64, model=m)
+    return np.ascontiguousarray(be.network(run.plan, job)[0])
 
 
 # ---------------------------------------------------------------------------

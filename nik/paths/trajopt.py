@@ -170,6 +170,11 @@ def _largest_step(Q: np.ndarray, q_start: np.ndarray | None, q_end: np.ndarray |
     return float(np.abs(np.diff(full, axis=0)).max())
 
 
+def _first_step(Q: np.ndarray, q_start: np.ndarray) -> float:
+    """The largest joint motion from ``q_start: (dof,)`` to the first row of ``Q: (N, dof)``."""
+    return float(np.abs(Q[0] - q_start).max())
+
+
 def _turns_nearest(Q: np.ndarray, q_start: np.ndarray | None, joints: np.ndarray) -> np.ndarray:
     """``Q: (N, dof)`` with each joint that turns past a full turn (``wraps``) moved by the whole turns that bring
     it nearest the row before (from ``q_start`` when given), where that stays inside its limits: the waypoint chain
@@ -206,7 +211,8 @@ def polish_path(
     or some step exceeds ``max_step`` (every path with ``always``; a waypoint proven out of reach, ``reachable (N,)``
     False, does not count: no optimisation reaches it), in windows of :data:`WINDOW` waypoints either side of each
     problem, each window kept only when it is no worse: every waypoint in it that was within tolerance still is,
-    and its largest step (from the row before, to the row after) does not grow; the whole path likewise, else
+    and its largest step (from the row before, to the row after) does not grow, nor its first step from ``q_start``
+    beyond ``max_step`` (the arm starts without a jump); the whole path likewise, else
     ``Q`` as it came. Returns ``(Q, pos_err (N,), rot_err (N,))``, the errors re-checked by FK (metres, radians):
     one compiled call (:func:`nik.kernels.trajopt.path_check`) where nothing needs optimising."""
     from nik.kernels.trajopt import path_check
@@ -241,8 +247,10 @@ def polish_path(
         )  # fmt: skip
         ok2 = (res.pos_err <= tol_pos) & (res.rot_err <= tol_rot)
         inside = bool(((res.q >= lo) & (res.q <= hi)).all())
+        first = a > 0 or before is None or _first_step(res.q, before) <= max(max_step, _first_step(Q1[a:b], before))
         if (
             inside
+            and first
             and ok2[ok[a:b]].all()
             and _largest_step(res.q, before, after) <= _largest_step(Q1[a:b], before, after)
         ):
