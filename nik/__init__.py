@@ -24,6 +24,7 @@ _SUBMODULES = {
     "analytic",
     "cli",
     "collision",
+    "costs",
     "data",
     "evaluate",
     "ik",

@@ -37,8 +37,9 @@ from pathlib import Path
 
 import torch
 
-from nik.ik import backends, collide, networks, stages
+from nik.ik import backends, collide, every, networks, stages
 from nik.ik.backends.one_pose import one_pose
+from nik.ik.costs import solve as solve_costs
 from nik.ik.plan import REFINE_METHODS, Plan, check_settings, resolve_fallback, solver_plan, with_goal
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
@@ -208,6 +209,7 @@ class IKSolver:
         bounds=None,
         q_rest=None,
         rest_weight: float = 0.1,
+        costs=None,
     ) -> IKResult:
         """Joint angles that reach the target poses.
 
@@ -235,6 +237,10 @@ class IKSolver:
                 ranges), reached in the null space of the task without leaving the tolerance; moves the answers of
                 redundant arms (7 joints, or any arm under a free axis) only; rest_weight: the share of the way to
                 it each step asks (:mod:`nik.ik.goals`).
+            costs: the user's cost terms (:func:`nik.costs.custom`, any :class:`nik.costs.Term`): after the pipeline,
+                the call's terms (pose or bounds, limits, posture, collisions, these) are solved as one problem from
+                its answer (:mod:`nik.ik.costs`); success then needs every constraint's check, ``res.unmet`` names
+                what a failed target misses.
 
         Returns:
             :class:`IKResult` with ``(B, ...)`` fields; errors and success measured by FK on the returned ``q``
@@ -248,7 +254,7 @@ class IKSolver:
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
         if plan is None and q_near is None and max_iters is None and representation is None and world is None:
-            res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is None and q_rest is None else None
+            res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is q_rest is costs is None else None
             if res is not None:  # one pose in one kernel call (nik.ik.backends.one_pose)
                 return res
         check_tolerances(tol_pos, tol_rot)
@@ -256,7 +262,7 @@ class IKSolver:
         if plan is None:
             plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
         plan = with_goal(plan, bounds, q_rest, rest_weight)
-        return collide.after_solve(self, be, plan, T_target, q_near, representation, world)
+        return solve_costs(self, be, plan, T_target, q_near, representation, world, costs)
 
     def solve_all(
         self,
@@ -272,6 +278,7 @@ class IKSolver:
         world=None,
         q_rest=None,
         rest_weight: float = 0.1,
+        costs=None,
     ) -> torch.Tensor:
         """Every distinct solution found for one pose: ``(K, dof)`` radians inside the limits (K may be 0).
 
@@ -288,13 +295,16 @@ class IKSolver:
         pose, one thread (``python benchmarks/solve_all.py``; about a second with the batched torch LM, the
         path of targets on a GPU). Where a collision check is active (``world``, else the solver's, and
         ``self_collision``), only the collision-free solutions (colliding ones solved again with collision rows); with
-        ``q_rest`` each moved towards it in the null space, nearest first (:func:`nik.ik.collide.solve_all`).
+        ``q_rest`` each moved towards it in the null space, nearest first (:func:`nik.ik.collide.solve_all`). With
+        ``costs`` (as :meth:`solve`), each solution solved again under the call's terms, only those meeting every
+        constraint kept (:mod:`nik.ik.every`).
         """
         T = as_poses(T_target, representation)
         check_tolerances(tol_pos, tol_rot)
         plan = with_goal(self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds, q_rest,
                          rest_weight)  # fmt: skip
-        return collide.solve_all(self, plan, T, world, n_starts=n_starts, dedupe_tol=dedupe_tol)
+        Q = collide.solve_all(self, plan, T, world, n_starts=n_starts, dedupe_tol=dedupe_tol)
+        return every.with_costs(self, plan, T, world, costs, Q, dedupe_tol)
 
     def solve_path(
         self,
@@ -313,6 +323,7 @@ class IKSolver:
         acc_limits=None,
         bounds=None,
         q_rest=None,
+        costs=None,
     ) -> IKResult:
         """One continuous joint trajectory through the waypoints of a Cartesian path (:mod:`nik.paths.solve`).
 
@@ -333,6 +344,8 @@ class IKSolver:
                 ``qdd``; vel_limits, acc_limits: ``(dof,)`` its limits (default the robot's).
             bounds: a tolerant goal per waypoint (:func:`nik.ik.bounds.parse_bounds`, e.g. ``"axis_z"``).
             q_rest: ``(dof,)`` or ``"mid"``: the posture a redundant arm keeps to along the path (null space).
+            costs: the user's cost terms (as :meth:`solve`; path terms too): the path found is then solved as one
+                problem with them, smoothness and the ``max_step`` cap (:mod:`nik.paths.costs`).
 
         Returns:
             :class:`IKResult` with ``(N, ...)`` fields: ``q: (N, dof)`` the trajectory inside the limits,
@@ -342,11 +355,11 @@ class IKSolver:
             UserWarning: naming the first waypoint out of reach, beyond a joint limit on every branch, not reached,
             or forcing a reconfiguration.
         """
-        from nik.paths import solve as paths
+        from nik.paths import costs as paths
 
         step = paths.PATH_MAX_STEP if max_step is None else max_step
         return paths.solve_path(
             self, T_path, q_start, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, representation=representation,
             max_step=step, world=world, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits,
-            bounds=bounds, q_rest=q_rest,
+            bounds=bounds, q_rest=q_rest, costs=costs,
         )  # fmt: skip

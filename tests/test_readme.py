@@ -35,6 +35,7 @@ DOC_ORDER = [
     "bounds.md",
     "collisions.md",
     "paths.md",
+    "costs.md",
     "timing.md",
     "view.md",
     "swarm.md",

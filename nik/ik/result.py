@@ -45,6 +45,8 @@ class IKResult:
             ``"link|box 2"`` (a link and the world's obstacle of that kind, ``sphere`` | ``box`` | ``capsule``, and
             index in :meth:`nik.World.packed`); None (not a list) where no collision model is active, and from
             :meth:`IKSolver.solve_path` (its ``path.reasons`` say ``"colliding"``).
+        unmet: with ``costs=`` (:mod:`nik.ik.costs`), a list of B entries: None where the answer meets every
+            constraint term, else what it misses (``["above_plane: residual above 1e-06"]``); None without costs.
     """
 
     q: torch.Tensor | np.ndarray
@@ -58,6 +60,7 @@ class IKResult:
     collision_free: torch.Tensor | np.ndarray | None = None
     axis_err: torch.Tensor | np.ndarray | None = None
     collisions: list | None = None
+    unmet: list | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])

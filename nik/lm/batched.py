@@ -48,17 +48,16 @@ from functools import partial
 
 import torch
 
+from nik.costs.pose import DEAD_ZONE, bounded_residual
+from nik.costs.pose import dead_zone as _dead_zone
 from nik.kinematics import chain_jacobian
-from nik.poses import ROT_FREE, matrix_to_quaternion, rotation_angle, rotation_modes, tool_error
+from nik.poses import matrix_to_quaternion, rotation_modes, tool_error
 from nik.robots.joints import wrap_into, wrap_mask
 from nik.robots.model import Robot
 from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 __all__ = ["DEAD_ZONE", "LMCfg", "LMRun", "bounded_residual", "lm_run", "lm_solve", "so3_log"]
-
-#: The dead zone of the bounded residual, as a fraction of each bound (the compiled kernel's).
-DEAD_ZONE = 0.5
 
 
 @dataclass
@@ -119,84 +118,6 @@ def _residual(Tt: torch.Tensor, T: torch.Tensor, rw: float):
     pos2 = (dp * dp).sum(-1)
     E = pos2 + (rw * theta) ** 2
     return torch.cat([dp, w], dim=-1), E, pos2.sqrt(), theta
-
-
-def _skew(v: torch.Tensor) -> torch.Tensor:
-    """``[v]x: (..., 3, 3)`` of ``v: (..., 3)``."""
-    z = torch.zeros_like(v[..., 0])
-    x, y, w = v.unbind(-1)
-    return torch.stack([z, -w, y, w, z, -x, -y, x, z], dim=-1).reshape(*v.shape, 3)
-
-
-def _rotation_rows(d_rot: torch.Tensor, R_rel: torch.Tensor, modes: torch.Tensor) -> torch.Tensor:
-    """``M: (..., 3, 3)`` with ``d(rotation rows) = M a``, ``a = R_t^T omega`` (the angular velocity in the target
-    frame): ``J_l^-1`` of the rotation vector (mode -1), the swing's ``-(ds/dv) [v]x`` (mode k, row k zero), 0."""
-    th2 = (d_rot * d_rot).sum(-1)
-    th = th2.sqrt()
-    small = th < 1e-4
-    h = 0.5 * torch.where(small, torch.ones_like(th), th)
-    cc = torch.where(small, torch.full_like(th, 1.0 / 12.0), (1.0 - h * torch.cos(h) / torch.sin(h)) / (4 * h * h))
-    S = _skew(d_rot)
-    eye = torch.eye(3, dtype=d_rot.dtype, device=d_rot.device)
-    M = eye - 0.5 * S + cc[..., None, None] * (S @ S)
-    M = torch.where((modes == ROT_FREE)[..., None, None], torch.zeros_like(M), M)
-    for k in range(3):
-        sel = modes == k
-        if not bool(sel.any()):
-            continue
-        v = R_rel[..., :, k]
-        ek = torch.zeros_like(v)
-        ek[..., k] = 1.0
-        vk = v[..., k]
-        s2 = (v * v).sum(-1) - vk * vk
-        n2 = s2 + vk * vk
-        tiny = s2 < 1e-8
-        sg = torch.where(tiny, torch.ones_like(s2), s2).sqrt()
-        phi = torch.atan2(sg, vk)
-        f = torch.where(tiny, torch.ones_like(s2), phi / sg)
-        gs = torch.where(tiny, torch.full_like(s2, -2.0 / 3.0), (vk * sg / n2 - phi) / (s2 * sg))
-        grad_f = gs[..., None] * (v - vk[..., None] * ek) + (-1.0 / n2)[..., None] * ek
-        u = torch.linalg.cross(ek, v, dim=-1)
-        dsdv = u[..., :, None] * grad_f[..., None, :] + f[..., None, None] * _skew(ek)
-        Mk = -(dsdv @ _skew(v))
-        M = torch.where(sel[..., None, None], Mk, M)
-    return M
-
-
-def _dead_zone(d: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
-    """``sign(d) max(|d| - DEAD_ZONE * bound, 0)`` per entry of ``d: (..., 6)``; 0 on free axes."""
-    finite = torch.isfinite(bounds)
-    z = DEAD_ZONE * torch.where(finite, bounds, torch.zeros_like(bounds))
-    return torch.where(finite & (d.abs() > z), d - torch.copysign(z, d), torch.zeros_like(d))
-
-
-def bounded_residual(Tt: torch.Tensor, T: torch.Tensor, J: torch.Tensor, bounds: torch.Tensor, rw: float):
-    """The bounded error of LM and its Jacobian, for poses ``T: (..., 3, 4)`` with geometric Jacobians
-    ``J: (..., 6, n)`` (base frame, rows linear then angular velocity) against ``Tt: (..., 3|4, 4)`` and
-    ``bounds: (..., 6)`` (``inf`` = free).
-
-    Returns ``(e, Jr, E, pos, rot, inside)``: ``e = -r (..., 6)`` with ``r`` the dead-zone residual of
-    :func:`nik.poses.tool_error` (rotation rows times ``rw``), ``Jr (..., 6, n)`` the Jacobian of that error
-    (``d(tool_error)/dq``, rotation rows times ``rw``, rows of free axes zero), ``E = |e|^2``, the position
-    error (m) and geodesic angle (rad) of ``T``, and ``inside``: every axis within its bound.
-    """
-    modes = rotation_modes(bounds)
-    d = tool_error(Tt, T, modes)
-    finite = torch.isfinite(bounds)
-    b = torch.where(finite, bounds, torch.zeros_like(bounds))
-    r = _dead_zone(d, bounds)
-    w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=T.dtype, device=T.device)
-    r = r * w
-    inside = ((d.abs() <= b) | ~finite).all(-1)
-    Rt_T = Tt[..., :3, :3].transpose(-1, -2)
-    R_rel = Rt_T @ T[..., :3, :3]
-    Jp = Rt_T @ J[..., :3, :]
-    M = _rotation_rows(d[..., 3:], R_rel, modes)
-    Jw = M @ (Rt_T @ J[..., 3:, :])
-    Jr = torch.cat([Jp, Jw], dim=-2) * (w * finite.to(T.dtype))[..., :, None]
-    pos = torch.linalg.vector_norm(T[..., :3, 3] - Tt[..., :3, 3], dim=-1)
-    rot = rotation_angle(R_rel)
-    return -r, Jr, (r * r).sum(-1), pos, rot, inside
 
 
 def _evaluate_bounded(q, Tt, bounds, G, offsets, rw: float, **kw):
