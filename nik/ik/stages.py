@@ -4,7 +4,8 @@
    guess), the closed form, or none (the refiner starts from uniform configurations itself);
 2. :func:`refine`: the targets the guess leaves outside tolerance, refined from it (never worse than it);
 3. :func:`near`: with ``q_near`` (arms without a closed form), a second refinement from ``q_near`` itself;
-   per target the successful answer nearest ``q_near`` is kept;
+   per target the successful answer nearest ``q_near`` is kept; a redundant arm's then moved towards ``q_near`` in
+   the null space of its task (within tolerance);
 4. :func:`more_hypotheses`: targets still failing get LM from the network's next hypotheses, in turn;
 5. :func:`fallback`: targets still failing and within reach get a second chance (the closed form, or LM from
    uniform starts with the restart budget);
@@ -187,7 +188,11 @@ def refine(plan: Plan, job: Job, answers: Answers | None) -> Answers:
 def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     """Stage 3 (``q_near`` given, ``plan.near``: no closed form): refine every target from ``q_near`` too (no joint
     wrapping: ``local``); both answers' wrapping joints moved by whole turns towards ``q_near``; per target a
-    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error."""
+    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error. On an arm of
+    more than 6 joints the successful answers then move towards ``q_near`` in the null space of the task
+    (:func:`nik.ik.goals.rest_torch` / :func:`nik.kernels.driver.rest_posture` with ``q_rest = q_near``, weight 1):
+    LM from ``q_near`` ends on a pose solution that drifted along the self-motion manifold, up to 0.5 rad and more
+    (issue 37)."""
     if job.q_near is None or not plan.near:
         return answers
     be = job.backend
@@ -200,7 +205,20 @@ def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     dist_b = be.norm(res.q - job.q_near)
     worse_a = answers.score() > score(res.pos_err, res.rot_err)
     take_b = (ok_b & (~ok_a | (dist_b < dist_a))) | (~ok_a & ~ok_b & worse_a)
-    return answers.take(job, idx, res, take_b)
+    answers = answers.take(job, idx, res, take_b)
+    if job.robot.dof <= 6:
+        return answers
+    # a redundant arm's answer drifts along its self-motion: pulled back towards q_near in the null space, never
+    # leaving tolerance (the posture step of nik.ik.goals with q_rest = q_near; nik.kernels.driver.NEAR_WEIGHT)
+    from dataclasses import replace
+
+    from nik.ik import goals
+
+    pull = replace(plan, q_rest=job.q_near, rest_weight=1.0)
+    if job.model is not None:
+        goals.rest_compiled(pull, job, answers)
+        return answers
+    return goals.rest_stage(pull, job, answers)
 
 
 def more_hypotheses(plan: Plan, job: Job, answers: Answers) -> Answers:

@@ -49,6 +49,9 @@ __all__ = ["FALLBACK_ANALYTIC", "FALLBACK_MULTISTART", "FALLBACK_NONE", "SOURCE_
 #: Codes of the plan's guess source and fallback.
 SOURCE_NETWORK, SOURCE_ANALYTIC, SOURCE_MULTISTART = 0, 1, 2
 FALLBACK_NONE, FALLBACK_ANALYTIC, FALLBACK_MULTISTART = 0, 1, 2
+#: The near stage's pull of a redundant arm's answer towards ``q_near`` in the null space (:func:`rest_posture`'s
+#: ``weight``, ``iters``, ``damping``; ``nik.ik.stages.near`` uses the same through ``nik.ik.goals``).
+NEAR_WEIGHT, NEAR_ITERS, NEAR_DAMPING = 1.0, 50, 1e-8
 
 
 @kernel
@@ -215,6 +218,11 @@ def solve(
                 pos[b], rot[b] = rpos[b], rrot[b]
             iterations[b] += rit[b]
             ok[b] = pos[b] <= tol_pos and rot[b] <= tol_rot
+        if n > 6:  # a redundant arm's answer drifts along its self-motion: pulled back towards q_near (null space)
+            rest_posture(
+                G, joints, T, q, np.zeros((B, 6)), np.full(B, CLASSIC, dtype=np.int64), opts, q_near, NEAR_WEIGHT,
+                NEAR_ITERS, NEAR_DAMPING, ok, pos, rot, np.empty((B, 6)),
+            )  # fmt: skip
     # more hypotheses
     if has_hyp:
         idx = _gather(ok, False)
