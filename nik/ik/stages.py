@@ -4,8 +4,8 @@
    guess), the closed form, or none (the refiner starts from uniform configurations itself);
 2. :func:`refine`: the targets the guess leaves outside tolerance, refined from it (never worse than it);
 3. :func:`near`: with ``q_near`` (arms without a closed form), a second refinement from ``q_near`` itself;
-   per target the successful answer nearest ``q_near`` is kept; a redundant arm's then moved towards ``q_near`` in
-   the null space of its task (within tolerance);
+   per target the successful answer nearest ``q_near`` is kept; on a redundant arm a far one gets LM from a walk out
+   of ``q_near`` too, and then moves towards ``q_near`` in the null space of its task (within tolerance);
 4. :func:`more_hypotheses`: targets still failing get LM from the network's next hypotheses, in turn;
 5. :func:`fallback`: targets still failing and within reach get a second chance (the closed form, or LM from
    uniform starts with the restart budget);
@@ -188,11 +188,14 @@ def refine(plan: Plan, job: Job, answers: Answers | None) -> Answers:
 def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     """Stage 3 (``q_near`` given, ``plan.near``: no closed form): refine every target from ``q_near`` too (no joint
     wrapping: ``local``); both answers' wrapping joints moved by whole turns towards ``q_near``; per target a
-    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error. On an arm of
-    more than 6 joints the successful answers then move towards ``q_near`` in the null space of the task
-    (:func:`nik.ik.goals.rest_torch` / :func:`nik.kernels.driver.rest_posture` with ``q_rest = q_near``, weight 1):
-    LM from ``q_near`` ends on a pose solution that drifted along the self-motion manifold, up to 0.5 rad and more
-    (issue 37)."""
+    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error.
+
+    On an arm of more than 6 joints LM from ``q_near`` can end on a pose solution that drifted along the self-motion
+    manifold, 0.5 rad and more away where an exact one lies within 0.3 rad (issue 37): the answers farther than
+    :data:`NEAR_FAR` (some joint) get LM (no restarts) from :func:`_near_prior`'s walk out of ``q_near``, taken
+    where successful and nearer; then the successful answers move towards ``q_near`` in the null space of the task
+    (:func:`nik.ik.goals.rest_torch` / :func:`nik.kernels.driver.rest_posture` with ``q_rest = q_near``, weight 1),
+    never leaving tolerance."""
     if job.q_near is None or not plan.near:
         return answers
     be = job.backend
