@@ -5,7 +5,7 @@
 2. :func:`refine`: the targets the guess leaves outside tolerance, refined from it (never worse than it);
 3. :func:`near`: with ``q_near`` (arms without a closed form), a second refinement from ``q_near`` itself;
    per target the successful answer nearest ``q_near`` is kept; on a redundant arm a far one gets LM from a walk out
-   of ``q_near`` too, and then moves towards ``q_near`` in the null space of its task (within tolerance);
+   of ``q_near`` too;
 4. :func:`more_hypotheses`: targets still failing get LM from the network's next hypotheses, in turn;
 5. :func:`fallback`: targets still failing and within reach get a second chance (the closed form, or LM from
    uniform starts with the restart budget);
@@ -193,9 +193,8 @@ def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     On an arm of more than 6 joints LM from ``q_near`` can end on a pose solution that drifted along the self-motion
     manifold, 0.5 rad and more away where an exact one lies within 0.3 rad (issue 37): the answers farther than
     :data:`NEAR_FAR` (some joint) get LM (no restarts) from :func:`_near_prior`'s walk out of ``q_near``, taken
-    where successful and nearer; then the successful answers move towards ``q_near`` in the null space of the task
-    (:func:`nik.ik.goals.rest_torch` / :func:`nik.kernels.driver.rest_posture` with ``q_rest = q_near``, weight 1),
-    never leaving tolerance."""
+    where successful and nearer. (A pull towards ``q_near`` in the null space after it, the ``q_rest`` step, found
+    no more and cost 2.5x the stage.)"""
     if job.q_near is None or not plan.near:
         return answers
     be = job.backend
@@ -212,13 +211,7 @@ def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     if job.robot.dof <= 6:
         return answers
     # a redundant arm's answer drifts along its self-motion: the answers still far from q_near get LM from a walk
-    # from q_near (nik.kernels.driver.near_prior), kept where successful and nearer; then every answer is pulled
-    # back towards q_near in the null space, never leaving tolerance (the posture step of nik.ik.goals with
-    # q_rest = q_near; nik.kernels.driver.NEAR_WEIGHT)
-    from dataclasses import replace
-
-    from nik.ik import goals
-
+    # out of q_near (nik.kernels.driver.near_prior), kept where successful and nearer
     idx = be.nonzero(_max_abs(answers.q - job.q_near) > NEAR_FAR)
     if idx.shape[0] > 0:
         qn = be.rows(job.q_near, idx)
@@ -227,16 +220,12 @@ def near(plan: Plan, job: Job, answers: Answers) -> Answers:
         ok_a = be.rows(answers.ok(job), idx)
         closer = be.norm(res.q - qn) < be.norm(be.rows(answers.q, idx) - qn)
         answers = answers.take(job, idx, res, ok_b & (~ok_a | closer))
-    pull = replace(plan, q_rest=job.q_near, rest_weight=1.0)
-    if job.model is not None:
-        goals.rest_compiled(pull, job, answers)
-        return answers
-    return goals.rest_stage(pull, job, answers)
+    return answers
 
 
 #: The near stage's walk (:func:`nik.kernels.driver.near_prior`, whose constants these are): for the answers of a
 #: redundant arm farther than ``NEAR_FAR`` rad (some joint) from ``q_near``, the annealed weights of the pull.
-NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.25, (1.0, 0.3, 0.1, 0.03, 0.01), 10
+NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.5, (1.0, 0.3, 0.1, 0.03, 0.01), 10
 
 
 def _max_abs(x):

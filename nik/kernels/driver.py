@@ -52,12 +52,9 @@ __all__ = ["FALLBACK_ANALYTIC", "FALLBACK_MULTISTART", "FALLBACK_NONE", "SOURCE_
 #: Codes of the plan's guess source and fallback.
 SOURCE_NETWORK, SOURCE_ANALYTIC, SOURCE_MULTISTART = 0, 1, 2
 FALLBACK_NONE, FALLBACK_ANALYTIC, FALLBACK_MULTISTART = 0, 1, 2
-#: The near stage's pull of a redundant arm's answer towards ``q_near`` in the null space (:func:`rest_posture`'s
-#: ``weight``, ``iters``, ``damping``; ``nik.ik.stages.near`` uses the same through ``nik.ik.goals``).
-NEAR_WEIGHT, NEAR_ITERS, NEAR_DAMPING = 1.0, 50, 1e-8
 #: The near stage's walk from ``q_near`` (:func:`near_prior`) for the answers still farther than ``NEAR_FAR`` rad
 #: (some joint) from ``q_near``: the weights of the pull towards ``q_near``, annealed, ``NEAR_PRIOR_STEPS`` each.
-NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.25, (1.0, 0.3, 0.1, 0.03, 0.01), 10
+NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.5, (1.0, 0.3, 0.1, 0.03, 0.01), 10
 
 
 @kernel
@@ -269,7 +266,7 @@ def solve(
                 pos[b], rot[b] = rpos[b], rrot[b]
             iterations[b] += rit[b]
             ok[b] = pos[b] <= tol_pos and rot[b] <= tol_rot
-        if n > 6:  # a redundant arm's answer drifts along its self-motion: a walk from q_near, then pulled back
+        if n > 6:  # a redundant arm's answer drifts along its self-motion: LM again from a walk out of q_near
             far = np.empty(B, dtype=np.bool_)
             for b in range(B):
                 d = 0.0
@@ -293,10 +290,6 @@ def solve(
                         q[b] = rq[i]
                         pos[b], rot[b], ok[b] = rpos[i], rrot[i], True
                     iterations[b] += rit[i]
-            rest_posture(
-                G, joints, T, q, np.zeros((B, 6)), np.full(B, CLASSIC, dtype=np.int64), opts, q_near, NEAR_WEIGHT,
-                NEAR_ITERS, NEAR_DAMPING, ok, pos, rot, np.empty((B, 6)),
-            )  # fmt: skip
     # more hypotheses
     if has_hyp:
         idx = _gather(ok, False)
