@@ -6,7 +6,7 @@ moved to ``limit -+ u`` (``u`` uniform in ``[0, within]``, inside), ``q_near`` =
 clamped to the limits, the chosen joint set to its limit. Counted: answers more than 0.5 rad from ``q_near`` in some
 joint, and failures. The second block: ``q_near`` = truth + noise clamped to the limits (no joint forced).
 
-    python benchmarks/near_limits.py                      # xarm7, panda, tiago right arm; 300 targets, 3 seeds
+    python benchmarks/near_limits.py                      # xarm7, panda, ur5, tiago right arm; 300 targets, 3 seeds
     python benchmarks/near_limits.py --backend torch
 """
 
@@ -71,7 +71,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--backend", default="auto")
     args = ap.parse_args()
-    robots = [nik.load_robot("xarm7"), nik.load_robot("panda")]
+    robots = [nik.load_robot("xarm7"), nik.load_robot("panda"), nik.load_robot("ur5")]
     t = tiago()
     if t is not None:
         robots.append(t)

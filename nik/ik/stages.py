@@ -4,7 +4,8 @@
    guess), the closed form, or none (the refiner starts from uniform configurations itself);
 2. :func:`refine`: the targets the guess leaves outside tolerance, refined from it (never worse than it);
 3. :func:`near`: with ``q_near`` (arms without a closed form), a second refinement from ``q_near`` itself;
-   per target the successful answer nearest ``q_near`` is kept;
+   per target the successful answer nearest ``q_near`` is kept; on a redundant arm a far one gets LM from a walk out
+   of ``q_near`` too;
 4. :func:`more_hypotheses`: targets still failing get LM from the network's next hypotheses, in turn;
 5. :func:`fallback`: targets still failing and within reach get a second chance (the closed form, or LM from
    uniform starts with the restart budget);
@@ -187,7 +188,13 @@ def refine(plan: Plan, job: Job, answers: Answers | None) -> Answers:
 def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     """Stage 3 (``q_near`` given, ``plan.near``: no closed form): refine every target from ``q_near`` too (no joint
     wrapping: ``local``); both answers' wrapping joints moved by whole turns towards ``q_near``; per target a
-    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error."""
+    successful answer first, then the one nearer ``q_near``; where neither succeeded, the smaller error.
+
+    On an arm of more than 6 joints LM from ``q_near`` can end on a pose solution that drifted along the self-motion
+    manifold, 0.5 rad and more away where an exact one lies within 0.3 rad (issue 37): the answers farther than
+    :data:`NEAR_FAR` (some joint) get LM (no restarts) from :func:`_near_prior`'s walk out of ``q_near``, taken
+    where successful and nearer. (A pull towards ``q_near`` in the null space after it, the ``q_rest`` step, found
+    no more and cost 2.5x the stage.)"""
     if job.q_near is None or not plan.near:
         return answers
     be = job.backend
@@ -200,7 +207,76 @@ def near(plan: Plan, job: Job, answers: Answers) -> Answers:
     dist_b = be.norm(res.q - job.q_near)
     worse_a = answers.score() > score(res.pos_err, res.rot_err)
     take_b = (ok_b & (~ok_a | (dist_b < dist_a))) | (~ok_a & ~ok_b & worse_a)
-    return answers.take(job, idx, res, take_b)
+    answers = answers.take(job, idx, res, take_b)
+    if job.robot.dof <= 6:
+        return answers
+    # a redundant arm's answer drifts along its self-motion: the answers still far from q_near get LM from a walk
+    # out of q_near (nik.kernels.driver.near_prior), kept where successful and nearer
+    idx = be.nonzero(_max_abs(answers.q - job.q_near) > NEAR_FAR)
+    if idx.shape[0] > 0:
+        qn = be.rows(job.q_near, idx)
+        res = be.refine(plan, job, idx, _near_prior(plan, job, idx, qn), False, local=True)
+        ok_b = (res.pos_err <= job.tol_pos) & (res.rot_err <= job.tol_rot)
+        ok_a = be.rows(answers.ok(job), idx)
+        closer = be.norm(res.q - qn) < be.norm(be.rows(answers.q, idx) - qn)
+        answers = answers.take(job, idx, res, ok_b & (~ok_a | closer))
+    return answers
+
+
+#: The near stage's walk (:func:`nik.kernels.driver.near_prior`, whose constants these are): for the answers of a
+#: redundant arm farther than ``NEAR_FAR`` rad (some joint) from ``q_near``, the annealed weights of the pull.
+NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.5, (1.0, 0.3, 0.1, 0.03, 0.01), 10
+
+
+def _max_abs(x):
+    """``(B,)`` the largest entry of ``|x|: (B, n)`` per row (numpy or torch)."""
+    return abs(x).max(1) if isinstance(x, np.ndarray) else x.abs().amax(1)
+
+
+def _near_prior(plan: Plan, job: Job, idx, q_near):
+    """``(b, n)`` starts: :func:`nik.kernels.driver.near_prior` on the targets ``idx`` (compiled), or the same steps
+    batched in torch (the torch backend)."""
+    if job.model is not None:
+        from nik.kernels import driver
+        from nik.kernels.chain import WRAPS
+        from nik.kernels.lm import MAX_STEP, ROT_WEIGHT
+
+        opts, _ = job.model.lm.options(job.tol_pos, job.tol_rot, plan.max_iters)
+        local = job.model.joints.copy()
+        local[:, WRAPS] = 0.0
+        q = np.empty(q_near.shape)
+        driver.near_prior(job.model.G, local, job.backend.rows(job.T, idx), q_near, opts[ROT_WEIGHT], opts[MAX_STEP],
+                          q)  # fmt: skip
+        return q
+    from nik.lm.batched import _residual
+
+    robot, T = job.robot, job.backend.rows(job.T, idx)
+    rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None else 0.5
+    max_step = plan.lm_cfg.max_step if plan.lm_cfg is not None else 0.5
+    lo, hi = robot.limits[:, 0].to(q_near), robot.limits[:, 1].to(q_near)
+    wr = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=q_near.dtype, device=q_near.device)
+    eye = torch.eye(robot.dof, dtype=q_near.dtype, device=q_near.device)
+    q = q_near.clone()
+    for w in NEAR_PRIOR:
+        for _ in range(NEAR_PRIOR_STEPS):
+            Tq, J = robot.fk_and_jacobian(q)
+            e = _residual(T[..., :3, :], Tq[..., :3, :], rw)[0]
+            J = J * wr[:, None]
+            A = J.transpose(-1, -2) @ J + (w * w + 1e-9) * eye
+            g = (J.transpose(-1, -2) @ e[..., None])[..., 0] - w * w * (q - q_near)
+            dq = torch.zeros_like(q)
+            for _ in range(2):  # the joints on a limit that the descent or the step pushes out are held
+                held = ((q <= lo) & ((g < 0) | (dq < 0))) | ((q >= hi) & ((g > 0) | (dq > 0)))
+                free = (~held).to(q)
+                Ah = A * free[:, :, None] * free[:, None, :] + eye * held.to(q)[:, :, None]
+                dq = torch.linalg.solve(Ah, (g * free)[..., None])[..., 0]
+                if not bool((((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))).any()):
+                    break
+            big = dq.abs().amax(-1, keepdim=True)
+            f = torch.where(big > max_step, max_step / big.clamp_min(1e-300), torch.ones_like(big))
+            dq = torch.where(torch.isfinite(big), f * dq, torch.zeros_like(dq))
+            q = torch.maximum(torch.minimum(q + dq, hi), lo)
+    return q
 
 
 def more_hypotheses(plan: Plan, job: Job, answers: Answers) -> Answers:

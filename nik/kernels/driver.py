@@ -34,10 +34,13 @@ from nik.kernels.lm import (
     _cholesky_solve,
     _copy,
     _eval,
+    _evaluate,
     _lm_one_bounded,
     _tool_error,
     _work_size,
+    hold,
     lm_solve,
+    pushes_out,
     turns_toward,
 )
 from nik.kernels.poses import reach_flags
@@ -49,6 +52,54 @@ __all__ = ["FALLBACK_ANALYTIC", "FALLBACK_MULTISTART", "FALLBACK_NONE", "SOURCE_
 #: Codes of the plan's guess source and fallback.
 SOURCE_NETWORK, SOURCE_ANALYTIC, SOURCE_MULTISTART = 0, 1, 2
 FALLBACK_NONE, FALLBACK_ANALYTIC, FALLBACK_MULTISTART = 0, 1, 2
+#: The near stage's walk from ``q_near`` (:func:`near_prior`) for the answers still farther than ``NEAR_FAR`` rad
+#: (some joint) from ``q_near``: the weights of the pull towards ``q_near``, annealed, ``NEAR_PRIOR_STEPS`` each.
+NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.5, (1.0, 0.3, 0.1, 0.03, 0.01), 10
+
+
+@kernel
+def near_prior(G, joints, T, q_near, rw, max_step, q):
+    """``q: (B, n)`` out: from ``q_near: (B, n)``, Gauss-Newton steps on ``|e|^2 + w^2 |q - q_near|^2`` (``e``: the
+    pose error of ``T: (B, 4, 4)``, rotation rows times ``rw``) with ``w`` over :data:`NEAR_PRIOR`, each
+    :data:`NEAR_PRIOR_STEPS` times: ``(J^T J + w^2 I) dq = J^T e - w^2 (q - q_near)``, the joints on a limit that it
+    pushes out held (:func:`nik.kernels.lm.hold`), scaled to ``max_step``, clamped into the limits (``joints``; pass
+    them without wrapping). Not exact (``w`` ends above 0): a start for LM that stays on the side of ``q_near``."""
+    B, n = q.shape
+    Tc, J, e = np.empty((3, 4)), np.empty((6, n)), np.empty(6)
+    A, g, dq = np.empty((n, n)), np.empty(n), np.empty(n)
+    for b in range(B):
+        _copy(q_near[b], q[b])
+        for w in NEAR_PRIOR:
+            for _ in range(NEAR_PRIOR_STEPS):
+                _evaluate(G, joints, q[b], T[b], rw, Tc, J, e)
+                for i in range(n):
+                    dq[i] = 0.0
+                for _ in range(2):
+                    for i in range(n):
+                        v = -w * w * (q[b, i] - q_near[b, i])
+                        for r in range(6):
+                            v += J[r, i] * e[r]
+                        g[i] = v
+                        for k in range(i + 1):
+                            a = 0.0
+                            for r in range(6):
+                                a += J[r, i] * J[r, k]
+                            A[i, k] = a
+                            A[k, i] = a
+                        A[i, i] += w * w + 1e-9
+                    hold(q[b], joints, g, dq, A)
+                    good = _cholesky_solve(A, g, dq)
+                    if not good or not pushes_out(q[b], joints, dq):
+                        break
+                big = 0.0
+                for i in range(n):
+                    big = max(big, abs(dq[i]))
+                if not good or not math.isfinite(big):
+                    break
+                f = min(1.0, max_step / big) if big > 0.0 else 1.0
+                for i in range(n):
+                    q[b, i] += f * dq[i]
+                _bounds(joints, q[b])
 
 
 @kernel
@@ -215,6 +266,30 @@ def solve(
                 pos[b], rot[b] = rpos[b], rrot[b]
             iterations[b] += rit[b]
             ok[b] = pos[b] <= tol_pos and rot[b] <= tol_rot
+        if n > 6:  # a redundant arm's answer drifts along its self-motion: LM again from a walk out of q_near
+            far = np.empty(B, dtype=np.bool_)
+            for b in range(B):
+                d = 0.0
+                for j in range(n):
+                    d = max(d, abs(q[b, j] - q_near[b, j]))
+                far[b] = d > NEAR_FAR
+            idx = _gather(far, True)
+            m = idx.shape[0]
+            if m > 0:
+                Ti, qn = _rows(T, idx), _rows(q_near, idx)
+                start = np.empty((m, n))
+                near_prior(G, local, Ti, qn, opts[ROT_WEIGHT], opts[MAX_STEP], start)
+                rq, rit, rpos, rrot = _lm(G, local, Ti, start, opts, iopts, _budgets(_rows(reachable, idx), 0), seed)
+                for i in range(m):
+                    b = idx[i]
+                    da, db = 0.0, 0.0
+                    for j in range(n):
+                        da += (q[b, j] - q_near[b, j]) ** 2
+                        db += (rq[i, j] - q_near[b, j]) ** 2
+                    if rpos[i] <= tol_pos and rrot[i] <= tol_rot and (not ok[b] or db < da):
+                        q[b] = rq[i]
+                        pos[b], rot[b], ok[b] = rpos[i], rrot[i], True
+                    iterations[b] += rit[i]
     # more hypotheses
     if has_hyp:
         idx = _gather(ok, False)
