@@ -168,6 +168,23 @@ def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g, want=Fals
 
 
 @kernel
+def _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, out):
+    """``out (4,)``: a sphere holding obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule): centre, radius."""
+    if kind == 0:
+        for r in range(4):
+            out[r] = w_spheres[o, r]
+    elif kind == 1:
+        b = w_boxes[o]
+        out[0], out[1], out[2] = b[9], b[10], b[11]
+        out[3] = math.sqrt(b[12] * b[12] + b[13] * b[13] + b[14] * b[14])
+    else:
+        c = w_capsules[o]
+        dx, dy, dz = c[3] - c[0], c[4] - c[1], c[5] - c[2]
+        out[0], out[1], out[2] = 0.5 * (c[0] + c[3]), 0.5 * (c[1] + c[4]), 0.5 * (c[2] + c[5])
+        out[3] = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz) + c[6]
+
+
+@kernel
 def link_bounds(spheres, body_start, bounds):
     """``bounds (L, 4)``: each link's bounding sphere in its own frame (the mean of its centres, and the radius
     reaching every one of its spheres; radius -1 for a link without spheres). A link rides on one frame, so the
@@ -247,6 +264,15 @@ def _rows(
     kinds = np.empty(No, dtype=np.int64)
     which = np.empty(No, dtype=np.int64)
     keep = np.empty(S, dtype=np.int64)
+    all_kinds = np.empty(No, dtype=np.int64)
+    all_which = np.empty(No, dtype=np.int64)
+    Ob = np.empty((No, 4))  # each obstacle's bounding sphere: the first, cheapest test of a link against it
+    m = 0
+    for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+        for o in range(count):
+            all_kinds[m], all_which[m] = kind, o
+            _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, Ob[m])
+            m += 1
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or sphere_frame[s0] == 0 or No == 0:
@@ -254,15 +280,18 @@ def _rows(
             continue
         lower = np.inf  # the smallest bound of the obstacles skipped
         m = 0
-        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
-            for o in range(count):
+        for t in range(No):
+            kind, o = all_kinds[t], all_which[t]
+            dx, dy, dz = Bc[link, 0] - Ob[t, 0], Bc[link, 1] - Ob[t, 1], Bc[link, 2] - Ob[t, 2]
+            bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Ob[t, 3] - bounds[link, 3]
+            if bound <= cutoff and kind != 0:  # the bounding spheres within reach: the obstacle's own distance
                 bound = _obstacle_one(Bc[link, 0], Bc[link, 1], Bc[link, 2], kind, o, w_spheres, w_boxes, w_capsules,
                                       g) - bounds[link, 3]  # fmt: skip
-                if bound > cutoff:
-                    lower = min(lower, bound)
-                else:
-                    kinds[m], which[m] = kind, o
-                    m += 1
+            if bound > cutoff:
+                lower = min(lower, bound)
+            else:
+                kinds[m], which[m] = kind, o
+                m += 1
         best, bs, bk = np.inf, -1, -1
         if m > 0:
             _place_link(F, spheres, sphere_frame, body_start, link, X, placed)
