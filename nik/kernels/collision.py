@@ -36,6 +36,7 @@ from nik.kernels.chain import LOWER, OFFSET, PRISMATIC, UPPER, _joint, _start, _
 __all__ = [
     "blocked_poses",
     "collides_batch",
+    "collides_bounded",
     "collision_distances",
     "collision_distances_batch",
     "collision_residual",
@@ -418,6 +419,18 @@ def residual_bounded(
             for m in range(Jr.shape[1]):
                 Jr[k, m] = 0.0
     return smallest
+
+
+@kernel
+def collides_bounded(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, d, bounds
+):
+    """Whether some row of ``q: (n,)`` is below ``margin`` (metres), stopping at the first such row, no Jacobian;
+    ``d (P + L,)`` scratch, ``bounds (L, 4)``: :func:`link_bounds` (the test of :func:`collides_batch`, for one
+    configuration)."""
+    J = np.empty((0, q.shape[0]))
+    return _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+                 False, margin, bounds, True)  # fmt: skip
 
 
 @kernel
