@@ -70,7 +70,12 @@ def _stacked_step(J, e, Jr, r, w2, q, joints, lam, eps, max_step, A, g, dq):
     as in :mod:`nik.kernels.lm`) and the collision rows ``Jr (R, n), r (R,)`` (``r`` = residual) weighted by
     ``w2``; False if it failed."""
     n = q.shape[0]
-    R = r.shape[0]
+    active = np.empty(r.shape[0], dtype=np.int64)  # the rows that push (most are 0), in order
+    R = 0
+    for k in range(r.shape[0]):
+        if r[k] != 0.0:
+            active[R] = k
+            R += 1
     for i in range(n):
         dq[i] = 0.0
     for _ in range(2):  # the active set at the limits of nik.kernels.lm._step: hold, solve, once more if pushed out
@@ -78,17 +83,17 @@ def _stacked_step(J, e, Jr, r, w2, q, joints, lam, eps, max_step, A, g, dq):
             v = 0.0
             for k in range(6):
                 v += J[k, i] * e[k]
-            for k in range(R):
-                if r[k] != 0.0:
-                    v -= w2 * Jr[k, i] * r[k]
+            for t in range(R):
+                k = active[t]
+                v -= w2 * Jr[k, i] * r[k]
             g[i] = v
             for m in range(i + 1):
                 a = 0.0
                 for k in range(6):
                     a += J[k, i] * J[k, m]
-                for k in range(R):
-                    if r[k] != 0.0:
-                        a += w2 * Jr[k, i] * Jr[k, m]
+                for t in range(R):
+                    k = active[t]
+                    a += w2 * Jr[k, i] * Jr[k, m]
                 A[i, m] = a
                 A[m, i] = a
         hold(q, joints, g, dq, A)
