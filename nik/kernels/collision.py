@@ -266,6 +266,7 @@ def _rows(
     which = np.empty(No, dtype=np.int64)
     keep = np.empty(S, dtype=np.int64)
     all_kinds = np.empty(No, dtype=np.int64)
+    near_at = np.empty(No, dtype=np.int64)
     all_which = np.empty(No, dtype=np.int64)
     Ob = np.empty((No, 4))  # each obstacle's bounding sphere: the first, cheapest test of a link against it
     m = 0
@@ -291,13 +292,22 @@ def _rows(
             if bound > cutoff:
                 lower = min(lower, bound)
             else:
-                kinds[m], which[m] = kind, o
+                kinds[m], which[m], near_at[m] = kind, o, t
                 m += 1
         best, bs, bk = np.inf, -1, -1
         if m > 0:
             _place_link(F, spheres, sphere_frame, body_start, link, X, placed)
             for s in range(s0, s1):
                 for k in range(m):
+                    if kinds[k] != 0:  # the obstacle's bounding sphere first: skipped where it cannot matter
+                        t = near_at[k]
+                        dx, dy, dz = X[s, 0] - Ob[t, 0], X[s, 1] - Ob[t, 1], X[s, 2] - Ob[t, 2]
+                        bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Ob[t, 3] - spheres[s, 3]
+                        if bound >= best:
+                            continue
+                        if bound > cutoff:
+                            lower = min(lower, bound)
+                            continue
                     dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kinds[k], which[k], w_spheres, w_boxes,
                                          w_capsules, g) - spheres[s, 3]  # fmt: skip
                     if dist < best:
