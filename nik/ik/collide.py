@@ -84,7 +84,9 @@ __all__ = [
 @dataclass(frozen=True)
 class CollideCfg:
     """Settings of the collision stage (module docstring): ``margin`` metres, ``weight`` of the collision rows,
-    ``iters`` / ``stall_iters`` per start, ``restarts`` uniform starts per target, ``tries`` draws per start."""
+    ``iters`` / ``stall_iters`` per start, ``restarts`` uniform starts per target, ``tries`` draws per start,
+    ``patience``: end a target's uniform restarts after that many in a row that do not lower its best sum by 1 %
+    (0: off, the default; :mod:`nik.kernels.collision_lm` says what it trades)."""
 
     margin: float = 0.005
     weight: float = 1.0

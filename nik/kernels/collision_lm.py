@@ -23,7 +23,17 @@ from it would spend the budget the uniform starts use better); then up to ``rest
 collision-free draw nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before
 any iteration).
 The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
-reached with the spheres overlapping by millimetres beats a free configuration far from the pose).
+reached with the spheres overlapping by millimetres beats a free configuration far from the pose). A start that
+ends free but held off the goal by the margin rows (the goal lies nearer an obstacle than ``margin``), with a
+lower sum than every start before it, goes on at once with the rows at margin 0 (the verdict's); done there, it
+ends the target (measured on the panda's scene: 3 of 10 such targets, that otherwise spent the whole budget
+before the caller's margin-0 pass). ``patience > 0`` ends a target's uniform restarts after that many in a row
+that do not lower the best sum by 1 % (off by default: on the panda's scene it saved 30 % of the stage's time
+but lost 3 of 1,000 targets that the 10th-16th restart solves).
+
+Cost per iteration (what the measurements found): the collision rows of a candidate dominate; a candidate whose
+pose rows alone are no better than the current sum is rejected without them (the same decision: the sum only
+adds), and the step's normal equations run over the rows that push only.
 Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
 """
 
