@@ -204,3 +204,43 @@ def test_the_last_joints_sweep_blocks_a_pose_whose_wrist_link_always_collides():
     assert not fixed_only.any()  # the hand is free of the ring: the sweep does the proving
     assert blocked_targets(robot, model, ring, T, 1e-4, 1e-3, self_collision=False).all()
     assert collides(robot, q, ring, model=model, self_collision=False).all()
+
+
+def test_one_configuration_check_is_that_of_the_all_pairs_rows():
+    from nik.kernels.collision import collides_bounded, link_bounds
+
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    Q = _q(robot, 300, seed=21)
+    (G, joints), rest = kernel_arguments(robot, model, _scene(7))
+    exact = np.empty((len(Q), len(model.pairs) + len(model.links)))
+    collision_distances_batch(G, joints, Q, *rest, exact)
+    bounds = np.empty((len(model.links), 4))
+    link_bounds(rest[0], rest[2], bounds)
+    d = np.empty(exact.shape[1])
+    for margin in (0.0, 0.01):
+        hit = np.array([collides_bounded(G, joints, q, *rest, margin, d, bounds) for q in Q])
+        np.testing.assert_array_equal(hit, (exact < margin).any(axis=1))
+        assert 0 < hit.sum() < len(Q)
+
+
+def test_patience_ends_the_restarts_early_and_keeps_the_verdicts():
+    """CollideCfg.patience: fewer iterations on the targets the re-solve fails; every answer called free stays free
+    by the all-pairs rows, and a success is a success without it too (the same starts come first)."""
+    from nik.ik.collide import CollideCfg
+
+    robot = nik.load_robot("panda")
+    world = _scene(6)
+    T = np.ascontiguousarray(np.asarray(robot.fk(_q(robot, 400, seed=17)))[:120])
+    solver = nik.IKSolver(robot, world=world)
+    full = solver.solve(T)
+    solver.collide_cfg = CollideCfg(patience=2)
+    short = solver.solve(T)
+    model = collision_model(robot)
+    (G, joints), rest = kernel_arguments(robot, model, world)
+    exact = np.empty((len(T), len(model.pairs) + len(model.links)))
+    collision_distances_batch(G, joints, np.ascontiguousarray(short.q), *rest, exact)
+    np.testing.assert_array_equal(short.collision_free, (exact >= 0).all(axis=1))
+    assert not (short.success & ~full.success).any()
+    failed = ~full.success & ~short.success
+    assert failed.any() and short.iterations[failed].sum() < full.iterations[failed].sum()

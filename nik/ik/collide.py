@@ -84,7 +84,9 @@ __all__ = [
 @dataclass(frozen=True)
 class CollideCfg:
     """Settings of the collision stage (module docstring): ``margin`` metres, ``weight`` of the collision rows,
-    ``iters`` / ``stall_iters`` per start, ``restarts`` uniform starts per target, ``tries`` draws per start."""
+    ``iters`` / ``stall_iters`` per start, ``restarts`` uniform starts per target, ``tries`` draws per start,
+    ``patience``: end a target's uniform restarts after that many in a row that do not lower its best sum by 1 %
+    (0: off, the default; :mod:`nik.kernels.collision_lm` says what it trades)."""
 
     margin: float = 0.005
     weight: float = 1.0
@@ -92,6 +94,7 @@ class CollideCfg:
     stall_iters: int = 5
     restarts: int = 16
     tries: int = 16
+    patience: int = 0
 
 
 @dataclass(frozen=True)
@@ -356,8 +359,8 @@ def _collision_solve(robot, s: Setup, plan, cfg: CollideCfg, goal, T, starts, n_
     it, pos, rot = np.empty(k, dtype=np.int64), np.empty(k), np.empty(k)
     collision_lm(G, joints, np.ascontiguousarray(T), np.ascontiguousarray(starts), np.asarray(n_starts, dtype=np.int64),
                  np.ascontiguousarray(half[:k]), np.ascontiguousarray(modes[:k]), opts, iopts,
-                 np.asarray(restarts, dtype=np.int64), cfg.tries, seed_state(plan.seed), *rest, margin, cfg.weight, q,
-                 free, done, it, pos, rot)  # fmt: skip
+                 np.asarray(restarts, dtype=np.int64), cfg.tries, cfg.patience, seed_state(plan.seed), *rest, margin,
+                 cfg.weight, q, free, done, it, pos, rot)  # fmt: skip
     return q, done, it
 
 

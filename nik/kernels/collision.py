@@ -36,6 +36,7 @@ from nik.kernels.chain import LOWER, OFFSET, PRISMATIC, UPPER, _joint, _start, _
 __all__ = [
     "blocked_poses",
     "collides_batch",
+    "collides_bounded",
     "collision_distances",
     "collision_distances_batch",
     "collision_residual",
@@ -168,6 +169,23 @@ def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g, want=Fals
 
 
 @kernel
+def _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, out):
+    """``out (4,)``: a sphere holding obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule): centre, radius."""
+    if kind == 0:
+        for r in range(4):
+            out[r] = w_spheres[o, r]
+    elif kind == 1:
+        b = w_boxes[o]
+        out[0], out[1], out[2] = b[9], b[10], b[11]
+        out[3] = math.sqrt(b[12] * b[12] + b[13] * b[13] + b[14] * b[14])
+    else:
+        c = w_capsules[o]
+        dx, dy, dz = c[3] - c[0], c[4] - c[1], c[5] - c[2]
+        out[0], out[1], out[2] = 0.5 * (c[0] + c[3]), 0.5 * (c[1] + c[4]), 0.5 * (c[2] + c[5])
+        out[3] = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz) + c[6]
+
+
+@kernel
 def link_bounds(spheres, body_start, bounds):
     """``bounds (L, 4)``: each link's bounding sphere in its own frame (the mean of its centres, and the radius
     reaching every one of its spheres; radius -1 for a link without spheres). A link rides on one frame, so the
@@ -247,6 +265,16 @@ def _rows(
     kinds = np.empty(No, dtype=np.int64)
     which = np.empty(No, dtype=np.int64)
     keep = np.empty(S, dtype=np.int64)
+    all_kinds = np.empty(No, dtype=np.int64)
+    near_at = np.empty(No, dtype=np.int64)
+    all_which = np.empty(No, dtype=np.int64)
+    Ob = np.empty((No, 4))  # each obstacle's bounding sphere: the first, cheapest test of a link against it
+    m = 0
+    for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+        for o in range(count):
+            all_kinds[m], all_which[m] = kind, o
+            _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, Ob[m])
+            m += 1
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or sphere_frame[s0] == 0 or No == 0:
@@ -254,20 +282,32 @@ def _rows(
             continue
         lower = np.inf  # the smallest bound of the obstacles skipped
         m = 0
-        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
-            for o in range(count):
+        for t in range(No):
+            kind, o = all_kinds[t], all_which[t]
+            dx, dy, dz = Bc[link, 0] - Ob[t, 0], Bc[link, 1] - Ob[t, 1], Bc[link, 2] - Ob[t, 2]
+            bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Ob[t, 3] - bounds[link, 3]
+            if bound <= cutoff and kind != 0:  # the bounding spheres within reach: the obstacle's own distance
                 bound = _obstacle_one(Bc[link, 0], Bc[link, 1], Bc[link, 2], kind, o, w_spheres, w_boxes, w_capsules,
                                       g) - bounds[link, 3]  # fmt: skip
-                if bound > cutoff:
-                    lower = min(lower, bound)
-                else:
-                    kinds[m], which[m] = kind, o
-                    m += 1
+            if bound > cutoff:
+                lower = min(lower, bound)
+            else:
+                kinds[m], which[m], near_at[m] = kind, o, t
+                m += 1
         best, bs, bk = np.inf, -1, -1
         if m > 0:
             _place_link(F, spheres, sphere_frame, body_start, link, X, placed)
             for s in range(s0, s1):
                 for k in range(m):
+                    if kinds[k] != 0:  # the obstacle's bounding sphere first: skipped where it cannot matter
+                        t = near_at[k]
+                        dx, dy, dz = X[s, 0] - Ob[t, 0], X[s, 1] - Ob[t, 1], X[s, 2] - Ob[t, 2]
+                        bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Ob[t, 3] - spheres[s, 3]
+                        if bound >= best:
+                            continue
+                        if bound > cutoff:
+                            lower = min(lower, bound)
+                            continue
                     dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kinds[k], which[k], w_spheres, w_boxes,
                                          w_capsules, g) - spheres[s, 3]  # fmt: skip
                     if dist < best:
@@ -389,6 +429,18 @@ def residual_bounded(
             for m in range(Jr.shape[1]):
                 Jr[k, m] = 0.0
     return smallest
+
+
+@kernel
+def collides_bounded(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, d, bounds
+):
+    """Whether some row of ``q: (n,)`` is below ``margin`` (metres), stopping at the first such row, no Jacobian;
+    ``d (P + L,)`` scratch, ``bounds (L, 4)``: :func:`link_bounds` (the test of :func:`collides_batch`, for one
+    configuration)."""
+    J = np.empty((0, q.shape[0]))
+    return _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+                 False, margin, bounds, True)  # fmt: skip
 
 
 @kernel
