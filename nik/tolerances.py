@@ -31,6 +31,11 @@ DEFAULT_TOL_ROT = math.radians(DEFAULT_TOL_ROT_DEG)  # rad
 #: 0.1 m per radian: a 1 mm position error weighs as much as a 0.57 deg rotation error.
 SCORE_ROT_WEIGHT = 0.1
 
+#: The near stage's walk from ``q_near`` (:func:`nik.kernels.driver.near_prior`, and its torch twin in
+#: :mod:`nik.ik.stages`) for the answers of a redundant arm still farther than ``NEAR_FAR`` rad (some joint) from
+#: ``q_near``: the weights of the pull towards ``q_near``, annealed, ``NEAR_PRIOR_STEPS`` steps each.
+NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.5, (1.0, 0.3, 0.1, 0.03, 0.01), 10
+
 
 def score(pos_err, rot_err):
     """``pos_err + SCORE_ROT_WEIGHT * rot_err``: one number per answer, lower is better (metres and radians; floats,

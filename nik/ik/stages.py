@@ -38,7 +38,7 @@ from nik.ik.guesses import analytic_guess, dedupe, multistart_guess, network_gue
 from nik.ik.plan import Plan
 from nik.ik.result import IKResult
 from nik.poses import pose_error
-from nik.tolerances import score
+from nik.tolerances import NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS, score
 
 __all__ = [
     "Answers",
@@ -221,11 +221,6 @@ def near(plan: Plan, job: Job, answers: Answers) -> Answers:
         closer = be.norm(res.q - qn) < be.norm(be.rows(answers.q, idx) - qn)
         answers = answers.take(job, idx, res, ok_b & (~ok_a | closer))
     return answers
-
-
-#: The near stage's walk (:func:`nik.kernels.driver.near_prior`, whose constants these are): for the answers of a
-#: redundant arm farther than ``NEAR_FAR`` rad (some joint) from ``q_near``, the annealed weights of the pull.
-NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.5, (1.0, 0.3, 0.1, 0.03, 0.01), 10
 
 
 def _max_abs(x):

@@ -45,6 +45,7 @@ from nik.kernels.lm import (
 )
 from nik.kernels.poses import reach_flags
 from nik.kernels.seeded import lm_starts, merge, ranked_hypotheses
+from nik.tolerances import NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS
 
 __all__ = ["FALLBACK_ANALYTIC", "FALLBACK_MULTISTART", "FALLBACK_NONE", "SOURCE_ANALYTIC", "SOURCE_MULTISTART",
            "SOURCE_NETWORK", "rest_posture", "solve", "solve_bounded"]  # fmt: skip
@@ -52,9 +53,6 @@ __all__ = ["FALLBACK_ANALYTIC", "FALLBACK_MULTISTART", "FALLBACK_NONE", "SOURCE_
 #: Codes of the plan's guess source and fallback.
 SOURCE_NETWORK, SOURCE_ANALYTIC, SOURCE_MULTISTART = 0, 1, 2
 FALLBACK_NONE, FALLBACK_ANALYTIC, FALLBACK_MULTISTART = 0, 1, 2
-#: The near stage's walk from ``q_near`` (:func:`near_prior`) for the answers still farther than ``NEAR_FAR`` rad
-#: (some joint) from ``q_near``: the weights of the pull towards ``q_near``, annealed, ``NEAR_PRIOR_STEPS`` each.
-NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS = 0.5, (1.0, 0.3, 0.1, 0.03, 0.01), 10
 
 
 @kernel
