@@ -384,32 +384,14 @@ class _Run:
         """:func:`nik.paths.kernels.path_chains` along ``T`` from ``starts: (K, dof)``: ``q (K, N, dof)``,
         iterations ``(K, N)``, ok ``(K, N)`` (LM options: the model's LM with this call's tolerances; with a tolerant
         goal, :func:`~nik.paths.kernels.path_chains_bounded` towards the bounds of waypoints ``offset ...`` of
-        the path, which ``T`` are)."""
-        from nik.kernels.lm import seed_state
-        from nik.paths.kernels import path_chains, path_chains_bounded
+        the path, which ``T`` are): :meth:`tracks` drifting towards ``q_rest``, else the middle of the ranges."""
+        from nik.kernels.chain import LOWER, UPPER
 
-        lm = self.model.lm
-        K, n, N = starts.shape[0], starts.shape[1], T.shape[0]
-        opts, iopts = lm.options(self.tol_pos, self.tol_rot)
-        q = np.empty((K, N, n))
-        its, ok = np.empty((K, N), dtype=np.int64), np.empty((K, N), dtype=bool)
-        pos, rot = np.empty((K, N)), np.empty((K, N))
-        budget = np.where(reachable, restarts, 0).astype(np.int64)
-        T, starts = np.ascontiguousarray(T), np.ascontiguousarray(starts, dtype=np.float64)
-        rng, cap = seed_state(self.seed if seed is None else seed), PATH_PULL_CAP if pull > 0 else 0.0
-        if self.rest is None:
-            if self.half is None:
-                path_chains(lm.G, lm.joints, T, starts, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot)
-            else:
-                half, modes = self._goal(offset, T.shape[0], False)
-                path_chains_bounded(
-                    lm.G, lm.joints, T, starts, half, modes, opts, iopts, budget, rng, pull, cap, q, its, ok, pos, rot
-                )
-            return q, its, ok
-        targets = np.repeat(self.rest[None], K, axis=0)  # towards q_rest instead of the middle
-        full = (np.full(K, pull), np.full(K, cap))
-        q, its, ok = self.tracks(T, starts, targets, *full, reachable, restarts, offset, seed=seed)
-        return q, its, ok
+        joints, K = self.model.lm.joints, starts.shape[0]
+        rest = self.rest if self.rest is not None else 0.5 * (joints[:, LOWER] + joints[:, UPPER])
+        pulls, caps = np.full(K, pull), np.full(K, PATH_PULL_CAP if pull > 0 else 0.0)
+        return self.tracks(T, starts, np.repeat(rest[None], K, axis=0), pulls, caps, reachable, restarts, offset,
+                           seed=seed)  # fmt: skip
 
     def _goal(self, offset: int, N: int, backward: bool) -> tuple[np.ndarray, np.ndarray]:
         """``(half (N, 6), modes (N,))`` of the tolerant goal at waypoints ``offset ... offset + N`` (reversed on a
