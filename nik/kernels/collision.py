@@ -86,18 +86,24 @@ def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, row):
 
 
 @kernel
+def _radial(dx, dy, dz, r, g, want):
+    """Signed distance ``|d| - r`` of the offset ``d = (dx, dy, dz)`` from a point to its nearest point on a core (a
+    sphere's centre, a capsule's segment), its gradient ``d / |d|`` in ``g (3,)`` where ``want`` (+z where
+    ``d = 0``)."""
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if want:
+        if n > 0:
+            g[0], g[1], g[2] = dx / n, dy / n, dz / n
+        else:
+            g[0], g[1], g[2] = 0.0, 0.0, 1.0
+    return n - r
+
+
+@kernel
 def _sphere_distance(x, y, z, w, o, g, want):
     """Signed distance from the point ``(x, y, z)`` to the world's sphere ``w[o]``, its gradient in ``g (3,)``
     where ``want``."""
-    dx, dy, dz = x - w[o, 0], y - w[o, 1], z - w[o, 2]
-    n = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if not want:
-        return n - w[o, 3]
-    if n > 0:
-        g[0], g[1], g[2] = dx / n, dy / n, dz / n
-    else:
-        g[0], g[1], g[2] = 0.0, 0.0, 1.0
-    return n - w[o, 3]
+    return _radial(x - w[o, 0], y - w[o, 1], z - w[o, 2], w[o, 3], g, want)
 
 
 @kernel
@@ -111,15 +117,7 @@ def _capsule_distance(x, y, z, w, o, g, want):
     if L2 > 0:
         t = ((x - ax) * bx + (y - ay) * by + (z - az) * bz) / L2
         t = min(1.0, max(0.0, t))
-    dx, dy, dz = x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz)
-    n = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if not want:
-        return n - w[o, 6]
-    if n > 0:
-        g[0], g[1], g[2] = dx / n, dy / n, dz / n
-    else:
-        g[0], g[1], g[2] = 0.0, 0.0, 1.0
-    return n - w[o, 6]
+    return _radial(x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz), w[o, 6], g, want)
 
 
 @kernel
