@@ -44,7 +44,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from collisions import scene  # noqa: E402  (the same scene as benchmarks/collisions.py)
 
 
-def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, max_edge=None) -> CollisionModel:
+def fit(
+    name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, max_edge=None, refine: int = 0
+) -> CollisionModel:
     """The model of the built-in ``name`` fitted to example-robot-data's meshes (module docstring)."""
     urdf_rel, srdf_rel = BUILTIN_MESHES[name]
     urdf, srdf = erd_path(urdf_rel), erd_path(srdf_rel)
@@ -56,7 +58,13 @@ def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, 
     for b in bodies:
         t = time.perf_counter()
         f = fit_spheres(
-            b.triangles, tolerance=tolerance, max_spheres=max_spheres, medial=medial, seed=seed, max_edge=max_edge
+            b.triangles,
+            tolerance=tolerance,
+            max_spheres=max_spheres,
+            medial=medial,
+            seed=seed,
+            max_edge=max_edge,
+            refine=refine,
         )
         fits.append(f)
         print(
@@ -88,6 +96,7 @@ def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, 
             "max_spheres": max_spheres,
             "medial": medial,
             "max_edge": max_edge,
+            "refine": refine,
             "seed": seed,
         },
         "samples": 1000,
@@ -123,6 +132,7 @@ def main(argv=None) -> None:
     ap.add_argument("--tolerance", type=float, default=0.004)
     ap.add_argument("--max-spheres", type=int, default=32)
     ap.add_argument("--max-edge", type=float, default=None, help="split triangles to this edge (m; default: fit's)")
+    ap.add_argument("--refine", type=int, default=0, help="rounds of the continuous refinement (0: greedy only)")
     ap.add_argument("--no-medial", action="store_true", help="without the medial-axis candidates")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--samples", type=int, default=2000)
@@ -137,11 +147,11 @@ def main(argv=None) -> None:
         else:
             print(
                 f"{name}: fitting (tolerance {args.tolerance} m, <= {args.max_spheres} spheres a link, "
-                f"{'no ' if args.no_medial else ''}medial candidates, seed {args.seed})",
+                f"{'no ' if args.no_medial else ''}medial candidates, refine {args.refine}, seed {args.seed})",
                 flush=True,
             )
             t = time.perf_counter()
-            model = fit(name, args.tolerance, args.max_spheres, not args.no_medial, args.seed, args.max_edge)
+            model = fit(name, args.tolerance, args.max_spheres, not args.no_medial, args.seed, args.max_edge, args.refine)
             print(f"  {model} in {time.perf_counter() - t:.0f} s; pairs {len(model.pairs)}")
             if not args.dry:
                 path = model.save(MODEL_DIR / f"{name}.collision.json")

@@ -188,6 +188,125 @@ def _greedy_cover(corners, faces, inside, depth, reach, max_spheres):
     return centers[keep], out[keep], remap[lab]
 
 
+def _probes(tri: np.ndarray, edge: float):
+    """Surface probes for the signed depth: centroids of ``tri`` split to ``edge`` with their outward normals
+    (orientation from the enclosed volume's sign), and a KD-tree over them (scipy)."""
+    from scipy.spatial import cKDTree
+
+    fine = subdivide(tri, edge)
+    cen = fine.mean(axis=1)
+    fn = np.cross(fine[:, 1] - fine[:, 0], fine[:, 2] - fine[:, 0])
+    if float(np.einsum("ij,ij->i", fine[:, 0], fn).sum()) < 0:  # inward-facing: flip
+        fn = -fn
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    return cKDTree(cen), cen, fn
+
+
+def _signed_depth(x: np.ndarray, probes) -> np.ndarray:
+    """Distance from ``x: (..., 3)`` to the nearest probe, positive inside (against its normal), negative out."""
+    tree, cen, fn = probes
+    d, i = tree.query(x)
+    inside = np.einsum("...k,...k->...", fn[i], cen[i] - x) >= 0
+    return np.where(inside, d, -d)
+
+
+def _need(corners: np.ndarray, faces: np.ndarray, centers: np.ndarray) -> np.ndarray:
+    """``(T, K)``: the radius sphere ``k`` needs to hold triangle ``t`` (its farthest corner)."""
+    out = np.empty((len(faces), len(centers)))
+    for s in range(0, len(centers), 16):
+        dv = np.sqrt(((corners[:, None, :] - centers[None, s : s + 16]) ** 2).sum(-1))  # (V, k)
+        out[:, s : s + 16] = dv[faces].max(axis=1)
+    return out
+
+
+def _hull_vertices(p: np.ndarray) -> np.ndarray:
+    """The points of ``p: (N, 3)`` on its convex hull (the farthest point from anywhere is one of them)."""
+    if len(p) < 16:
+        return p
+    try:
+        from scipy.spatial import ConvexHull
+
+        return p[ConvexHull(p).vertices]
+    except Exception:  # noqa: BLE001 - flat patch
+        return p
+
+
+def _best_centre(c0: np.ndarray, pts: np.ndarray, probes) -> np.ndarray:
+    """Centre minimising ``max |c - p| - depth(c)`` over the patch ``pts`` (Nelder-Mead from ``c0``): the bound
+    on how far the ball holding the patch reaches out of the body (a ball centred inside at depth ``d`` with
+    radius ``r`` leaves it by at most ``r - d``)."""
+    from scipy.optimize import minimize
+
+    hull = _hull_vertices(pts)
+
+    def cost(x):
+        return float(np.sqrt(((hull - x) ** 2).sum(-1)).max() - _signed_depth(x, probes))
+
+    r0 = float(np.sqrt(((hull - c0) ** 2).sum(-1)).max())
+    simplex = np.vstack([c0, c0 + np.eye(3) * max(0.25 * r0, 1e-3)])
+    res = minimize(cost, c0, method="Nelder-Mead", options={"initial_simplex": simplex, "maxfev": 150, "xatol": 1e-5})
+    return res.x if res.fun < cost(c0) else c0
+
+
+def _radii(need: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
+    r = np.zeros(k)
+    np.maximum.at(r, lab, need[np.arange(len(lab)), lab])
+    return r
+
+
+def _refine(corners, faces, centers, radii, probes, iters: int, max_spheres: int):
+    """Continuous refinement of a cover (module docstring): alternately each sphere's centre moved to the best
+    one for its triangles (:func:`_best_centre`) and each triangle given to the sphere that holds it with the
+    least overreach; the sphere reaching out most split in two while under ``max_spheres``. Every triangle stays
+    assigned and every radius is its triangles' farthest corner, so every iterate is a cover; the one with the
+    least area-weighted overreach bound is returned ``(centres, radii)``."""
+    tri = corners[faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    c = np.asarray(centers, dtype=np.float64).copy()
+    need = _need(corners, faces, c)
+    held = need <= np.asarray(radii)[None] * (1 + 1e-12)
+    lab = np.where(held.any(axis=1), np.argmax(np.where(held, -need, -np.inf), axis=1), np.argmin(need, axis=1))
+    best = None
+    for it in range(iters + 1):
+        if it:  # centre step, then the sphere reaching out most split while under budget
+            for k in range(len(c)):
+                m = lab == k
+                if m.any():
+                    c[k] = _best_centre(c[k], corners[np.unique(faces[m])], probes)
+            depth = _signed_depth(c, probes)
+            over = _radii(need, lab, len(c)) - depth
+            last = max(1, iters - 3)  # splits until 3 rounds before the end, then the cover settles
+            splits = -(-(max_spheres - len(c)) // (last - it + 1)) if it <= last else 0
+            for k in np.argsort(-over)[: max(0, splits)]:
+                m = np.nonzero(lab == k)[0]
+                if len(m) > 1:
+                    mid = tri[m].mean(axis=1)
+                    axis = np.linalg.svd(mid - mid.mean(axis=0), full_matrices=False)[2][0]
+                    side = (mid - mid.mean(axis=0)) @ axis > 0
+                    lab[m[side]] = len(c)
+                    c = np.vstack([c, c[k]])
+                    for j in (k, len(c) - 1):
+                        c[j] = _best_centre(c[j], corners[np.unique(faces[lab == j])], probes)
+            need = _need(corners, faces, c)
+            depth = _signed_depth(c, probes)
+            lab = np.argmin(need - depth[None], axis=1)  # the least overreach for each triangle
+        for _ in range(8):  # then shrink: each triangle to the sphere that holds it with most room
+            r = _radii(need, lab, len(c))
+            new = np.argmax(np.where(need <= r[None], r[None] - need, -np.inf), axis=1)
+            if (new == lab).all():
+                break
+            lab = new
+        r = _radii(need, lab, len(c))
+        keep = r > 0
+        depth = _signed_depth(c, probes)
+        score = float(area @ (r - depth)[lab]) / float(area.sum())
+        if best is None or score < best[0]:
+            best = (score, c[keep].copy(), r[keep].copy())
+        c, lab = c[keep], (np.cumsum(keep) - 1)[lab]
+        need = need[:, keep]
+    return best[1], best[2]
+
+
 def _medial_candidates(corners: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Centres of the largest balls inside the surface touching each corner (the shrinking-ball estimate of the
     medial axis): corner ``p`` with outward normal ``n`` (area-weighted face normals; the orientation taken from
@@ -225,6 +344,8 @@ def fit_spheres(
     seed: int = 0,
     medial: bool = False,
     candidates: int = 800,
+    refine: int = 0,
+    fine_edge: float | None = None,
 ) -> SphereFit:
     """Spheres whose union holds every point of the surface ``triangles: (T, 3, 3)`` (metres, body frame).
 
@@ -238,6 +359,9 @@ def fit_spheres(
         seed: seed of the candidate centres and of the Monte Carlo volume.
         medial: add the medial-axis candidates (module docstring): tighter, slower (nik's shipped models).
         candidates: candidate centres drawn inside the hull (plus a tenth as many surface corners).
+        refine: rounds of the continuous refinement (module docstring; 0: the greedy cover as it is); it may
+            split spheres up to ``max_spheres``.
+        fine_edge: the refinement holds triangles split to this edge (default a third of ``max_edge``).
     """
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     if not len(tri) or not np.isfinite(tri).all():
@@ -264,5 +388,11 @@ def fit_spheres(
         found = _greedy_cover(corners, faces, inside, depth, reach, int(max_spheres))
         reach *= 1.5
     c, r, _ = found
+    if refine > 0:
+        fe = edge / 3.0 if fine_edge is None else float(fine_edge)
+        fine = subdivide(tri, fe) if extent > 0 else tri
+        corners, faces = np.unique(fine.reshape(-1, 3).round(12), axis=0, return_inverse=True)
+        faces = faces.reshape(-1, 3)
+        c, r = _refine(corners, faces, c, r, _probes(tri, fe / 2.0), int(refine), int(max_spheres))
     surface = corners if len(corners) <= 4000 else corners[rng.choice(len(corners), 4000, replace=False)]
     return SphereFit(c, r, _gap(c, r, surface), _volume_ratio(c, r, volume, np.random.default_rng(seed)))
