@@ -151,7 +151,9 @@ def main(argv=None) -> None:
                 flush=True,
             )
             t = time.perf_counter()
-            model = fit(name, args.tolerance, args.max_spheres, not args.no_medial, args.seed, args.max_edge, args.refine)
+            model = fit(
+                name, args.tolerance, args.max_spheres, not args.no_medial, args.seed, args.max_edge, args.refine
+            )
             print(f"  {model} in {time.perf_counter() - t:.0f} s; pairs {len(model.pairs)}")
             if not args.dry:
                 path = model.save(MODEL_DIR / f"{name}.collision.json")
