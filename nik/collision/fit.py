@@ -231,21 +231,45 @@ def _hull_vertices(p: np.ndarray) -> np.ndarray:
         return p
 
 
-def _best_centre(c0: np.ndarray, pts: np.ndarray, probes) -> np.ndarray:
-    """Centre minimising ``max |c - p| - depth(c)`` over the patch ``pts`` (Nelder-Mead from ``c0``): the bound
-    on how far the ball holding the patch reaches out of the body (a ball centred inside at depth ``d`` with
-    radius ``r`` leaves it by at most ``r - d``)."""
-    from scipy.optimize import minimize
+_DIRECTIONS = np.concatenate(
+    [np.eye(3), -np.eye(3), np.array(np.meshgrid(*[[-1.0, 1.0]] * 3)).reshape(3, -1).T / 3**0.5]
+)
 
-    hull = _hull_vertices(pts)
 
-    def cost(x):
-        return float(np.sqrt(((hull - x) ** 2).sum(-1)).max() - _signed_depth(x, probes))
+def _best_centres(c0: np.ndarray, patches: list, probes, steps: int = 60) -> np.ndarray:
+    """Centres ``(K, 3)`` minimising, each for its patch of points, ``max |c - p| - depth(c)``: the bound on how
+    far the ball holding the patch reaches out of the body (a ball centred inside at depth ``d`` with radius
+    ``r`` leaves it by at most ``r - d``). A compass search from ``c0`` (14 directions, the step halved where
+    none improves), all spheres at once (one KD-tree query a step); an empty patch keeps its centre."""
+    hulls = [_hull_vertices(p) if len(p) else None for p in patches]
+    c = np.asarray(c0, dtype=np.float64).copy()
+    K, D = len(c), len(_DIRECTIONS)
 
-    r0 = float(np.sqrt(((hull - c0) ** 2).sum(-1)).max())
-    simplex = np.vstack([c0, c0 + np.eye(3) * max(0.25 * r0, 1e-3)])
-    res = minimize(cost, c0, method="Nelder-Mead", options={"initial_simplex": simplex, "maxfev": 150, "xatol": 1e-5})
-    return res.x if res.fun < cost(c0) else c0
+    def far(k, x):  # (n, 3) -> (n,)
+        return np.sqrt(((x[:, None, :] - hulls[k][None]) ** 2).sum(-1)).max(axis=1)
+
+    live = np.array([h is not None for h in hulls])
+    cost = np.full(K, np.inf)
+    step = np.zeros(K)
+    depth = _signed_depth(c, probes)
+    for k in np.nonzero(live)[0]:
+        r = far(k, c[k : k + 1])[0]
+        cost[k], step[k] = r - depth[k], max(0.25 * r, 1e-3)
+    for _ in range(steps):
+        live &= step > 2e-5
+        idx = np.nonzero(live)[0]
+        if not len(idx):
+            break
+        trial = c[idx, None, :] + step[idx, None, None] * _DIRECTIONS[None]  # (n, D, 3)
+        dep = _signed_depth(trial.reshape(-1, 3), probes).reshape(len(idx), D)
+        for j, k in enumerate(idx):
+            tc = far(k, trial[j]) - dep[j]
+            b = int(np.argmin(tc))
+            if tc[b] < cost[k] - 1e-9:
+                c[k], cost[k] = trial[j, b], tc[b]
+            else:
+                step[k] *= 0.5
+    return c
 
 
 def _radii(need: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
@@ -256,7 +280,7 @@ def _radii(need: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
 
 def _refine(corners, faces, centers, radii, probes, iters: int, max_spheres: int):
     """Continuous refinement of a cover (module docstring): alternately each sphere's centre moved to the best
-    one for its triangles (:func:`_best_centre`) and each triangle given to the sphere that holds it with the
+    one for its triangles (:func:`_best_centres`) and each triangle given to the sphere that holds it with the
     least overreach; the sphere reaching out most split in two while under ``max_spheres``. Every triangle stays
     assigned and every radius is its triangles' farthest corner, so every iterate is a cover; the one with the
     least area-weighted overreach bound is returned ``(centres, radii)``."""
@@ -269,14 +293,12 @@ def _refine(corners, faces, centers, radii, probes, iters: int, max_spheres: int
     best = None
     for it in range(iters + 1):
         if it:  # centre step, then the sphere reaching out most split while under budget
-            for k in range(len(c)):
-                m = lab == k
-                if m.any():
-                    c[k] = _best_centre(c[k], corners[np.unique(faces[m])], probes)
+            c = _best_centres(c, [corners[np.unique(faces[lab == k])] for k in range(len(c))], probes)
             depth = _signed_depth(c, probes)
             over = _radii(need, lab, len(c)) - depth
             last = max(1, iters - 3)  # splits until 3 rounds before the end, then the cover settles
             splits = -(-(max_spheres - len(c)) // (last - it + 1)) if it <= last else 0
+            split = []
             for k in np.argsort(-over)[: max(0, splits)]:
                 m = np.nonzero(lab == k)[0]
                 if len(m) > 1:
@@ -285,8 +307,9 @@ def _refine(corners, faces, centers, radii, probes, iters: int, max_spheres: int
                     side = (mid - mid.mean(axis=0)) @ axis > 0
                     lab[m[side]] = len(c)
                     c = np.vstack([c, c[k]])
-                    for j in (k, len(c) - 1):
-                        c[j] = _best_centre(c[j], corners[np.unique(faces[lab == j])], probes)
+                    split += [k, len(c) - 1]
+            if split:
+                c[split] = _best_centres(c[split], [corners[np.unique(faces[lab == j])] for j in split], probes)
             need = _need(corners, faces, c)
             depth = _signed_depth(c, probes)
             lab = np.argmin(need - depth[None], axis=1)  # the least overreach for each triangle
@@ -393,6 +416,6 @@ def fit_spheres(
         fine = subdivide(tri, fe) if extent > 0 else tri
         corners, faces = np.unique(fine.reshape(-1, 3).round(12), axis=0, return_inverse=True)
         faces = faces.reshape(-1, 3)
-        c, r = _refine(corners, faces, c, r, _probes(tri, fe / 2.0), int(refine), int(max_spheres))
+        c, r = _refine(corners, faces, c, r, _probes(tri, fe), int(refine), int(max_spheres))
     surface = corners if len(corners) <= 4000 else corners[rng.choice(len(corners), 4000, replace=False)]
     return SphereFit(c, r, _gap(c, r, surface), _volume_ratio(c, r, volume, np.random.default_rng(seed)))
