@@ -23,13 +23,29 @@ centres of the largest balls inside, one touching each surface corner, :func:`_m
 part-way to them, for which a sphere of radius ``d + reach`` holds the most surface per unit of overreach (a
 cylinder's axis, a plate's mid-plane).
 
+The refinement (``refine=N`` rounds, the built-ins' shipped models; choices): the greedy cover is carried onto
+the surface split finer (``fine_edge``, a third of ``max_edge`` by default: a sub-triangle lies inside its
+triangle, so the cover still holds it) and optimised continuously against the mesh. The quantity minimised is
+the bound above: a ball centred inside at depth ``d`` (the distance to the nearest surface point) with radius
+``r`` leaves the body by at most ``r - d`` (a point outside is reached through the surface). Each round (a) moves
+every centre to the point minimising ``max |c - p| - d(c)`` over the corners ``p`` of its own triangles (a
+compass search, 14 directions, the step halved where none improves; depth from a KD-tree of surface probes
+with outward normals, so a centre that leaves the body is charged for it), (b) gives every triangle to the
+sphere that needs the least overreach to hold it, then to the one that holds it with the most room, and sets
+each radius to its triangles' farthest corner, and (c) while under ``max_spheres`` splits the spheres reaching
+out most (their triangles halved across their principal axis). Every iterate is an exact cover (each triangle
+assigned, each radius reaching its triangles' corners: the guarantee above, not a sampled one, so no safety
+margin for sampling density is needed); the one with the least area-weighted ``r - d`` over the surface is
+kept. The depths only steer the search: an error in them makes the fit looser, never smaller than the cover.
+
 Overreach (:class:`SphereFit`): ``gap`` is the largest distance from a point of the union's boundary to the
 geometry's surface (metres, measured on 96 points per sphere against the subdivided surface's corners), and
 ``volume_ratio`` the union's volume over the geometry's (Monte Carlo, seeded; the convex hull's volume where the
 surface is not closed).
 
 numpy, and scipy's convex hull where installed (for the candidate centres and the volume; the bounding box
-without it); :mod:`nik.collision.shapes` turns URDF geometry (and meshes, through trimesh) into triangles.
+without it; the refinement needs scipy's KD-tree); :mod:`nik.collision.shapes` turns URDF geometry (and meshes,
+through trimesh) into triangles.
 """
 
 from __future__ import annotations
