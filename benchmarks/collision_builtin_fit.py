@@ -17,7 +17,7 @@ printed for :data:`nik.collision.builtin.CHECKSUMS`.
 The measure (``--samples`` seeded configurations within the limits, and the scene of ``benchmarks/collisions.py``:
 a table and 10 obstacles): by coal on the meshes (MoveIt's pairs) and by the model, how many the model calls
 free that collide (must be 0) and the share of the mesh-free ones it calls colliding (the price of conservative
-spheres), self only and in the scene.
+spheres): self only (the arm alone), world only (the scene, self-collision off on both sides) and both (the scene).
 """
 
 from __future__ import annotations
@@ -118,9 +118,10 @@ def measure(name: str, model: CollisionModel, samples: int, seed: int) -> dict:
     g = torch.Generator().manual_seed(seed)
     Q = np.ascontiguousarray(robot.sample(samples, generator=g, dtype=torch.float64).numpy())
     out = {}
-    for label, w in (("self", None), ("scene", scene(seed))):
-        ours = collides(robot, Q, w, model=model)
-        theirs = mesh.collides(Q, w)
+    w = scene(seed)
+    for label, world, self_collision in (("self", None, True), ("world", w, False), ("scene", w, True)):
+        ours = collides(robot, Q, world, model=model, self_collision=self_collision)
+        theirs = mesh.collides(Q, world, self_collision=self_collision)
         free = ~theirs
         out[label] = (int((~ours & theirs).sum()), int((ours & free).sum()), int(free.sum()))
     return out
