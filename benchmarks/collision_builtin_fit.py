@@ -1,6 +1,6 @@
 """Regenerate the built-in arms' collision models from their vendors' meshes, and measure them against the meshes.
 
-    python benchmarks/collision_builtin_fit.py                   # fit panda, ur5, xarm7; write the JSON files
+    python benchmarks/collision_builtin_fit.py --tolerance 0.004 --max-spheres 48 --refine 10   # the shipped files
     python benchmarks/collision_builtin_fit.py --check           # measure the shipped files only (no fitting)
     python benchmarks/collision_builtin_fit.py --arms panda --tolerance 0.004 --max-spheres 48 --dry
 
@@ -9,7 +9,8 @@ URDFs and meshes, ``".[collision-check]"`` for trimesh and coal): the same arms 
 as the built-in's frames, checked by :func:`nik.collision.urdf.urdf_bodies`; the built-in is taken without its
 flange/tool, whose frame does not move any link). Each link's surface is covered by spheres
 (:func:`nik.collision.fit.fit_spheres`: greedy cover at ``--tolerance``, at most ``--max-spheres`` a link,
-among random and medial-axis candidates; seeded), the link pairs are those of nik's rules with the
+among random and medial-axis candidates; then ``--refine`` rounds of the continuous refinement against the mesh,
+:mod:`nik.collision.fit`; seeded), the link pairs are those of nik's rules with the
 vendor's MoveIt SRDF (:func:`nik.collision.collision_model`'s defaults: 1000 samples, 2 cm never-clearance, seed 0),
 and the model is written to ``configs/robots/collision/NAME.collision.json`` for the bare arm's hash, its SHA-256
 printed for :data:`nik.collision.builtin.CHECKSUMS`.
