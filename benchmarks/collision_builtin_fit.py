@@ -1,6 +1,6 @@
 """Regenerate the built-in arms' collision models from their vendors' meshes, and measure them against the meshes.
 
-    python benchmarks/collision_builtin_fit.py                   # fit panda, ur5, xarm7; write the JSON files
+    python benchmarks/collision_builtin_fit.py --tolerance 0.004 --max-spheres 48 --refine 10   # the shipped files
     python benchmarks/collision_builtin_fit.py --check           # measure the shipped files only (no fitting)
     python benchmarks/collision_builtin_fit.py --arms panda --tolerance 0.004 --max-spheres 48 --dry
 
@@ -9,7 +9,8 @@ URDFs and meshes, ``".[collision-check]"`` for trimesh and coal): the same arms 
 as the built-in's frames, checked by :func:`nik.collision.urdf.urdf_bodies`; the built-in is taken without its
 flange/tool, whose frame does not move any link). Each link's surface is covered by spheres
 (:func:`nik.collision.fit.fit_spheres`: greedy cover at ``--tolerance``, at most ``--max-spheres`` a link,
-among random and medial-axis candidates; seeded), the link pairs are those of nik's rules with the
+among random and medial-axis candidates; then ``--refine`` rounds of the continuous refinement against the mesh,
+:mod:`nik.collision.fit`; seeded), the link pairs are those of nik's rules with the
 vendor's MoveIt SRDF (:func:`nik.collision.collision_model`'s defaults: 1000 samples, 2 cm never-clearance, seed 0),
 and the model is written to ``configs/robots/collision/NAME.collision.json`` for the bare arm's hash, its SHA-256
 printed for :data:`nik.collision.builtin.CHECKSUMS`.
@@ -17,7 +18,7 @@ printed for :data:`nik.collision.builtin.CHECKSUMS`.
 The measure (``--samples`` seeded configurations within the limits, and the scene of ``benchmarks/collisions.py``:
 a table and 10 obstacles): by coal on the meshes (MoveIt's pairs) and by the model, how many the model calls
 free that collide (must be 0) and the share of the mesh-free ones it calls colliding (the price of conservative
-spheres), self only and in the scene.
+spheres): self only (the arm alone), world only (the scene, self-collision off on both sides) and both (the scene).
 """
 
 from __future__ import annotations
@@ -44,7 +45,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from collisions import scene  # noqa: E402  (the same scene as benchmarks/collisions.py)
 
 
-def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, max_edge=None) -> CollisionModel:
+def fit(
+    name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, max_edge=None, refine: int = 0
+) -> CollisionModel:
     """The model of the built-in ``name`` fitted to example-robot-data's meshes (module docstring)."""
     urdf_rel, srdf_rel = BUILTIN_MESHES[name]
     urdf, srdf = erd_path(urdf_rel), erd_path(srdf_rel)
@@ -56,7 +59,13 @@ def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, 
     for b in bodies:
         t = time.perf_counter()
         f = fit_spheres(
-            b.triangles, tolerance=tolerance, max_spheres=max_spheres, medial=medial, seed=seed, max_edge=max_edge
+            b.triangles,
+            tolerance=tolerance,
+            max_spheres=max_spheres,
+            medial=medial,
+            seed=seed,
+            max_edge=max_edge,
+            refine=refine,
         )
         fits.append(f)
         print(
@@ -88,6 +97,7 @@ def fit(name: str, tolerance: float, max_spheres: int, medial: bool, seed: int, 
             "max_spheres": max_spheres,
             "medial": medial,
             "max_edge": max_edge,
+            "refine": refine,
             "seed": seed,
         },
         "samples": 1000,
@@ -109,9 +119,10 @@ def measure(name: str, model: CollisionModel, samples: int, seed: int) -> dict:
     g = torch.Generator().manual_seed(seed)
     Q = np.ascontiguousarray(robot.sample(samples, generator=g, dtype=torch.float64).numpy())
     out = {}
-    for label, w in (("self", None), ("scene", scene(seed))):
-        ours = collides(robot, Q, w, model=model)
-        theirs = mesh.collides(Q, w)
+    w = scene(seed)
+    for label, world, self_collision in (("self", None, True), ("world", w, False), ("scene", w, True)):
+        ours = collides(robot, Q, world, model=model, self_collision=self_collision)
+        theirs = mesh.collides(Q, world, self_collision=self_collision)
         free = ~theirs
         out[label] = (int((~ours & theirs).sum()), int((ours & free).sum()), int(free.sum()))
     return out
@@ -123,6 +134,7 @@ def main(argv=None) -> None:
     ap.add_argument("--tolerance", type=float, default=0.004)
     ap.add_argument("--max-spheres", type=int, default=32)
     ap.add_argument("--max-edge", type=float, default=None, help="split triangles to this edge (m; default: fit's)")
+    ap.add_argument("--refine", type=int, default=0, help="rounds of the continuous refinement (0: greedy only)")
     ap.add_argument("--no-medial", action="store_true", help="without the medial-axis candidates")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--samples", type=int, default=2000)
@@ -137,11 +149,13 @@ def main(argv=None) -> None:
         else:
             print(
                 f"{name}: fitting (tolerance {args.tolerance} m, <= {args.max_spheres} spheres a link, "
-                f"{'no ' if args.no_medial else ''}medial candidates, seed {args.seed})",
+                f"{'no ' if args.no_medial else ''}medial candidates, refine {args.refine}, seed {args.seed})",
                 flush=True,
             )
             t = time.perf_counter()
-            model = fit(name, args.tolerance, args.max_spheres, not args.no_medial, args.seed, args.max_edge)
+            model = fit(
+                name, args.tolerance, args.max_spheres, not args.no_medial, args.seed, args.max_edge, args.refine
+            )
             print(f"  {model} in {time.perf_counter() - t:.0f} s; pairs {len(model.pairs)}")
             if not args.dry:
                 path = model.save(MODEL_DIR / f"{name}.collision.json")

@@ -95,6 +95,19 @@ def test_spheres_hold_every_surface_point_of_a_cylinder():
     assert _inside(side, fit).all()
 
 
+def test_refined_spheres_still_hold_every_surface_point_and_reach_out_less():
+    rng = np.random.default_rng(3)
+    size = np.array([0.3, 0.1, 0.05])
+    greedy = fit_spheres(box_triangles(size), tolerance=0.01, max_spheres=8, seed=0)
+    refined = fit_spheres(box_triangles(size), tolerance=0.01, max_spheres=8, seed=0, refine=6)
+    p = rng.uniform(-size / 2, size / 2, size=(20000, 3))
+    face = rng.integers(3, size=len(p))
+    p[np.arange(len(p)), face] = np.sign(rng.normal(size=len(p))) * size[face] / 2  # on the faces
+    assert _inside(p, refined).all()
+    assert len(refined.radii) <= 8
+    assert refined.volume_ratio < greedy.volume_ratio
+
+
 def test_capsule_model_holds_the_capsules(prims):
     robot = nik.load_robot("ur5")
     model = collision_model(robot, radius=0.04)

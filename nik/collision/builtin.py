@@ -46,9 +46,9 @@ BUILTIN_MESHES = {
 
 #: SHA-256 of each shipped file (``benchmarks/collision_builtin_fit.py`` prints them)
 CHECKSUMS = {
-    "panda": "b07cb52451d7a6c79798ae76d0cc961a0a9656a26e6d1189c59597aa9a7ea411",
-    "ur5": "7cb5f18be7be0888ea2ca888a07ccf17b9ec926b416a7724bff79377702aa549",
-    "xarm7": "f856a8b622b574025daaf0efd492523792a1f67f3d3501128c951cc6d39208d4",
+    "panda": "42887410091c8d80c51d958318b5012e649f3d5e9b077462c8c099380686d741",
+    "ur5": "9f5534e289d54fae985ef62d4477fc9df5ba610373e9d48519194f25ad686bde",
+    "xarm7": "2c2dc805aefec117833dec0e94d76b4e508fb45fa9638367c6046623c4da5eb8",
 }
 
 

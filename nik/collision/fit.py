@@ -23,13 +23,29 @@ centres of the largest balls inside, one touching each surface corner, :func:`_m
 part-way to them, for which a sphere of radius ``d + reach`` holds the most surface per unit of overreach (a
 cylinder's axis, a plate's mid-plane).
 
+The refinement (``refine=N`` rounds, the built-ins' shipped models; choices): the greedy cover is carried onto
+the surface split finer (``fine_edge``, a third of ``max_edge`` by default: a sub-triangle lies inside its
+triangle, so the cover still holds it) and optimised continuously against the mesh. The quantity minimised is
+the bound above: a ball centred inside at depth ``d`` (the distance to the nearest surface point) with radius
+``r`` leaves the body by at most ``r - d`` (a point outside is reached through the surface). Each round (a) moves
+every centre to the point minimising ``max |c - p| - d(c)`` over the corners ``p`` of its own triangles (a
+compass search, 14 directions, the step halved where none improves; depth from a KD-tree of surface probes
+with outward normals, so a centre that leaves the body is charged for it), (b) gives every triangle to the
+sphere that needs the least overreach to hold it, then to the one that holds it with the most room, and sets
+each radius to its triangles' farthest corner, and (c) while under ``max_spheres`` splits the spheres reaching
+out most (their triangles halved across their principal axis). Every iterate is an exact cover (each triangle
+assigned, each radius reaching its triangles' corners: the guarantee above, not a sampled one, so no safety
+margin for sampling density is needed); the one with the least area-weighted ``r - d`` over the surface is
+kept. The depths only steer the search: an error in them makes the fit looser, never smaller than the cover.
+
 Overreach (:class:`SphereFit`): ``gap`` is the largest distance from a point of the union's boundary to the
 geometry's surface (metres, measured on 96 points per sphere against the subdivided surface's corners), and
 ``volume_ratio`` the union's volume over the geometry's (Monte Carlo, seeded; the convex hull's volume where the
 surface is not closed).
 
 numpy, and scipy's convex hull where installed (for the candidate centres and the volume; the bounding box
-without it); :mod:`nik.collision.shapes` turns URDF geometry (and meshes, through trimesh) into triangles.
+without it; the refinement needs scipy's KD-tree); :mod:`nik.collision.shapes` turns URDF geometry (and meshes,
+through trimesh) into triangles.
 """
 
 from __future__ import annotations
@@ -188,6 +204,148 @@ def _greedy_cover(corners, faces, inside, depth, reach, max_spheres):
     return centers[keep], out[keep], remap[lab]
 
 
+def _probes(tri: np.ndarray, edge: float):
+    """Surface probes for the signed depth: centroids of ``tri`` split to ``edge`` with their outward normals
+    (orientation from the enclosed volume's sign), and a KD-tree over them (scipy)."""
+    from scipy.spatial import cKDTree
+
+    fine = subdivide(tri, edge)
+    cen = fine.mean(axis=1)
+    fn = np.cross(fine[:, 1] - fine[:, 0], fine[:, 2] - fine[:, 0])
+    if float(np.einsum("ij,ij->i", fine[:, 0], fn).sum()) < 0:  # inward-facing: flip
+        fn = -fn
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    return cKDTree(cen), cen, fn
+
+
+def _signed_depth(x: np.ndarray, probes) -> np.ndarray:
+    """Distance from ``x: (..., 3)`` to the nearest probe, positive inside (against its normal), negative out."""
+    tree, cen, fn = probes
+    d, i = tree.query(x)
+    inside = np.einsum("...k,...k->...", fn[i], cen[i] - x) >= 0
+    return np.where(inside, d, -d)
+
+
+def _need(corners: np.ndarray, faces: np.ndarray, centers: np.ndarray) -> np.ndarray:
+    """``(T, K)``: the radius sphere ``k`` needs to hold triangle ``t`` (its farthest corner)."""
+    out = np.empty((len(faces), len(centers)))
+    for s in range(0, len(centers), 16):
+        dv = np.sqrt(((corners[:, None, :] - centers[None, s : s + 16]) ** 2).sum(-1))  # (V, k)
+        out[:, s : s + 16] = dv[faces].max(axis=1)
+    return out
+
+
+def _hull_vertices(p: np.ndarray) -> np.ndarray:
+    """The points of ``p: (N, 3)`` on its convex hull (the farthest point from anywhere is one of them)."""
+    if len(p) < 16:
+        return p
+    try:
+        from scipy.spatial import ConvexHull
+
+        return p[ConvexHull(p).vertices]
+    except Exception:  # noqa: BLE001 - flat patch
+        return p
+
+
+_DIRECTIONS = np.concatenate(
+    [np.eye(3), -np.eye(3), np.array(np.meshgrid(*[[-1.0, 1.0]] * 3)).reshape(3, -1).T / 3**0.5]
+)
+
+
+def _best_centres(c0: np.ndarray, patches: list, probes, steps: int = 60) -> np.ndarray:
+    """Centres ``(K, 3)`` minimising, each for its patch of points, ``max |c - p| - depth(c)``: the bound on how
+    far the ball holding the patch reaches out of the body (a ball centred inside at depth ``d`` with radius
+    ``r`` leaves it by at most ``r - d``). A compass search from ``c0`` (14 directions, the step halved where
+    none improves), all spheres at once (one KD-tree query a step); an empty patch keeps its centre."""
+    hulls = [_hull_vertices(p) if len(p) else None for p in patches]
+    c = np.asarray(c0, dtype=np.float64).copy()
+    K, D = len(c), len(_DIRECTIONS)
+
+    def far(k, x):  # (n, 3) -> (n,)
+        return np.sqrt(((x[:, None, :] - hulls[k][None]) ** 2).sum(-1)).max(axis=1)
+
+    live = np.array([h is not None for h in hulls])
+    cost = np.full(K, np.inf)
+    step = np.zeros(K)
+    depth = _signed_depth(c, probes)
+    for k in np.nonzero(live)[0]:
+        r = far(k, c[k : k + 1])[0]
+        cost[k], step[k] = r - depth[k], max(0.25 * r, 1e-3)
+    for _ in range(steps):
+        live &= step > 2e-5
+        idx = np.nonzero(live)[0]
+        if not len(idx):
+            break
+        trial = c[idx, None, :] + step[idx, None, None] * _DIRECTIONS[None]  # (n, D, 3)
+        dep = _signed_depth(trial.reshape(-1, 3), probes).reshape(len(idx), D)
+        for j, k in enumerate(idx):
+            tc = far(k, trial[j]) - dep[j]
+            b = int(np.argmin(tc))
+            if tc[b] < cost[k] - 1e-9:
+                c[k], cost[k] = trial[j, b], tc[b]
+            else:
+                step[k] *= 0.5
+    return c
+
+
+def _radii(need: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
+    r = np.zeros(k)
+    np.maximum.at(r, lab, need[np.arange(len(lab)), lab])
+    return r
+
+
+def _refine(corners, faces, centers, radii, probes, iters: int, max_spheres: int):
+    """Continuous refinement of a cover (module docstring): alternately each sphere's centre moved to the best
+    one for its triangles (:func:`_best_centres`) and each triangle given to the sphere that holds it with the
+    least overreach; the sphere reaching out most split in two while under ``max_spheres``. Every triangle stays
+    assigned and every radius is its triangles' farthest corner, so every iterate is a cover; the one with the
+    least area-weighted overreach bound is returned ``(centres, radii)``."""
+    tri = corners[faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    c = np.asarray(centers, dtype=np.float64).copy()
+    need = _need(corners, faces, c)
+    held = need <= np.asarray(radii)[None] * (1 + 1e-12)
+    lab = np.where(held.any(axis=1), np.argmax(np.where(held, -need, -np.inf), axis=1), np.argmin(need, axis=1))
+    best = None
+    for it in range(iters + 1):
+        if it:  # centre step, then the sphere reaching out most split while under budget
+            c = _best_centres(c, [corners[np.unique(faces[lab == k])] for k in range(len(c))], probes)
+            depth = _signed_depth(c, probes)
+            over = _radii(need, lab, len(c)) - depth
+            last = max(1, iters - 3)  # splits until 3 rounds before the end, then the cover settles
+            splits = -(-(max_spheres - len(c)) // (last - it + 1)) if it <= last else 0
+            split = []
+            for k in np.argsort(-over)[: max(0, splits)]:
+                m = np.nonzero(lab == k)[0]
+                if len(m) > 1:
+                    mid = tri[m].mean(axis=1)
+                    axis = np.linalg.svd(mid - mid.mean(axis=0), full_matrices=False)[2][0]
+                    side = (mid - mid.mean(axis=0)) @ axis > 0
+                    lab[m[side]] = len(c)
+                    c = np.vstack([c, c[k]])
+                    split += [k, len(c) - 1]
+            if split:
+                c[split] = _best_centres(c[split], [corners[np.unique(faces[lab == j])] for j in split], probes)
+            need = _need(corners, faces, c)
+            depth = _signed_depth(c, probes)
+            lab = np.argmin(need - depth[None], axis=1)  # the least overreach for each triangle
+        for _ in range(8):  # then shrink: each triangle to the sphere that holds it with most room
+            r = _radii(need, lab, len(c))
+            new = np.argmax(np.where(need <= r[None], r[None] - need, -np.inf), axis=1)
+            if (new == lab).all():
+                break
+            lab = new
+        r = _radii(need, lab, len(c))
+        keep = r > 0
+        depth = _signed_depth(c, probes)
+        score = float(area @ (r - depth)[lab]) / float(area.sum())
+        if best is None or score < best[0]:
+            best = (score, c[keep].copy(), r[keep].copy())
+        c, lab = c[keep], (np.cumsum(keep) - 1)[lab]
+        need = need[:, keep]
+    return best[1], best[2]
+
+
 def _medial_candidates(corners: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Centres of the largest balls inside the surface touching each corner (the shrinking-ball estimate of the
     medial axis): corner ``p`` with outward normal ``n`` (area-weighted face normals; the orientation taken from
@@ -225,6 +383,8 @@ def fit_spheres(
     seed: int = 0,
     medial: bool = False,
     candidates: int = 800,
+    refine: int = 0,
+    fine_edge: float | None = None,
 ) -> SphereFit:
     """Spheres whose union holds every point of the surface ``triangles: (T, 3, 3)`` (metres, body frame).
 
@@ -238,6 +398,9 @@ def fit_spheres(
         seed: seed of the candidate centres and of the Monte Carlo volume.
         medial: add the medial-axis candidates (module docstring): tighter, slower (nik's shipped models).
         candidates: candidate centres drawn inside the hull (plus a tenth as many surface corners).
+        refine: rounds of the continuous refinement (module docstring; 0: the greedy cover as it is); it may
+            split spheres up to ``max_spheres``.
+        fine_edge: the refinement holds triangles split to this edge (default a third of ``max_edge``).
     """
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     if not len(tri) or not np.isfinite(tri).all():
@@ -264,5 +427,11 @@ def fit_spheres(
         found = _greedy_cover(corners, faces, inside, depth, reach, int(max_spheres))
         reach *= 1.5
     c, r, _ = found
+    if refine > 0:
+        fe = edge / 3.0 if fine_edge is None else float(fine_edge)
+        fine = subdivide(tri, fe) if extent > 0 else tri
+        corners, faces = np.unique(fine.reshape(-1, 3).round(12), axis=0, return_inverse=True)
+        faces = faces.reshape(-1, 3)
+        c, r = _refine(corners, faces, c, r, _probes(tri, fe), int(refine), int(max_spheres))
     surface = corners if len(corners) <= 4000 else corners[rng.choice(len(corners), 4000, replace=False)]
     return SphereFit(c, r, _gap(c, r, surface), _volume_ratio(c, r, volume, np.random.default_rng(seed)))
