@@ -543,20 +543,75 @@ def collides_batch(
 
 
 @kernel
-def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on, g):
-    """The smallest exact row among those whose links all have ``on[frame]`` (placed in ``X``): pairs with both
-    links on such frames, and such links (not on frame 0) against the world."""
+def _link_bound(F, bounds, sphere_frame, body_start, link, c):
+    """``c (3,)``: link ``link``'s bounding sphere (:func:`link_bounds`) placed by the frames ``F``; returns its
+    radius (-1 for a link without spheres)."""
+    if bounds[link, 3] < 0:
+        return -1.0
+    f = sphere_frame[body_start[link]]
+    for r in range(3):
+        c[r] = F[f, r, 0] * bounds[link, 0] + F[f, r, 1] * bounds[link, 1] + F[f, r, 2] * bounds[link, 2] + F[f, r, 3]
+    return bounds[link, 3]
+
+
+@kernel
+def _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes, w_capsules, g, c, cut,
+                below):  # fmt: skip
+    """The smallest row of link ``link`` against the world: exact where at most ``cut``, else a lower bound above it
+    (an obstacle farther than ``cut`` from the link's bounding sphere is that bound: a signed distance is
+    1-Lipschitz); returned as soon as it is below ``below``."""
+    s0, s1 = body_start[link], body_start[link + 1]
+    rad = _link_bound(F, bounds, sphere_frame, body_start, link, c)
+    best = np.inf
+    for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+        for o in range(count):
+            lower = _obstacle_one(c[0], c[1], c[2], kind, o, w_spheres, w_boxes, w_capsules, g) - rad
+            if lower > cut:
+                best = min(best, lower)
+                continue
+            for s in range(s0, s1):
+                dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                best = min(best, dist - spheres[s, 3])
+                if best < below:
+                    return best
+    return best
+
+
+@kernel
+def _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, cut, below):
+    """The row of links ``a`` and ``b``: exact where at most ``cut``, else a lower bound above it (their bounding
+    spheres' distance); returned as soon as it is below ``below``."""
+    ra = _link_bound(F, bounds, sphere_frame, body_start, a, c)
+    rb = _link_bound(F, bounds, sphere_frame, body_start, b, cb)
+    dx, dy, dz = c[0] - cb[0], c[1] - cb[1], c[2] - cb[2]
+    lower = math.sqrt(dx * dx + dy * dy + dz * dz) - ra - rb
+    if lower > cut:
+        return lower
+    best = np.inf
+    for i in range(body_start[a], body_start[a + 1]):
+        for j in range(body_start[b], body_start[b + 1]):
+            dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+            best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+            if best < below:
+                return best
+    return best
+
+
+@kernel
+def _fixed_rows(X, F, bounds, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on, g,
+                cut):  # fmt: skip
+    """The smallest row among those whose links all have ``on[frame]`` (placed in ``X``, frames ``F``, the links'
+    bounds ``bounds``): pairs with both links on such frames, and such links (not on frame 0) against the world;
+    exact where at most ``cut``, else a lower bound above it."""
     L = body_start.shape[0] - 1
     best = np.inf
+    c, cb = np.empty(3), np.empty(3)
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or not on[sphere_frame[s0]] or sphere_frame[s0] == 0:
             continue
-        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
-            for o in range(count):
-                for s in range(s0, s1):
-                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
-                    best = min(best, dist - spheres[s, 3])
+        best = min(best, _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes,
+                                     w_capsules, g, c, cut, -np.inf))  # fmt: skip
     if self_on:
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
@@ -564,32 +619,28 @@ def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
                 continue
             if not (on[sphere_frame[body_start[a]]] and on[sphere_frame[body_start[b]]]):
                 continue
-            for i in range(body_start[a], body_start[a + 1]):
-                for j in range(body_start[b], body_start[b + 1]):
-                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
-                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+            best = min(best, _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, cut, -np.inf))
     return best
 
 
 @kernel
 def _sweep_rows(
-    X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g, below
+    X, F, bounds, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g, below
 ):  # fmt: skip
-    """The smallest exact row of the links on frame ``k`` (placed in ``X``): against the world, and against the
-    links on frames 0, ``k`` and ``n``; returned as soon as one is below ``below`` (then an upper bound of it)."""
+    """The smallest row of the links on frame ``k`` (placed in ``X``, frames ``F``, the links' bounds ``bounds``):
+    against the world, and against the links on frames 0, ``k`` and ``n``; exact where at most ``below``, else a
+    lower bound above it; returned as soon as one is below ``below`` (then an upper bound of it)."""
     L = body_start.shape[0] - 1
     best = np.inf
+    c, cb = np.empty(3), np.empty(3)
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or sphere_frame[s0] != k:
             continue
-        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
-            for o in range(count):
-                for s in range(s0, s1):
-                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
-                    best = min(best, dist - spheres[s, 3])
-                    if best < below:
-                        return best
+        best = min(best, _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes,
+                                     w_capsules, g, c, below, below))  # fmt: skip
+        if best < below:
+            return best
     if self_on:
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
@@ -598,12 +649,9 @@ def _sweep_rows(
             fa, fb = sphere_frame[body_start[a]], sphere_frame[body_start[b]]
             if not ((fa == k and (fb == 0 or fb == k or fb == n)) or (fb == k and (fa == 0 or fa == k or fa == n))):
                 continue
-            for i in range(body_start[a], body_start[a + 1]):
-                for j in range(body_start[b], body_start[b + 1]):
-                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
-                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
-                    if best < below:
-                        return best
+            best = min(best, _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, below, below))
+            if best < below:
+                return best
     return best
 
 
@@ -655,6 +703,8 @@ def blocked_poses(
     X = np.zeros((S, 3))
     on = np.zeros(n + 1, dtype=np.bool_)
     g = np.empty(3)
+    lb = np.empty((body_start.shape[0] - 1, 4))  # the links' bounding spheres: rows far above the cut skipped
+    link_bounds(spheres, body_start, lb)
     Tj = np.empty((3, 4))
     Gn = np.empty((3, 4))
     _start(Gn, G[n])
@@ -672,8 +722,8 @@ def blocked_poses(
         for i in range(n + 1):
             on[i] = i == 0 or i == n
         _place(F, spheres, sphere_frame, X)  # only the spheres on frames 0 and n are read
-        if _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on,
-                       g) < -slack:  # fmt: skip
+        if _fixed_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+                       on, g, -slack) < -slack:  # fmt: skip
             out[b] = True
             continue
         if samples < 2:
@@ -701,8 +751,8 @@ def blocked_poses(
                     _rigid_inverse_times(F[n], Tj, F[n - 1])
                 _place_frame(F, spheres, sphere_frame, k, X)  # frames 0 and n stay placed
                 reach = rho * h / 2 + slack  # a row at least -reach here may be free somewhere near
-                worst = _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                                    self_on, k, n, g, -reach)  # fmt: skip
+                worst = _sweep_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                                    w_capsules, self_on, k, n, g, -reach)  # fmt: skip
                 if worst >= -reach:
                     blocked = False
                     break
