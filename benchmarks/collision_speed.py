@@ -1,7 +1,7 @@
 """Collision-free IK speed on the panda in a scene (issue 35 item 4): time per target against the same solver
 without a world, per stage, and the collision-free success.
 
-    python benchmarks/collision_speed.py [--targets 1000] [--seed 0] [--rounds 5]
+    python benchmarks/collision_speed.py [--targets 1000] [--seed 0] [--rounds 5] [--builtin]
 
 The panda of example-robot-data (its URDF with collision meshes: arm, hand, fingers), its sphere model fitted to
 the meshes (:func:`nik.collision.collision_model`, cached), the scene of ``benchmarks/collisions.py`` (a table and
@@ -13,6 +13,10 @@ other jobs; the wall time beside it) and the median of the per-round ratios. The
 solver with each stage of :func:`nik.ik.collide.resolve` timed (the pipeline without a world, the first check, the
 blocked-pose proof where the code has it, the re-solve, the check of the new answers, the names), and the
 outcome: success, answers called free that collide on the meshes (must be 0), targets re-solved, blocked.
+
+``--builtin``: nik's built-in ``panda`` with its shipped model (spheres fitted to the same meshes, tighter:
+:mod:`nik.collision.builtin`) instead, the targets and the mesh check as above (coal on example-robot-data's meshes,
+the model's pairs), what a user of ``nik.load_robot("panda")`` gets.
 """
 
 from __future__ import annotations
@@ -65,6 +69,7 @@ def main(argv=None) -> None:
     ap.add_argument("--targets", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rounds", type=int, default=5, help="timed rounds per solver, interleaved")
+    ap.add_argument("--builtin", action="store_true", help="the built-in panda and its shipped model")
     args = ap.parse_args(argv)
     from collisions import panda_urdf, scene
 
@@ -75,13 +80,19 @@ def main(argv=None) -> None:
     nik.set_threads(1)
     torch.set_num_threads(1)
     urdf = panda_urdf()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        robot = nik.load_robot(urdf, end_link="panda_hand")
-    model = collision_model(robot)
+    if args.builtin:
+        robot = nik.load_robot("panda")
+        model = collision_model(robot, source="builtin")
+        skip = [tuple(k.split("|")) for k, why in model.left_out.items() if why != "never"]
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            robot = nik.load_robot(urdf, end_link="panda_hand")
+        model = collision_model(robot)
+        srdf = srdf_of(urdf)
+        skip = list(srdf_disabled(srdf)) if srdf is not None else []
     nik.collision.set_collision_model(robot, model)
-    srdf = srdf_of(urdf)
-    mesh = MeshCheck(robot, urdf, skip=list(srdf_disabled(srdf)) if srdf is not None else [])
+    mesh = MeshCheck(robot, urdf, skip=skip)
     world = scene(args.seed)
     g = torch.Generator().manual_seed(args.seed)
     Q = np.ascontiguousarray(robot.sample(4 * args.targets, generator=g, dtype=torch.float64).numpy())
@@ -89,9 +100,8 @@ def main(argv=None) -> None:
     plain = nik.IKSolver(robot, self_collision=False)
     safe = nik.IKSolver(robot, world=world)
     print(f"nik at {Path(nik.__file__).resolve().parent.parent}")
-    print(
-        f"panda (example-robot-data, arm + hand + fingers), {len(T)} targets from configurations the meshes call free"
-    )
+    which = "built-in, shipped spheres" if args.builtin else "example-robot-data, arm + hand + fingers"
+    print(f"panda ({which}), {len(T)} targets from configurations the meshes call free")
     print(f"in a scene of {sum(world.counts())} obstacles (table + 10), seed {args.seed}; model: {model}; one thread")
     plain.solve(T), safe.solve(T)  # compile / load the kernels, and one full call each, before timing
     cpu = {"plain": [], "safe": []}

@@ -73,6 +73,16 @@ def _place(F, spheres, sphere_frame, X):
 
 
 @kernel
+def _place_frame(F, spheres, sphere_frame, k, X):
+    """:func:`_place` for the spheres on frame ``k`` only (a sweep moves one frame; the others stay placed)."""
+    for s in range(spheres.shape[0]):
+        if sphere_frame[s] != k:
+            continue
+        for r in range(3):
+            X[s, r] = F[k, r, 0] * spheres[s, 0] + F[k, r, 1] * spheres[s, 1] + F[k, r, 2] * spheres[s, 2] + F[k, r, 3]
+
+
+@kernel
 def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, row):
     """``row[m] += sign * v . dc/dq_m`` for a point ``(x, y, z)`` riding on frame ``frame``."""
     for m in range(frame):
@@ -222,9 +232,30 @@ def _place_link(F, spheres, sphere_frame, body_start, link, X, placed):
 
 
 @kernel
+def rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules):
+    """``(wf, wi)``: the scratch of :func:`_rows_in` for a chain of ``n`` joints, the model and the world (float64
+    and int64, 1-D), allocated once by a caller that evaluates many configurations (an LM, a batch) rather than on
+    every evaluation (13 small arrays: about 1 us of a 5-10 us evaluation)."""
+    S, L = spheres.shape[0], body_start.shape[0] - 1
+    No = w_spheres.shape[0] + w_boxes.shape[0] + w_capsules.shape[0]
+    return np.empty((n + 1) * 12 + 3 * S + 3 * L + 4 * No + 6), np.empty(5 * No + S + L, dtype=np.int64)
+
+
+@kernel
 def _rows(
     G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
     want_jacobian, cutoff, bounds, stop,
+):  # fmt: skip
+    """:func:`_rows_in` with its scratch allocated here (:func:`rows_work`)."""
+    wf, wi = rows_work(q.shape[0], spheres, body_start, w_spheres, w_boxes, w_capsules)
+    return _rows_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+                    d, J, want_jacobian, cutoff, bounds, stop, wf, wi)  # fmt: skip
+
+
+@kernel
+def _rows_in(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
+    want_jacobian, cutoff, bounds, stop, wf, wi,
 ):  # fmt: skip
     """The rows (module docstring) with the broad phase: ``d[k]`` is exact wherever it is at most ``cutoff``, else
     a lower bound above ``cutoff`` (Jacobian row 0). ``bounds (L, 4)``: :func:`link_bounds`. ``stop``: return at the
@@ -241,11 +272,23 @@ def _rows(
     P = pairs.shape[0]
     L = body_start.shape[0] - 1
     No = w_spheres.shape[0] + w_boxes.shape[0] + w_capsules.shape[0]
-    F = np.empty((n + 1, 3, 4))
-    X = np.empty((S, 3))
-    placed = np.zeros(L, dtype=np.bool_)
+    # the scratch (rows_work), sliced: frames, placed spheres, the links' and the obstacles' bounding spheres
+    a = (n + 1) * 12
+    F = wf[0:a].reshape((n + 1, 3, 4))
+    X = wf[a : a + 3 * S].reshape((S, 3))
+    a += 3 * S
+    Bc = wf[a : a + 3 * L].reshape((L, 3))  # each link's bounding sphere, placed
+    a += 3 * L
+    Ob = wf[a : a + 4 * No].reshape((No, 4))  # each obstacle's bounding sphere: the first test of a link against it
+    a += 4 * No
+    g = wf[a : a + 3]
+    gb = wf[a + 3 : a + 6]
+    kinds, which, all_kinds = wi[0:No], wi[No : 2 * No], wi[2 * No : 3 * No]
+    near_at, all_which = wi[3 * No : 4 * No], wi[4 * No : 5 * No]
+    keep, placed = wi[5 * No : 5 * No + S], wi[5 * No + S : 5 * No + S + L]
+    for link in range(L):
+        placed[link] = 0
     _frames(G, joints, q, F)
-    Bc = np.empty((L, 3))  # each link's bounding sphere, placed
     for link in range(L):
         if bounds[link, 3] >= 0:
             f = sphere_frame[body_start[link]]
@@ -256,17 +299,10 @@ def _rows(
         for r in range(P + L):
             for m in range(n):
                 J[r, m] = 0.0
-    g = np.empty(3)
-    gb = np.zeros(3)
+    for r in range(3):
+        gb[r] = 0.0
     hit = False
     # the world first: a link and an obstacle are the likelier overlap, and the cheaper test
-    kinds = np.empty(No, dtype=np.int64)
-    which = np.empty(No, dtype=np.int64)
-    keep = np.empty(S, dtype=np.int64)
-    all_kinds = np.empty(No, dtype=np.int64)
-    near_at = np.empty(No, dtype=np.int64)
-    all_which = np.empty(No, dtype=np.int64)
-    Ob = np.empty((No, 4))  # each obstacle's bounding sphere: the first, cheapest test of a link against it
     m = 0
     for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
         for o in range(count):
@@ -411,9 +447,21 @@ def residual_bounded(
     bounds,
 ):  # fmt: skip
     """:func:`collision_residual` with the links' bounds ``(L, 4)`` of :func:`link_bounds` given (computed once by
-    a caller that evaluates many configurations of one model: the LM of :mod:`nik.kernels.collision_lm`)."""
-    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr,
-          True, margin, bounds, False)  # fmt: skip
+    a caller that evaluates many configurations of one model)."""
+    wf, wi = rows_work(q.shape[0], spheres, body_start, w_spheres, w_boxes, w_capsules)
+    return residual_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                       self_on, margin, r, Jr, bounds, wf, wi)  # fmt: skip
+
+
+@kernel
+def residual_in(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr,
+    bounds, wf, wi,
+):  # fmt: skip
+    """:func:`residual_bounded` with its scratch ``wf, wi`` given (:func:`rows_work`, once per call of the LM of
+    :mod:`nik.kernels.collision_lm`)."""
+    _rows_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr,
+             True, margin, bounds, False, wf, wi)  # fmt: skip
     smallest = np.inf
     for k in range(r.shape[0]):
         dist = r[k]
@@ -436,9 +484,20 @@ def collides_bounded(
     """Whether some row of ``q: (n,)`` is below ``margin`` (metres), stopping at the first such row, no Jacobian;
     ``d (P + L,)`` scratch, ``bounds (L, 4)``: :func:`link_bounds` (the test of :func:`collides_batch`, for one
     configuration)."""
+    wf, wi = rows_work(q.shape[0], spheres, body_start, w_spheres, w_boxes, w_capsules)
+    return collides_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+                       margin, d, bounds, wf, wi)  # fmt: skip
+
+
+@kernel
+def collides_in(
+    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, d, bounds,
+    wf, wi,
+):  # fmt: skip
+    """:func:`collides_bounded` with its scratch ``wf, wi`` given (:func:`rows_work`)."""
     J = np.empty((0, q.shape[0]))
-    return _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
-                 False, margin, bounds, True)  # fmt: skip
+    return _rows_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+                    d, J, False, margin, bounds, True, wf, wi)  # fmt: skip
 
 
 @kernel
@@ -460,9 +519,10 @@ def collision_rows_batch(
     J = np.empty((0, Q.shape[1]))
     bounds = np.empty((body_start.shape[0] - 1, 4))
     link_bounds(spheres, body_start, bounds)
+    wf, wi = rows_work(Q.shape[1], spheres, body_start, w_spheres, w_boxes, w_capsules)
     for b in range(Q.shape[0]):
-        _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-              D[b], J, False, cutoff, bounds, False)  # fmt: skip
+        _rows_in(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+                 D[b], J, False, cutoff, bounds, False, wf, wi)  # fmt: skip
 
 
 @kernel
@@ -476,26 +536,82 @@ def collides_batch(
     J = np.empty((0, Q.shape[1]))
     bounds = np.empty((body_start.shape[0] - 1, 4))
     link_bounds(spheres, body_start, bounds)
+    wf, wi = rows_work(Q.shape[1], spheres, body_start, w_spheres, w_boxes, w_capsules)
     for b in range(Q.shape[0]):
-        out[b] = _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                       self_on, d, J, False, margin, bounds, True)  # fmt: skip
+        out[b] = _rows_in(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                          self_on, d, J, False, margin, bounds, True, wf, wi)  # fmt: skip
 
 
 @kernel
-def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on, g):
-    """The smallest exact row among those whose links all have ``on[frame]`` (placed in ``X``): pairs with both
-    links on such frames, and such links (not on frame 0) against the world."""
+def _link_bound(F, bounds, sphere_frame, body_start, link, c):
+    """``c (3,)``: link ``link``'s bounding sphere (:func:`link_bounds`) placed by the frames ``F``; returns its
+    radius (-1 for a link without spheres)."""
+    if bounds[link, 3] < 0:
+        return -1.0
+    f = sphere_frame[body_start[link]]
+    for r in range(3):
+        c[r] = F[f, r, 0] * bounds[link, 0] + F[f, r, 1] * bounds[link, 1] + F[f, r, 2] * bounds[link, 2] + F[f, r, 3]
+    return bounds[link, 3]
+
+
+@kernel
+def _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes, w_capsules, g, c, cut,
+                below):  # fmt: skip
+    """The smallest row of link ``link`` against the world: exact where at most ``cut``, else a lower bound above it
+    (an obstacle farther than ``cut`` from the link's bounding sphere is that bound: a signed distance is
+    1-Lipschitz); returned as soon as it is below ``below``."""
+    s0, s1 = body_start[link], body_start[link + 1]
+    rad = _link_bound(F, bounds, sphere_frame, body_start, link, c)
+    best = np.inf
+    for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
+        for o in range(count):
+            lower = _obstacle_one(c[0], c[1], c[2], kind, o, w_spheres, w_boxes, w_capsules, g) - rad
+            if lower > cut:
+                best = min(best, lower)
+                continue
+            for s in range(s0, s1):
+                dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
+                best = min(best, dist - spheres[s, 3])
+                if best < below:
+                    return best
+    return best
+
+
+@kernel
+def _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, cut, below):
+    """The row of links ``a`` and ``b``: exact where at most ``cut``, else a lower bound above it (their bounding
+    spheres' distance); returned as soon as it is below ``below``."""
+    ra = _link_bound(F, bounds, sphere_frame, body_start, a, c)
+    rb = _link_bound(F, bounds, sphere_frame, body_start, b, cb)
+    dx, dy, dz = c[0] - cb[0], c[1] - cb[1], c[2] - cb[2]
+    lower = math.sqrt(dx * dx + dy * dy + dz * dz) - ra - rb
+    if lower > cut:
+        return lower
+    best = np.inf
+    for i in range(body_start[a], body_start[a + 1]):
+        for j in range(body_start[b], body_start[b + 1]):
+            dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+            best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+            if best < below:
+                return best
+    return best
+
+
+@kernel
+def _fixed_rows(X, F, bounds, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on, g,
+                cut):  # fmt: skip
+    """The smallest row among those whose links all have ``on[frame]`` (placed in ``X``, frames ``F``, the links'
+    bounds ``bounds``): pairs with both links on such frames, and such links (not on frame 0) against the world;
+    exact where at most ``cut``, else a lower bound above it."""
     L = body_start.shape[0] - 1
     best = np.inf
+    c, cb = np.empty(3), np.empty(3)
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or not on[sphere_frame[s0]] or sphere_frame[s0] == 0:
             continue
-        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
-            for o in range(count):
-                for s in range(s0, s1):
-                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
-                    best = min(best, dist - spheres[s, 3])
+        best = min(best, _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes,
+                                     w_capsules, g, c, cut, -np.inf))  # fmt: skip
     if self_on:
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
@@ -503,32 +619,28 @@ def _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
                 continue
             if not (on[sphere_frame[body_start[a]]] and on[sphere_frame[body_start[b]]]):
                 continue
-            for i in range(body_start[a], body_start[a + 1]):
-                for j in range(body_start[b], body_start[b + 1]):
-                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
-                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
+            best = min(best, _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, cut, -np.inf))
     return best
 
 
 @kernel
 def _sweep_rows(
-    X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g, below
+    X, F, bounds, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g, below
 ):  # fmt: skip
-    """The smallest exact row of the links on frame ``k`` (placed in ``X``): against the world, and against the
-    links on frames 0, ``k`` and ``n``; returned as soon as one is below ``below`` (then an upper bound of it)."""
+    """The smallest row of the links on frame ``k`` (placed in ``X``, frames ``F``, the links' bounds ``bounds``):
+    against the world, and against the links on frames 0, ``k`` and ``n``; exact where at most ``below``, else a
+    lower bound above it; returned as soon as one is below ``below`` (then an upper bound of it)."""
     L = body_start.shape[0] - 1
     best = np.inf
+    c, cb = np.empty(3), np.empty(3)
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or sphere_frame[s0] != k:
             continue
-        for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
-            for o in range(count):
-                for s in range(s0, s1):
-                    dist = _obstacle_one(X[s, 0], X[s, 1], X[s, 2], kind, o, w_spheres, w_boxes, w_capsules, g)
-                    best = min(best, dist - spheres[s, 3])
-                    if best < below:
-                        return best
+        best = min(best, _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes,
+                                     w_capsules, g, c, below, below))  # fmt: skip
+        if best < below:
+            return best
     if self_on:
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
@@ -537,12 +649,9 @@ def _sweep_rows(
             fa, fb = sphere_frame[body_start[a]], sphere_frame[body_start[b]]
             if not ((fa == k and (fb == 0 or fb == k or fb == n)) or (fb == k and (fa == 0 or fa == k or fa == n))):
                 continue
-            for i in range(body_start[a], body_start[a + 1]):
-                for j in range(body_start[b], body_start[b + 1]):
-                    dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
-                    best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
-                    if best < below:
-                        return best
+            best = min(best, _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, below, below))
+            if best < below:
+                return best
     return best
 
 
@@ -594,6 +703,8 @@ def blocked_poses(
     X = np.zeros((S, 3))
     on = np.zeros(n + 1, dtype=np.bool_)
     g = np.empty(3)
+    lb = np.empty((body_start.shape[0] - 1, 4))  # the links' bounding spheres: rows far above the cut skipped
+    link_bounds(spheres, body_start, lb)
     Tj = np.empty((3, 4))
     Gn = np.empty((3, 4))
     _start(Gn, G[n])
@@ -611,8 +722,8 @@ def blocked_poses(
         for i in range(n + 1):
             on[i] = i == 0 or i == n
         _place(F, spheres, sphere_frame, X)  # only the spheres on frames 0 and n are read
-        if _fixed_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on,
-                       g) < -slack:  # fmt: skip
+        if _fixed_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
+                       on, g, -slack) < -slack:  # fmt: skip
             out[b] = True
             continue
         if samples < 2:
@@ -638,10 +749,10 @@ def blocked_poses(
                     _start(Tj, G[n - 1])
                     _joint(Tj, prismatic, x + joints[j, OFFSET])
                     _rigid_inverse_times(F[n], Tj, F[n - 1])
-                _place(F, spheres, sphere_frame, X)
+                _place_frame(F, spheres, sphere_frame, k, X)  # frames 0 and n stay placed
                 reach = rho * h / 2 + slack  # a row at least -reach here may be free somewhere near
-                worst = _sweep_rows(X, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                                    self_on, k, n, g, -reach)  # fmt: skip
+                worst = _sweep_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                                    w_capsules, self_on, k, n, g, -reach)  # fmt: skip
                 if worst >= -reach:
                     blocked = False
                     break

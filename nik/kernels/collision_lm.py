@@ -45,7 +45,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import _chain
-from nik.kernels.collision import collides_bounded, link_bounds, residual_bounded
+from nik.kernels.collision import collides_in, link_bounds, residual_in, rows_work
 from nik.kernels.lm import (
     _STREAM,
     EPS,
@@ -135,7 +135,7 @@ def _sum_sq(r):
 
 @kernel
 def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame, body_start, pairs, w_spheres,
-                 w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr, lb):  # fmt: skip
+                 w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr, lb, wf, wi):  # fmt: skip
     """How many of the given starts ``starts[:H] (H, n)`` LM runs from, their indices in ``order``: the first (the
     answer that collided: near the caller's ``q_near`` or the path's previous waypoint, it keeps an answer on its
     branch), then the other free ones (every row >= 0, brought inside the limits) nearest the pose first (the pose
@@ -150,8 +150,8 @@ def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame,
     for s in range(1, H):
         _copy(starts[s], q)
         _bounds(joints, q)
-        if not collides_bounded(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                                w_capsules, self_on, 0.0, r, lb):  # fmt: skip
+        if not collides_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                           self_on, 0.0, r, lb, wf, wi):  # fmt: skip
             _chain(G, joints, q, Tc)
             e = _score(Tt, Tc, rw, bnd, mode, ec, d)
             k = m  # insertion sort (stable) after the first: a handful of starts
@@ -166,7 +166,7 @@ def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame,
 @kernel
 def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
              self_on, margin, w2, lb, opts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq,
-             qc):  # fmt: skip
+             qc, wf, wi):  # fmt: skip
     """LM with collision rows of reach ``margin`` from ``qs (n,)`` (moved in place) towards ``Tt`` until done (the
     pose within the tolerances and free), stalled or ``limit`` iterations; returns ``(S, pos, rot, near, done,
     iterations)``: the sum, the pose errors, the smallest row (exact where at most ``margin``)."""
@@ -177,8 +177,8 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
     stall_rel = opts[STALL_REL]
     total = 0
     E, p_e, r_e, reached = _eval(G, joints, qs, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
-    near = residual_bounded(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                            self_on, margin, r, Jr, lb)  # fmt: skip
+    near = residual_in(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                       self_on, margin, r, Jr, lb, wf, wi)  # fmt: skip
     S = E + w2 * _sum_sq(r)
     done = reached and near >= 0.0
     lam = lambda0
@@ -196,8 +196,8 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
             _bounds(joints, qc)
             Ec, p_c, r_c, reached_c = _eval(G, joints, qc, Tt, rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, d)
             if reached_c or Ec < S:  # else rejected by the pose rows alone (Sc >= Ec >= S): no collision rows
-                near_c = residual_bounded(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
-                                          w_boxes, w_capsules, self_on, margin, rc, Jrc, lb)  # fmt: skip
+                near_c = residual_in(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                                     w_capsules, self_on, margin, rc, Jrc, lb, wf, wi)  # fmt: skip
                 Sc = Ec + w2 * _sum_sq(rc)
                 donec = reached_c and near_c >= 0.0
         if good and (Sc < S or donec):
@@ -251,6 +251,7 @@ def collision_lm(
     order, score = np.empty(starts.shape[1], dtype=np.int64), np.empty(starts.shape[1])
     lb = np.empty((body_start.shape[0] - 1, 4))  # the links' bounds, once per call (the broad phase)
     link_bounds(spheres, body_start, lb)
+    wf, wi = rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules)  # the rows' scratch, once per call
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
@@ -259,8 +260,8 @@ def collision_lm(
         best_pos, best_rot = math.inf, math.inf
         stale = 0
         H = _rank_starts(G, joints, Tt[b], starts[b], n_starts[b], rw, bnd, mode, spheres, sphere_frame, body_start,
-                         pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr,
-                         lb)  # fmt: skip
+                         pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr, lb, wf,
+                         wi)  # fmt: skip
         for s in range(H + restarts[b]):
             if s < H:
                 _copy(starts[b, order[s]], qs)
@@ -271,9 +272,9 @@ def collision_lm(
                     _draw(joints, rng, qc)
                     _chain(G, joints, qc, Tc)
                     Ed = _score(Tt[b], Tc, rw, bnd, mode, ec, d)
-                    if Ed < best_draw and not collides_bounded(G, joints, qc, spheres, sphere_frame, body_start,
-                                                               pairs, w_spheres, w_boxes, w_capsules, self_on, 0.0,
-                                                               r, lb):  # fmt: skip
+                    if Ed < best_draw and not collides_in(G, joints, qc, spheres, sphere_frame, body_start, pairs,
+                                                          w_spheres, w_boxes, w_capsules, self_on, 0.0, r, lb, wf,
+                                                          wi):  # fmt: skip
                         best_draw = Ed
                         _copy(qc, qs)
                 if best_draw == math.inf:
@@ -281,7 +282,7 @@ def collision_lm(
             S, p_e, r_e, near, done, its = _descend(
                 G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
                 w_capsules, self_on, margin, w2, lb, opts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
-                Jrc, A, g, dq, qc,
+                Jrc, A, g, dq, qc, wf, wi,
             )  # fmt: skip
             total += its
             if not done and margin > 0.0 and near >= 0.0 and S < best_S:
@@ -291,7 +292,7 @@ def collision_lm(
                 S0, p0, r0, near0, done0, its = _descend(
                     G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
                     w_capsules, self_on, 0.0, w2, lb, opts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
-                    Jrc, A, g, dq, qc,
+                    Jrc, A, g, dq, qc, wf, wi,
                 )  # fmt: skip
                 total += its
                 if done0:
@@ -322,7 +323,7 @@ def collision_lm(
             _bounds(joints, best_q)
             _, best_pos, best_rot, _ = _eval(G, joints, best_q, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
             best_free = (
-                residual_bounded(
+                residual_in(
                     G,
                     joints,
                     best_q,
@@ -338,6 +339,8 @@ def collision_lm(
                     r,
                     Jr,
                     lb,
+                    wf,
+                    wi,
                 )
                 >= 0.0  # fmt: skip
             )
