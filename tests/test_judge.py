@@ -98,6 +98,25 @@ def test_the_shipped_networks_earn_their_place_given_by_object(name):
         assert solver.plan().source == "network" and solver.plan().net is net
 
 
+@pytest.mark.parametrize("name", ["panda", "ur5", "xarm7", "kuka_kr"])
+def test_the_shipped_single_pose_networks_earn_their_place_and_serve_single_poses_on_the_cpu(name):
+    from nik.nets.pair import load_pair
+    from nik.nets.pretrained import PRETRAINED_DIR
+
+    robot = nik.load_robot(name)
+    small = load_pair(PRETRAINED_DIR / f"{name}_one.safetensors", robot=robot.arm)
+    v = judge.verdict(small, robot.arm)  # trained for the bare arm: judged in its frame
+    assert v.earns and v.wins >= 0.9 and v.net_median < v.uniform_median
+    solver = nik.IKSolver(robot, analytic=False)  # ur5, kuka_kr: the network asked for, the closed form aside
+    plan = solver.plan(backend="compiled")
+    assert plan.source == "network" and plan.net is solver.single_pose_net
+    assert plan.net_in_arm_frame == (robot.arm is not robot)
+    assert solver.plan(backend="torch").net is solver.net  # the main network elsewhere
+    T = _targets(robot, 8, seed=3)
+    res = solver.solve(T[:1])
+    assert res.source == "network" and bool(res.success.all())
+
+
 def test_the_raw_guess_and_no_fallback_keep_a_useless_network(tmp_path):
     robot = nik.load_robot("panda")
     path = str(save_checkpoint(_useless(robot, "scrambled"), tmp_path / "s.ckpt"))

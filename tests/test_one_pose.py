@@ -65,6 +65,19 @@ def test_one_pose_answers_as_the_general_path_for_every_kind_of_pose(name, check
     assert sources == {"analytic" if name == "ur5" else "network" if checkpoint else "multistart"}
 
 
+def test_one_pose_answers_as_the_general_path_with_a_branch_network_in_the_arms_frame():
+    robot = nik.load_robot("ur5")  # a flange (tool0): the single-pose branch network guesses in the bare arm's frame
+    solver = nik.IKSolver(robot, analytic=False)
+    assert solver.single_pose_net is not None and solver.plan(backend="compiled").net_in_arm_frame
+    T = _poses(robot, 4, seed=8)
+    for i in range(T.shape[0]):
+        for pose in (T[i], T[i].numpy().copy()):
+            fast = solver.solve(pose, seed=1)
+            assert isinstance(fast, TensorResult) == isinstance(pose, torch.Tensor)
+            _assert_same(fast, _general(solver, pose, seed=1))
+            assert fast.source == "network" and bool(fast.success.all())
+
+
 def test_tolerances_and_seed_reach_the_one_pose_path():
     robot = nik.load_robot("panda")
     solver = nik.IKSolver(robot, checkpoint=None)  # multistart: the seed chooses the answer
