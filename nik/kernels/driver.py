@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import WRAPS, _chain
+from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain
 from nik.kernels.closed import guess as closed_guess
 from nik.kernels.lm import (
     _STREAM,
@@ -399,7 +399,8 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     bounded one of ``half[b]``, whose free rows vanish and so leave more room) is held (to first order) while the rest
     of the motion goes to ``q_rest``. That step is the one of ``|e - J dq|^2 + damping |dq - z|^2`` (the push-through
     identity), solved by the one LM step of :func:`nik.kernels.lm_step._damped_step` with the prior ``q + z`` (weight
-    ``damping``, no Marquardt damping; a joint on a limit that the step pushes out is held). The step is kept only
+    ``damping``, no Marquardt damping, no joint held at a limit: a joint held would leave a 7-joint arm no null space
+    to move in; the clamp into the limits follows the step, as before the step was shared). The step is kept only
     where FK of the result is still within tolerance (the tolerances of ``opts``, or inside every bound) and nearer
     ``q_rest``; else ``s`` is halved (from 1; doubled after a kept one; stop below 1/64: the rule of
     :func:`nik.kernels.lm_step._judge` on ``1 / s``). ``pos, rot, d`` are updated for the kept answers (as
@@ -414,6 +415,9 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     e, ec, dd = np.empty(6), np.empty(6), np.empty(6)
     A, g = np.empty((n, n)), np.empty(n)
     qp, qc, dq = np.empty(n), np.empty(n), np.empty(n)
+    free = joints.copy()  # no joint held at a limit: the step slides along it and the clamp follows (as before)
+    for i in range(n):
+        free[i, LOWER], free[i, UPPER] = -math.inf, math.inf
     for b in range(B):
         mode = modes[b]
         bnd = half[b]
@@ -436,7 +440,7 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
             s = 1.0 / lam
             for i in range(n):
                 qp[i] = q[b, i] + s * weight * (q_rest[b, i] - q[b, i])
-            good = _damped_step(J, e, None, None, 0.0, qp, damping, q[b], joints, 0.0, 0.0, math.inf, A, g, dq)
+            good = _damped_step(J, e, None, None, 0.0, qp, damping, q[b], free, 0.0, 0.0, math.inf, A, g, dq)
             big = 0.0
             dc = math.inf
             if good:
