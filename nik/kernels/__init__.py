@@ -7,6 +7,8 @@ them; the torch code stays the reference they are tested against.
 
 - :mod:`nik.kernels.chain`: the model arrays of a robot (:func:`chain_model`), FK of one
   configuration or a small batch, FK + geometric Jacobian;
+- :mod:`nik.kernels.lm_step`: the one LM step (damped normal equations of residual rows, extra weighted rows and a
+  prior; the limit-hold rule; the step cap) and its accept/damping rule, that every compiled solver below calls;
 - :mod:`nik.kernels.lm`: Levenberg-Marquardt with joint limits and seeded uniform restarts, pose errors;
 - :mod:`nik.kernels.closed`: the closed forms of 6R arms (spherical wrist, three parallel axes) and the
   choice among their solutions;

@@ -142,19 +142,20 @@ def _rebuild_env_without_import(modname, consts, env_name):
     return env
 
 
-def kernel(fn=None, *, fastmath=False):
+def kernel(fn=None, *, fastmath=False, inline="never"):
     """``numba.njit`` in nopython mode, releasing the GIL (``nogil``), cached on disk when a folder allows it
     (see :mod:`.cache`) unless ``fn`` is a building block (its name starts with ``_``: see the module docstring).
 
     ``error_model="numpy"``: a division by zero gives inf/nan as numpy does instead of raising
     (no exception checks in the inner loops). ``fastmath``: numba's flags (e.g. ``{"reassoc"}`` lets
-    long sums be vectorised, changing their rounding)."""
+    long sums be vectorised, changing their rounding). ``inline="always"``: numba inlines the building block into
+    each caller before typing, so that a caller's constant arguments (a loop count) are known when it compiles."""
     if fn is None:
-        return lambda f: kernel(f, fastmath=fastmath)
+        return lambda f: kernel(f, fastmath=fastmath, inline=inline)
     cache = CACHE.cache and not fn.__name__.startswith("_")
     with _cache_folder():
         return _cached_loads_without_refresh(
-            numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath)(fn)
+            numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath, inline=inline)(fn)
         )
 
 

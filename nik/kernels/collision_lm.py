@@ -7,8 +7,9 @@ rows ``max(0, margin - d)``: one per checked link pair and one per link against 
 
     minimise |e(q)|^2 + weight^2 |r(q)|^2
 
-The step is the damped Gauss-Newton step of :mod:`nik.kernels.lm` (Marquardt damping, the active set at the
-limits, steps capped at ``max_step`` and brought inside the limits) on the stacked rows. A candidate is kept when
+The step is the damped Gauss-Newton step of :mod:`nik.kernels.lm_step` (Marquardt damping, the active set at the
+limits, steps capped at ``max_step`` and brought inside the limits) on the pose rows with the collision rows as its
+extra rows; the damping rule is its :func:`~nik.kernels.lm_step._judge`. A candidate is kept when
 it lowers the sum, or when it is done: within the pose tolerances (or inside the bounds) **and** free (every
 row's distance ``d >= 0``, the verdict of :func:`nik.kernels.collision.collides_batch` with margin 0). Stopping
 at the first done candidate matters: the margin rows still pull when ``0 <= d < margin``, and where the goal
@@ -62,67 +63,14 @@ from nik.kernels.lm import (
     TOL_POS,
     TOL_ROT,
     _bounds,
-    _cholesky_solve,
     _copy,
     _draw,
     _eval,
     _score,
-    hold,
-    pushes_out,
 )
+from nik.kernels.lm_step import _damped_step, _judge, _stalled
 
 __all__ = ["collision_lm"]
-
-
-@kernel
-def _stacked_step(J, e, Jr, r, w2, q, joints, lam, eps, max_step, A, g, dq):
-    """The damped, limit-aware step ``dq (n,)`` for the pose rows ``J (6, n), e (6,)`` (``e`` = target - reached,
-    as in :mod:`nik.kernels.lm`) and the collision rows ``Jr (R, n), r (R,)`` (``r`` = residual) weighted by
-    ``w2``; False if it failed."""
-    n = q.shape[0]
-    active = np.empty(r.shape[0], dtype=np.int64)  # the rows that push (most are 0), in order
-    R = 0
-    for k in range(r.shape[0]):
-        if r[k] != 0.0:
-            active[R] = k
-            R += 1
-    for i in range(n):
-        dq[i] = 0.0
-    for _ in range(2):  # the active set at the limits of nik.kernels.lm._step: hold, solve, once more if pushed out
-        for i in range(n):
-            v = 0.0
-            for k in range(6):
-                v += J[k, i] * e[k]
-            for t in range(R):
-                k = active[t]
-                v -= w2 * Jr[k, i] * r[k]
-            g[i] = v
-            for m in range(i + 1):
-                a = 0.0
-                for k in range(6):
-                    a += J[k, i] * J[k, m]
-                for t in range(R):
-                    k = active[t]
-                    a += w2 * Jr[k, i] * Jr[k, m]
-                A[i, m] = a
-                A[m, i] = a
-        hold(q, joints, g, dq, A)
-        for i in range(n):
-            A[i, i] += lam * (A[i, i] + eps) + eps
-        if not _cholesky_solve(A, g, dq):
-            return False
-        if not pushes_out(q, joints, dq):
-            break
-    big = 0.0
-    for i in range(n):
-        if not math.isfinite(dq[i]):
-            return False
-        big = max(big, abs(dq[i]))
-    if big > max_step:
-        f = max_step / big
-        for i in range(n):
-            dq[i] *= f
-    return True
 
 
 @kernel
@@ -186,7 +134,7 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
     for _ in range(limit):
         if done:
             break
-        good = _stacked_step(J, e, Jr, r, w2, qs, joints, lam, eps, max_step, A, g, dq)
+        good = _damped_step(J, e, Jr, r, w2, None, 0.0, qs, joints, lam, eps, max_step, A, g, dq)
         total += 1
         Sc, near_c = math.inf, math.inf
         donec = False
@@ -200,18 +148,15 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
                                      w_capsules, self_on, margin, rc, Jrc, lb, wf, wi)  # fmt: skip
                 Sc = Ec + w2 * _sum_sq(rc)
                 donec = reached_c and near_c >= 0.0
-        if good and (Sc < S or donec):
-            stall = 0 if S - Sc >= stall_rel * S else stall + 1
+        kept, lam = _judge(good, S, Sc, donec, lam, lam_down, lam_up, lam_min, lam_max)
+        stall = _stalled(kept, S, Sc, stall, stall_rel)
+        if kept:
             _copy(qc, qs)
             _copy(Jc.ravel(), J.ravel())
             _copy(ec, e)
             _copy(rc, r)
             _copy(Jrc.ravel(), Jr.ravel())
             S, p_e, r_e, near, done = Sc, p_c, r_c, near_c, donec
-            lam = max(lam * lam_down, lam_min)
-        else:
-            stall += 1
-            lam = min(lam * lam_up, lam_max)
         if stall >= stall_limit:
             break
     return S, p_e, r_e, near, done, total

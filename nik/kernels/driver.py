@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import WRAPS, _chain
+from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain
 from nik.kernels.closed import guess as closed_guess
 from nik.kernels.lm import (
     _STREAM,
@@ -31,18 +31,16 @@ from nik.kernels.lm import (
     TOL_ROT,
     _bounded_check,
     _bounds,
-    _cholesky_solve,
     _copy,
     _eval,
     _evaluate,
     _lm_one_bounded,
     _tool_error,
     _work_size,
-    hold,
     lm_solve,
-    pushes_out,
     turns_toward,
 )
+from nik.kernels.lm_step import _damped_step, _judge
 from nik.kernels.poses import reach_flags
 from nik.kernels.seeded import lm_starts, merge, ranked_hypotheses
 from nik.tolerances import NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS
@@ -59,9 +57,10 @@ FALLBACK_NONE, FALLBACK_ANALYTIC, FALLBACK_MULTISTART = 0, 1, 2
 def near_prior(G, joints, T, q_near, rw, max_step, q):
     """``q: (B, n)`` out: from ``q_near: (B, n)``, Gauss-Newton steps on ``|e|^2 + w^2 |q - q_near|^2`` (``e``: the
     pose error of ``T: (B, 4, 4)``, rotation rows times ``rw``) with ``w`` over :data:`NEAR_PRIOR`, each
-    :data:`NEAR_PRIOR_STEPS` times: ``(J^T J + w^2 I) dq = J^T e - w^2 (q - q_near)``, the joints on a limit that it
-    pushes out held (:func:`nik.kernels.lm.hold`), scaled to ``max_step``, clamped into the limits (``joints``; pass
-    them without wrapping). Not exact (``w`` ends above 0): a start for LM that stays on the side of ``q_near``."""
+    :data:`NEAR_PRIOR_STEPS` times: ``(J^T J + w^2 I) dq = J^T e - w^2 (q - q_near)`` (the one LM step,
+    :func:`nik.kernels.lm_step._damped_step`, with that prior and no Marquardt damping), the joints on a limit that it
+    pushes out held (:func:`nik.kernels.lm_step.hold`), scaled to ``max_step``, clamped into the limits (``joints``;
+    pass them without wrapping). Not exact (``w`` ends above 0): a start for LM that stays on the side of ``q_near``."""
     B, n = q.shape
     Tc, J, e = np.empty((3, 4)), np.empty((6, n)), np.empty(6)
     A, g, dq = np.empty((n, n)), np.empty(n), np.empty(n)
@@ -70,33 +69,11 @@ def near_prior(G, joints, T, q_near, rw, max_step, q):
         for w in NEAR_PRIOR:
             for _ in range(NEAR_PRIOR_STEPS):
                 _evaluate(G, joints, q[b], T[b], rw, Tc, J, e)
-                for i in range(n):
-                    dq[i] = 0.0
-                for _ in range(2):
-                    for i in range(n):
-                        v = -w * w * (q[b, i] - q_near[b, i])
-                        for r in range(6):
-                            v += J[r, i] * e[r]
-                        g[i] = v
-                        for k in range(i + 1):
-                            a = 0.0
-                            for r in range(6):
-                                a += J[r, i] * J[r, k]
-                            A[i, k] = a
-                            A[k, i] = a
-                        A[i, i] += w * w + 1e-9
-                    hold(q[b], joints, g, dq, A)
-                    good = _cholesky_solve(A, g, dq)
-                    if not good or not pushes_out(q[b], joints, dq):
-                        break
-                big = 0.0
-                for i in range(n):
-                    big = max(big, abs(dq[i]))
-                if not good or not math.isfinite(big):
+                if not _damped_step(J, e, None, None, 0.0, q_near[b], w * w, q[b], joints, 0.0, 1e-9, max_step, A, g,
+                                    dq):  # fmt: skip
                     break
-                f = min(1.0, max_step / big) if big > 0.0 else 1.0
                 for i in range(n):
-                    q[b, i] += f * dq[i]
+                    q[b, i] += dq[i]
                 _bounds(joints, q[b])
 
 
@@ -420,9 +397,14 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     Each iteration takes the step ``dq = z + J^T (J J^T + damping I)^-1 (e - J z)`` with ``z = s * weight * (q_rest -
     q)``: the task residual ``e`` (and its Jacobian ``J``: the classic error where ``modes[b] == CLASSIC``, else the
     bounded one of ``half[b]``, whose free rows vanish and so leave more room) is held (to first order) while the rest
-    of the motion goes to ``q_rest``. The step is kept only where FK of the result is still within tolerance (the
-    tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved (from 1; doubled
-    after a kept one; stop below 1/64). ``pos, rot, d`` are updated for the kept answers (as :func:`solve_bounded`'s).
+    of the motion goes to ``q_rest``. That step is the one of ``|e - J dq|^2 + damping |dq - z|^2`` (the push-through
+    identity), solved by the one LM step of :func:`nik.kernels.lm_step._damped_step` with the prior ``q + z`` (weight
+    ``damping``, no Marquardt damping, no joint held at a limit: a joint held would leave a 7-joint arm no null space
+    to move in; the clamp into the limits follows the step, as before the step was shared). The step is kept only
+    where FK of the result is still within tolerance (the tolerances of ``opts``, or inside every bound) and nearer
+    ``q_rest``; else ``s`` is halved (from 1; doubled after a kept one; stop below 1/64: the rule of
+    :func:`nik.kernels.lm_step._judge` on ``1 / s``). ``pos, rot, d`` are updated for the kept answers (as
+    :func:`solve_bounded`'s).
     A target whose task has as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space
     and is left as it is.
     """
@@ -430,9 +412,12 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     rw, tol_pos, tol_rot, max_step = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT], opts[MAX_STEP]
     Tc = np.empty((3, 4))
     J, Jc = np.empty((6, n)), np.empty((6, n))
-    e, ec, dd, y, rhs = np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6)
-    A = np.empty((6, 6))
-    z, qc, dq = np.empty(n), np.empty(n), np.empty(n)
+    e, ec, dd = np.empty(6), np.empty(6), np.empty(6)
+    A, g = np.empty((n, n)), np.empty(n)
+    qp, qc, dq = np.empty(n), np.empty(n), np.empty(n)
+    free = joints.copy()  # no joint held at a limit: the step slides along it and the clamp follows (as before)
+    for i in range(n):
+        free[i, LOWER], free[i, UPPER] = -math.inf, math.inf
     for b in range(B):
         mode = modes[b]
         bnd = half[b]
@@ -450,32 +435,18 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
         dist = 0.0
         for i in range(n):
             dist += (q[b, i] - q_rest[b, i]) ** 2
-        s = 1.0
+        lam = 1.0  # 1 / s
         for _ in range(iters):
+            s = 1.0 / lam
             for i in range(n):
-                z[i] = s * weight * (q_rest[b, i] - q[b, i])
-            for a in range(6):
-                v = e[a]
-                for i in range(n):
-                    v -= J[a, i] * z[i]
-                rhs[a] = v
-                for c in range(a + 1):
-                    w = 0.0
-                    for i in range(n):
-                        w += J[a, i] * J[c, i]
-                    A[a, c] = w
-                    A[c, a] = w
-                A[a, a] += damping
-            good = _cholesky_solve(A, rhs, y)
+                qp[i] = q[b, i] + s * weight * (q_rest[b, i] - q[b, i])
+            good = _damped_step(J, e, None, None, 0.0, qp, damping, q[b], free, 0.0, 0.0, math.inf, A, g, dq)
             big = 0.0
+            dc = math.inf
             if good:
                 for i in range(n):
-                    v = z[i]
-                    for a in range(6):
-                        v += J[a, i] * y[a]
-                    dq[i] = v
-                    big = max(big, abs(v))
-                    qc[i] = q[b, i] + v
+                    big = max(big, abs(dq[i]))
+                    qc[i] = q[b, i] + dq[i]
                 good = big <= max_step
             if good:
                 _bounds(joints, qc)
@@ -483,19 +454,17 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
                 dc = 0.0
                 for i in range(n):
                     dc += (qc[i] - q_rest[b, i]) ** 2
-                good = donec and dc < dist
-            if good:
+                good = donec
+            kept, lam = _judge(good, dist, dc, False, lam, 0.5, 2.0, 1.0, math.inf)
+            if kept:
                 _copy(qc, q[b])
                 _copy(Jc.ravel(), J.ravel())
                 _copy(ec, e)
                 dist, p, r = dc, pc, rc
-                s = min(1.0, 2.0 * s)
                 if big < 1e-9:
                     break
-            else:
-                s *= 0.5
-                if s < 1.0 / 64.0:
-                    break
+            elif lam > 64.0:
+                break
         pos[b], rot[b] = p, r
         if mode != CLASSIC:
             _chain(G, joints, q[b], Tc)

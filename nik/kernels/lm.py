@@ -13,7 +13,8 @@ with the rotation vector's angle taken as ``atan2(|sin|, cos)``. Step::
 
     dq = (J^T J + lambda (diag(J^T J) + eps) + eps I)^-1 J^T e
 
-by a Cholesky factorisation written out (a failed factorisation is a rejected step), scaled so that
+(the one step of :mod:`nik.kernels.lm_step`, with its accept and damping rule) by a Cholesky factorisation written
+out (a failed factorisation is a rejected step), scaled so that
 no joint moves more than ``max_step``, then brought inside the limits (a wrapping joint moves by whole
 turns, the others are clamped). A joint held at a limit that the descent direction pushes further out
 is left out of the step (active set), and so is one that the step solved without it would push out (the step is
@@ -53,6 +54,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain, _chain_jacobian
+from nik.kernels.lm_step import _damped_step, _judge, _stalled
 
 __all__ = [
     "bounded_errors",
@@ -397,97 +399,10 @@ def _bounded_evaluate(G, joints, q, Tt, rw, bnd, mode, T, J, e, d):
 
 
 @kernel
-def _cholesky_solve(A, b, x):
-    """Solve ``A x = b`` for a symmetric positive definite ``A (n, n)`` (overwritten by its Cholesky factor,
-    lower triangle). Returns False when a pivot is not positive or not finite."""
-    n = b.shape[0]
-    for j in range(n):
-        d = A[j, j]
-        for k in range(j):
-            d -= A[j, k] * A[j, k]
-        if not d > 0.0 or not math.isfinite(d):
-            return False
-        d = math.sqrt(d)
-        A[j, j] = d
-        for i in range(j + 1, n):
-            v = A[i, j]
-            for k in range(j):
-                v -= A[i, k] * A[j, k]
-            A[i, j] = v / d
-    for i in range(n):  # L y = b
-        v = b[i]
-        for k in range(i):
-            v -= A[i, k] * x[k]
-        x[i] = v / A[i, i]
-    for i in range(n - 1, -1, -1):  # L^T x = y
-        v = x[i]
-        for k in range(i + 1, n):
-            v -= A[k, i] * x[k]
-        x[i] = v / A[i, i]
-    return True
-
-
-@kernel
-def hold(q, joints, g, dq, A):
-    """The active set at the limits, in place on the normal equations ``A (n, n) dq = g (n,)``: a joint on a limit
-    that the descent direction ``g`` or the previous solution ``dq`` (zeros on a first pass) pushes further out is
-    held (its row and column left out, ``g_i = 0``)."""
-    n = q.shape[0]
-    for i in range(n):
-        lo, hi = q[i] <= joints[i, LOWER], q[i] >= joints[i, UPPER]
-        if (lo and (g[i] < 0.0 or dq[i] < 0.0)) or (hi and (g[i] > 0.0 or dq[i] > 0.0)):
-            for k in range(n):
-                A[i, k] = 0.0
-                A[k, i] = 0.0
-            A[i, i] = 1.0
-            g[i] = 0.0
-
-
-@kernel
-def pushes_out(q, joints, dq):
-    """Whether the step ``dq (n,)`` moves a joint that sits on a limit further out (it would be clamped, and the
-    others moved as if it were not: the step is solved again with that joint held, :func:`hold`)."""
-    for i in range(q.shape[0]):
-        if (q[i] <= joints[i, LOWER] and dq[i] < 0.0) or (q[i] >= joints[i, UPPER] and dq[i] > 0.0):
-            return True
-    return False
-
-
-@kernel
 def _step(J, e, q, joints, lam, eps, max_step, A, g, dq):
-    """The damped, limit-aware step ``dq (n,)`` from ``J (6, n)`` and ``e (6,)``; False if it failed."""
-    n = q.shape[0]
-    for i in range(n):
-        dq[i] = 0.0
-    for _ in range(2):
-        for i in range(n):
-            v = 0.0
-            for r in range(6):
-                v += J[r, i] * e[r]
-            g[i] = v
-            for k in range(i + 1):
-                a = 0.0
-                for r in range(6):
-                    a += J[r, i] * J[r, k]
-                A[i, k] = a
-                A[k, i] = a
-        hold(q, joints, g, dq, A)
-        for i in range(n):
-            A[i, i] += lam * (A[i, i] + eps) + eps
-        if not _cholesky_solve(A, g, dq):
-            return False
-        if not pushes_out(q, joints, dq):
-            break
-    big = 0.0
-    for i in range(n):
-        if not math.isfinite(dq[i]):
-            return False
-        big = max(big, abs(dq[i]))
-    if big > max_step:
-        f = max_step / big
-        for i in range(n):
-            dq[i] *= f
-    return True
+    """The damped, limit-aware step ``dq (n,)`` from ``J (6, n)`` and ``e (6,)``; False if it failed
+    (:func:`nik.kernels.lm_step._damped_step` with no extra rows and no prior)."""
+    return _damped_step(J, e, None, None, 0.0, None, 0.0, q, joints, lam, eps, max_step, A, g, dq)
 
 
 @kernel
@@ -612,16 +527,13 @@ def _lm_one_bounded(G, joints, Tt, q0, bnd, mode, opts, iopts, restarts, rng, q,
                     qc[i] = q[i] + dq[i]
                 _bounds(joints, qc)
                 Ec, posc, rotc, donec = _eval(G, joints, qc, Tt, rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, d)
-            if good and (Ec < E or (donec and mode != CLASSIC)):
-                stall = 0 if E - Ec >= stall_rel * E else stall + 1
+            kept, lam = _judge(good, E, Ec, donec and mode != CLASSIC, lam, lam_down, lam_up, lam_min, lam_max)
+            stall = _stalled(kept, E, Ec, stall, stall_rel)
+            if kept:
                 _copy(qc, q)
                 _copy(Jc.ravel(), J.ravel())
                 _copy(ec, e)
                 E, pos, rot, done = Ec, posc, rotc, donec
-                lam = max(lam * lam_down, lam_min)
-            else:
-                stall += 1
-                lam = min(lam * lam_up, lam_max)
             if stall >= stall_limit:
                 break
         if done:

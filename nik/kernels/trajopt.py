@@ -25,9 +25,11 @@ The acceleration rows couple waypoints ``i - 1, i, i + 1``, so the normal matrix
 kept in lower band storage, ``H[r, k] = A[r, r - k]`` (``H: (M, b + 1)``), factorised by a banded Cholesky and
 solved in ``O(M b^2) = O(N n^3)``: the cost is linear in the waypoints.
 
-The step is LM's: ``(A + lambda (diag(A) + eps)) dq = -J^T r``, scaled so that no joint moves more than
-``max_step_lm``, then clamped into the limits (the limits always hold: a projected step); kept when the total
-cost ``|r|^2`` falls (lambda shrinks by 0.3), else lambda grows by 5 and the step is refactorised. It stops after
+The step is LM's (:mod:`nik.kernels.lm_step`: its damped diagonal, step cap and damping rule; the banded
+factorisation here is the path's linear solver, the one band solver of nik): ``(A + lambda (diag(A) + eps)) dq =
+-J^T r``, scaled so that no joint moves more than ``max_step_lm``, then clamped into the limits (the limits always
+hold: a projected step); kept when the total cost ``|r|^2`` falls (lambda shrinks by 0.3), else lambda grows by 5
+and the step is refactorised. It stops after
 ``iters`` factorisations, when a kept step lowers the cost by less than ``stall_rel`` of it, or as soon as the path
 is feasible (every waypoint within ``tol_pos`` and ``tol_rot``, every step at most ``path_step``; ``tol_pos <= 0``:
 never; with collision rows, also every sample at least ``col_margin / 2`` from a collision): the polish asks for a
@@ -46,6 +48,7 @@ from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, _chain, _chain_jacobian
 from nik.kernels.collision import collision_residual
 from nik.kernels.lm import _residual
+from nik.kernels.lm_step import _cap, _damped, _judge
 
 __all__ = [
     "band_cholesky",
@@ -62,6 +65,9 @@ ROT_WEIGHT, W_VEL, W_ACC, W_STEP, STEP_CAP, W_LIM, MARGIN, LAMBDA0, MAX_STEP_LM,
 TOL_POS, TOL_ROT, PATH_STEP, W_COL, COL_MARGIN, COL_SUB = 11, 12, 13, 14, 15, 16
 #: length of ``opts``
 OPTS = 17
+#: the damping rule of :func:`trajopt` (:func:`nik.kernels.lm_step._judge`): lambda times ``LAM_DOWN`` after a kept
+#: step (not below ``LAM_MIN``), times ``LAM_UP`` after a rejected one; it stops once lambda exceeds ``LAM_STOP``
+LAM_DOWN, LAM_UP, LAM_MIN, LAM_STOP = 0.3, 5.0, 1e-12, 1e8
 
 
 @kernel
@@ -389,31 +395,28 @@ def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, col, pos, 
         for f in range(M):
             for k in range(b + 1):
                 A[f, k] = H[f, k]
-            A[f, 0] += lam * (H[f, 0] + opts[EPS])
+            A[f, 0] = _damped(H[f, 0], lam, opts[EPS], 0.0)
         if not band_cholesky(A, b):
-            lam *= 5.0
+            _, lam = _judge(False, cost, cost, False, lam, LAM_DOWN, LAM_UP, LAM_MIN, math.inf)
             continue
         band_solve(A, b, g, dq)
-        big = 0.0
-        for f in range(M):
-            big = max(big, abs(dq[f]))
-        scale = min(1.0, opts[MAX_STEP_LM] / big) if big > 0.0 else 1.0
-        for i in range(N):
-            for j in range(n):
-                x = Q[i, j] + scale * dq[i * n + j]
-                X[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
-        new = _terms(G, joints, T, X, qs, has_start, qe, has_end, opts, False, H, g, none, pt, rt, col, inf2)
-        if new < cost:
+        good = _cap(dq, opts[MAX_STEP_LM])
+        new = math.inf
+        if good:
+            for i in range(N):
+                for j in range(n):
+                    x = Q[i, j] + dq[i * n + j]
+                    X[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
+            new = _terms(G, joints, T, X, qs, has_start, qe, has_end, opts, False, H, g, none, pt, rt, col, inf2)
+        kept, lam = _judge(good, cost, new, False, lam, LAM_DOWN, LAM_UP, LAM_MIN, math.inf)
+        if kept:
             Q[:] = X
             drop = cost - new
             cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot, col, info)
-            lam = max(lam * 0.3, 1e-12)
             if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot, info):
                 break
-        else:
-            lam *= 5.0
-            if lam > 1e8:
-                break
+        elif lam > LAM_STOP:
+            break
     return it, cost
 
 

@@ -302,7 +302,7 @@ def lm_run(
             )
         A = (J[..., :, :, None] * J[..., :, None, :]).sum(-3)  # J^T J by broadcasting: faster than bmm here
         g = (J * e[..., :, None]).sum(-2).unsqueeze(-1)
-        # active set (nik.kernels.lm.hold): a joint on a limit that the descent direction pushes further out is
+        # active set (nik.kernels.lm_step.hold): a joint on a limit that the descent direction pushes further out is
         # left out, and so is one that the step solved without it pushes out (the step is solved once more)
         dq, info = _held_step(A, g, q, lo, hi, torch.zeros_like(q), lam, cfg.eps, eye_eps)
         out = ((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))
@@ -347,7 +347,8 @@ def lm_run(
 
 def _held_step(A, g, q, lo, hi, prev, lam, eps, eye_eps):
     """``(dq (..., n), info)``: the damped step of ``A (..., n, n) dq = g (..., n, 1)`` with the joints on a limit
-    that ``g`` or ``prev`` (the step before, zeros at first) pushes further out held (:func:`nik.kernels.lm.hold`)."""
+    that ``g`` or ``prev`` (the step before, zeros at first) pushes further out held
+    (:func:`nik.kernels.lm_step.hold`)."""
     gs = g.squeeze(-1)
     held = ((q <= lo) & ((gs < 0) | (prev < 0))) | ((q >= hi) & ((gs > 0) | (prev > 0)))
     if bool(held.any()):
