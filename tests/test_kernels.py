@@ -325,6 +325,19 @@ def test_cache_folder_is_numbas_setting_then_the_package_then_the_user_folder(tm
     assert nothing.mode == "none" and not nothing.cache
 
 
+def test_every_cached_kernel_is_stamped_with_every_source_file_of_the_kernels_room():
+    # numba stamps a kernel's cache with its own file only; a building block changed in another file would leave
+    # its callers' cached machine code stale. nik stamps each cache with every source file of the room.
+    from pathlib import Path
+
+    from nik.kernels import _jit, collision_lm, lm
+
+    room = sorted(p.name for p in Path(lm.__file__).parent.glob("*.py"))
+    assert [name for name, _, _ in _jit.ROOM_STAMP] == room
+    for dispatcher in (lm.lm_solve, collision_lm.collision_lm):
+        assert dispatcher._cache._cache_file._source_stamp == _jit.ROOM_STAMP
+
+
 _LIGHT = """
 import sys
 import torch

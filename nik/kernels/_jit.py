@@ -35,6 +35,7 @@ import importlib
 import sys
 import threading
 import warnings
+from pathlib import Path
 
 import numba
 from numba.core import config as _numba_config
@@ -154,9 +155,30 @@ def kernel(fn=None, *, fastmath=False, inline="never"):
         return lambda f: kernel(f, fastmath=fastmath, inline=inline)
     cache = CACHE.cache and not fn.__name__.startswith("_")
     with _cache_folder():
-        return _cached_loads_without_refresh(
-            numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath, inline=inline)(fn)
-        )
+        dispatcher = numba.njit(cache=cache, nogil=True, error_model="numpy", fastmath=fastmath, inline=inline)(fn)
+    return _cached_loads_without_refresh(_stamped(dispatcher))
+
+
+def _room_stamp() -> tuple:
+    """``(name, mtime_ns, size)`` of every source file of the kernels room: the stamp each kernel's cache is
+    checked against. numba's own stamp is the defining file's alone, and a kernel's machine code holds the
+    building blocks it calls from other files, so a changed block (a checkout, an edit) would leave its callers'
+    cached code stale; with the room's stamp, any change to a kernel source recompiles every cached kernel."""
+    files = sorted(Path(__file__).resolve().parent.glob("*.py"))
+    return tuple((f.name, f.stat().st_mtime_ns, f.stat().st_size) for f in files)
+
+
+#: The kernels room's stamp, read once when the room is imported (20-odd ``stat`` calls).
+ROOM_STAMP = _room_stamp()
+
+
+def _stamped(dispatcher):
+    """``dispatcher`` with its cache index checked against :data:`ROOM_STAMP` (numba's private ``_cache_file``;
+    left alone where this numba has none). Returns ``dispatcher``."""
+    index = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if index is not None and hasattr(index, "_source_stamp"):
+        index._source_stamp = ROOM_STAMP
+    return dispatcher
 
 
 def entry_point(dispatcher, *args):
