@@ -66,7 +66,9 @@ least-motion sequence; other goals and arms run the LM chains towards the bounds
 
 **Posture** (``q_rest=``: one posture ``(dof,)`` or ``"mid"``): on arms without a closed form the chains and the
 search's plain tracks drift towards it instead of the middle of the ranges (and the start posture nearest it comes
-first); the closed form's branches are chosen by motion alone, and the whole-path optimisation has no posture term.
+first); the closed form's branches are chosen by motion alone; the whole-path optimisation (where it runs: a
+waypoint missed or a step above ``max_step``) has posture rows towards it (:class:`nik.paths.trajopt.TrajCfg`
+``w_rest``).
 
 **Timing** (``timing=True`` or a dict of :func:`nik.paths.timing.time_path` keywords): the answer is timed after the
 path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
@@ -266,7 +268,7 @@ def solve_path(
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
         q, _, _ = polish_path(
-            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
+            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest
         )
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
