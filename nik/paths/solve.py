@@ -272,7 +272,7 @@ def solve_path(
         q, _, _ = polish_path(
             model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest
         )
-        if not closed_form:
+        if not closed_form and check is None:  # among obstacles the search's free candidates stay as they are
             q = _flatten(run, q, its, max_step, is_closed)
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
@@ -1003,7 +1003,8 @@ def _flatten(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float, closed:
     :data:`SEARCH_TRIGGER` and ``max_step``, optimised as one path towards steps of at most :data:`SEARCH_TRIGGER`
     (:func:`nik.paths.trajopt.polish_path`, windows around each larger step; kept only where no waypoint is lost and
     the largest step does not grow): the search picks among the tracks' answers, whose self-motion is not tuned to the
-    path; the optimisation moves it so that no joint takes a step the next waypoints then need back (a circle of
+    path (free space only: it has no collision rows, and among obstacles the search's candidates are free ones); the
+    optimisation moves it so that no joint takes a step the next waypoints then need back (a circle of
     xarm7 followed by the search in steps of 4.5 deg comes out in steps of 2.9 deg). A closed path keeps it only where
     it still closes as well (:func:`_close_loop` of both): a loop that repeats without a jump beats smaller steps."""
     full = q if run.q0 is None else np.concatenate([run.q0[None], q])
