@@ -44,7 +44,7 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    switching tracks where they meet; a loop's end pinned next to its start. The chain's answer stays unless the
    search reaches more waypoints, closes a loop the chain leaves open, or cuts the largest step by
    :data:`SEARCH_GAIN`: the search never answers worse than the chain. Where the answer's largest step still lies
-   between :data:`SEARCH_TRIGGER` and ``max_step``, the whole-path optimisation aims at steps of
+   between :data:`SEARCH_TRIGGER` and ``max_step`` (free space), the whole-path optimisation aims at steps of
    :data:`SEARCH_TRIGGER` (:func:`_flatten`, kept only where nothing gets worse).
 7. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
