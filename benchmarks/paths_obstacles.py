@@ -1,9 +1,11 @@
 """Cartesian paths among obstacles (issue 36): ``solve_path(T, q_start=q0, world=w)`` on tool lines whose plain answer
 sweeps the arm through a box, with CppFlow's criteria.
 
-Problems (seeded): a 200-waypoint, 25 cm tool line (orientation fixed) from a configuration in the middle 60 % of the
-ranges; the plain answer (no world) is solved; a box is placed off its elbow at the middle waypoint (``offset`` from
-the elbow, away from the shoulder-wrist axis; half size ``size``), at least 20 cm from the tool's line, kept only
+Problems (seeded), 200 waypoints each, orientation fixed, from a configuration in the middle 60 % of the ranges
+(:func:`shape`): a 25 cm tool line; a circle of radius 8 cm through the start in a random plane (closed); a letter,
+"Z" (three strokes of 15 cm, 15 cm and 21 cm: corners where the tool turns on the spot), in a random plane. The plain
+answer (no world) is solved; a box is placed off its elbow at the middle waypoint (``offset`` from the elbow, away
+from the shoulder-wrist axis; half size ``size``), at least 20 cm from every waypoint of the tool's path, kept only
 where the plain answer (which takes no step above 7 deg) collides with it and ``q0`` does not. Valid (CppFlow):
 every waypoint within 0.1 mm / 0.1 deg by FK, no step (from q0 on) above 7 deg, no collision of the spheres at the
 waypoints and at 7 samples inside every step (the sphere model: conservative, docs/collisions.md). Columns: valid
@@ -20,9 +22,9 @@ median time per path. Rows: the search with the network, without it (``checkpoin
 (the search switched off: what main did). Kinova Gen2 (example-robot-data, where installed): circles only.
 
     OMP_NUM_THREADS=1 python benchmarks/paths_obstacles.py --n 8 --free 40
+    OMP_NUM_THREADS=1 python benchmarks/paths_obstacles.py --n 8 --shapes line,circle,letter   # obstacles only
 
-Not measured here (issue 36, left to do): circles and letters among obstacles, a chain of
-``solve(q_near=previous, world=w)`` as the peer.
+Not measured here (issue 36, left to do): a chain of ``solve(q_near=previous, world=w)`` as the peer.
 """
 
 from __future__ import annotations
@@ -47,8 +49,34 @@ N_WAYPOINTS, STEP = 200, math.radians(7.0)
 BOXES = ((0.10, 0.02), (0.09, 0.03), (0.08, 0.04))  # (offset from the elbow, half size), metres
 
 
-def problems(name: str, n: int, seed: int = 0):
-    """``n`` problems ``(T (N, 4, 4), q0 (dof,), world)`` on ``name`` (module docstring)."""
+SHAPES = ("line", "circle", "letter")
+
+
+def shape(robot, q0: np.ndarray, rng: np.random.Generator, kind: str) -> np.ndarray:
+    """``(N, 4, 4)``: the tool path ``kind`` (:data:`SHAPES`, module docstring) from FK(``q0``), orientation fixed."""
+    T = np.repeat(robot.fk(q0)[None], N_WAYPOINTS, 0)
+    s = np.linspace(0, 1, N_WAYPOINTS)[:, None]
+    if kind == "line":
+        d = rng.normal(size=3)
+        T[:, :3, 3] += s * d * (0.25 / np.linalg.norm(d))
+        return T
+    u, v = np.linalg.qr(rng.normal(size=(3, 2)))[0].T
+    if kind == "circle":
+        a = 2 * math.pi * s
+        T[:, :3, 3] += 0.08 * (u - np.cos(a) * u - np.sin(a) * v)
+        return T
+    if kind != "letter":
+        raise ValueError(f"shape: expected one of {SHAPES}, got {kind!r}")
+    corners = 0.15 * np.array([[0.0, 1.0], [1.0, 1.0], [0.0, 0.0], [1.0, 0.0]]) - [0.0, 0.15]  # "Z" from its top left
+    seg = np.linalg.norm(np.diff(corners, axis=0), axis=1)
+    at = np.concatenate([[0.0], np.cumsum(seg)]) / seg.sum()  # arc length of each corner, 0 ... 1
+    xy = np.stack([np.interp(s[:, 0], at, corners[:, k]) for k in range(2)], axis=1)
+    T[:, :3, 3] += xy[:, :1] * u + xy[:, 1:] * v
+    return T
+
+
+def problems(name: str, n: int, seed: int = 0, kind: str = "line"):
+    """``n`` problems ``(T (N, 4, 4), q0 (dof,), world)`` on ``name`` along paths of ``kind`` (module docstring)."""
     robot = nik.load_robot(name)
     solver = nik.IKSolver(robot, checkpoint=None)
     rng = np.random.default_rng(seed)
@@ -57,9 +85,7 @@ def problems(name: str, n: int, seed: int = 0):
     out = []
     while len(out) < n:
         q0 = mid + 0.6 * (rng.uniform(lim[:, 0], lim[:, 1]) - mid)
-        d = rng.normal(size=3)
-        T = np.repeat(robot.fk(q0)[None], N_WAYPOINTS, 0)
-        T[:, :3, 3] += np.linspace(0, 1, N_WAYPOINTS)[:, None] * d * (0.25 / np.linalg.norm(d))
+        T = shape(robot, q0, rng, kind)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             plain = solver.solve_path(T, q_start=q0)
@@ -92,8 +118,8 @@ def verdict(robot, T, q0, q, world) -> tuple[bool, float, float, float]:
     return bool(ok), float(np.abs(d).max()), float(np.abs(d).sum()), float(pos.max() * 1e3)
 
 
-def bench(name: str, n: int) -> list[str]:
-    robot, probs = problems(name, n)
+def bench(name: str, n: int, kind: str = "line") -> list[str]:
+    robot, probs = problems(name, n, kind=kind)
     solvers = {
         "nik, world, network on": nik.IKSolver(robot),
         "nik, world, network off": nik.IKSolver(robot, checkpoint=None),
@@ -110,7 +136,7 @@ def bench(name: str, n: int) -> list[str]:
             res.append((*verdict(robot, T, q0, out.q.numpy(), world), dt))
         v, step, length, err, dt = (np.array(x) for x in zip(*res, strict=True))
         rows.append(
-            f"| {name} | {label} | {int(v.sum())}/{len(v)} | {math.degrees(np.median(step)):.2f} | "
+            f"| {name} | {kind} | {label} | {int(v.sum())}/{len(v)} | {math.degrees(np.median(step)):.2f} | "
             f"{np.median(length):.2f} | {err.max():.4f} | {np.median(dt):.2f} |"
         )
     return rows
@@ -205,15 +231,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=6, help="problems among obstacles per robot (0: none)")
     ap.add_argument("--robots", default="panda,xarm7")
+    ap.add_argument("--shapes", default=",".join(SHAPES), help="tool paths among obstacles: line, circle, letter")
     ap.add_argument("--free", type=int, default=0, help="free-space lines + circles per arm from q_start (0: none)")
     ap.add_argument("--free-robots", default="xarm7,panda,kinova")
     args = ap.parse_args()
     if args.n:
-        print("| robot | solver | valid | largest step (deg) | path length (rad) | worst error (mm) | s / path |")
-        print("|---|---|---|---|---|---|---|")
+        print(
+            "| robot | path | solver | valid | largest step (deg) | path length (rad) | worst error (mm) | s / path |"
+        )
+        print("|---|---|---|---|---|---|---|---|")
         for name in args.robots.split(","):
-            for row in bench(name, args.n):
-                print(row, flush=True)
+            for kind in args.shapes.split(","):
+                for row in bench(name, args.n, kind):
+                    print(row, flush=True)
     if args.free:
         print()
         print(

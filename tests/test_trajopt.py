@@ -212,3 +212,62 @@ def test_collision_rows_match_finite_differences():
     )
     np.testing.assert_allclose(_dense(H), J.T @ J, atol=1e-5)
     np.testing.assert_allclose(g, -J.T @ r, atol=1e-5)
+
+
+def test_posture_rows_match_finite_differences():
+    """With a posture (``q_rest``) the residual has ``dof`` more rows per waypoint, ``sqrt(w_rest) (q_i - q_rest)``,
+    and the normal equations stay the Jacobian's (finite differences)."""
+    robot = nik.load_robot("panda")
+    m = model_of(robot)
+    rng = np.random.default_rng(2)
+    N, n = 4, robot.dof
+    Q = rng.uniform(m.lo, m.hi, size=(N, n))
+    T = np.ascontiguousarray(robot.fk(torch.from_numpy(Q)).numpy())
+    rest = 0.5 * (m.lo + m.hi)
+    cfg = TrajCfg(w_vel=0.3, w_acc=0.2, w_rest=0.4)
+    opts = trajopt_options(cfg, math.radians(10.0), q_rest=rest)
+    qs = np.clip(Q[0] + 0.3, m.lo, m.hi)
+    R = residual_count(N, n, True, False, rest=True)
+    assert R == residual_count(N, n, True, False) + N * n
+    r = np.empty(R)
+    cost = residuals(m.G, m.joints, T, Q, qs, True, qs, False, opts, r)
+    assert cost == pytest.approx((r**2).sum())
+    plain = np.empty(R - N * n)
+    residuals(m.G, m.joints, T, Q, qs, True, qs, False, trajopt_options(cfg, math.radians(10.0)), plain)
+    np.testing.assert_allclose(r[len(plain) :], math.sqrt(0.4) * (Q - rest).ravel(), atol=1e-12)
+    J = np.empty((R, N * n))
+    h = 1e-6
+    for f in range(N * n):
+        cols = []
+        for s in (h, -h):
+            Qs = Q.copy()
+            Qs.flat[f] += s
+            rs = np.empty(R)
+            residuals(m.G, m.joints, T, Qs, qs, True, qs, False, opts, rs)
+            cols.append(rs)
+        J[:, f] = (cols[0] - cols[1]) / (2 * h)
+    H, g = np.empty((N * n, 3 * n)), np.empty(N * n)
+    normal_equations(m.G, m.joints, T, Q, qs, True, qs, False, opts, H, g)
+    np.testing.assert_allclose(_dense(H), J.T @ J, atol=1e-6)
+    np.testing.assert_allclose(g, -J.T @ r, atol=1e-6)
+
+
+def test_q_rest_pulls_the_optimised_path_nearer():
+    """The whole-path optimisation of a redundant arm's path with a posture ends nearer it than without (the
+    self-motion moves), with every waypoint still within the tolerances (FK) and every step within max_step."""
+    robot, q0, T = _xarm7_circle()
+    m = model_of(robot)
+    Tn = np.ascontiguousarray(T.numpy())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        Q0 = nik.IKSolver(robot).solve_path(T, q_start=q0).q.numpy()
+    rest = Q0.mean(axis=0) + np.where(np.arange(robot.dof) % 2 == 0, 0.4, -0.4)
+    rest = np.clip(rest, m.lo, m.hi)
+    kw = {"max_step": math.radians(10.0), "cfg": TrajCfg(iters=60)}
+    free = optimise_path(m, Tn, Q0, q_start=q0.numpy(), **kw)
+    pulled = optimise_path(m, Tn, Q0, q_start=q0.numpy(), q_rest=rest, **kw)
+    far = lambda Q: float(np.linalg.norm(Q - rest, axis=1).mean())  # noqa: E731
+    assert far(pulled.q) < far(free.q) - 0.05
+    for res in (free, pulled):
+        ok, step = _check(robot, T, res.q, q0)
+        assert ok and step <= math.radians(10.0)

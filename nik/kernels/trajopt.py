@@ -13,6 +13,8 @@ residual stacks, for the poses ``T: (N, 4, 4)``:
   hinge that pushes every step under ``step_cap`` (a fraction of the path's ``max_step``);
 - **limits** (``2 n`` rows per waypoint): ``sqrt(w_lim) max(lo + m - q, 0)`` and ``sqrt(w_lim) max(q - hi + m, 0)``
   with the margin ``m = margin x (hi - lo)``: a barrier near each limit;
+- **posture** (``n`` rows per waypoint, only with ``w_rest > 0``): ``sqrt(w_rest) (q_i - q_rest)``, ``q_rest`` the
+  ``n`` values after the options (``opts[OPTS:]``): on a redundant arm the self-motion drifts towards it;
 - **collision** (``R = P + L`` rows per sample, only with a collision model: the ``*_collision`` kernels and
   :func:`trajopt` given one): ``sqrt(w_col) max(col_margin - d, 0)`` of the signed distances ``d`` of
   :func:`nik.kernels.collision.collision_residual` (self pairs and the world), at every waypoint and at
@@ -62,9 +64,9 @@ __all__ = [
 ]
 
 ROT_WEIGHT, W_VEL, W_ACC, W_STEP, STEP_CAP, W_LIM, MARGIN, LAMBDA0, MAX_STEP_LM, EPS, STALL_REL = range(11)
-TOL_POS, TOL_ROT, PATH_STEP, W_COL, COL_MARGIN, COL_SUB = 11, 12, 13, 14, 15, 16
-#: length of ``opts``
-OPTS = 17
+TOL_POS, TOL_ROT, PATH_STEP, W_COL, COL_MARGIN, COL_SUB, W_REST = 11, 12, 13, 14, 15, 16, 17
+#: length of ``opts`` (with ``W_REST > 0``, the posture's ``n`` values follow)
+OPTS = 18
 #: the damping rule of :func:`trajopt` (:func:`nik.kernels.lm_step._judge`): lambda times ``LAM_DOWN`` after a kept
 #: step (not below ``LAM_MIN``), times ``LAM_UP`` after a rejected one; it stops once lambda exceeds ``LAM_STOP``
 LAM_DOWN, LAM_UP, LAM_MIN, LAM_STOP = 0.3, 5.0, 1e-12, 1e8
@@ -295,6 +297,18 @@ def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, po
                 if above > 0.0:
                     H[f, 0] += sl * sl
                     g[f] -= sl * res_hi
+    if opts[W_REST] > 0.0:  # posture
+        sr = math.sqrt(opts[W_REST])
+        for i in range(N):
+            for j in range(n):
+                res = sr * (Q[i, j] - opts[OPTS + j])
+                cost += res * res
+                if keep:
+                    r[at] = res
+                    at += 1
+                if build:
+                    H[i * n + j, 0] += sr * sr
+                    g[i * n + j] -= sr * res
     info[0] = np.inf
     if opts[W_COL] > 0.0 and col[3].shape[0] + col[2].shape[0] > 1:
         cost += _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g, r, at, col, info)

@@ -43,7 +43,9 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    obstacles); the dynamic programming (:func:`nik.paths.kernels.path_dp`, real joint motion) chooses the sequence,
    switching tracks where they meet; a loop's end pinned next to its start. The chain's answer stays unless the
    search reaches more waypoints, closes a loop the chain leaves open, or cuts the largest step by
-   :data:`SEARCH_GAIN`: the search never answers worse than the chain.
+   :data:`SEARCH_GAIN`: the search never answers worse than the chain. Where the answer's largest step still lies
+   between :data:`SEARCH_TRIGGER` and ``max_step`` (free space), the whole-path optimisation aims at steps of
+   :data:`SEARCH_TRIGGER` (:func:`_flatten`, kept only where nothing gets worse).
 7. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
    on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
@@ -66,7 +68,9 @@ least-motion sequence; other goals and arms run the LM chains towards the bounds
 
 **Posture** (``q_rest=``: one posture ``(dof,)`` or ``"mid"``): on arms without a closed form the chains and the
 search's plain tracks drift towards it instead of the middle of the ranges (and the start posture nearest it comes
-first); the closed form's branches are chosen by motion alone, and the whole-path optimisation has no posture term.
+first); the closed form's branches are chosen by motion alone; the whole-path optimisation (where it runs: a
+waypoint missed or a step above ``max_step``) has posture rows towards it (:class:`nik.paths.trajopt.TrajCfg`
+``w_rest``).
 
 **Timing** (``timing=True`` or a dict of :func:`nik.paths.timing.time_path` keywords): the answer is timed after the
 path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
@@ -266,8 +270,10 @@ def solve_path(
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
         q, _, _ = polish_path(
-            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable
+            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest
         )
+        if not closed_form and check is None:  # among obstacles the search's free candidates stay as they are
+            q = _flatten(run, q, its, max_step, is_closed)
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
     if is_closed:
@@ -990,6 +996,30 @@ def _smooth(run: _Run, q: np.ndarray, max_step: float, closed: bool, col=None) -
     _, _, step = _path_cost(q, within, run.q0)
     closes = not closed or _closure(q, run.model.wraps) <= max_step
     return bool(within.all() and inside and closes and step <= min(SEARCH_TRIGGER, max_step))
+
+
+def _flatten(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float, closed: bool) -> np.ndarray:
+    """``q: (N, dof)`` of an arm without a closed form whose largest step (from ``q0`` on) lies between
+    :data:`SEARCH_TRIGGER` and ``max_step``, optimised as one path towards steps of at most :data:`SEARCH_TRIGGER`
+    (:func:`nik.paths.trajopt.polish_path`, windows around each larger step; kept only where no waypoint is lost and
+    the largest step does not grow): the search picks among the tracks' answers, whose self-motion is not tuned to the
+    path (free space only: it has no collision rows, and among obstacles the search's candidates are free ones); the
+    optimisation moves it so that no joint takes a step the next waypoints then need back (a circle of
+    xarm7 followed by the search in steps of 4.5 deg comes out in steps of 2.9 deg). A closed path keeps it only where
+    it still closes as well (:func:`_close_loop` of both): a loop that repeats without a jump beats smaller steps."""
+    full = q if run.q0 is None else np.concatenate([run.q0[None], q])
+    step = float(np.abs(np.diff(full, axis=0)).max())
+    if not SEARCH_TRIGGER < step <= max_step:
+        return q
+    out, _, _ = polish_path(
+        run.model, run.T, q, run.q0, tol_pos=run.tol_pos, tol_rot=run.tol_rot, max_step=SEARCH_TRIGGER,
+        reachable=run.reachable, q_rest=run.rest,
+    )  # fmt: skip
+    if closed and out is not q:
+        w = run.model.wraps
+        if _closure(_close_loop(run, out, its, max_step)[0], w) > _closure(_close_loop(run, q, its, max_step)[0], w):
+            return q
+    return out
 
 
 def _colliding(model, q: np.ndarray, col) -> np.ndarray:

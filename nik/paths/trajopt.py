@@ -11,7 +11,10 @@ block-pentadiagonal, solved by a banded Cholesky in ``O(N dof^3)`` (:mod:`nik.ke
 Choices (the defaults of :class:`TrajCfg`, for metres and radians): ``w_vel = 1e-4`` and ``w_acc = 1e-3`` keep
 the pose error they cost at a few micrometres (a pose row has weight 1); the step hinge ``w_step = 1e-2`` starts at
 ``0.8 max_step``; the limit barrier ``w_lim = 1e-3`` acts within 2 % of each joint's range. A waypoint's pose counts
-as reached inside the call's tolerances (``tol_pos``, ``tol_rot``), as everywhere in nik.
+as reached inside the call's tolerances (``tol_pos``, ``tol_rot``), as everywhere in nik. With a posture ``q_rest``
+(``solve_path(q_rest=)``) every waypoint also has the rows ``sqrt(w_rest) (q_i - q_rest)``, ``w_rest = 1e-4``: as
+small as the velocity's, so it moves the self-motion of a redundant arm and costs the pose micrometres (the finish
+scales it down with the other shape weights).
 """
 
 from __future__ import annotations
@@ -66,6 +69,7 @@ class TrajCfg:
     w_col: float = 1.0
     col_margin: float = 0.005
     col_sub: int = 4
+    w_rest: float = 1e-4
 
 
 @dataclass
@@ -80,12 +84,18 @@ class TrajResult:
     clearance: float = math.inf
 
 
-def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot: float = 0.0) -> np.ndarray:
+def trajopt_options(
+    cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot: float = 0.0, q_rest: np.ndarray | None = None
+) -> np.ndarray:
     """``opts`` of :func:`nik.kernels.trajopt.trajopt` for ``cfg`` and the path's ``max_step`` (radians); with
-    ``tol_pos > 0`` the optimisation stops as soon as the path is feasible (within the tolerances and ``max_step``)."""
+    ``tol_pos > 0`` the optimisation stops as soon as the path is feasible (within the tolerances and ``max_step``).
+    ``q_rest: (dof,)``: the posture rows (weight ``cfg.w_rest``), its values appended after the options."""
     from nik.kernels import trajopt as k
 
-    opts = np.empty(k.OPTS)
+    rest = np.empty(0) if q_rest is None else np.asarray(q_rest, dtype=np.float64).ravel()
+    opts = np.empty(k.OPTS + rest.size)
+    opts[k.OPTS :] = rest
+    opts[k.W_REST] = cfg.w_rest if rest.size else 0.0
     opts[k.ROT_WEIGHT], opts[k.W_VEL], opts[k.W_ACC] = cfg.rot_weight, cfg.w_vel, cfg.w_acc
     opts[k.W_STEP], opts[k.STEP_CAP] = cfg.w_step, cfg.step_frac * max_step
     opts[k.W_LIM], opts[k.MARGIN], opts[k.LAMBDA0] = cfg.w_lim, cfg.margin, cfg.lambda0
@@ -95,12 +105,16 @@ def trajopt_options(cfg: TrajCfg, max_step: float, tol_pos: float = 0.0, tol_rot
     return opts
 
 
-def residual_count(N: int, dof: int, has_start: bool, has_end: bool = False, rows: int = 0, sub: int = 1) -> int:
+def residual_count(
+    N: int, dof: int, has_start: bool, has_end: bool = False, rows: int = 0, sub: int = 1, rest: bool = False
+) -> int:
     """Rows of the residual of :func:`nik.kernels.trajopt.residuals`: pose, velocity + step cap, acceleration,
-    limits; with ``rows`` collision rows per sample (:func:`nik.kernels.trajopt.residuals_collision`), those of
-    every waypoint and of ``sub - 1`` samples inside every step."""
+    limits, posture (with ``rest``: options built with a ``q_rest``); with ``rows`` collision rows per sample
+    (:func:`nik.kernels.trajopt.residuals_collision`), those of every waypoint and of ``sub - 1`` samples inside
+    every step."""
     steps = N - 1 + int(has_start) + int(has_end)
-    return 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N + rows * (N + steps * (max(sub, 1) - 1))
+    fixed = 6 * N + 2 * dof * steps + dof * max(N - 2, 0) + 2 * dof * N + dof * N * int(rest)
+    return fixed + rows * (N + steps * (max(sub, 1) - 1))
 
 
 def optimise_path(
@@ -115,6 +129,7 @@ def optimise_path(
     tol_rot: float = 0.0,
     cfg: TrajCfg | None = None,
     collision: tuple | None = None,
+    q_rest: np.ndarray | None = None,
 ) -> TrajResult:
     """The joint path ``Q0: (N, dof)`` optimised as one problem towards the poses ``T: (N, 4, 4)`` (float64, metres).
 
@@ -125,7 +140,8 @@ def optimise_path(
     within the tolerances, every step at most ``max_step`` (and, with ``collision``, every sample clear). ``collision``:
     the arrays after ``q`` of :func:`nik.kernels.collision.collision_residual` (``Setup.arguments(robot)[1]`` of
     :mod:`nik.ik.collide`): collision rows at the waypoints and inside the steps (``cfg.w_col``, ``cfg.col_margin``,
-    ``cfg.col_sub``). ``TrajResult.clearance``: the smallest signed distance of those samples (``inf`` without)."""
+    ``cfg.col_sub``). ``TrajResult.clearance``: the smallest signed distance of those samples (``inf`` without).
+    ``q_rest: (dof,)``: a posture every waypoint is drawn towards (weight ``cfg.w_rest``; the module docstring)."""
     from nik.kernels import trajopt as k
 
     cfg = _default_cfg(model) if cfg is None else cfg
@@ -139,13 +155,13 @@ def optimise_path(
     qe = np.zeros(n) if q_end is None else np.ascontiguousarray(q_end, dtype=np.float64)
     ends = (qs, q_start is not None, qe, q_end is not None)
     pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
-    opts = trajopt_options(cfg, max_step, tol_pos, tol_rot)
+    opts = trajopt_options(cfg, max_step, tol_pos, tol_rot, q_rest)
     col = k._no_collision() if collision is None else tuple(collision)
     its, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
     feasible = (pos <= tol_pos).all() and (rot <= tol_rot).all() and _largest_step(Q, q_start, q_end) <= max_step
     if tol_pos > 0.0 and feasible and info[0] >= 0.5 * opts[k.COL_MARGIN]:
         return TrajResult(Q, pos, rot, int(its), float(info[0]))  # feasible already
-    opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM]] *= FINISH  # the finish: the poses first, the shape kept
+    opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM, k.W_REST]] *= FINISH  # the finish: the poses first, the shape kept
     more, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
     return TrajResult(Q, pos, rot, int(its + more), float(info[0]))
 
@@ -206,6 +222,7 @@ def polish_path(
     reachable: np.ndarray | None = None,
     always: bool = False,
     cfg: TrajCfg | None = None,
+    q_rest: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The path stage: ``Q: (N, dof)`` optimised by :func:`optimise_path` where some waypoint misses the tolerance
     or some step exceeds ``max_step`` (every path with ``always``; a waypoint proven out of reach, ``reachable (N,)``
@@ -214,7 +231,8 @@ def polish_path(
     and its largest step (from the row before, to the row after) does not grow, nor its first step from ``q_start``
     beyond ``max_step`` (the arm starts without a jump); the whole path likewise, else
     ``Q`` as it came. Returns ``(Q, pos_err (N,), rot_err (N,))``, the errors re-checked by FK (metres, radians):
-    one compiled call (:func:`nik.kernels.trajopt.path_check`) where nothing needs optimising."""
+    one compiled call (:func:`nik.kernels.trajopt.path_check`) where nothing needs optimising. ``q_rest: (dof,)``:
+    the windows' posture rows (:func:`optimise_path`)."""
     from nik.kernels.trajopt import path_check
 
     Q = np.ascontiguousarray(Q, dtype=np.float64)
@@ -243,7 +261,7 @@ def polish_path(
         after = Q1[b] if b < N else None
         res = optimise_path(
             model, T[a:b], Q1[a:b], q_start=before, q_end=after, max_step=max_step, tol_pos=tol_pos, tol_rot=tol_rot,
-            cfg=cfg,
+            cfg=cfg, q_rest=q_rest,
         )  # fmt: skip
         ok2 = (res.pos_err <= tol_pos) & (res.rot_err <= tol_rot)
         inside = bool(((res.q >= lo) & (res.q <= hi)).all())
