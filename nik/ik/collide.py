@@ -402,31 +402,40 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     hit = s.colliding(robot, q)
     reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
     idx = np.nonzero(hit & reach)[0]
-    if idx.size and s.mesh is None and getattr(plan, "bounds", None) is None:
-        # a pose whose own rows collide has no free answer: not solved again (a tolerant goal fixes no pose)
-        from nik.collision.compiled import blocked_targets
-
-        T_hit = _numpy(T)[idx]
-        idx = idx[
-            ~blocked_targets(robot, s.model, s.world, T_hit, plan.tol_pos, plan.tol_rot, self_collision=s.self_on)
-        ]
     success = _numpy(res.success).astype(bool).copy()
     pos, rot, it = (_numpy(x).copy() for x in (res.pos_err, res.rot_err, res.iterations))
     axis = None if res.axis_err is None else _numpy(res.axis_err).copy()
     changed = np.zeros(B, dtype=bool)
     if idx.size:
         Tn = np.ascontiguousarray(Tnp[idx])
-        starts, n_starts = _starts(robot, plan, Tn, q[idx])
         k = idx.size
         kgoal = (model, half[idx], modes[idx], opts, iopts)
+        first = q[idx]
         if plan.q_rest is not None:  # the first start moved towards q_rest first (the re-solve lands nearer it)
             from nik.ik.goals import rest_target
 
-            first = q[idx]
             rest_free(robot, None, kgoal, Tn, first, success[idx], rest_target(robot, plan.q_rest, B)[idx],
                       plan.rest_weight)  # fmt: skip
-            starts[:, 0] = first
-        qk, done, itk = _solve_free(robot, s, plan, cfg, kgoal, Tn, starts, n_starts, np.full(k, cfg.restarts))
+        # from the answer alone first: it ends most targets (44 of 55 on the panda's scene), without the
+        # hypotheses, the blocked-pose proof or the restarts, which only the rest get
+        qk, done, itk = _solve_free(robot, s, plan, cfg, kgoal, Tn, first[:, None], np.ones(k), np.zeros(k))
+        miss = np.flatnonzero(~done)
+        if miss.size and s.mesh is None and getattr(plan, "bounds", None) is None:
+            # a pose whose own rows collide has no free answer: not solved on (a tolerant goal fixes no pose)
+            from nik.collision.compiled import blocked_targets
+
+            T_miss = _numpy(T)[idx[miss]]
+            miss = miss[
+                ~blocked_targets(robot, s.model, s.world, T_miss, plan.tol_pos, plan.tol_rot, self_collision=s.self_on)
+            ]
+        if miss.size:  # from the first pass's answer, the hypotheses or branches, the uniform restarts
+            Tm = np.ascontiguousarray(Tn[miss])
+            starts, n_starts = _starts(robot, plan, Tm, qk[miss])
+            mgoal = (model, half[idx[miss]], modes[idx[miss]], opts, iopts)
+            qm, dm, itm = _solve_free(
+                robot, s, plan, cfg, mgoal, Tm, starts, n_starts, np.full(miss.size, cfg.restarts)
+            )
+            qk[miss], done[miss], itk[miss] = qm, dm, itk[miss] + itm
         q[idx], it[idx] = qk, it[idx] + itk
         hit[idx] = s.colliding(robot, qk)  # the verdict of the new answers (the others' stands)
         success[idx] = done & ~hit[idx]
