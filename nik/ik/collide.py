@@ -420,7 +420,11 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
                       plan.rest_weight)  # fmt: skip
         # from the answer alone first: it ends most targets (44 of 55 on the panda's scene), without the
         # hypotheses, the blocked-pose proof or the restarts, which only the rest get
-        qk, done, itk = _solve_free(robot, s, plan, cfg, kgoal, Tn, first[:, None], np.ones(k), np.zeros(k))
+        # (the margin-0 pass of :func:`_solve_free` waits for the second pass: measured, it costs more there than
+        # it saves)
+        qk, done, itk = _collision_solve(
+            robot, s, plan, cfg, kgoal, Tn, first[:, None], np.ones(k), np.zeros(k), cfg.margin
+        )
         miss = np.flatnonzero(~done)
         if miss.size and s.mesh is None and getattr(plan, "bounds", None) is None:
             # a pose whose own rows collide has no free answer: not solved on (a tolerant goal fixes no pose)
