@@ -535,9 +535,7 @@ def _closure(q: np.ndarray, wraps: np.ndarray) -> float:
     return float(d.max())
 
 
-def _close_loop(
-    run: _Run, q: np.ndarray, its: np.ndarray, max_step: float, col=None
-) -> tuple[np.ndarray, np.ndarray]:
+def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float, col=None) -> tuple[np.ndarray, np.ndarray]:
     """A closed path's joints with the last row equal to the first (module docstring, "closed loops"): LM from the
     first row at the last waypoint; the difference ``delta`` between that answer and the last row (modulo whole
     turns on wrapping joints) is blended back over the path (row ``i`` seeded at ``q_i + w_i delta``,
