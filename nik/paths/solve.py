@@ -277,7 +277,7 @@ def solve_path(
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
     if is_closed:
-        q, its = _close_loop(run, q, its, max_step)
+        q, its = _close_loop(run, q, its, max_step, None if check is None else check.arguments(robot)[1])
     if run.refine and run.half is None:
         q = _inside_margin(run, q, max_step, check, is_closed)
     pos, rot, within = _final_check(run, q)
@@ -535,16 +535,21 @@ def _closure(q: np.ndarray, wraps: np.ndarray) -> float:
     return float(d.max())
 
 
-def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> tuple[np.ndarray, np.ndarray]:
+def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float, col=None) -> tuple[np.ndarray, np.ndarray]:
     """A closed path's joints with the last row equal to the first (module docstring, "closed loops"): LM from the
     first row at the last waypoint; the difference ``delta`` between that answer and the last row (modulo whole
     turns on wrapping joints) is blended back over the path (row ``i`` seeded at ``q_i + w_i delta``,
     ``w = 3 s^2 - 2 s^3`` of ``s = i / (N - 1)``: no added motion at either end) and every row re-solved by LM from
     its seed (the tool stays, the null-space drift is undone). Kept only when every waypoint reached before is
-    still reached, inside the limits, and no step grows above ``max(max_step, the largest step before)``; else the
-    last row alone is moved onto the first (``q_-1 + delta``) where that keeps its waypoint and its step within the
-    same bound (a path whose other rows LM would move, near a singularity); else ``q`` as it was (its closure is
-    reported)."""
+    still reached, inside the limits, no step grows above ``max(max_step, the largest step before)`` and, among
+    obstacles (``col``: the collision arrays of :mod:`nik.ik.collide`), no waypoint nor step that was free collides
+    (the sphere check, :func:`nik.paths.trajopt.path_collisions`). Where the blend over the whole path is refused
+    (among obstacles, the LM re-solve moves the rows past the box back into it), the blend over the last half, then
+    the last quarter and eighth of the path is tried (``s`` running from that row to the end, the rows before
+    unchanged: the box a path is planned around lies at its middle as often as not). Else the last row alone is
+    moved onto the first (``q_-1 + delta``) where that keeps its waypoint, its step within the same bound and (with
+    ``col``) its motion free (a path whose other rows LM would move, near a singularity); else ``q`` as it was (its
+    closure is reported)."""
     model = run.model
     if _closure(q, model.wraps) <= PATH_CLOSE_TOL:
         return q, its
@@ -555,28 +560,46 @@ def _close_loop(run: _Run, q: np.ndarray, its: np.ndarray, max_step: float) -> t
     delta = end[0] - q[-1]
     w = model.wraps
     delta[w] = np.remainder(delta[w] + math.pi, 2 * math.pi) - math.pi  # never undo a whole turn of the path
-    s = np.arange(N) / (N - 1)
-    seeds = np.clip(q + (3 * s**2 - 2 * s**3)[:, None] * delta, model.lo, model.hi)
-    new, new_its, reached = _lm_batch(run, seeds, np.arange(N))
-    new[-1] = q[-1] + delta
-    new_its[-1] = end_its[0]
     _, _, before = _final_check(run, q)
-    _, _, after = _final_check(run, new)
-    inside = ((new >= model.lo - 1e-9) & (new <= model.hi + 1e-9)).all(axis=1)
     old_step = np.abs(np.diff(q, axis=0)).max()
-    new_step = np.abs(np.diff(new, axis=0)).max()
-    if (before & ~(after & inside)).any() or new_step > max(max_step, old_step):
-        last = q.copy()  # the blend refused: the last row alone moved onto the first, where its step stays small
-        last[-1] = q[-1] + delta
-        step = float(np.abs(last[-1] - last[-2]).max())
-        ok = _final_check(run, last)[2][-1]
-        inside = bool(((last[-1] >= model.lo - 1e-9) & (last[-1] <= model.hi + 1e-9)).all())
-        if (ok or not before[-1]) and inside and step <= max(max_step, old_step):
-            its = its.copy()
-            its[-1] += end_its[0]
-            return last, its
-        return q, its
-    return new, its + new_its
+    bound = max(max_step, old_step)
+    if col is not None:
+        from nik.paths.trajopt import TrajCfg, path_collisions
+
+        was = np.logical_or(*path_collisions(model, q, run.q0, col, TrajCfg.col_sub))
+
+    def new_hits(new: np.ndarray) -> bool:
+        """Whether ``new`` collides at a waypoint or inside a step that was free in ``q``."""
+        if col is None:
+            return False
+        return bool((np.logical_or(*path_collisions(model, new, run.q0, col, TrajCfg.col_sub)) & ~was).any())
+
+    for a in (0, N // 2, 3 * N // 4, 7 * N // 8) if col is not None else (0,):
+        if N - 1 - a < 2:
+            break
+        rows = np.arange(a, N)
+        s = (rows - a) / (N - 1 - a)
+        seeds = np.clip(q[a:] + (3 * s**2 - 2 * s**3)[:, None] * delta, model.lo, model.hi)
+        part, part_its, _ = _lm_batch(run, seeds, rows)
+        new, new_its = q.copy(), np.zeros_like(its)
+        new[a:], new_its[a:] = part, part_its
+        new[-1] = q[-1] + delta
+        new_its[-1] = end_its[0]
+        _, _, after = _final_check(run, new)
+        inside = ((new >= model.lo - 1e-9) & (new <= model.hi + 1e-9)).all(axis=1)
+        new_step = np.abs(np.diff(new, axis=0)).max()
+        if not (before & ~(after & inside)).any() and new_step <= bound and not new_hits(new):
+            return new, its + new_its
+    last = q.copy()  # the blend refused: the last row alone moved onto the first, where its step stays small
+    last[-1] = q[-1] + delta
+    step = float(np.abs(last[-1] - last[-2]).max())
+    ok = _final_check(run, last)[2][-1]
+    inside = bool(((last[-1] >= model.lo - 1e-9) & (last[-1] <= model.hi + 1e-9)).all())
+    if (ok or not before[-1]) and inside and step <= bound and not new_hits(last):
+        its = its.copy()
+        its[-1] += end_its[0]
+        return last, its
+    return q, its
 
 
 def _inside_margin(run: _Run, q: np.ndarray, max_step: float, check, closed: bool) -> np.ndarray:
