@@ -16,6 +16,21 @@ from nik.paths.trajopt import TrajCfg, optimise_path, polish_path, residual_coun
 TOL_POS, TOL_ROT = 1e-4, math.radians(0.1)
 
 
+def _fd_jacobian(residuals_into, Q: np.ndarray, R: int, h: float = 1e-6) -> np.ndarray:
+    """``(R, Q.size)``: central differences of ``residuals_into(Q, r)`` (which writes ``R`` residuals into ``r``)."""
+    J = np.empty((R, Q.size))
+    for f in range(Q.size):
+        cols = []
+        for step in (h, -h):
+            Qs = Q.copy()
+            Qs.flat[f] += step
+            rs = np.empty(R)
+            residuals_into(Qs, rs)
+            cols.append(rs)
+        J[:, f] = (cols[0] - cols[1]) / (2 * h)
+    return J
+
+
 def _dense(H: np.ndarray) -> np.ndarray:
     """The symmetric matrix of the lower band ``H[r, k] = A[r, r - k]``."""
     M, w = H.shape
@@ -69,17 +84,7 @@ def test_normal_equations_match_finite_differences_of_the_residual():
     cost = residuals(m.G, m.joints, T, Q, qs, True, qe, True, opts, r)
     assert cost == pytest.approx((r**2).sum())
     assert np.abs(r[: 6 * N]).max() < 1e-12 and np.abs(r[6 * N :]).max() > 0.1
-    J = np.empty((R, N * n))
-    h = 1e-6
-    for f in range(N * n):
-        cols = []
-        for s in (h, -h):
-            Qs = Q.copy()
-            Qs.flat[f] += s
-            rs = np.empty(R)
-            residuals(m.G, m.joints, T, Qs, qs, True, qe, True, opts, rs)
-            cols.append(rs)
-        J[:, f] = (cols[0] - cols[1]) / (2 * h)
+    J = _fd_jacobian(lambda Qs, rs: residuals(m.G, m.joints, T, Qs, qs, True, qe, True, opts, rs), Q, R)
     H, g = np.empty((N * n, 3 * n)), np.empty(N * n)
     assert normal_equations(m.G, m.joints, T, Q, qs, True, qe, True, opts, H, g) == pytest.approx(cost)
     np.testing.assert_allclose(_dense(H), J.T @ J, atol=1e-6)
@@ -199,17 +204,9 @@ def test_collision_rows_match_finite_differences():
     cost = residuals_collision(m.G, m.joints, T, Q, qs, True, Q[0], False, opts, col, r)
     assert cost == pytest.approx((r**2).sum())
     assert np.abs(r[R - rows * (N + 2 * N) :]).max() > 0.01  # collision rows are active
-    J = np.empty((R, N * n))
-    h = 1e-7
-    for f in range(N * n):
-        cols = []
-        for s in (h, -h):
-            Qs = Q.copy()
-            Qs.flat[f] += s
-            rs = np.empty(R)
-            residuals_collision(m.G, m.joints, T, Qs, qs, True, Q[0], False, opts, col, rs)
-            cols.append(rs)
-        J[:, f] = (cols[0] - cols[1]) / (2 * h)
+    J = _fd_jacobian(
+        lambda Qs, rs: residuals_collision(m.G, m.joints, T, Qs, qs, True, Q[0], False, opts, col, rs), Q, R, h=1e-7
+    )
     H, g = np.empty((N * n, 3 * n)), np.empty(N * n)
     assert normal_equations_collision(m.G, m.joints, T, Q, qs, True, Q[0], False, opts, col, H, g) == pytest.approx(
         cost
@@ -239,17 +236,7 @@ def test_posture_rows_match_finite_differences():
     plain = np.empty(R - N * n)
     residuals(m.G, m.joints, T, Q, qs, True, qs, False, trajopt_options(cfg, math.radians(10.0)), plain)
     np.testing.assert_allclose(r[len(plain) :], math.sqrt(0.4) * (Q - rest).ravel(), atol=1e-12)
-    J = np.empty((R, N * n))
-    h = 1e-6
-    for f in range(N * n):
-        cols = []
-        for s in (h, -h):
-            Qs = Q.copy()
-            Qs.flat[f] += s
-            rs = np.empty(R)
-            residuals(m.G, m.joints, T, Qs, qs, True, qs, False, opts, rs)
-            cols.append(rs)
-        J[:, f] = (cols[0] - cols[1]) / (2 * h)
+    J = _fd_jacobian(lambda Qs, rs: residuals(m.G, m.joints, T, Qs, qs, True, qs, False, opts, rs), Q, R)
     H, g = np.empty((N * n, 3 * n)), np.empty(N * n)
     normal_equations(m.G, m.joints, T, Q, qs, True, qs, False, opts, H, g)
     np.testing.assert_allclose(_dense(H), J.T @ J, atol=1e-6)
