@@ -60,3 +60,27 @@ def kill_at(monkeypatch):
         return c
 
     return arm
+
+
+@pytest.fixture
+def xarm7_circle_37():
+    """``(robot, q0, T)``: a 60-waypoint circle (radius 5 cm, orientation fixed) on xarm7 from ``q0``: path 37 of
+    benchmarks/paths.py's xarm7 stream, where the waypoint chain reaches every pose but needs a step of 3.4 deg."""
+    import math
+
+    import torch
+
+    import nik
+
+    robot = nik.load_robot("xarm7")
+    q0 = torch.tensor(
+        [-3.7690758749285, 0.085624766732189, -1.3870104036149629, 1.5032070640616755, 3.346257153772674,
+         2.1736983269078713, -2.187432020684759], dtype=torch.float64,
+    )  # fmt: skip
+    u = torch.tensor([-0.7748731305753529, -0.32139997072311666, -0.5443102886511807], dtype=torch.float64)
+    v = torch.tensor([-0.5406809388525697, -0.1090946657939946, 0.8341237775395208], dtype=torch.float64)
+    T0 = robot.fk(q0[None])[0]
+    a = torch.linspace(0.0, 2 * math.pi, 60, dtype=torch.float64)
+    T = T0.expand(60, 4, 4).clone()
+    T[:, :3, 3] = T0[:3, 3] + 0.05 * u - 0.05 * (torch.cos(a)[:, None] * u + torch.sin(a)[:, None] * v)
+    return robot, q0, T

@@ -116,22 +116,12 @@ def test_the_search_is_never_worse_than_the_chain(arm, monkeypatch):
         assert better >= 1
 
 
-def test_an_xarm7_circle_the_search_left_at_3_5_deg_is_followed_in_steps_under_3_deg_and_closed():
+def test_an_xarm7_circle_the_search_left_at_3_5_deg_is_followed_in_steps_under_3_deg_and_closed(xarm7_circle_37):
     """Path 37 of benchmarks/paths.py's xarm7 stream (a 5 cm circle, orientation fixed, from ``q_start``): the search
     alone answered with a 3.5 deg step; a witness in steps under 3 deg exists (the benchmark's oracle: 3.0 deg). The
     whole-path optimisation towards 2 deg steps now follows it: every waypoint within 0.1 mm / 0.1 deg by FK, every
     step from ``q_start`` on <= 3 deg, and the loop still closed (last row == first)."""
-    robot = nik.load_robot("xarm7")
-    q0 = torch.tensor(
-        [-3.7690758749285, 0.085624766732189, -1.3870104036149629, 1.5032070640616755, 3.346257153772674,
-         2.1736983269078713, -2.187432020684759], dtype=torch.float64,
-    )  # fmt: skip
-    u = torch.tensor([-0.7748731305753529, -0.32139997072311666, -0.5443102886511807], dtype=torch.float64)
-    v = torch.tensor([-0.5406809388525697, -0.1090946657939946, 0.8341237775395208], dtype=torch.float64)
-    T0 = robot.fk(q0[None])[0]
-    a = torch.linspace(0.0, 2 * math.pi, 60, dtype=torch.float64)
-    T = T0.expand(60, 4, 4).clone()
-    T[:, :3, 3] = T0[:3, 3] + 0.05 * u - 0.05 * (torch.cos(a)[:, None] * u + torch.sin(a)[:, None] * v)
+    robot, q0, T = xarm7_circle_37
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = nik.IKSolver(robot).solve_path(T, q_start=q0)

@@ -91,23 +91,6 @@ def test_normal_equations_match_finite_differences_of_the_residual():
     np.testing.assert_allclose(g, -J.T @ r, atol=1e-6)
 
 
-def _xarm7_circle():
-    """A 60-waypoint circle (radius 5 cm, orientation fixed) on xarm7 from ``q0``: path 37 of benchmarks/paths.py's
-    xarm7 stream, where the waypoint chain reaches every pose but needs a step of 3.4 deg."""
-    robot = nik.load_robot("xarm7")
-    q0 = torch.tensor(
-        [-3.7690758749285, 0.085624766732189, -1.3870104036149629, 1.5032070640616755, 3.346257153772674,
-         2.1736983269078713, -2.187432020684759], dtype=torch.float64,
-    )  # fmt: skip
-    u = torch.tensor([-0.7748731305753529, -0.32139997072311666, -0.5443102886511807], dtype=torch.float64)
-    v = torch.tensor([-0.5406809388525697, -0.1090946657939946, 0.8341237775395208], dtype=torch.float64)
-    T0 = robot.fk(q0[None])[0]
-    a = torch.linspace(0.0, 2 * math.pi, 60, dtype=torch.float64)
-    T = T0.expand(60, 4, 4).clone()
-    T[:, :3, 3] = T0[:3, 3] + 0.05 * u - 0.05 * (torch.cos(a)[:, None] * u + torch.sin(a)[:, None] * v)
-    return robot, q0, T
-
-
 def _check(robot, T, q, q0):
     """``(every waypoint within 0.1 mm / 0.1 deg by FK and inside the limits, largest step from q0 on)``."""
     qt = torch.from_numpy(np.ascontiguousarray(q))
@@ -118,12 +101,12 @@ def _check(robot, T, q, q0):
     return ok, float(steps)
 
 
-def test_optimisation_follows_a_redundant_path_the_waypoint_chain_cannot(monkeypatch):
+def test_optimisation_follows_a_redundant_path_the_waypoint_chain_cannot(monkeypatch, xarm7_circle_37):
     import nik.paths.solve as P
 
     monkeypatch.setattr(P, "_smooth", lambda *a: True)  # the chain alone: no global search...
     monkeypatch.setattr(P, "_flatten", lambda run, q, *a: q)  # ...and no 2 deg flattening (solve_path's own rescues)
-    robot, q0, T = _xarm7_circle()
+    robot, q0, T = xarm7_circle_37
     max_step = math.radians(3.0)
     solver = nik.IKSolver(robot)
     with warnings.catch_warnings():
@@ -243,10 +226,10 @@ def test_posture_rows_match_finite_differences():
     np.testing.assert_allclose(g, -J.T @ r, atol=1e-6)
 
 
-def test_q_rest_pulls_the_optimised_path_nearer():
+def test_q_rest_pulls_the_optimised_path_nearer(xarm7_circle_37):
     """The whole-path optimisation of a redundant arm's path with a posture ends nearer it than without (the
     self-motion moves), with every waypoint still within the tolerances (FK) and every step within max_step."""
-    robot, q0, T = _xarm7_circle()
+    robot, q0, T = xarm7_circle_37
     m = model_of(robot)
     Tn = np.ascontiguousarray(T.numpy())
     with warnings.catch_warnings():
