@@ -254,11 +254,10 @@ def _starts(robot, plan, T: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.n
             T64 = np.ascontiguousarray(T, dtype=np.float64)
             extra = packed.ranked_hypotheses(model.G, model.joints, T64, plan.tol_pos, plan.tol_rot,
                                              Tin=np.ascontiguousarray(Tn, dtype=np.float64))[0]  # fmt: skip
-            count = np.full(k, extra.shape[1], dtype=np.int64)
         else:
             with torch.no_grad():
                 extra = _numpy(plan.net.hypotheses(torch.from_numpy(np.ascontiguousarray(Tn)))).astype(np.float64)
-            count = np.full(k, extra.shape[1], dtype=np.int64)
+        count = np.full(k, extra.shape[1], dtype=np.int64)
     starts = np.ascontiguousarray(np.concatenate([q[:, None, :], extra], axis=1))
     return starts, count + 1
 
