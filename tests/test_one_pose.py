@@ -206,3 +206,124 @@ def test_threads_share_a_solver_on_the_one_pose_path():
     with warnings.catch_warnings(), ThreadPoolExecutor(2) as pool:
         together = list(pool.map(lambda i: solver.solve(T[i]).q, range(16)))
     assert all(torch.equal(a, b) for a, b in zip(alone, together, strict=True))
+
+
+def _kept_ways():
+    """Ways a caller keeps something of a tensor pose's result: each takes the result and returns what is kept."""
+    return {
+        "result": lambda r: r,
+        "q": lambda r: r.q,
+        "success": lambda r: r.success,
+        "slice": lambda r: r.q[:, :3],
+        "view": lambda r: r.q.view(-1),
+        "detach": lambda r: r.q.detach(),
+        "data": lambda r: r.q.data,
+        "numpy": lambda r: r.q.numpy(),
+        "asarray": lambda r: np.asarray(r.success),
+        "storage": lambda r: r.q.untyped_storage(),
+        "from_dlpack": lambda r: torch.from_dlpack(r.q),
+        "np_from_dlpack": lambda r: np.from_dlpack(r.q),
+        "dlpack_capsule": lambda r: torch.utils.dlpack.from_dlpack(torch.utils.dlpack.to_dlpack(r.q)),
+        "pos_err": lambda r: r.pos_err,
+        "iterations_slice": lambda r: r.iterations[:1],
+        "reachable_numpy": lambda r: r.reachable.numpy(),
+        "replace": lambda r: dataclasses.replace(r),
+        "as_numpy": lambda r: r.numpy(),
+        "list": lambda r: [r],
+    }
+
+
+def _values(kept):
+    """A copy of the values of something kept from a result."""
+    if isinstance(kept, IKResult):
+        return np.asarray(kept.q).copy(), np.asarray(kept.success).copy()
+    if isinstance(kept, list):
+        return [_values(k) for k in kept]
+    if isinstance(kept, torch.UntypedStorage):
+        return kept.tolist()
+    if isinstance(kept, torch.Tensor):
+        return kept.detach().clone().numpy()
+    return np.array(kept, copy=True)
+
+
+def _same_values(a, b):
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same_values(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, tuple):
+        return all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    return np.array_equal(a, b)
+
+
+def _in_slot(solver, res) -> bool:
+    """Whether ``res.q`` lies in one of the solver's output slots (:mod:`nik.ik.backends.one_pose`)."""
+    slots = [o for e in solver._one.values() if e for o in e.outs]
+    return any(o.buf.ctypes.data <= res.q.data_ptr() < o.buf.ctypes.data + o.buf.nbytes for o in slots)
+
+
+@pytest.mark.parametrize("way", list(_kept_ways()))
+def test_what_a_caller_keeps_of_a_tensor_result_never_changes_after_later_calls(way):
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 10, seed=13)
+    T[1:9, 0, 3] += 3.0  # the later poses out of reach: every field of their answers differs (LM's best effort)
+    solver.solve(T[9])  # the entry and its output slots made
+    kept = _kept_ways()[way](solver.solve(T[0]))
+    then = _values(kept)
+    reused = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        for i in range(1, 9):  # later calls, their results dropped: the slots are taken again
+            res = solver.solve(T[i])
+            reused += _in_slot(solver, res)
+            _assert_same(res, _general(solver, T[i]))
+            del res
+    assert reused == 8
+    assert _same_values(_values(kept), then)
+
+
+@pytest.mark.parametrize(
+    "change",
+    ["squeeze_", "unsqueeze_success", "transpose_", "as_strided_", "requires_grad_", "grad", "success_grad",
+     "share_memory_", "set_", "mul_"],
+)  # fmt: skip
+def test_a_dropped_tensor_result_changed_by_its_caller_leaves_later_results_as_made(change):
+    robot = nik.load_robot("ur5")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 8, seed=14)
+    solver.solve(T[7])
+    res = solver.solve(T[0])
+    q, ok = res.q, res.success
+    {
+        "squeeze_": lambda: q.squeeze_(0),
+        "unsqueeze_success": lambda: ok.unsqueeze_(0),
+        "transpose_": lambda: q.transpose_(0, 1),
+        "as_strided_": lambda: q.as_strided_((1, robot.dof - 1), (robot.dof, 1), 1),
+        "requires_grad_": lambda: q.requires_grad_(True),
+        "grad": lambda: setattr(q, "grad", torch.ones_like(q)),
+        "success_grad": lambda: setattr(ok, "grad", torch.ones_like(ok)),
+        "share_memory_": lambda: q.share_memory_(),
+        "set_": lambda: q.set_(torch.zeros(1, robot.dof, dtype=torch.float64)),
+        "mul_": lambda: q.mul_(0.0),
+    }[change]()
+    del res, q, ok
+    for i in range(1, 7):
+        res = solver.solve(T[i])
+        _assert_same(res, _general(solver, T[i]))
+        assert not res.q.requires_grad and res.q.grad is None and res.success.grad is None
+        assert res.q.is_contiguous() and res.success.shape == (1,)
+        del res
+
+
+def test_a_loop_keeping_its_previous_result_reuses_the_output_slots():
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 12, seed=15)
+    res, previous, addresses = solver.solve(T[11]), [], set()
+    for i in range(11):
+        res = solver.solve(T[i])  # the previous result is held while this call runs
+        addresses.add(res.q.data_ptr())
+        assert _in_slot(solver, res)
+        previous.append(res.q.clone())
+        _assert_same(res, _general(solver, T[i]))
+    assert len(addresses) == 2  # two slots, taken in turn
+    assert torch.equal(res.q, previous[-1])
