@@ -281,37 +281,38 @@ def test_what_a_caller_keeps_of_a_tensor_result_never_changes_after_later_calls(
     assert _same_values(_values(kept), then)
 
 
-@pytest.mark.parametrize(
-    "change",
-    ["squeeze_", "unsqueeze_success", "transpose_", "as_strided_", "requires_grad_", "grad", "success_grad",
-     "share_memory_", "set_", "mul_"],
-)  # fmt: skip
+_CHANGES = {  # what a caller may do to a result's q and success before dropping it
+    "squeeze_": lambda q, ok: q.squeeze_(0),
+    "unsqueeze_success": lambda q, ok: ok.unsqueeze_(0),
+    "transpose_": lambda q, ok: q.transpose_(0, 1),
+    "as_strided_": lambda q, ok: q.as_strided_((1, q.shape[1] - 1), (q.shape[1], 1), 1),
+    "requires_grad_": lambda q, ok: q.requires_grad_(True),
+    "grad": lambda q, ok: setattr(q, "grad", torch.ones_like(q)),
+    "success_grad": lambda q, ok: setattr(ok, "grad", torch.ones_like(ok)),
+    "share_memory_": lambda q, ok: q.share_memory_(),
+    "set_": lambda q, ok: q.set_(torch.zeros(q.shape, dtype=torch.float64)),
+    "mul_": lambda q, ok: q.mul_(0.0),
+}
+
+
+@pytest.mark.parametrize("change", list(_CHANGES))
 def test_a_dropped_tensor_result_changed_by_its_caller_leaves_later_results_as_made(change):
     robot = nik.load_robot("ur5")
     solver = nik.IKSolver(robot)
     T = _poses(robot, 8, seed=14)
     solver.solve(T[7])
     res = solver.solve(T[0])
-    q, ok = res.q, res.success
-    {
-        "squeeze_": lambda: q.squeeze_(0),
-        "unsqueeze_success": lambda: ok.unsqueeze_(0),
-        "transpose_": lambda: q.transpose_(0, 1),
-        "as_strided_": lambda: q.as_strided_((1, robot.dof - 1), (robot.dof, 1), 1),
-        "requires_grad_": lambda: q.requires_grad_(True),
-        "grad": lambda: setattr(q, "grad", torch.ones_like(q)),
-        "success_grad": lambda: setattr(ok, "grad", torch.ones_like(ok)),
-        "share_memory_": lambda: q.share_memory_(),
-        "set_": lambda: q.set_(torch.zeros(1, robot.dof, dtype=torch.float64)),
-        "mul_": lambda: q.mul_(0.0),
-    }[change]()
-    del res, q, ok
+    _CHANGES[change](res.q, res.success)
+    del res
+    reused = 0
     for i in range(1, 7):
         res = solver.solve(T[i])
+        reused += _in_slot(solver, res)
         _assert_same(res, _general(solver, T[i]))
         assert not res.q.requires_grad and res.q.grad is None and res.success.grad is None
         assert res.q.is_contiguous() and res.success.shape == (1,)
         del res
+    assert reused == 6  # the other slot
 
 
 def test_a_loop_keeping_its_previous_result_reuses_the_output_slots():

@@ -116,9 +116,10 @@ def entry(solver, tol_pos, tol_rot, seed, f32: bool):
             return None
     dtype = torch.float32 if f32 else torch.float64
     a0, a1, a2, a3 = compiled_backend().driver_args(plan, model, dtype, packed)
+    outs = [] if f32 else [_Outs(model.dof) for _ in range(SLOTS)]
     return Entry(
         model, a0, a1, a2, a3, plan.source, packed is not None and plan.net_in_arm_frame, f32, plan.tol_pos,
-        plan.tol_rot, solver.self_collision is None, generation, [] if f32 else [_Outs(model.dof) for _ in range(SLOTS)],
+        plan.tol_rot, solver.self_collision is None, generation, outs,
     )  # fmt: skip
 
 
