@@ -15,14 +15,25 @@ and after other work between calls (a control loop) each of those steps runs in 
    plan and the robot's model gathered once per solver settings, tolerances, seed and dtype (an :class:`Entry`, kept
    on the solver, which drops its entries when a setting changes: ``IKSolver.__setattr__``);
 4. the :class:`~nik.ik.result.IKResult`: numpy arrays for a numpy pose; for a tensor pose a
-   :class:`~nik.ik.result.TensorResult`, whose arrays become tensors (``torch.from_numpy``, sharing memory) when
-   first read. Of the ways measured (``benchmarks/torch_result.py``, ``benchmarks/results/torch_result.md``) this is
-   the cheapest: the six made at once cost 1-5 us more for the two a control loop reads, made before the kernel
-   call 1-9 us more, and the outputs allocated as tensors (``torch.empty``) with the kernel writing into their
-   ``Tensor.numpy()`` views 27-44 us more warm and 59-75 us more cold (0.5 ms idle; ur5, panda): each torch call
-   costs microseconds, ``torch.empty`` more than ``torch.from_numpy``. What is left of a torch pose's extra cost
-   over a numpy pose is torch's own: the pose's attributes read (dtype, device, shape, contiguity, negation,
-   address) and the two tensors made when read.
+   :class:`~nik.ik.result.TensorResult`. A float64 contiguous tensor pose's call writes into one of the entry's two
+   output slots (:class:`_Outs`, made with the entry while torch is warm: one buffer, the kernel's six outputs as its
+   numpy views, ``q`` and ``success`` as tensors on it, the pose's copy): the result's ``q`` and ``success`` are the
+   slot's tensors, the other four fields tensors made when first read (``torch.from_numpy``), and the slot goes back
+   to the entry. A call takes a slot only when nothing but the slot refers to it (:meth:`_Outs.state`: the Python
+   reference counts of its objects, the storage's use count; a result, field, view, slice, ``Tensor.numpy()`` array,
+   DLPack capsule or storage object held keeps it), and drops one whose tensors are no longer as made (an in-place
+   operation of values or shape, ``requires_grad``, a ``grad``): what a caller keeps never changes, a loop that keeps
+   only its previous result takes the two slots in turn, and where both are held (results kept, other threads) the
+   call's arrays are new and the tensors made when first read (every float32 pose too). Two slots per entry: a loop's
+   previous result is still held while its next call runs. Measured (``benchmarks/torch_result.py``, results in
+   ``benchmarks/results/cold_pose_w40.md``): each torch call costs microseconds in cold caches (the first of a call
+   most), ``torch.from_numpy`` more than the few attribute reads of the slot's check; of the ways to hand the tensors
+   back measured before, made on first read was the cheapest (all six made at once cost 1-5 us more, made before
+   the kernel call 1-9 us more, ``torch.empty`` outputs written through their ``Tensor.numpy()`` views 27-75 us
+   more), and the slots are cheaper still: in loops of one kind of call (``--order blocks``), the torch pose's extra
+   time over a numpy pose with ``q`` and ``success`` read fell from +7 to +21 us to +1 to +6 us call after call and
+   from +21 to +31 us to +7 to +13 us after 0.5 ms idle (ur5, panda; the check's four attribute reads of the tensors'
+   state about 3-5 us of it cold).
 
 The answer is the general path's, bit for bit (the same kernel on the same arguments: ``tests/test_one_pose.py``),
 the unreachable warning included. Anything else returns None and the general path takes the call: a pose in
