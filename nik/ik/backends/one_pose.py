@@ -30,10 +30,11 @@ and after other work between calls (a control loop) each of those steps runs in 
    most), ``torch.from_numpy`` more than the few attribute reads of the slot's check; of the ways to hand the tensors
    back measured before, made on first read was the cheapest (all six made at once cost 1-5 us more, made before
    the kernel call 1-9 us more, ``torch.empty`` outputs written through their ``Tensor.numpy()`` views 27-75 us
-   more), and the slots are cheaper still: in loops of one kind of call (``--order blocks``), the torch pose's extra
-   time over a numpy pose with ``q`` and ``success`` read fell from +7 to +21 us to +1 to +6 us call after call and
-   from +21 to +31 us to +7 to +13 us after 0.5 ms idle (ur5, panda; the check's four attribute reads of the tensors'
-   state about 3-5 us of it cold).
+   more), and the slots are cheaper still: in loops of one kind of call (``--order blocks``, medians of 4 rounds),
+   the torch pose's extra time over a numpy pose with ``q`` and ``success`` read fell from +6.1 (ur5) and +13.8 us
+   (panda) to +1.6 and +5.9 us call after call, from +27.2 and +26.3 us to +13.5 and +12.6 us after 0.5 ms idle;
+   the slot's check of the tensors' state (version, ``requires_grad``, two ``grad``) is about 3-5 us of that cold,
+   the pose's six attribute reads most of the rest.
 
 The answer is the general path's, bit for bit (the same kernel on the same arguments: ``tests/test_one_pose.py``),
 the unreachable warning included. Anything else returns None and the general path takes the call: a pose in
