@@ -8,6 +8,7 @@ import copy
 import dataclasses
 import pickle
 import warnings
+import weakref
 
 import numpy as np
 import pytest
@@ -230,6 +231,7 @@ def _kept_ways():
         "replace": lambda r: dataclasses.replace(r),
         "as_numpy": lambda r: r.numpy(),
         "list": lambda r: [r],
+        "weakref": lambda r: weakref.ref(r.q),
     }
 
 
@@ -239,6 +241,8 @@ def _values(kept):
         return np.asarray(kept.q).copy(), np.asarray(kept.success).copy()
     if isinstance(kept, list):
         return [_values(k) for k in kept]
+    if isinstance(kept, weakref.ref):
+        return _values(kept())
     if isinstance(kept, torch.UntypedStorage):
         return kept.tolist()
     if isinstance(kept, torch.Tensor):
@@ -328,3 +332,12 @@ def test_a_loop_keeping_its_previous_result_reuses_the_output_slots():
         _assert_same(res, _general(solver, T[i]))
     assert len(addresses) == 2  # two slots, taken in turn
     assert torch.equal(res.q, previous[-1])
+
+
+def test_a_copied_output_slot_is_a_new_free_one():
+    from nik.ik.backends.one_pose import _Outs
+
+    slot = _Outs(7)
+    for other in (copy.deepcopy(slot), pickle.loads(pickle.dumps(slot))):
+        assert other.state() == 0 and other.q.shape == (1, 7)
+        assert other.buf.ctypes.data != slot.buf.ctypes.data and other.cd != slot.cd

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import sys
 import warnings
+import weakref
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -139,6 +140,7 @@ SLOTS = 2  # output slots kept per entry: a loop's previous result is still held
 _USES = torch._C._storage_Use_Count
 _new = object.__new__
 _refs = sys.getrefcount
+_weakrefs = weakref.getweakrefcount
 
 
 class _Outs:
@@ -148,7 +150,7 @@ class _Outs:
     and the pose's copy ``T: (1, 4, 4)``; made with the entry (torch warm), taken by a call only while :meth:`state`
     is 0."""
 
-    __slots__ = ("buf", "base", "q", "ok", "arrays", "T", "st", "cd", "objs", "refs", "uses")
+    __slots__ = ("buf", "base", "q", "ok", "arrays", "T", "st", "cd", "objs", "weak", "refs", "uses")
 
     def __init__(self, dof: int):
         n = 8 * dof
@@ -165,20 +167,26 @@ class _Outs:
         self.st = self.base.untyped_storage()  # the storage's Python object: torch hands out this one while it lives
         self.cd = self.st._cdata
         self.objs = (self.q, self.ok, self.base, self.st, self.buf, self.arrays, *self.arrays)
+        self.weak = (self.q, self.ok, self.base, self.st)
         self.refs, self.uses = self.counts(), _USES(self.cd)
 
+    def __reduce__(self):
+        """A copy (``copy``, ``pickle`` of a solver) is a new slot: ``cd`` is an address in this process."""
+        return _Outs, (self.q.shape[1],)
+
     def counts(self) -> tuple:
-        """The Python reference counts of the slot's objects: the slot's own while nothing else holds them."""
-        return tuple(map(_refs, self.objs))
+        """The Python reference counts of the slot's objects (the slot's own while nothing else holds them) and the
+        weak references to its tensors and storage (none while nothing else holds one)."""
+        return *map(_refs, self.objs), *map(_weakrefs, self.weak)
 
     def state(self) -> int:
-        """0 (free) when nothing but the slot refers to its objects or memory: no Python reference (a result, a field
-        or a tensor made of a field on first read, ``_arrays``; a holder of a tensor from C++, such as a DLPack
-        capsule taken, holds its Python object too), no other tensor on the storage (a view, a slice, ``detach()``,
-        ``.data``, ``Tensor.numpy()``), the storage's memory still the buffer's (not moved by ``share_memory_()``:
-        buf's count drops); 1 (held) otherwise; 2 (changed: never to be used again) when the tensors are no longer as
-        made: a version above 0 (an in-place operation of values or shape on either: they share one version
-        counter), ``requires_grad`` or a ``grad``."""
+        """0 (free) when nothing but the slot refers to its objects or memory: no Python reference, weak or not (a
+        result, a field or a tensor made of a field on first read, ``_arrays``; a holder of a tensor from C++, such as
+        a DLPack capsule taken, holds its Python object too), no other tensor on the storage (a view, a slice,
+        ``detach()``, ``.data``, ``Tensor.numpy()``), the storage's memory still the buffer's (not moved by
+        ``share_memory_()``: buf's count drops); 1 (held) otherwise; 2 (changed: never to be used again) when the
+        tensors are no longer as made: a version above 0 (an in-place operation of values or shape on either: they
+        share one version counter), ``requires_grad`` or a ``grad``."""
         if self.counts() != self.refs or _USES(self.cd) != self.uses:
             return 1
         q = self.q
