@@ -186,7 +186,8 @@ class _Outs:
         ``detach()``, ``.data``, ``Tensor.numpy()``), the storage's memory still the buffer's (not moved by
         ``share_memory_()``: buf's count drops); 1 (held) otherwise; 2 (changed: never to be used again) when the
         tensors are no longer as made: a version above 0 (an in-place operation of values or shape on either: they
-        share one version counter), ``requires_grad`` or a ``grad``."""
+        share one version counter), ``requires_grad`` or a ``grad``. Not looked for: Python attributes set on a
+        dropped result's tensor by hand, and raw addresses (``data_ptr()``) kept past the tensor's life."""
         if self.counts() != self.refs or _USES(self.cd) != self.uses:
             return 1
         q = self.q
