@@ -188,8 +188,8 @@ class _Outs:
         tensors are no longer as made: a version above 0 (an in-place operation of values or shape on either: they
         share one version counter), ``requires_grad`` or a ``grad``. Not looked for: Python attributes set on a
         dropped result's tensor by hand, and raw addresses (``data_ptr()``) kept past the tensor's life."""
-        if self.counts() != self.refs or _USES(self.cd) != self.uses:
-            return 1
+        if (*map(_refs, self.objs), *map(_weakrefs, self.weak)) != self.refs or _USES(self.cd) != self.uses:
+            return 1  # the first test is counts(), written out: a call fewer (1-4 us less after 0.5 ms idle)
         q = self.q
         return 0 if q._version == 0 and not q.requires_grad and q.grad is None and self.ok.grad is None else 2
 
