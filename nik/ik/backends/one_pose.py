@@ -30,11 +30,12 @@ and after other work between calls (a control loop) each of those steps runs in 
    most), ``torch.from_numpy`` more than the few attribute reads of the slot's check; of the ways to hand the tensors
    back measured before, made on first read was the cheapest (all six made at once cost 1-5 us more, made before
    the kernel call 1-9 us more, ``torch.empty`` outputs written through their ``Tensor.numpy()`` views 27-75 us
-   more), and the slots are cheaper still: in loops of one kind of call (``--order blocks``, medians of 4 rounds),
-   the torch pose's extra time over a numpy pose with ``q`` and ``success`` read fell from +6.1 (ur5) and +13.8 us
-   (panda) to +1.6 and +5.9 us call after call, from +27.2 and +26.3 us to +13.5 and +12.6 us after 0.5 ms idle;
-   the slot's check of the tensors' state (version, ``requires_grad``, two ``grad``) is about 3-5 us of that cold,
-   the pose's six attribute reads most of the rest.
+   more), and the slots are cheaper still: in loops of one kind of call (``--order blocks``, three runs of 4 rounds),
+   the torch pose's extra time over a numpy pose with ``q`` and ``success`` read went from +8.0 to +11.2 us (ur5)
+   and +16.9 to +20.8 us (panda) to +1.6 to +3.0 and +6.0 to +9.3 us call after call, from +21.2 to +23.5 and +23.4
+   to +28.3 us to +8.4 to +10.0 and +8.4 to +14.3 us after 0.5 ms idle; the slot's check of the tensors' state
+   (version, ``requires_grad``, two ``grad``) is about 3-5 us of that cold, the pose's six attribute reads most of
+   the rest.
 
 The answer is the general path's, bit for bit (the same kernel on the same arguments: ``tests/test_one_pose.py``),
 the unreachable warning included. Anything else returns None and the general path takes the call: a pose in
