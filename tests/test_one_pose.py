@@ -341,3 +341,24 @@ def test_a_copied_output_slot_is_a_new_free_one():
     for other in (copy.deepcopy(slot), pickle.loads(pickle.dumps(slot))):
         assert other.state() == 0 and other.q.shape == (1, 7)
         assert other.buf.ctypes.data != slot.buf.ctypes.data and other.cd != slot.cd
+
+
+def test_threads_taking_the_output_slots_at_once_get_their_own_answers():
+    from concurrent.futures import ThreadPoolExecutor
+
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 24, seed=16)
+    expected = [solver.solve(T[i]).q.clone() for i in range(24)]
+
+    def run(start):
+        wrong = 0
+        for k in range(48):
+            i = (start + k) % 24
+            res = solver.solve(T[i])  # dropped at once: the slots go from thread to thread
+            wrong += not torch.equal(res.q, expected[i])
+            del res
+        return wrong
+
+    with ThreadPoolExecutor(3) as pool:
+        assert list(pool.map(run, (0, 8, 16))) == [0, 0, 0]
