@@ -112,7 +112,8 @@ def measure(name: str, n: int, seed: int, modes: list[str], threads: list[int]) 
                         q, _ = calls[label](i)
                         times[label].append((time.perf_counter_ns() - t) / 1e3)
                         q = q.q if label == "nik torch" else q  # the result, read after the timing
-                        answers[label][i] = np.asarray(q, dtype=np.float64).reshape(-1)
+                        answers[label][i] = np.asarray(q, dtype=np.float64).reshape(-1).copy()  # not kept: a
+                        q = None  # torch pose's output slot is taken again only when nothing refers to it
             for label in labels:
                 succ, outside = score(robot, T, np.stack(answers[label]))
                 rows.append(

@@ -8,6 +8,7 @@ import copy
 import dataclasses
 import pickle
 import warnings
+import weakref
 
 import numpy as np
 import pytest
@@ -206,3 +207,158 @@ def test_threads_share_a_solver_on_the_one_pose_path():
     with warnings.catch_warnings(), ThreadPoolExecutor(2) as pool:
         together = list(pool.map(lambda i: solver.solve(T[i]).q, range(16)))
     assert all(torch.equal(a, b) for a, b in zip(alone, together, strict=True))
+
+
+def _kept_ways():
+    """Ways a caller keeps something of a tensor pose's result: each takes the result and returns what is kept."""
+    return {
+        "result": lambda r: r,
+        "q": lambda r: r.q,
+        "success": lambda r: r.success,
+        "slice": lambda r: r.q[:, :3],
+        "view": lambda r: r.q.view(-1),
+        "detach": lambda r: r.q.detach(),
+        "data": lambda r: r.q.data,
+        "numpy": lambda r: r.q.numpy(),
+        "asarray": lambda r: np.asarray(r.success),
+        "storage": lambda r: r.q.untyped_storage(),
+        "from_dlpack": lambda r: torch.from_dlpack(r.q),
+        "np_from_dlpack": lambda r: np.from_dlpack(r.q),
+        "dlpack_capsule": lambda r: torch.utils.dlpack.from_dlpack(torch.utils.dlpack.to_dlpack(r.q)),
+        "pos_err": lambda r: r.pos_err,
+        "iterations_slice": lambda r: r.iterations[:1],
+        "reachable_numpy": lambda r: r.reachable.numpy(),
+        "replace": lambda r: dataclasses.replace(r),
+        "as_numpy": lambda r: r.numpy(),
+        "list": lambda r: [r],
+        "weakref": lambda r: weakref.ref(r.q),
+    }
+
+
+def _values(kept):
+    """A copy of the values of something kept from a result."""
+    if isinstance(kept, IKResult):
+        return np.asarray(kept.q).copy(), np.asarray(kept.success).copy()
+    if isinstance(kept, list):
+        return [_values(k) for k in kept]
+    if isinstance(kept, weakref.ref):
+        return _values(kept())
+    if isinstance(kept, torch.UntypedStorage):
+        return kept.tolist()
+    if isinstance(kept, torch.Tensor):
+        return kept.detach().clone().numpy()
+    return np.array(kept, copy=True)
+
+
+def _same_values(a, b):
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same_values(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, tuple):
+        return all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    return np.array_equal(a, b)
+
+
+def _in_slot(solver, res) -> bool:
+    """Whether ``res.q`` lies in one of the solver's output slots (:mod:`nik.ik.backends.one_pose`)."""
+    slots = [o for e in solver._one.values() if e for o in e.outs]
+    return any(o.buf.ctypes.data <= res.q.data_ptr() < o.buf.ctypes.data + o.buf.nbytes for o in slots)
+
+
+@pytest.mark.parametrize("way", list(_kept_ways()))
+def test_what_a_caller_keeps_of_a_tensor_result_never_changes_after_later_calls(way):
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 10, seed=13)
+    T[1:9, 0, 3] += 3.0  # the later poses out of reach: every field of their answers differs (LM's best effort)
+    solver.solve(T[9])  # the entry and its output slots made
+    kept = _kept_ways()[way](solver.solve(T[0]))
+    then = _values(kept)
+    reused = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        for i in range(1, 9):  # later calls, their results dropped: the slots are taken again
+            res = solver.solve(T[i])
+            reused += _in_slot(solver, res)
+            _assert_same(res, _general(solver, T[i]))
+            del res
+    assert reused == 8
+    assert _same_values(_values(kept), then)
+
+
+_CHANGES = {  # what a caller may do to a result's q and success before dropping it
+    "squeeze_": lambda q, ok: q.squeeze_(0),
+    "unsqueeze_success": lambda q, ok: ok.unsqueeze_(0),
+    "transpose_": lambda q, ok: q.transpose_(0, 1),
+    "as_strided_": lambda q, ok: q.as_strided_((1, q.shape[1] - 1), (q.shape[1], 1), 1),
+    "requires_grad_": lambda q, ok: q.requires_grad_(True),
+    "grad": lambda q, ok: setattr(q, "grad", torch.ones_like(q)),
+    "success_grad": lambda q, ok: setattr(ok, "grad", torch.ones_like(ok)),
+    "share_memory_": lambda q, ok: q.share_memory_(),
+    "set_": lambda q, ok: q.set_(torch.zeros(q.shape, dtype=torch.float64)),
+    "mul_": lambda q, ok: q.mul_(0.0),
+}
+
+
+@pytest.mark.parametrize("change", list(_CHANGES))
+def test_a_dropped_tensor_result_changed_by_its_caller_leaves_later_results_as_made(change):
+    robot = nik.load_robot("ur5")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 8, seed=14)
+    solver.solve(T[7])
+    res = solver.solve(T[0])
+    _CHANGES[change](res.q, res.success)
+    del res
+    reused = 0
+    for i in range(1, 7):
+        res = solver.solve(T[i])
+        reused += _in_slot(solver, res)
+        _assert_same(res, _general(solver, T[i]))
+        assert not res.q.requires_grad and res.q.grad is None and res.success.grad is None
+        assert res.q.is_contiguous() and res.success.shape == (1,)
+        del res
+    assert reused == 6  # the other slot
+
+
+def test_a_loop_keeping_its_previous_result_reuses_the_output_slots():
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 12, seed=15)
+    res, previous, addresses = solver.solve(T[11]), [], set()
+    for i in range(11):
+        res = solver.solve(T[i])  # the previous result is held while this call runs
+        addresses.add(res.q.data_ptr())
+        assert _in_slot(solver, res)
+        previous.append(res.q.clone())
+        _assert_same(res, _general(solver, T[i]))
+    assert len(addresses) == 2  # two slots, taken in turn
+    assert torch.equal(res.q, previous[-1])
+
+
+def test_a_copied_output_slot_is_a_new_free_one():
+    from nik.ik.backends.one_pose import _Outs
+
+    slot = _Outs(7)
+    for other in (copy.deepcopy(slot), pickle.loads(pickle.dumps(slot))):
+        assert other.state() == 0 and other.q.shape == (1, 7)
+        assert other.buf.ctypes.data != slot.buf.ctypes.data and other.cd != slot.cd
+
+
+def test_threads_taking_the_output_slots_at_once_get_their_own_answers():
+    from concurrent.futures import ThreadPoolExecutor
+
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot)
+    T = _poses(robot, 24, seed=16)
+    expected = [solver.solve(T[i]).q.clone() for i in range(24)]
+
+    def run(start):
+        wrong = 0
+        for k in range(48):
+            i = (start + k) % 24
+            res = solver.solve(T[i])  # dropped at once: the slots go from thread to thread
+            wrong += not torch.equal(res.q, expected[i])
+            del res
+        return wrong
+
+    with ThreadPoolExecutor(3) as pool:
+        assert list(pool.map(run, (0, 8, 16))) == [0, 0, 0]
