@@ -27,8 +27,9 @@ any iteration), taken to the pose first by LM without the collision rows (the po
 the call's goal, its iteration limits; its answer may collide), then on from there with them: an iteration without
 the rows costs a small part of one with them (which a configuration near obstacles dominates), and the collision
 LM from a pose reached ends most targets in a few iterations, as from a colliding answer (measured on the built-in
-panda's scene, 1,000 targets, seeds 0-2: the restarts' pass 0.69-0.92 x the time, success 99.7 %, 99.7 %, 99.0 %
-against 99.7 %, 99.6 %, 98.9 %).
+panda's scene, 1,000 targets, seeds 0-2: the pass with the restarts 0.70-0.92 x the time, the whole solve
+0.81-0.96 x, success 99.7 %, 99.7 %, 99.0 % against 99.7 %, 99.6 %, 98.9 %; the 116-sphere fit of example-robot-data's
+panda: the whole solve 0.92-1.13 x, success equal or one target more).
 The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
 reached with the spheres overlapping by millimetres beats a free configuration far from the pose). A start that
 ends free but held off the goal by the margin rows (the goal lies nearer an obstacle than ``margin``), with a
