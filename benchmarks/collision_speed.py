@@ -43,25 +43,43 @@ class _Timer:
         self.spent: dict[str, float] = {}
         self.calls: dict[str, int] = {}
         self.items: dict[str, int] = {}  # targets re-solved, targets blocked
+        self.iters: dict[str, list] = {}  # the re-solve's iterations per target, by pass
 
     def wrap(self, owner, attr: str, name: str):
         fn = getattr(owner, attr)
 
         def timed(*a, **k):
             t = time.process_time()
+            label = _pass(name, a)
             try:
                 got = fn(*a, **k)
                 if name.startswith("blocked"):
-                    self.items[name] = self.items.get(name, 0) + int(np.sum(got))
+                    self.items[label] = self.items.get(label, 0) + int(np.sum(got))
                 return got
             finally:
                 if name.startswith("re-solve"):
-                    self.items[name] = self.items.get(name, 0) + len(a[2])
-                self.spent[name] = self.spent.get(name, 0.0) + time.process_time() - t
-                self.calls[name] = self.calls.get(name, 0) + 1
+                    self.items[label] = self.items.get(label, 0) + len(a[2])
+                    its = np.asarray(a[-3])  # the kernel's iterations (B,), filled by the call
+                    self.iters[label] = self.iters.get(label, []) + its.tolist()
+                self.spent[label] = self.spent.get(label, 0.0) + time.process_time() - t
+                self.calls[label] = self.calls.get(label, 0) + 1
 
         setattr(owner, attr, timed)
         return fn
+
+
+def _pass(name: str, a) -> str:
+    """The re-solve's pass of a :func:`nik.kernels.collision_lm.collision_lm` call by its arguments (given starts,
+    uniform restarts, margin): from the answer alone (1 start, no restarts, margin > 0), the hypotheses and the
+    restarts, or margin 0 (one start, none); other stages keep their name."""
+    if not name.startswith("re-solve"):
+        return name
+    starts, restarts, margin = a[3], np.asarray(a[9]), float(a[21])
+    if margin == 0.0:
+        return "re-solve: margin 0, from the last answer"
+    if restarts.sum() == 0 and starts.shape[1] == 1:
+        return "re-solve: from the answer alone"
+    return "re-solve: hypotheses, then uniform restarts"
 
 
 def main(argv=None) -> None:
@@ -157,11 +175,14 @@ def _stages(robot, safe, T, B: int) -> None:
     total = time.process_time() - c
     inner = sum(timer.spent.values())
     print(f"\nstages of one call ({B} targets), CPU us per target (of all targets):")
-    print("| stage | us/target | calls | targets |")
-    print("|---|---|---|---|")
-    print(f"| pipeline without a world (backend) | {1e6 * (total - inner) / B:.1f} | 1 | {B} |")
+    print("| stage | us/target | calls | targets | iterations (largest 3 targets) |")
+    print("|---|---|---|---|---|")
+    print(f"| pipeline without a world (backend) and Python between the stages | {1e6 * (total - inner) / B:.1f} | 1 "
+          f"| {B} | |")  # fmt: skip
     for name, spent in timer.spent.items():
-        print(f"| {name} | {1e6 * spent / B:.1f} | {timer.calls[name]} | {timer.items.get(name, '')} |")
+        its = sorted(timer.iters.get(name, []), reverse=True)
+        it = f"{sum(its)} ({', '.join(map(str, its[:3]))})" if its else ""
+        print(f"| {name} | {1e6 * spent / B:.1f} | {timer.calls[name]} | {timer.items.get(name, '')} | {it} |")
     print(f"| total | {1e6 * total / B:.1f} | | |")
     print(f"success {np.mean(res.success):.1%}, collision-free {np.mean(res.collision_free):.1%}")
 

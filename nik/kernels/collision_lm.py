@@ -23,7 +23,13 @@ hypotheses or the closed form's other branches, ranked (:func:`_rank_starts`) on
 nearest the pose first; the colliding ones dropped (a colliding hypothesis mostly lands on a colliding answer; LM
 from it would spend the budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the
 collision-free draw nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before
-any iteration).
+any iteration), taken to the pose first by LM without the collision rows (the pose LM of :mod:`nik.kernels.lm`,
+the call's goal, its iteration limits; its answer may collide), then on from there with them: an iteration without
+the rows costs a small part of one with them (which a configuration near obstacles dominates), and the collision
+LM from a pose reached ends most targets in a few iterations, as from a colliding answer (measured on the built-in
+panda's scene, 1,000 targets, seeds 0-2: the pass with the restarts 0.70-0.92 x the time, the whole solve
+0.81-0.96 x, success 99.7 %, 99.7 %, 99.0 % against 99.7 %, 99.6 %, 98.9 %; the 116-sphere fit of example-robot-data's
+panda: the whole solve 0.92-1.13 x, success equal or one target more).
 The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
 reached with the spheres overlapping by millimetres beats a free configuration far from the pose). A start that
 ends free but held off the goal by the margin rows (the goal lies nearer an obstacle than ``margin``), with a
@@ -67,7 +73,9 @@ from nik.kernels.lm import (
     _copy,
     _draw,
     _eval,
+    _lm_one_bounded,
     _score,
+    _work_size,
 )
 from nik.kernels.lm_step import _damped_step, _judge, _stalled
 
@@ -198,6 +206,7 @@ def collision_lm(
     lb = np.empty((body_start.shape[0] - 1, 4))  # the links' bounds, once per call (the broad phase)
     link_bounds(spheres, body_start, lb)
     wf, wi = rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules)  # the rows' scratch, once per call
+    work = np.empty(_work_size(n))  # the pose-only LM's scratch (the uniform starts' first leg)
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
@@ -236,6 +245,11 @@ def collision_lm(
                         _copy(qc, qs)
                 if best_draw == math.inf:
                     continue
+                # to the pose first by LM without the collision rows (an iteration a tenth of the cost): the
+                # collision LM then starts near the pose, as from a colliding answer
+                its, _, _, _ = _lm_one_bounded(G, joints, Tt[b], qs, bnd, mode, opts, iopts, 0, rng, qp, work)
+                total += its
+                _copy(qp, qs)
             S, p_e, r_e, near, done, its = _descend(
                 G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
                 w_capsules, self_on, margin, w2, lb, opts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
