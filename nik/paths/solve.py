@@ -153,6 +153,11 @@ SEARCH_PULL_CAP = math.radians(0.5)
 #: The network's hypotheses (or uniform LM answers) per waypoint that the tracks drift towards (at the middle and the
 #: last waypoint), and how far apart two of them must be (largest joint difference, radians) to count twice.
 SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
+#: Among obstacles, the waypoints (fractions of the path) whose answers the tracks drift towards.
+SEARCH_ANCHORS = (0.25, 0.5, 0.75, 1.0)
+#: Among obstacles, each posture also gets a fast track from the start: this pull, at most this per waypoint (radians,
+#: 3 degrees, under the 7 degree steps a path may take): the self-motion swings away from a box met early.
+SEARCH_FAST_PULL, SEARCH_FAST_CAP = 0.3, math.radians(3.0)
 #: The search's answer replaces the chain's where it reaches more waypoints, closes a loop the chain leaves open, or
 #: (else equal) cuts the largest step by more than this (radians, 0.5 degrees): on a tie the chain stays.
 SEARCH_GAIN = math.radians(0.5)
@@ -251,6 +256,7 @@ def solve_path(
     is_closed = _is_closed(Tn, tol_pos, tol_rot) if closed is None else closed
     run = _Run(plan, model, Tn, q0, reachable, half, modes, rest)
     check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
+    col = None if check is None else check.arguments(robot)[1]
     follows = chain = None
     free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
     closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
@@ -263,21 +269,21 @@ def solve_path(
         q, its, found, source = _closed_form_path(run, is_closed, chain, max_step)
     else:
         q, its, source = _chain_path(run)
-        col = None if check is None else check.arguments(robot)[1]
         if run.refine and not _smooth(run, q, max_step, is_closed, col):
             q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest, col)
         found = None
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
         q, _, _ = polish_path(
-            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest
-        )
+            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest,
+            closed=is_closed, collision=col,
+        )  # fmt: skip
         if not closed_form and check is None:  # among obstacles the search's free candidates stay as they are
             q = _flatten(run, q, its, max_step, is_closed)
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
     if is_closed:
-        q, its = _close_loop(run, q, its, max_step, None if check is None else check.arguments(robot)[1])
+        q, its = _close_loop(run, q, its, max_step, col)
     if run.refine and run.half is None:
         q = _inside_margin(run, q, max_step, check, is_closed)
     pos, rot, within = _final_check(run, q)
@@ -1073,7 +1079,11 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         starts, sources = run.q0[None], ["q_start"]
     else:
         starts, sources = _start_postures(run)
-    postures = _search_postures(run, rest)
+    extra = ()
+    if col is not None:  # the stretch the chain collides on: its ends are anchors
+        hit = np.nonzero(_colliding(model, chain[0], col))[0]
+        extra = (int(hit[0]), int(hit[-1])) if hit.size else ()
+    postures = _search_postures(run, rest, col, extra)
     mid = 0.5 * (model.lo + model.hi)
     K0 = starts.shape[0]
     plain = mid if rest is None else rest
@@ -1081,6 +1091,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     for k in range(K0):
         for target, pull in [(starts[k], SEARCH_PULL), (mid, 0.0), *((p, SEARCH_PULL) for p in postures)]:
             tracks.append((k, target, pull, SEARCH_PULL_CAP))
+        if col is not None:
+            tracks += [(k, p, SEARCH_FAST_PULL, SEARCH_FAST_CAP) for p in postures]
     of = np.array([t[0] for t in tracks])
     q, its, ok = run.tracks(
         run.T, starts[of], np.array([t[1] for t in tracks]), np.array([t[2] for t in tracks]),
@@ -1094,6 +1106,12 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         b_targets = np.stack([x for p in back for x in (mid, p)])
         b_pull = np.tile([PATH_PULL, SEARCH_PULL], len(back))
         b_cap = np.tile([PATH_PULL_CAP, SEARCH_PULL_CAP], len(back))
+        if col is not None and closed:  # a loop's way back to its start: fast tracks from it towards the postures
+            fast = [(k, p) for k in range(K0) for p in postures]
+            b_starts = np.concatenate([b_starts, starts[[k for k, _ in fast]]]) if fast else b_starts
+            b_targets = np.concatenate([b_targets, np.array([p for _, p in fast])]) if fast else b_targets
+            b_pull = np.concatenate([b_pull, np.full(len(fast), SEARCH_FAST_PULL)])
+            b_cap = np.concatenate([b_cap, np.full(len(fast), SEARCH_FAST_CAP)])
         qb, itsb, okb = run.tracks(
             run.T[::-1], b_starts, b_targets, b_pull, b_cap, run.reachable[::-1], run.restarts, backward=True
         )
@@ -1141,21 +1159,30 @@ def _path_cost(q: np.ndarray, ok: np.ndarray, q0: np.ndarray | None, wraps=None,
     return int((~ok).sum()), gap, round(step, 9)
 
 
-def _search_postures(run: _Run, rest: np.ndarray | None) -> list[np.ndarray]:
+def _search_postures(run: _Run, rest: np.ndarray | None, col=None, extra=()) -> list[np.ndarray]:
     """The postures the search's tracks drift towards (beside the middle of the ranges and their own start): ``rest``,
     then distinct answers at the middle and the last waypoint: the network's hypotheses there (ranked by FK,
-    :data:`SEARCH_HYPOTHESES` per waypoint) where the plan has a network, else LM from uniform starts."""
+    :data:`SEARCH_HYPOTHESES` per waypoint) where the plan has a network, else LM from uniform starts. Among obstacles
+    (``col``: the collision arrays of :mod:`nik.ik.collide`) the answers at :data:`SEARCH_ANCHORS` waypoints, every
+    one of the network's hypotheses there (the compiled guess stage's, ranked by FK), those that collide left out:
+    the tracks that go round an obstacle drift towards free postures, and the network's samples of each pose's
+    self-motion are what lets them (without a network: :data:`SEARCH_HYPOTHESES` LM answers from uniform starts), and
+    at the waypoints ``extra`` (where the chain starts and stops colliding: the stretch to go round) first."""
     out = [] if rest is None else [np.asarray(rest, dtype=np.float64)]
     N = run.T.shape[0]
-    at = np.array(sorted({N // 2, N - 1}))
+    anchors = {N // 2, N - 1} if col is None else {int(f * (N - 1)) for f in SEARCH_ANCHORS}
+    at = np.array([*dict.fromkeys([*extra, *sorted(anchors)])])
     hyp = _hypotheses(run, at)
+    per = SEARCH_HYPOTHESES if hyp is None or col is None else hyp.shape[1]
     if hyp is None:
         lm = run.model.lm
         T = np.repeat(run.T[at], SEARCH_HYPOTHESES, axis=0)
         res = lm.solve(T, None, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False)
         hyp = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
-    for h in hyp:
-        for p in h[:SEARCH_HYPOTHESES]:
+    hyp = np.clip(hyp[:, :per], run.model.lo, run.model.hi)
+    free = np.ones(hyp.shape[:2], dtype=bool) if col is None else ~_colliding(run.model, hyp, col)
+    for h, f in zip(hyp, free, strict=True):
+        for p in h[f]:
             if all(np.abs(p - o).max() > SEARCH_DISTINCT for o in out):
                 out.append(p)
     return out
