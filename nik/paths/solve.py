@@ -826,8 +826,12 @@ def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DED
     if _closure(cand[[0, -1], choice[[0, -1]]], wraps) <= PATH_DEDUPE:
         return choice
     first = [int(choice[0])] + [int(k) for k in np.nonzero(valid[0])[0] if k != choice[0]]
+    tried: list[int] = []  # distinct start candidates only (tracks from q_start start alike)
+    for k in first:
+        if len(tried) < PATH_CLOSED_STARTS and all(np.abs(cand[0, k] - cand[0, t]).max() > PATH_DEDUPE for t in tried):
+            tried.append(k)
     best, best_cost = choice, (math.inf, math.inf)
-    for k in first[:PATH_CLOSED_STARTS]:
+    for k in tried:
         gap = np.array([_closure(np.stack([cand[0, k], c]), wraps) for c in cand[-1]])
         gap[~valid[-1]] = math.inf
         end = int(np.argmin(gap))
@@ -1173,13 +1177,15 @@ def _search_postures(run: _Run, rest: np.ndarray | None, col=None, extra=()) -> 
     anchors = {N // 2, N - 1} if col is None else {int(f * (N - 1)) for f in SEARCH_ANCHORS}
     at = np.array([*dict.fromkeys([*extra, *sorted(anchors)])])
     hyp = _hypotheses(run, at)
-    per = SEARCH_HYPOTHESES if hyp is None or col is None else hyp.shape[1]
-    if hyp is None:
+    if hyp is not None:
+        hyp = hyp[:, :SEARCH_HYPOTHESES]
+    if hyp is None or col is not None:  # among obstacles the network's and LM's, side by side
         lm = run.model.lm
         T = np.repeat(run.T[at], SEARCH_HYPOTHESES, axis=0)
         res = lm.solve(T, None, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False)
-        hyp = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
-    hyp = np.clip(hyp[:, :per], run.model.lo, run.model.hi)
+        uni = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
+        hyp = uni if hyp is None else np.concatenate([hyp, uni], axis=1)
+    hyp = np.clip(hyp, run.model.lo, run.model.hi)
     free = np.ones(hyp.shape[:2], dtype=bool) if col is None else ~_colliding(run.model, hyp, col)
     for h, f in zip(hyp, free, strict=True):
         for p in h[f]:
