@@ -153,6 +153,9 @@ SEARCH_PULL_CAP = math.radians(0.5)
 #: The network's hypotheses (or uniform LM answers) per waypoint that the tracks drift towards (at the middle and the
 #: last waypoint), and how far apart two of them must be (largest joint difference, radians) to count twice.
 SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
+#: Among obstacles, how many times the search's choice is made again without the candidates that a colliding step
+#: leads to (:func:`_free_steps`).
+SEARCH_RECHOOSE = 3
 #: Among obstacles, the waypoints (fractions of the path) whose answers the tracks drift towards.
 SEARCH_ANCHORS = (0.25, 0.5, 0.75, 1.0)
 #: Among obstacles, each posture also gets a fast track from the start: this pull, at most this per waypoint (radians,
@@ -1136,6 +1139,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step)
     if (choice < 0).all():
         return chain
+    if col is not None:
+        choice = _free_steps(run, cand, valid, raw, closed, max_step, col, choice)
     chosen = np.nonzero(choice >= 0)[0]
     for i in np.nonzero(choice < 0)[0]:  # a waypoint no track reaches: the track chosen before it continues
         before = chosen[chosen < i]
@@ -1151,6 +1156,31 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     if c_cost[:2] < s_cost[:2] or (c_cost[:2] == s_cost[:2] and s_cost[2] > c_cost[2] - SEARCH_GAIN):
         return chain
     return found, found_its, sources[int(of[choice[0]])] if of[choice[0]] >= 0 else "search"
+
+
+def _free_steps(run: _Run, cand, valid, raw, closed: bool, max_step: float, col, choice: np.ndarray) -> np.ndarray:
+    """``choice (N,)`` of the search among obstacles with no step that collides inside (the dynamic programming
+    judges the candidates, each one free, not the motion between two of them: a switch between tracks may cross the
+    obstacle): up to :data:`SEARCH_RECHOOSE` times, the candidate each colliding step leads to is no candidate and the
+    choice is made again; the first choice whose motion is free (else the one with the fewest colliding steps)."""
+    from nik.paths.trajopt import TrajCfg, path_collisions
+
+    N = cand.shape[0]
+    valid = valid.copy()
+    best, fewest = choice, None
+    for _ in range(SEARCH_RECHOOSE + 1):
+        if (choice < 0).any():
+            break
+        between = path_collisions(run.model, cand[np.arange(N), choice], run.q0, col, TrajCfg.col_sub)[1]
+        n = int(between.sum())
+        if fewest is None or n < fewest:
+            best, fewest = choice, n
+        if n == 0:
+            break
+        bad = np.nonzero(between)[0]
+        valid[bad, choice[bad]] = False
+        choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step)
+    return best
 
 
 def _path_cost(q: np.ndarray, ok: np.ndarray, q0: np.ndarray | None, wraps=None, within: float = 0.0) -> tuple:
