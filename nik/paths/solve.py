@@ -153,6 +153,9 @@ SEARCH_PULL_CAP = math.radians(0.5)
 #: The network's hypotheses (or uniform LM answers) per waypoint that the tracks drift towards (at the middle and the
 #: last waypoint), and how far apart two of them must be (largest joint difference, radians) to count twice.
 SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
+#: The search's closed paths: distinct start candidates tried with the end pinned (:func:`_choose`; with ``q_start``
+#: they all lie within ``max_step`` of it).
+SEARCH_CLOSED_STARTS = 4
 #: Among obstacles, how many times the search's choice is made again without the candidates that a colliding step
 #: leads to (:func:`_free_steps`).
 SEARCH_RECHOOSE = 3
@@ -812,10 +815,10 @@ def _free_samples(N: int) -> int:
     return int(np.clip(math.isqrt(PATH_DP_CELLS // N) // 8, 4, 36))
 
 
-def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DEDUPE) -> np.ndarray:
+def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DEDUPE, tries: int = PATH_CLOSED_STARTS):
     """``choice (N,)``: :func:`nik.paths.kernels.path_dp` over the candidates; on a closed path, the choice that
     ends on its start's branch (the last waypoint's candidate nearest the first's, modulo whole turns on the joints
-    that wrap): when the free choice does not, each start candidate (at most :data:`PATH_CLOSED_STARTS`) is tried
+    that wrap): when the free choice does not, each distinct start candidate (at most ``tries``) is tried
     with the end pinned to its match, and the least-motion sequence (largest step, then sum of squared steps) is
     kept (with ``q0``, the step from it counted)."""
     from nik.paths.kernels import path_dp
@@ -831,11 +834,13 @@ def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DED
     first = [int(choice[0])] + [int(k) for k in np.nonzero(valid[0])[0] if k != choice[0]]
     tried: list[int] = []  # distinct start candidates only (tracks from q_start start alike)
     for k in first:
-        if len(tried) < PATH_CLOSED_STARTS and all(np.abs(cand[0, k] - cand[0, t]).max() > PATH_DEDUPE for t in tried):
+        if len(tried) < tries and all(np.abs(cand[0, k] - cand[0, t]).max() > PATH_DEDUPE for t in tried):
             tried.append(k)
     best, best_cost = choice, (math.inf, math.inf)
     for k in tried:
-        gap = np.array([_closure(np.stack([cand[0, k], c]), wraps) for c in cand[-1]])
+        d = np.abs(cand[-1] - cand[0, k])  # _closure of each last candidate against start k
+        d[:, wraps] = np.abs(np.remainder(d[:, wraps] + math.pi, 2 * math.pi) - math.pi)
+        gap = d.max(axis=1)
         gap[~valid[-1]] = math.inf
         end = int(np.argmin(gap))
         if gap[end] > close_within:
@@ -1136,7 +1141,7 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         if near.any():
             valid[0] = near
     raw = np.zeros_like(model.wraps)  # real joint motion: tracks are continuous in the joints' own values
-    choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step)
+    choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step, tries=SEARCH_CLOSED_STARTS)
     if (choice < 0).all():
         return chain
     if col is not None:
@@ -1179,7 +1184,7 @@ def _free_steps(run: _Run, cand, valid, raw, closed: bool, max_step: float, col,
             break
         bad = np.nonzero(between)[0]
         valid[bad, choice[bad]] = False
-        choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step)
+        choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step, tries=SEARCH_CLOSED_STARTS)
     return best
 
 
