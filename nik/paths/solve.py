@@ -41,7 +41,12 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    those postures (and, on a loop, from the start, which answers its last pose too). Every track's answer at every
    waypoint is a candidate (inside the limits, within the tolerances or the tolerant goal, free of collision among
    obstacles); the dynamic programming (:func:`nik.paths.kernels.path_dp`, real joint motion) chooses the sequence,
-   switching tracks where they meet; a loop's end pinned next to its start. The chain's answer stays unless the
+   switching tracks where they meet; a loop's end pinned next to its start. Among obstacles
+   (:func:`_search_postures`): the free ones among the network's hypotheses and LM's uniform answers, side by side, at
+   :data:`SEARCH_ANCHORS` and the ends of the chain's colliding stretch, each with a fast track too
+   (:data:`SEARCH_FAST_CAP`); a choice whose step collides inside is made again (:func:`_free_steps`); the
+   whole-path optimisation that follows has collision rows and keeps a loop closed (``polish_path(closed=,
+   collision=)``). The chain's answer stays unless the
    search reaches more waypoints, closes a loop the chain leaves open, or cuts the largest step by
    :data:`SEARCH_GAIN`: the search never answers worse than the chain. Where the answer's largest step still lies
    between :data:`SEARCH_TRIGGER` and ``max_step`` (free space), the whole-path optimisation aims at steps of
@@ -1202,11 +1207,10 @@ def _search_postures(run: _Run, rest: np.ndarray | None, col=None, extra=()) -> 
     """The postures the search's tracks drift towards (beside the middle of the ranges and their own start): ``rest``,
     then distinct answers at the middle and the last waypoint: the network's hypotheses there (ranked by FK,
     :data:`SEARCH_HYPOTHESES` per waypoint) where the plan has a network, else LM from uniform starts. Among obstacles
-    (``col``: the collision arrays of :mod:`nik.ik.collide`) the answers at :data:`SEARCH_ANCHORS` waypoints, every
-    one of the network's hypotheses there (the compiled guess stage's, ranked by FK), those that collide left out:
-    the tracks that go round an obstacle drift towards free postures, and the network's samples of each pose's
-    self-motion are what lets them (without a network: :data:`SEARCH_HYPOTHESES` LM answers from uniform starts), and
-    at the waypoints ``extra`` (where the chain starts and stops colliding: the stretch to go round) first."""
+    (``col``: the collision arrays of :mod:`nik.ik.collide`), at the waypoints ``extra`` (where the chain starts and
+    stops colliding: the stretch to go round) and at :data:`SEARCH_ANCHORS`: the network's hypotheses and LM's
+    answers from uniform starts side by side (:data:`SEARCH_HYPOTHESES` of each: the network adds postures, it
+    replaces none), those that collide left out."""
     out = [] if rest is None else [np.asarray(rest, dtype=np.float64)]
     N = run.T.shape[0]
     anchors = {N // 2, N - 1} if col is None else {int(f * (N - 1)) for f in SEARCH_ANCHORS}
@@ -1220,8 +1224,10 @@ def _search_postures(run: _Run, rest: np.ndarray | None, col=None, extra=()) -> 
         res = lm.solve(T, None, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False)
         uni = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
         hyp = uni if hyp is None else np.concatenate([hyp, uni], axis=1)
-    hyp = np.clip(hyp, run.model.lo, run.model.hi)
-    free = np.ones(hyp.shape[:2], dtype=bool) if col is None else ~_colliding(run.model, hyp, col)
+    free = np.ones(hyp.shape[:2], dtype=bool)
+    if col is not None:  # the collision check inside the limits
+        hyp = np.clip(hyp, run.model.lo, run.model.hi)
+        free = ~_colliding(run.model, hyp, col)
     for h, f in zip(hyp, free, strict=True):
         for p in h[f]:
             if all(np.abs(p - o).max() > SEARCH_DISTINCT for o in out):
