@@ -8,10 +8,11 @@ answer (no world) is solved; a box is placed off its elbow at the middle waypoin
 from the shoulder-wrist axis; half size ``size``), at least 20 cm from every waypoint of the tool's path, kept only
 where the plain answer (which takes no step above 7 deg) collides with it and ``q0`` does not. Valid (CppFlow):
 every waypoint within 0.1 mm / 0.1 deg by FK, no step (from q0 on) above 7 deg, no collision of the spheres at the
-waypoints and at 7 samples inside every step (the sphere model: conservative, docs/collisions.md). Columns: valid
-paths, the largest step (median over the problems, deg), the joint path length (median, sum of |dq|, rad), the
-worst error (mm), the time per path (median, s). Rows: nik with the world (network on: the default checkpoint;
-off: ``checkpoint=None``) and the plain answer (no world: what the straight motion does).
+waypoints and at 7 samples inside every step (the sphere model: conservative, docs/collisions.md); a circle also
+closed: its last row within 0.1 deg of its first (the loop repeats without a jump). Columns: valid paths, the largest
+step (median over the problems, deg), the joint path length (median, sum of |dq|, rad), the worst error (mm), the worst
+loop closure (circles, deg), the time per path (median, s). Rows: nik with the world (network on: the default
+checkpoint; off: ``checkpoint=None``) and the plain answer (no world: what the straight motion does).
 
 The second table (free space, from ``q_start``): benchmarks/paths.py's stream of paths on the redundant arms (60
 waypoints; lines of 15 cm, circles of 5 cm radius, closed; from a configuration in the middle 60 % of the ranges);
@@ -106,8 +107,9 @@ def problems(name: str, n: int, seed: int = 0, kind: str = "line"):
     return robot, out
 
 
-def verdict(robot, T, q0, q, world) -> tuple[bool, float, float, float]:
-    """``(valid, largest step rad, path length rad, worst error mm)`` of ``q: (N, dof)`` (module docstring)."""
+def verdict(robot, T, q0, q, world, closed: bool = False) -> tuple[bool, float, float, float, float]:
+    """``(valid, largest step rad, path length rad, worst error mm, closure deg)`` of ``q: (N, dof)`` (module
+    docstring; ``closed``: a loop, valid only where its last row is within 0.1 deg of its first)."""
     rows = np.concatenate([q0[None], q])
     d = np.diff(rows, axis=0)
     t = np.linspace(0.0, 1.0, 9)[None, :, None]
@@ -115,7 +117,9 @@ def verdict(robot, T, q0, q, world) -> tuple[bool, float, float, float]:
     pos, rot = (x.numpy() for x in nik.pose_error(torch.from_numpy(T), robot.fk(torch.from_numpy(q))))
     ok = pos.max() <= 1e-4 and rot.max() <= math.radians(0.1) and np.abs(d).max() <= STEP
     ok = ok and not collides(robot, motion, world, self_collision=False).any()
-    return bool(ok), float(np.abs(d).max()), float(np.abs(d).sum()), float(pos.max() * 1e3)
+    closure = _closure_deg(robot, q) if closed else 0.0
+    ok = ok and closure <= 0.1
+    return bool(ok), float(np.abs(d).max()), float(np.abs(d).sum()), float(pos.max() * 1e3), closure
 
 
 def bench(name: str, n: int, kind: str = "line") -> list[str]:
@@ -133,11 +137,12 @@ def bench(name: str, n: int, kind: str = "line") -> list[str]:
                 warnings.simplefilter("ignore")
                 out = solver.solve_path(T, q_start=q0, world=None if label.startswith("plain") else world)
             dt = time.perf_counter() - t
-            res.append((*verdict(robot, T, q0, out.q.numpy(), world), dt))
-        v, step, length, err, dt = (np.array(x) for x in zip(*res, strict=True))
+            res.append((*verdict(robot, T, q0, out.q.numpy(), world, closed=kind == "circle"), dt))
+        v, step, length, err, closure, dt = (np.array(x) for x in zip(*res, strict=True))
+        shut = f"{closure.max():.3g}" if kind == "circle" else "-"
         rows.append(
             f"| {name} | {kind} | {label} | {int(v.sum())}/{len(v)} | {math.degrees(np.median(step)):.2f} | "
-            f"{np.median(length):.2f} | {err.max():.4f} | {np.median(dt):.2f} |"
+            f"{np.median(length):.2f} | {err.max():.4f} | {shut} | {np.median(dt):.2f} |"
         )
     return rows
 
@@ -237,9 +242,10 @@ def main() -> None:
     args = ap.parse_args()
     if args.n:
         print(
-            "| robot | path | solver | valid | largest step (deg) | path length (rad) | worst error (mm) | s / path |"
+            "| robot | path | solver | valid | largest step (deg) | path length (rad) | worst error (mm) | "
+            "worst closure (deg) | s / path |"
         )
-        print("|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|")
         for name in args.robots.split(","):
             for kind in args.shapes.split(","):
                 for row in bench(name, args.n, kind):

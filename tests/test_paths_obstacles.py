@@ -99,3 +99,66 @@ def test_a_path_past_a_box_is_free_on_the_meshes():
     assert mesh.collides(plain, world, self_collision=False).any()
     res = solver.solve_path(T, q_start=q0, world=world)
     assert res.success.all() and not mesh.collides(res.q.numpy(), world, self_collision=False).any()
+
+
+def test_closing_a_loop_among_obstacles_keeps_it_free_by_blending_over_its_tail():
+    """``_close_loop`` among obstacles: the blend of a loop's gap over the whole path (free space's rule) would move
+    the first half's rows into a small box placed just inside one of the spheres of that blend (and clear of the
+    chain's own motion, 3 mm and more); with the world it keeps no blend that collides: it closes the loop over the
+    last half only (rows before it unchanged), free at every waypoint and inside every step."""
+    from nik.collision.check import collision_model
+    from nik.collision.distance import sphere_centers
+    from nik.ik import collide
+    from nik.ik.model import model_of
+    from nik.paths import solve as P
+    from nik.paths.trajopt import TrajCfg, path_collisions
+
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot, checkpoint=None)
+    gen = torch.Generator().manual_seed(3)
+    lim = robot.limits
+    mid = lim.mean(1)
+    u01 = torch.rand(robot.dof, generator=gen, dtype=torch.float64)
+    q0 = (mid + 0.6 * (lim[:, 0] + u01 * (lim[:, 1] - lim[:, 0]) - mid)).numpy()
+    u, v = torch.linalg.qr(torch.randn(3, 2, generator=gen, dtype=torch.float64))[0].T.numpy()
+    N = 60
+    a = np.linspace(0.0, 2 * math.pi, N)[:, None]
+    T = np.repeat(robot.fk(q0)[None], N, 0)
+    T[:, :3, 3] += 0.08 * (u - np.cos(a) * u - np.sin(a) * v)  # an 8 cm circle through FK(q0), closed
+    plan = P._plan(solver, 1e-4, math.radians(0.1), 0)
+    model = model_of(robot, plan.lm_cfg)
+    run = P._Run(plan, model, np.ascontiguousarray(T), q0, model.reach(T)[0])
+    q, its, _ = P._chain_path(run)
+    assert P._closure(q, model.wraps) > math.radians(5.0)  # the chain drifts: the loop is open
+    whole, _ = P._close_loop(run, q, its, math.radians(10.0))  # no world: the blend over the whole path
+    assert P._closure(whole, model.wraps) <= P.PATH_CLOSE_TOL
+
+    cm = collision_model(robot)
+    radii = np.asarray(cm.radii)
+    rows = np.concatenate([q0[None], q])
+    motion = (rows[:-1, None] + np.linspace(0, 1, 9)[None, :, None] * np.diff(rows, axis=0)[:, None]).reshape(-1, 7)
+    c_q = sphere_centers(cm, robot, torch.from_numpy(motion)).numpy().reshape(-1, 3)
+    r_q = np.tile(radii, len(motion))
+    c_old = sphere_centers(cm, robot, torch.from_numpy(whole[: N // 2])).numpy()
+    c_new = sphere_centers(cm, robot, torch.from_numpy(q[: N // 2])).numpy()
+    moved = np.linalg.norm(c_old - c_new, axis=-1)
+    box = None
+    for i, s in zip(*np.unravel_index(np.argsort(-moved, axis=None)[:200], moved.shape), strict=True):
+        p = c_old[i, s] + (radii[s] - 0.003) * (c_old[i, s] - c_new[i, s]) / moved[i, s]  # inside the blend's sphere
+        if (np.linalg.norm(c_q - p, axis=1) - r_q).min() > 0.004:  # clear of the chain's motion
+            box = p
+            break
+    assert box is not None
+    world = nik.World().add_box(box, [0.002] * 3)
+    col = collide.setup(robot, world, False).arguments(robot)[1]
+
+    def hits(x):
+        return np.logical_or(*path_collisions(model, x, q0, col, TrajCfg.col_sub))
+
+    assert not hits(q).any() and hits(whole).any()  # the whole-path blend runs into the box
+    out, _ = P._close_loop(run, q, its, math.radians(10.0), col)
+    assert P._closure(out, model.wraps) <= P.PATH_CLOSE_TOL  # closed ...
+    assert not hits(out).any()  # ... and free
+    np.testing.assert_array_equal(out[: N // 2], q[: N // 2])  # the blend over the tail only
+    assert P._final_check(run, out)[2].all()
+    assert np.abs(np.diff(out, axis=0)).max() <= math.radians(10.0)

@@ -41,7 +41,12 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    those postures (and, on a loop, from the start, which answers its last pose too). Every track's answer at every
    waypoint is a candidate (inside the limits, within the tolerances or the tolerant goal, free of collision among
    obstacles); the dynamic programming (:func:`nik.paths.kernels.path_dp`, real joint motion) chooses the sequence,
-   switching tracks where they meet; a loop's end pinned next to its start. The chain's answer stays unless the
+   switching tracks where they meet; a loop's end pinned next to its start. Among obstacles
+   (:func:`_search_postures`): the free ones among the network's hypotheses and LM's uniform answers, side by side, at
+   :data:`SEARCH_ANCHORS` and the ends of the chain's colliding stretch, each with a fast track too
+   (:data:`SEARCH_FAST_CAP`); a choice whose step collides inside is made again (:func:`_free_steps`); the
+   whole-path optimisation that follows has collision rows and keeps a loop closed (``polish_path(closed=,
+   collision=)``). The chain's answer stays unless the
    search reaches more waypoints, closes a loop the chain leaves open, or cuts the largest step by
    :data:`SEARCH_GAIN`: the search never answers worse than the chain. Where the answer's largest step still lies
    between :data:`SEARCH_TRIGGER` and ``max_step`` (free space), the whole-path optimisation aims at steps of
@@ -153,6 +158,17 @@ SEARCH_PULL_CAP = math.radians(0.5)
 #: The network's hypotheses (or uniform LM answers) per waypoint that the tracks drift towards (at the middle and the
 #: last waypoint), and how far apart two of them must be (largest joint difference, radians) to count twice.
 SEARCH_HYPOTHESES, SEARCH_DISTINCT = 4, math.radians(20.0)
+#: The search's closed paths: distinct start candidates tried with the end pinned (:func:`_choose`; with ``q_start``
+#: they all lie within ``max_step`` of it).
+SEARCH_CLOSED_STARTS = 4
+#: Among obstacles, how many times the search's choice is made again without the candidates that a colliding step
+#: leads to (:func:`_free_steps`).
+SEARCH_RECHOOSE = 3
+#: Among obstacles, the waypoints (fractions of the path) whose answers the tracks drift towards.
+SEARCH_ANCHORS = (0.25, 0.5, 0.75, 1.0)
+#: Among obstacles, each posture also gets a fast track from the start: this pull, at most this per waypoint (radians,
+#: 3 degrees, under the 7 degree steps a path may take): the self-motion swings away from a box met early.
+SEARCH_FAST_PULL, SEARCH_FAST_CAP = 0.3, math.radians(3.0)
 #: The search's answer replaces the chain's where it reaches more waypoints, closes a loop the chain leaves open, or
 #: (else equal) cuts the largest step by more than this (radians, 0.5 degrees): on a tie the chain stays.
 SEARCH_GAIN = math.radians(0.5)
@@ -251,6 +267,7 @@ def solve_path(
     is_closed = _is_closed(Tn, tol_pos, tol_rot) if closed is None else closed
     run = _Run(plan, model, Tn, q0, reachable, half, modes, rest)
     check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
+    col = None if check is None else check.arguments(robot)[1]
     follows = chain = None
     free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
     closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
@@ -263,21 +280,21 @@ def solve_path(
         q, its, found, source = _closed_form_path(run, is_closed, chain, max_step)
     else:
         q, its, source = _chain_path(run)
-        col = None if check is None else check.arguments(robot)[1]
         if run.refine and not _smooth(run, q, max_step, is_closed, col):
             q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest, col)
         found = None
     if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
         # large (the classic tolerances only), kept if no worse
         q, _, _ = polish_path(
-            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest
-        )
+            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest,
+            closed=is_closed, collision=col,
+        )  # fmt: skip
         if not closed_form and check is None:  # among obstacles the search's free candidates stay as they are
             q = _flatten(run, q, its, max_step, is_closed)
     if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
         q = _avoid(solver, run, q, check, max_step)
     if is_closed:
-        q, its = _close_loop(run, q, its, max_step, None if check is None else check.arguments(robot)[1])
+        q, its = _close_loop(run, q, its, max_step, col)
     if run.refine and run.half is None:
         q = _inside_margin(run, q, max_step, check, is_closed)
     pos, rot, within = _final_check(run, q)
@@ -803,10 +820,10 @@ def _free_samples(N: int) -> int:
     return int(np.clip(math.isqrt(PATH_DP_CELLS // N) // 8, 4, 36))
 
 
-def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DEDUPE) -> np.ndarray:
+def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DEDUPE, tries: int = PATH_CLOSED_STARTS):
     """``choice (N,)``: :func:`nik.paths.kernels.path_dp` over the candidates; on a closed path, the choice that
     ends on its start's branch (the last waypoint's candidate nearest the first's, modulo whole turns on the joints
-    that wrap): when the free choice does not, each start candidate (at most :data:`PATH_CLOSED_STARTS`) is tried
+    that wrap): when the free choice does not, each distinct start candidate (at most ``tries``) is tried
     with the end pinned to its match, and the least-motion sequence (largest step, then sum of squared steps) is
     kept (with ``q0``, the step from it counted)."""
     from nik.paths.kernels import path_dp
@@ -820,9 +837,15 @@ def _choose(cand, valid, wraps, q0, closed: bool, close_within: float = PATH_DED
     if _closure(cand[[0, -1], choice[[0, -1]]], wraps) <= PATH_DEDUPE:
         return choice
     first = [int(choice[0])] + [int(k) for k in np.nonzero(valid[0])[0] if k != choice[0]]
+    tried: list[int] = []  # distinct start candidates only (tracks from q_start start alike)
+    for k in first:
+        if len(tried) < tries and all(np.abs(cand[0, k] - cand[0, t]).max() > PATH_DEDUPE for t in tried):
+            tried.append(k)
     best, best_cost = choice, (math.inf, math.inf)
-    for k in first[:PATH_CLOSED_STARTS]:
-        gap = np.array([_closure(np.stack([cand[0, k], c]), wraps) for c in cand[-1]])
+    for k in tried:
+        d = np.abs(cand[-1] - cand[0, k])  # _closure of each last candidate against start k
+        d[:, wraps] = np.abs(np.remainder(d[:, wraps] + math.pi, 2 * math.pi) - math.pi)
+        gap = d.max(axis=1)
         gap[~valid[-1]] = math.inf
         end = int(np.argmin(gap))
         if gap[end] > close_within:
@@ -1073,7 +1096,11 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         starts, sources = run.q0[None], ["q_start"]
     else:
         starts, sources = _start_postures(run)
-    postures = _search_postures(run, rest)
+    extra = ()
+    if col is not None:  # the stretch the chain collides on: its ends are anchors
+        hit = np.nonzero(_colliding(model, chain[0], col))[0]
+        extra = (int(hit[0]), int(hit[-1])) if hit.size else ()
+    postures = _search_postures(run, rest, col, extra)
     mid = 0.5 * (model.lo + model.hi)
     K0 = starts.shape[0]
     plain = mid if rest is None else rest
@@ -1081,6 +1108,8 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     for k in range(K0):
         for target, pull in [(starts[k], SEARCH_PULL), (mid, 0.0), *((p, SEARCH_PULL) for p in postures)]:
             tracks.append((k, target, pull, SEARCH_PULL_CAP))
+        if col is not None:
+            tracks += [(k, p, SEARCH_FAST_PULL, SEARCH_FAST_CAP) for p in postures]
     of = np.array([t[0] for t in tracks])
     q, its, ok = run.tracks(
         run.T, starts[of], np.array([t[1] for t in tracks]), np.array([t[2] for t in tracks]),
@@ -1094,6 +1123,12 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         b_targets = np.stack([x for p in back for x in (mid, p)])
         b_pull = np.tile([PATH_PULL, SEARCH_PULL], len(back))
         b_cap = np.tile([PATH_PULL_CAP, SEARCH_PULL_CAP], len(back))
+        if col is not None and closed:  # a loop's way back to its start: fast tracks from it towards the postures
+            fast = [(k, p) for k in range(K0) for p in postures]
+            b_starts = np.concatenate([b_starts, starts[[k for k, _ in fast]]]) if fast else b_starts
+            b_targets = np.concatenate([b_targets, np.array([p for _, p in fast])]) if fast else b_targets
+            b_pull = np.concatenate([b_pull, np.full(len(fast), SEARCH_FAST_PULL)])
+            b_cap = np.concatenate([b_cap, np.full(len(fast), SEARCH_FAST_CAP)])
         qb, itsb, okb = run.tracks(
             run.T[::-1], b_starts, b_targets, b_pull, b_cap, run.reachable[::-1], run.restarts, backward=True
         )
@@ -1111,9 +1146,11 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
         if near.any():
             valid[0] = near
     raw = np.zeros_like(model.wraps)  # real joint motion: tracks are continuous in the joints' own values
-    choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step)
+    choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step, tries=SEARCH_CLOSED_STARTS)
     if (choice < 0).all():
         return chain
+    if col is not None:
+        choice = _free_steps(run, cand, valid, raw, closed, max_step, col, choice)
     chosen = np.nonzero(choice >= 0)[0]
     for i in np.nonzero(choice < 0)[0]:  # a waypoint no track reaches: the track chosen before it continues
         before = chosen[chosen < i]
@@ -1131,6 +1168,31 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     return found, found_its, sources[int(of[choice[0]])] if of[choice[0]] >= 0 else "search"
 
 
+def _free_steps(run: _Run, cand, valid, raw, closed: bool, max_step: float, col, choice: np.ndarray) -> np.ndarray:
+    """``choice (N,)`` of the search among obstacles with no step that collides inside (the dynamic programming
+    judges the candidates, each one free, not the motion between two of them: a switch between tracks may cross the
+    obstacle): up to :data:`SEARCH_RECHOOSE` times, the candidate each colliding step leads to is no candidate and the
+    choice is made again; the first choice whose motion is free (else the one with the fewest colliding steps)."""
+    from nik.paths.trajopt import TrajCfg, path_collisions
+
+    N = cand.shape[0]
+    valid = valid.copy()
+    best, fewest = choice, None
+    for _ in range(SEARCH_RECHOOSE + 1):
+        if (choice < 0).any():
+            break
+        between = path_collisions(run.model, cand[np.arange(N), choice], run.q0, col, TrajCfg.col_sub)[1]
+        n = int(between.sum())
+        if fewest is None or n < fewest:
+            best, fewest = choice, n
+        if n == 0:
+            break
+        bad = np.nonzero(between)[0]
+        valid[bad, choice[bad]] = False
+        choice = _choose(cand, valid, raw, run.q0, closed, close_within=max_step, tries=SEARCH_CLOSED_STARTS)
+    return best
+
+
 def _path_cost(q: np.ndarray, ok: np.ndarray, q0: np.ndarray | None, wraps=None, within: float = 0.0) -> tuple:
     """``(waypoints missed, open, largest step)`` of a path ``q: (N, dof)`` (the first step from ``q0`` where given;
     ``open``: with ``wraps``, a closed path whose last row is more than ``within`` from its first, else 0): the order
@@ -1141,21 +1203,33 @@ def _path_cost(q: np.ndarray, ok: np.ndarray, q0: np.ndarray | None, wraps=None,
     return int((~ok).sum()), gap, round(step, 9)
 
 
-def _search_postures(run: _Run, rest: np.ndarray | None) -> list[np.ndarray]:
+def _search_postures(run: _Run, rest: np.ndarray | None, col=None, extra=()) -> list[np.ndarray]:
     """The postures the search's tracks drift towards (beside the middle of the ranges and their own start): ``rest``,
     then distinct answers at the middle and the last waypoint: the network's hypotheses there (ranked by FK,
-    :data:`SEARCH_HYPOTHESES` per waypoint) where the plan has a network, else LM from uniform starts."""
+    :data:`SEARCH_HYPOTHESES` per waypoint) where the plan has a network, else LM from uniform starts. Among obstacles
+    (``col``: the collision arrays of :mod:`nik.ik.collide`), at the waypoints ``extra`` (where the chain starts and
+    stops colliding: the stretch to go round) and at :data:`SEARCH_ANCHORS`: the network's hypotheses and LM's
+    answers from uniform starts side by side (:data:`SEARCH_HYPOTHESES` of each: the network adds postures, it
+    replaces none), those that collide left out."""
     out = [] if rest is None else [np.asarray(rest, dtype=np.float64)]
     N = run.T.shape[0]
-    at = np.array(sorted({N // 2, N - 1}))
+    anchors = {N // 2, N - 1} if col is None else {int(f * (N - 1)) for f in SEARCH_ANCHORS}
+    at = np.array([*dict.fromkeys([*extra, *sorted(anchors)])])
     hyp = _hypotheses(run, at)
-    if hyp is None:
+    if hyp is not None:
+        hyp = hyp[:, :SEARCH_HYPOTHESES]
+    if hyp is None or col is not None:  # among obstacles the network's and LM's, side by side
         lm = run.model.lm
         T = np.repeat(run.T[at], SEARCH_HYPOTHESES, axis=0)
         res = lm.solve(T, None, tol_pos=run.tol_pos, tol_rot=run.tol_rot, seed=run.seed, restarts=False)
-        hyp = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
-    for h in hyp:
-        for p in h[:SEARCH_HYPOTHESES]:
+        uni = res.q.reshape(at.size, SEARCH_HYPOTHESES, -1)
+        hyp = uni if hyp is None else np.concatenate([hyp, uni], axis=1)
+    free = np.ones(hyp.shape[:2], dtype=bool)
+    if col is not None:  # the collision check inside the limits
+        hyp = np.clip(hyp, run.model.lo, run.model.hi)
+        free = ~_colliding(run.model, hyp, col)
+    for h, f in zip(hyp, free, strict=True):
+        for p in h[f]:
             if all(np.abs(p - o).max() > SEARCH_DISTINCT for o in out):
                 out.append(p)
     return out

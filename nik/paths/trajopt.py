@@ -223,6 +223,8 @@ def polish_path(
     always: bool = False,
     cfg: TrajCfg | None = None,
     q_rest: np.ndarray | None = None,
+    closed: bool = False,
+    collision: tuple | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The path stage: ``Q: (N, dof)`` optimised by :func:`optimise_path` where some waypoint misses the tolerance
     or some step exceeds ``max_step`` (every path with ``always``; a waypoint proven out of reach, ``reachable (N,)``
@@ -232,7 +234,11 @@ def polish_path(
     beyond ``max_step`` (the arm starts without a jump); the whole path likewise, else
     ``Q`` as it came. Returns ``(Q, pos_err (N,), rot_err (N,))``, the errors re-checked by FK (metres, radians):
     one compiled call (:func:`nik.kernels.trajopt.path_check`) where nothing needs optimising. ``q_rest: (dof,)``:
-    the windows' posture rows (:func:`optimise_path`)."""
+    the windows' posture rows (:func:`optimise_path`). ``closed``: a loop (its last row is to equal its first): the
+    step from the last row back to the first (modulo whole turns on joints that wrap) counts as one more step, so that
+    no window opens a loop to smooth a step (the last window's row after is the first row). ``collision``: the
+    collision arrays (as :func:`optimise_path`'s): the windows are optimised with collision rows and kept only where
+    they collide at no more samples (:func:`path_collisions`) than before, nor does the whole path."""
     from nik.kernels.trajopt import path_check
 
     Q = np.ascontiguousarray(Q, dtype=np.float64)
@@ -242,6 +248,8 @@ def polish_path(
     qs = np.ascontiguousarray(q_start, dtype=np.float64) if has_start else Q[0]
     pos, rot = np.empty(N), np.empty(N)
     reached, step = path_check(model.G, model.joints, T, Q, qs, has_start, tol_pos, tol_rot, pos, rot)
+    if closed:
+        step = max(step, _loop_gap(Q, model.joints))
     if not always and step <= max_step:
         if reached == N:  # the usual case: one compiled call, nothing else
             return Q, pos, rot
@@ -253,32 +261,63 @@ def polish_path(
     bad = (np.abs(Q1 - prev).max(axis=1) > max_step) | ~ok
     if reachable is not None:
         bad &= reachable | (np.abs(Q1 - prev).max(axis=1) > max_step)
+    if closed and _loop_gap(Q1, model.joints) > max_step:
+        bad[-1] = True
     if always:
         bad[:] = True
     lo, hi = model.joints[:, 1], model.joints[:, 2]
+    sub = (cfg or TrajCfg()).col_sub
+
+    def hits(rows, before, after) -> int:
+        """Colliding samples of ``rows`` (waypoints and inside the steps from ``before``, and to ``after``)."""
+        x, y = path_collisions(model, rows, before, collision, sub)
+        n = int(x.sum() + y.sum())
+        return n if after is None else n + int(path_collisions(model, after[None], rows[-1], collision, sub)[1][0])
+
     for a, b in _windows(np.nonzero(bad)[0], N):
         before = q_start if a == 0 else Q1[a - 1]
-        after = Q1[b] if b < N else None
+        after = Q1[b] if b < N else (_loop_end(Q1, model.joints) if closed else None)
         res = optimise_path(
             model, T[a:b], Q1[a:b], q_start=before, q_end=after, max_step=max_step, tol_pos=tol_pos, tol_rot=tol_rot,
-            cfg=cfg, q_rest=q_rest,
+            cfg=cfg, q_rest=q_rest, collision=collision,
         )  # fmt: skip
         ok2 = (res.pos_err <= tol_pos) & (res.rot_err <= tol_rot)
         inside = bool(((res.q >= lo) & (res.q <= hi)).all())
         first = a > 0 or before is None or _first_step(res.q, before) <= max(max_step, _first_step(Q1[a:b], before))
+        free = collision is None or hits(res.q, before, after) <= hits(Q1[a:b], before, after)
         if (
             inside
             and first
+            and free
             and ok2[ok[a:b]].all()
             and _largest_step(res.q, before, after) <= _largest_step(Q1[a:b], before, after)
         ):
             Q1[a:b] = res.q  # this window is no worse: kept
     pos2, rot2 = np.empty(N), np.empty(N)
     _, step2 = path_check(model.G, model.joints, T, Q1, qs, has_start, tol_pos, tol_rot, pos2, rot2)
+    if closed:
+        step2 = max(step2, _loop_gap(Q1, model.joints))
     ok2 = (pos2 <= tol_pos) & (rot2 <= tol_rot)
-    if bool(ok2[ok].all()) and step2 <= step:
+    free = collision is None or hits(Q1, q_start, None) <= hits(Q, q_start, None)
+    if bool(ok2[ok].all()) and step2 <= step and free:
         return Q1, pos2, rot2
     return Q, pos, rot
+
+
+def _loop_end(Q: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """The first row of ``Q: (N, dof)`` as the row after its last (a loop), with whole turns on the joints that wrap
+    nearest the last row (a path that takes such a joint once around ends a turn further)."""
+    from nik.kernels.chain import WRAPS
+
+    end = Q[0].copy()
+    w = joints[:, WRAPS] != 0.0
+    end[w] += 2.0 * math.pi * np.round((Q[-1, w] - end[w]) / (2.0 * math.pi))
+    return end
+
+
+def _loop_gap(Q: np.ndarray, joints: np.ndarray) -> float:
+    """The largest joint difference between the last row of a loop ``Q: (N, dof)`` and its first (:func:`_loop_end`)."""
+    return float(np.abs(Q[-1] - _loop_end(Q, joints)).max())
 
 
 def _windows(bad: np.ndarray, N: int) -> list[tuple[int, int]]:
