@@ -277,3 +277,58 @@ def test_uniform_starts_end_free_and_within_the_tolerance_after_the_pose_leg():
     assert (exact[done] >= 0).all()
     assert done.mean() >= 0.6
     assert (it >= 1).all()
+
+
+def _rotation(axis, angle: float) -> np.ndarray:
+    k = np.asarray(axis) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def test_the_hands_slack_never_blocks_a_pose_that_a_free_configuration_reaches_within_the_tolerance():
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    n, tol_pos, tol_rot = robot.dof, 1e-4, 1e-3
+    (G, joints), rest = kernel_arguments(robot, model, nik.World(), self_collision=False)
+    spheres, frames = rest[0], rest[1]
+    hand = np.flatnonzero(frames == n)
+    assert hand.size  # the hand rides on the last frame
+    levers = np.linalg.norm(spheres[hand, :3] - G[n][:3, 3], axis=1)
+    inv = np.linalg.inv(G[n - 1])
+    wrist = spheres[frames == n - 1, :3] @ inv[:3, :3].T + inv[:3, 3]
+    wide = float((np.linalg.norm(wrist, axis=1) + np.linalg.norm(G[n][:3, 3])).max())
+    assert wide > levers.max()  # the sweeps' lever is the larger: the hand's rows get the smaller slack
+    on_hand = np.asarray(model.sphere_frame) == n
+    near = far = 0
+    for q in _q(robot, 6, seed=21):
+        T = np.asarray(robot.fk(q[None]))[0]
+        c = sphere_centers(model, robot, torch.as_tensor(q[None]))[0].numpy()[on_hand]
+        for u in (T[:3, 0], -T[:3, 0], T[:3, 1], -T[:3, 1]):  # across the hand
+            k = int(np.argmax(c @ u + spheres[hand, 3]))  # the hand's outermost sphere that way: a ball beyond it
+            v, r, rho = c[k] - T[:3, 3], spheres[hand[k], 3], 0.005  # touches no other sphere of the hand
+            w = np.cross(v, u)  # turning about w through the tool point moves the sphere towards u
+            reach = tol_pos + tol_rot * np.linalg.norm(w)  # |v x u|: the lever across u
+            past = tol_pos + tol_rot * (levers.max() + wide) / 2  # past the hand's slack, short of the sweeps'
+            for expect, a, t, ball in (
+                (False, 0.999 * tol_rot, 0.999 * tol_pos, c[k] + u * (r + rho + 1e-6)),
+                (True, 0.0, 0.0, c[k] + u * (r + rho - past)),
+            ):
+                world = nik.World()
+                world.add_sphere(ball, rho)
+                A = np.eye(4)
+                A[:3, :3] = _rotation(w, a)
+                A[:3, 3] = T[:3, 3] - A[:3, :3] @ T[:3, 3] + t * u
+                Tm = A @ T  # the tool point moved by t, the frame turned by a: q reaches it within the tolerance
+                blocked = blocked_targets(robot, model, world, Tm[None], tol_pos, tol_rot, self_collision=False,
+                                          samples=1)  # fmt: skip
+                hit = collides(robot, q[None], world, model=model, self_collision=False)[0]
+                if expect:
+                    assert blocked[0] and hit
+                    far += 1
+                elif not hit:  # q is free and within the tolerance of Tm
+                    moved = A[:3, :3] @ c[k] + A[:3, 3]
+                    assert np.linalg.norm(moved - ball) - rho - r < -0.9 * reach  # Tm puts the sphere in the ball
+                    assert reach > 1.5 * tol_pos  # by more than the position tolerance alone
+                    assert not blocked[0]
+                    near += 1
+    assert near >= 12 and far == 24
