@@ -84,3 +84,36 @@ def xarm7_circle_37():
     T = T0.expand(60, 4, 4).clone()
     T[:, :3, 3] = T0[:3, 3] + 0.05 * u - 0.05 * (torch.cos(a)[:, None] * u + torch.sin(a)[:, None] * v)
     return robot, q0, T
+
+
+@pytest.fixture
+def panda_circle_chain():
+    """``(robot, q0, T, model, run, q, its)``: an 8 cm panda circle through FK(``q0``) in a seeded plane (60
+    waypoints, orientation fixed, closed), ``q0`` seeded in the middle 60 % of the ranges, and the waypoint chain's
+    answer ``q: (60, 7)`` (with its ``run`` and iterations), which drifts: the loop it leaves is open."""
+    import math
+
+    import numpy as np
+    import torch
+
+    import nik
+    from nik.ik.model import model_of
+    from nik.paths import solve as P
+
+    robot = nik.load_robot("panda")
+    solver = nik.IKSolver(robot, checkpoint=None)
+    gen = torch.Generator().manual_seed(3)
+    lim = robot.limits
+    mid = lim.mean(1)
+    u01 = torch.rand(robot.dof, generator=gen, dtype=torch.float64)
+    q0 = (mid + 0.6 * (lim[:, 0] + u01 * (lim[:, 1] - lim[:, 0]) - mid)).numpy()
+    u, v = torch.linalg.qr(torch.randn(3, 2, generator=gen, dtype=torch.float64))[0].T.numpy()
+    N = 60
+    a = np.linspace(0.0, 2 * math.pi, N)[:, None]
+    T = np.repeat(robot.fk(q0)[None], N, 0)
+    T[:, :3, 3] += 0.08 * (u - np.cos(a) * u - np.sin(a) * v)  # an 8 cm circle through FK(q0), closed
+    plan = P._plan(solver, 1e-4, math.radians(0.1), 0)
+    model = model_of(robot, plan.lm_cfg)
+    run = P._Run(plan, model, np.ascontiguousarray(T), q0, model.reach(T)[0])
+    q, its, _ = P._chain_path(run)
+    return robot, q0, T, model, run, q, its

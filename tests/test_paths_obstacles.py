@@ -101,7 +101,7 @@ def test_a_path_past_a_box_is_free_on_the_meshes():
     assert res.success.all() and not mesh.collides(res.q.numpy(), world, self_collision=False).any()
 
 
-def test_closing_a_loop_among_obstacles_keeps_it_free_by_blending_over_its_tail():
+def test_closing_a_loop_among_obstacles_keeps_it_free_by_blending_over_its_tail(panda_circle_chain):
     """``_close_loop`` among obstacles: the blend of a loop's gap over the whole path (free space's rule) would move
     the first half's rows into a small box placed just inside one of the spheres of that blend (and clear of the
     chain's own motion, 3 mm and more); with the world it keeps no blend that collides: it closes the loop over the
@@ -109,26 +109,11 @@ def test_closing_a_loop_among_obstacles_keeps_it_free_by_blending_over_its_tail(
     from nik.collision.check import collision_model
     from nik.collision.distance import sphere_centers
     from nik.ik import collide
-    from nik.ik.model import model_of
     from nik.paths import solve as P
     from nik.paths.trajopt import TrajCfg, path_collisions
 
-    robot = nik.load_robot("panda")
-    solver = nik.IKSolver(robot, checkpoint=None)
-    gen = torch.Generator().manual_seed(3)
-    lim = robot.limits
-    mid = lim.mean(1)
-    u01 = torch.rand(robot.dof, generator=gen, dtype=torch.float64)
-    q0 = (mid + 0.6 * (lim[:, 0] + u01 * (lim[:, 1] - lim[:, 0]) - mid)).numpy()
-    u, v = torch.linalg.qr(torch.randn(3, 2, generator=gen, dtype=torch.float64))[0].T.numpy()
-    N = 60
-    a = np.linspace(0.0, 2 * math.pi, N)[:, None]
-    T = np.repeat(robot.fk(q0)[None], N, 0)
-    T[:, :3, 3] += 0.08 * (u - np.cos(a) * u - np.sin(a) * v)  # an 8 cm circle through FK(q0), closed
-    plan = P._plan(solver, 1e-4, math.radians(0.1), 0)
-    model = model_of(robot, plan.lm_cfg)
-    run = P._Run(plan, model, np.ascontiguousarray(T), q0, model.reach(T)[0])
-    q, its, _ = P._chain_path(run)
+    robot, q0, T, model, run, q, its = panda_circle_chain
+    N = len(T)
     assert P._closure(q, model.wraps) > math.radians(5.0)  # the chain drifts: the loop is open
     whole, _ = P._close_loop(run, q, its, math.radians(10.0))  # no world: the blend over the whole path
     assert P._closure(whole, model.wraps) <= P.PATH_CLOSE_TOL

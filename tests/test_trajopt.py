@@ -247,27 +247,11 @@ def test_q_rest_pulls_the_optimised_path_nearer(xarm7_circle_37):
         assert ok and step <= math.radians(10.0)
 
 
-def test_the_path_stage_keeps_a_loop_closed():
+def test_the_path_stage_keeps_a_loop_closed(panda_circle_chain):
     """``polish_path(closed=True)``: a panda loop closed by a 17 deg jump back to its first row (the search's answer
     where no track comes back) is smoothed without opening the loop: the step from the last row back to the first
     counts as a step. Without ``closed`` the same optimisation removes the jump by leaving the loop 16 deg open."""
-    from nik.paths import solve as P
-
-    robot = nik.load_robot("panda")
-    solver = nik.IKSolver(robot, checkpoint=None)
-    gen = torch.Generator().manual_seed(3)
-    lim = robot.limits
-    mid = lim.mean(1)
-    u01 = torch.rand(robot.dof, generator=gen, dtype=torch.float64)
-    q0 = (mid + 0.6 * (lim[:, 0] + u01 * (lim[:, 1] - lim[:, 0]) - mid)).numpy()
-    u, v = torch.linalg.qr(torch.randn(3, 2, generator=gen, dtype=torch.float64))[0].T.numpy()
-    N = 60
-    a = np.linspace(0.0, 2 * math.pi, N)[:, None]
-    T = np.repeat(robot.fk(q0)[None], N, 0)
-    T[:, :3, 3] += 0.08 * (u - np.cos(a) * u - np.sin(a) * v)  # an 8 cm circle through FK(q0), closed
-    plan = P._plan(solver, 1e-4, math.radians(0.1), 0)
-    model = model_of(robot, plan.lm_cfg)
-    q, _, _ = P._chain_path(P._Run(plan, model, np.ascontiguousarray(T), q0, model.reach(T)[0]))
+    _, q0, T, model, _, q, _ = panda_circle_chain
     jumped = q.copy()
     jumped[-1] = q[0]  # the last pose is the first: closed, by a jump into the last row
     max_step = math.radians(10.0)
