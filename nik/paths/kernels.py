@@ -38,16 +38,23 @@ _TIE = 1e-6
 
 
 @kernel
+def _motion(x, y, wraps):
+    """One joint's motion from ``x`` to ``y``: the shorter way round where the joint ``wraps``."""
+    d = abs(x - y)
+    if wraps:
+        d = d % _TWO_PI
+        if d > math.pi:
+            d = _TWO_PI - d
+    return d
+
+
+@kernel
 def _step(a, b, wraps):
     """``(largest joint motion, total joint motion)`` from ``a (n,)`` to ``b (n,)``."""
     m = 0.0
     s = 0.0
     for j in range(a.shape[0]):
-        d = abs(a[j] - b[j])
-        if wraps[j]:
-            d = d % _TWO_PI
-            if d > math.pi:
-                d = _TWO_PI - d
+        d = _motion(a[j], b[j], wraps[j])
         if d > m:
             m = d
         s += d
@@ -60,11 +67,7 @@ def _largest(a, b, wraps, stop):
     motion reaches it (the caller has no use for more)."""
     m = 0.0
     for j in range(a.shape[0]):
-        d = abs(a[j] - b[j])
-        if wraps[j]:
-            d = d % _TWO_PI
-            if d > math.pi:
-                d = _TWO_PI - d
+        d = _motion(a[j], b[j], wraps[j])
         if d > m:
             m = d
             if m >= stop:
