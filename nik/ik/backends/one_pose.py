@@ -245,8 +245,20 @@ def one_pose(solver, T_target, tol_pos, tol_rot, seed) -> IKResult | None:
     slot = None
     if kind is torch.Tensor:
         if not f32 and T_target.is_contiguous() and not T_target.is_neg():
-            if _POOL:
-                slot = _take(e.outs)
+            if _POOL:  # _take written out for the slot put back last, free in a loop (1-2.5 us less after idle)
+                outs = e.outs
+                try:
+                    slot = outs.pop()
+                except IndexError:  # other threads hold the slots
+                    slot = None
+                else:
+                    if (*map(_refs, slot.objs), *map(_weakrefs, slot.weak)) != slot.refs or _USES(slot.cd) != slot.uses:
+                        outs.insert(0, slot)  # held: the others looked at
+                        slot = _take(outs)
+                    else:
+                        sq = slot.q
+                        if sq._version or sq.requires_grad or sq.grad is not None or slot.ok.grad is not None:
+                            slot = _take(outs)  # changed: dropped
             a = np.empty((1, 4, 4)) if slot is None else slot.T  # read at its address: no Tensor.numpy()
             if not _POSE_AT(T_target.data_ptr(), _ORTHONORMAL_TOL, a):
                 if slot is not None:
