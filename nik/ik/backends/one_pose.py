@@ -35,7 +35,15 @@ and after other work between calls (a control loop) each of those steps runs in 
    and +16.9 to +20.8 us (panda) to +1.6 to +3.0 and +6.0 to +9.3 us call after call, from +21.2 to +23.5 and +23.4
    to +28.3 us to +8.4 to +10.0 and +8.4 to +14.3 us after 0.5 ms idle; the slot's check of the tensors' state
    (version, ``requires_grad``, two ``grad``) is about 3-5 us of that cold, the pose's six attribute reads most of
-   the rest.
+   the rest. The check of the slot put back last (the free one in a loop) is written out in :func:`one_pose`
+   (:func:`_take` looks at the others): a Python frame or two fewer, +6.6 to +9.7 (ur5) and +11.2 to +12.2 us (panda)
+   to +4.9 to +5.8 and +6.0 to +7.7 us after 0.5 ms idle (``benchmarks/results/cold_pose_w42.md``). What is left is
+   torch's reads, about 1 us each cold (2-3 us the first): without the slot's four and its storage count the torch
+   pose is +0 to +5 us, without any -1 to -4 us. Fewer torch calls in their place cost as much: one
+   ``torch._C._to_dlpack`` +7.7 us against +7.1 for the pose's six reads (0.5 ms idle, alone), the DLTensor of the
+   DLPack exchange API (``torch._C._dlpack_exchange_api``) read in a kernel about what the five reads it replaces
+   cost, ``Tensor.type()`` +9.7 us; the slot's reads each guard something a test does (a view, an in-place
+   change of shape, ``requires_grad_``, a ``grad`` on either tensor) that no reference count shows.
 
 The answer is the general path's, bit for bit (the same kernel on the same arguments: ``tests/test_one_pose.py``),
 the unreachable warning included. Anything else returns None and the general path takes the call: a pose in
@@ -188,7 +196,8 @@ class _Outs:
         ``share_memory_()``: buf's count drops); 1 (held) otherwise; 2 (changed: never to be used again) when the
         tensors are no longer as made: a version above 0 (an in-place operation of values or shape on either: they
         share one version counter), ``requires_grad`` or a ``grad``. Not looked for: Python attributes set on a
-        dropped result's tensor by hand, and raw addresses (``data_ptr()``) kept past the tensor's life."""
+        dropped result's tensor by hand, and raw addresses (``data_ptr()``) kept past the tensor's life.
+        :func:`one_pose` writes this check out for the slot it looks at first (keep the two alike)."""
         if (*map(_refs, self.objs), *map(_weakrefs, self.weak)) != self.refs or _USES(self.cd) != self.uses:
             return 1  # the first test is counts(), written out: a call fewer (1-4 us less after 0.5 ms idle)
         q = self.q
