@@ -36,14 +36,17 @@ and after other work between calls (a control loop) each of those steps runs in 
    to +28.3 us to +8.4 to +10.0 and +8.4 to +14.3 us after 0.5 ms idle; the slot's check of the tensors' state
    (version, ``requires_grad``, two ``grad``) is about 3-5 us of that cold, the pose's six attribute reads most of
    the rest. The check of the slot put back last (the free one in a loop) is written out in :func:`one_pose`
-   (:func:`_take` looks at the others): a Python frame or two fewer, +6.6 to +9.7 (ur5) and +11.2 to +12.2 us (panda)
-   to +4.9 to +5.8 and +6.0 to +7.7 us after 0.5 ms idle (``benchmarks/results/cold_pose_w42.md``). What is left is
-   torch's reads, about 1 us each cold (2-3 us the first): without the slot's four and its storage count the torch
-   pose is +0 to +5 us, without any -1 to -4 us. Fewer torch calls in their place cost as much: one
-   ``torch._C._to_dlpack`` +7.7 us against +7.1 for the pose's six reads (0.5 ms idle, alone), the DLTensor of the
-   DLPack exchange API (``torch._C._dlpack_exchange_api``) read in a kernel about what the five reads it replaces
-   cost, ``Tensor.type()`` +9.7 us; the slot's reads each guard something a test does (a view, an in-place
-   change of shape, ``requires_grad_``, a ``grad`` on either tensor) that no reference count shows.
+   (:func:`_take` looks at the others): a Python frame or two fewer, after 0.5 ms idle +6.6 to +10.5 (ur5) and +9.9
+   to +12.2 us (panda) became +4.9 to +7.4 and +6.0 to +9.2 us (six alternating runs each; per pair 1.5-3.9 and
+   1.7-6.0 us less), call after call +0.2 to +1.3 and +2.0 to +5.5 us (``benchmarks/results/cold_pose_w42.md``).
+   What is left is torch's reads, 1-3 us each cold (``benchmarks/torch_reads.py``: the pose's six +7.3 us, the
+   slot's five +7.5, both +13.9 after 0.5 ms idle); in the call, without the slot's five the torch pose would be
+   +0 to +5 us over numpy, without any -1 to -4 us. Each of the slot's reads guards what a test does and no
+   reference count shows (a view, an in-place change of shape, ``requires_grad_``, a ``grad`` on either tensor).
+   One call in place of the pose's reads costs as much: ``torch._C._to_dlpack`` +9.0 us, ``Tensor.type()`` +9.6;
+   the DLTensor of the DLPack exchange API (``torch._C._dlpack_exchange_api``) read by a numba function with
+   ``is_neg()`` still asked (DLPack export does not refuse a negative view) was no faster in the call (+5.8 to +9.8
+   against +6.5 to +8.9 us), so the six reads stay.
 
 The answer is the general path's, bit for bit (the same kernel on the same arguments: ``tests/test_one_pose.py``),
 the unreachable warning included. Anything else returns None and the general path takes the call: a pose in
