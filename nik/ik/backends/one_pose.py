@@ -35,7 +35,18 @@ and after other work between calls (a control loop) each of those steps runs in 
    and +16.9 to +20.8 us (panda) to +1.6 to +3.0 and +6.0 to +9.3 us call after call, from +21.2 to +23.5 and +23.4
    to +28.3 us to +8.4 to +10.0 and +8.4 to +14.3 us after 0.5 ms idle; the slot's check of the tensors' state
    (version, ``requires_grad``, two ``grad``) is about 3-5 us of that cold, the pose's six attribute reads most of
-   the rest.
+   the rest. The check of the slot put back last (the free one in a loop) is written out in :func:`one_pose`
+   (:func:`_take` looks at the others): a Python frame or two fewer, after 0.5 ms idle +6.6 to +10.5 (ur5) and +9.9
+   to +12.2 us (panda) became +4.9 to +7.4 and +6.0 to +9.2 us (six alternating runs each; per pair 1.5-3.9 and
+   1.7-6.0 us less), call after call +0.2 to +1.3 and +2.0 to +5.5 us (``benchmarks/results/cold_pose_w42.md``).
+   What is left is torch's reads, 1-3 us each cold (``benchmarks/torch_reads.py``: the pose's six +7.3 us, the
+   slot's five +7.5, both +13.9 after 0.5 ms idle); in the call, without the slot's five the torch pose would be
+   +0 to +5 us over numpy, without any -1 to -4 us. Each of the slot's reads guards what a test does and no
+   reference count shows (a view, an in-place change of shape, ``requires_grad_``, a ``grad`` on either tensor).
+   One call in place of the pose's reads costs as much: ``torch._C._to_dlpack`` +9.0 us, ``Tensor.type()`` +9.6;
+   the DLTensor of the DLPack exchange API (``torch._C._dlpack_exchange_api``) read by a numba function with
+   ``is_neg()`` still asked (DLPack export does not refuse a negative view) was no faster in the call (+5.8 to +9.8
+   against +6.5 to +8.9 us), so the six reads stay.
 
 The answer is the general path's, bit for bit (the same kernel on the same arguments: ``tests/test_one_pose.py``),
 the unreachable warning included. Anything else returns None and the general path takes the call: a pose in
@@ -188,7 +199,8 @@ class _Outs:
         ``share_memory_()``: buf's count drops); 1 (held) otherwise; 2 (changed: never to be used again) when the
         tensors are no longer as made: a version above 0 (an in-place operation of values or shape on either: they
         share one version counter), ``requires_grad`` or a ``grad``. Not looked for: Python attributes set on a
-        dropped result's tensor by hand, and raw addresses (``data_ptr()``) kept past the tensor's life."""
+        dropped result's tensor by hand, and raw addresses (``data_ptr()``) kept past the tensor's life.
+        :func:`one_pose` writes this check out for the slot it looks at first (keep the two alike)."""
         if (*map(_refs, self.objs), *map(_weakrefs, self.weak)) != self.refs or _USES(self.cd) != self.uses:
             return 1  # the first test is counts(), written out: a call fewer (1-4 us less after 0.5 ms idle)
         q = self.q
@@ -245,8 +257,20 @@ def one_pose(solver, T_target, tol_pos, tol_rot, seed) -> IKResult | None:
     slot = None
     if kind is torch.Tensor:
         if not f32 and T_target.is_contiguous() and not T_target.is_neg():
-            if _POOL:
-                slot = _take(e.outs)
+            if _POOL:  # _take written out for the slot put back last, free in a loop (1.5-6 us less after idle)
+                outs = e.outs
+                try:
+                    slot = outs.pop()
+                except IndexError:  # other threads hold the slots
+                    slot = None
+                else:
+                    if (*map(_refs, slot.objs), *map(_weakrefs, slot.weak)) != slot.refs or _USES(slot.cd) != slot.uses:
+                        outs.insert(0, slot)  # held: the others looked at
+                        slot = _take(outs)
+                    else:
+                        sq = slot.q
+                        if sq._version or sq.requires_grad or sq.grad is not None or slot.ok.grad is not None:
+                            slot = _take(outs)  # changed: dropped
             a = np.empty((1, 4, 4)) if slot is None else slot.T  # read at its address: no Tensor.numpy()
             if not _POSE_AT(T_target.data_ptr(), _ORTHONORMAL_TOL, a):
                 if slot is not None:
