@@ -140,6 +140,7 @@ def test_a_pose_that_overlaps_a_ball_by_less_than_the_tolerance_moves_the_hand_i
         assert np.arccos(cos) <= np.radians(0.1)
         assert res.iterations[0] < 40  # ended by the finishing step, not by the restart budget
 
+
 def test_answers_called_free_never_collide_with_the_meshes():
     pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik[collision-check]')")
     import sys
