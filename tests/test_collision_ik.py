@@ -105,6 +105,42 @@ def test_bad_collision_arguments_are_one_line_errors():
         nik.IKSolver("ur5", world={"spheres": []}).solve(np.eye(4))
 
 
+def test_a_pose_that_overlaps_a_ball_by_less_than_the_tolerance_moves_the_hand_is_solved_within_it():
+    """The exact pose puts a hand sphere 0.15 mm into a ball (the sphere is fixed to the tool, so every configuration
+    at that exact pose overlaps), but the tolerances (0.1 mm, 0.1 deg; the sphere 0.1 m from the tool point) let it
+    move 0.27 mm: the finishing step of the collision LM finds a free answer within them (without it the LM drives
+    the pose error to zero and spends the restart budget)."""
+    from nik.collision.compiled import signed_distances_compiled
+
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    spheres, frame, _, _ = model.arrays()
+    n, overlap, ro = robot.dof, 1.5e-4, 0.01
+    q = robot.sample(32, generator=torch.Generator().manual_seed(7), dtype=torch.float64).numpy()
+    for q0 in q[~collides(robot, q)][:3]:
+        F = link_frames(robot, torch.from_numpy(q0[None]))[0].numpy()
+        T0 = robot.fk(q0[None])[0]
+        on = np.flatnonzero(frame == n)
+        c = spheres[on, :3] @ F[n][:3, :3].T + F[n][:3, 3]
+        k = int(np.argmax(np.linalg.norm(c - T0[:3, 3], axis=1)))  # the hand sphere farthest from the tool point
+        u = np.cross(c[k] - T0[:3, 3], T0[:3, 2])
+        u /= np.linalg.norm(u)  # across its lever: a turn within the tolerance moves it most
+        p = c[k] + u * (spheres[on[k], 3] + ro + 0.01)
+        for _ in range(8):  # the ball moved in along u until the nearest sphere overlaps it by `overlap`
+            world = nik.World().add_sphere(p, ro)
+            p = p - u * (signed_distances_compiled(robot, q0[None], world)[0, len(model.pairs) :].min() + overlap)
+        world = nik.World().add_sphere(p, ro)
+        assert signed_distances_compiled(robot, q0[None], world)[0].min() == pytest.approx(-overlap, abs=1e-8)
+        res = nik.IKSolver(robot, world=world).solve(T0[None])
+        assert res.success[0] and res.collision_free[0]
+        assert not collides(robot, res.q, world)[0]  # the exact check: every sphere pair and sphere-ball distance
+        T1 = robot.fk(res.q)[0]  # FK round trip: within the tolerances
+        assert np.linalg.norm(T1[:3, 3] - T0[:3, 3]) <= 1e-4
+        cos = np.clip((np.trace(T0[:3, :3].T @ T1[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
+        assert np.arccos(cos) <= np.radians(0.1)
+        assert res.iterations[0] < 40  # ended by the finishing step, not by the restart budget
+
+
 def test_answers_called_free_never_collide_with_the_meshes():
     pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik[collision-check]')")
     import sys

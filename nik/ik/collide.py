@@ -57,7 +57,9 @@ answer (``"linkA|linkB"``, ``"link|box 2"``; :func:`nik.collision.collision_name
 Choices (:class:`CollideCfg`): margin 5 mm (the rows push the spheres that far apart, the verdict needs 0), weight
 1 (a millimetre of penetration costs as much as a millimetre of pose error), 30 iterations per start,
 :attr:`CollideCfg.restarts` uniform starts, each the collision-free draw nearest the pose among
-:attr:`CollideCfg.tries`. A solver takes other settings as ``solver.collide_cfg = CollideCfg(...)``.
+:attr:`CollideCfg.tries`; a start at the pose whose hand overlaps by less than the tolerance can move it is first
+finished inside the tolerance (:attr:`CollideCfg.finish` iterations, :mod:`nik.kernels.collision_lm`). A solver takes
+other settings as ``solver.collide_cfg = CollideCfg(...)``.
 """
 
 from __future__ import annotations
@@ -88,7 +90,9 @@ class CollideCfg:
     """Settings of the collision stage (module docstring): ``margin`` metres, ``weight`` of the collision rows,
     ``iters`` / ``stall_iters`` per start, ``restarts`` uniform starts per target, ``tries`` draws per start,
     ``patience``: end a target's uniform restarts after that many in a row that do not lower its best sum by 1 %
-    (0: off, the default; :mod:`nik.kernels.collision_lm` says what it trades)."""
+    (0: off, the default; :mod:`nik.kernels.collision_lm` says what it trades); ``finish``: iterations of the finishing
+    step (a start at the pose that overlaps by less than the tolerance can move the hand, solved inside the tolerance;
+    0: off)."""
 
     margin: float = 0.005
     weight: float = 1.0
@@ -97,6 +101,7 @@ class CollideCfg:
     restarts: int = 16
     tries: int = 16
     patience: int = 0
+    finish: int = 10
 
 
 @dataclass(frozen=True)
@@ -369,7 +374,7 @@ def _collision_solve(robot, s: Setup, plan, cfg: CollideCfg, goal, T, starts, n_
     collision_lm(G, joints, np.ascontiguousarray(T), np.ascontiguousarray(starts), np.asarray(n_starts, dtype=np.int64),
                  np.ascontiguousarray(half[:k]), np.ascontiguousarray(modes[:k]), opts, iopts,
                  np.asarray(restarts, dtype=np.int64), cfg.tries, cfg.patience, seed_state(plan.seed), *rest, margin,
-                 cfg.weight, q, free, done, it, pos, rot)  # fmt: skip
+                 cfg.weight, cfg.finish, q, free, done, it, pos, rot)  # fmt: skip
     return q, done, it
 
 
