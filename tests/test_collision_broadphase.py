@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import nik
-from nik.collision import collides, collision_model
+from nik.collision import collides, collision_model, signed_distances
 from nik.collision.compiled import blocked_targets, kernel_arguments
 from nik.collision.distance import sphere_centers
 from nik.kernels.collision import (
@@ -332,3 +332,76 @@ def test_the_hands_slack_never_blocks_a_pose_that_a_free_configuration_reaches_w
                     assert not blocked[0]
                     near += 1
     assert near >= 12 and far == 24
+
+
+def _wrist_ring(robot, model, q, side, gap, radius=0.01, count=360):
+    """A ring of ``count`` balls about the last joint's axis for ``q (1, n)``, on the circle of the wrist sphere
+    farthest from that axis (the sweep over the last joint turns the wrist's spheres about it), moved along
+    ``side * axis`` until the nearest wrist sphere is ``gap`` (m) clear of the circle of the balls (clear of the balls
+    by that where it lies under one, by up to 17 um more between two), and the axis."""
+    n = robot.dof
+    frames = np.asarray(model.sphere_frame)
+    F = nik.collision.link_frames(robot, torch.as_tensor(q))[0].numpy()
+    c = sphere_centers(model, robot, torch.as_tensor(q))[0].numpy()[frames == n - 1]
+    r = model.arrays()[0][frames == n - 1, 3]
+    axis, origin = F[n][:3, 2], F[n][:3, 3]
+    along = (c - origin) @ axis
+    radial = c - origin - along[:, None] * axis
+    k = int(np.argmax(np.linalg.norm(radial, axis=1)))
+    u, rho = radial[k] / np.linalg.norm(radial[k]), float(np.linalg.norm(radial[k]))
+    v = np.cross(axis, u)
+    ball = np.abs(np.linalg.norm(radial, axis=1) - rho)  # each wrist sphere's offset from the circle, across
+
+    def clear(t):  # the wrist's clearance from the circle of the balls at height t along side * axis
+        return float((np.hypot(ball, t - side * along) - r - radius).min())
+
+    ts = np.linspace(float((side * along).min()), float((side * along).max()) + 0.2, 2001)
+    lo = float(ts[max(i for i, t in enumerate(ts) if clear(t) < gap)])  # touching here, clear one grid step on
+    hi = lo + float(ts[1] - ts[0])
+    for _ in range(100):  # a height where the clearance is gap (it is continuous in the height)
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if clear(mid) < gap else (lo, mid)
+    world = nik.World()
+    centre = origin + side * hi * axis
+    for a in np.linspace(0, 2 * np.pi, count, endpoint=False):
+        world.add_sphere(centre + rho * (np.cos(a) * u + np.sin(a) * v), radius)
+    return world, axis
+
+
+def test_the_sweeps_halving_never_blocks_a_pose_that_a_free_configuration_reaches_within_the_tolerance():
+    """A ring of balls about the last joint's axis over the circle its wrist link's outer sphere turns on, just
+    clear of the wrist: where the configuration is free, the target moved 0.999 x tol_pos towards the ring (every
+    wrist sphere that much nearer it at every value of the last joint) is reached within the tolerance, so it is
+    never blocked at any depth of the halving (the links between, which the ring's circle crosses, are not what the
+    proof reads: the links it reads are free); a ring 1 mm into the wrist (more than the slack, less than one step's
+    motion) is blocked by the halving and not by the plain sweep. With half the slack the first case is called
+    blocked."""
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    n, frames = robot.dof, np.asarray(model.sphere_frame)
+    start = model.arrays()[2]
+    swept = np.array([frames[start[link]] in (0, 1, n - 1, n) for link in range(len(model.links))])
+    free = caught = 0
+    for q in _q(robot, 6, seed=23):
+        q = q[None]
+        T = np.asarray(robot.fk(q))[0]
+        for side in (1.0, -1.0):
+            tol_pos, tol_rot = 1e-3, 1e-4  # slack 1.02 mm on the built-in panda's wrist lever
+            world, axis = _wrist_ring(robot, model, q, side, 1e-6)
+            d = signed_distances(robot, torch.as_tensor(q), world, model=model, self_collision=False)[0].numpy()
+            if (d[len(model.pairs) :][swept] >= 0).all():  # the hand may touch the ring (forearm rows aside)
+                Tm = T.copy()
+                Tm[:3, 3] += side * 0.999 * tol_pos * axis  # q reaches Tm within tol_pos
+                for depth in (0, 4, 6):
+                    blocked = blocked_targets(robot, model, world, Tm[None], tol_pos, tol_rot, self_collision=False,
+                                              depth=depth)  # fmt: skip
+                    assert not blocked[0]
+                free += 1
+            world, _ = _wrist_ring(robot, model, q, side, -1e-3)
+            plain, halved = (
+                blocked_targets(robot, model, world, T[None], 1e-4, 1e-3, self_collision=False, depth=d)[0]
+                for d in (0, 4)
+            )
+            assert collides(robot, q, world, model=model, self_collision=False)[0]
+            caught += bool(halved and not plain)
+    assert free >= 3 and caught >= 3
