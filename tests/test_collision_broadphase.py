@@ -470,3 +470,10 @@ def test_the_halvings_motion_bound_never_blocks_a_pose_free_only_between_two_swe
             assert not blocked_targets(robot, model, world, T, 1e-4, 1e-4, self_collision=False, depth=depth)[0]
         checked += 1
     assert checked >= 3
+
+
+def test_a_negative_halving_depth_is_refused_in_one_line():
+    robot = nik.load_robot("panda")
+    T = np.asarray(robot.fk(_q(robot, 1, seed=31)))
+    with pytest.raises(ValueError, match="depth must be >= 0"):
+        blocked_targets(robot, collision_model(robot), nik.World(), T, 1e-4, 1e-3, depth=-1)

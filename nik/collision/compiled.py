@@ -63,6 +63,8 @@ def blocked_targets(
     sweep."""
     from nik.kernels.collision import blocked_poses
 
+    if depth < 0:
+        raise ValueError(f"blocked_targets: depth must be >= 0 (halvings of a step), got {depth}")
     (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
     spheres, frames, n = rest[0], rest[1], joints.shape[0]
     tool = G[n][:3, 3]
