@@ -332,3 +332,148 @@ def test_the_hands_slack_never_blocks_a_pose_that_a_free_configuration_reaches_w
                     assert not blocked[0]
                     near += 1
     assert near >= 12 and far == 24
+
+
+def _wrist_ring(robot, model, q, side, gap, radius=0.01, count=360, hole=None):
+    """A ring of ``count`` balls about the last joint's axis for ``q (1, n)``, on the circle of the wrist sphere
+    farthest from that axis (the sweep over the last joint turns the wrist's spheres about it), moved along
+    ``side * axis`` until the nearest wrist sphere is ``gap`` (m) clear of the circle of the balls (clear of the balls
+    by that where it lies under one, by up to 17 um more between two): ``(count, 3)`` centres, and the axis. With
+    ``hole = (a, b)`` (rad) the ring lies on that sphere's circle instead (through its centre), from ``a`` to
+    ``2 pi - b`` of its angle."""
+    c, r, axis, origin = _wrist(robot, model, q)
+    along = (c - origin) @ axis
+    radial = c - origin - along[:, None] * axis
+    k = int(np.argmax(np.linalg.norm(radial, axis=1)))
+    u, rho = radial[k] / np.linalg.norm(radial[k]), float(np.linalg.norm(radial[k]))
+    v = np.cross(axis, u)
+    ball = np.abs(np.linalg.norm(radial, axis=1) - rho)  # each wrist sphere's offset from the circle, across
+
+    def clear(t):  # the wrist's clearance from the circle of the balls at height t along side * axis
+        return float((np.hypot(ball, t - side * along) - r - radius).min())
+
+    if hole is not None:
+        a = np.linspace(hole[0], 2 * np.pi - hole[1], count)[:, None]
+        return origin + along[k] * axis + rho * (np.cos(a) * u + np.sin(a) * v), axis
+    ts = np.linspace(float((side * along).min()), float((side * along).max()) + 0.2, 2001)
+    lo = float(ts[max(i for i, t in enumerate(ts) if clear(t) < gap)])  # touching here, clear one grid step on
+    hi = lo + float(ts[1] - ts[0])
+    for _ in range(100):  # a height where the clearance is gap (it is continuous in the height)
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if clear(mid) < gap else (lo, mid)
+    a = np.linspace(0, 2 * np.pi, count, endpoint=False)[:, None]
+    return origin + side * hi * axis + rho * (np.cos(a) * u + np.sin(a) * v), axis
+
+
+_PLACED: dict = {}
+
+
+def _placed(robot, model, key):
+    """The centres ``(S, 3)`` of the spheres and the frames ``(n + 1, 3, 4)`` for ``q = np.frombuffer(key)``, kept
+    for the last configuration (the rings' searches place the same one many times)."""
+    if _PLACED.get("key") != (id(robot), id(model), key):
+        q = torch.as_tensor(np.frombuffer(key).reshape(1, -1).copy())
+        _PLACED["key"] = (id(robot), id(model), key)
+        _PLACED["got"] = sphere_centers(model, robot, q)[0].numpy(), nik.collision.link_frames(robot, q)[0].numpy()
+    return _PLACED["got"]
+
+
+def _wrist(robot, model, q):
+    """The wrist's (frame ``n - 1``) sphere centres and radii for ``q (1, n)``, the last joint's axis and origin."""
+    n, frames = robot.dof, np.asarray(model.sphere_frame)
+    c, F = _placed(robot, model, np.ascontiguousarray(q, dtype=np.float64).tobytes())
+    return c[frames == n - 1], model.arrays()[0][frames == n - 1, 3], F[n][:3, 2], F[n][:3, 3]
+
+
+def _balls(centres, radius=0.01) -> nik.World:
+    world = nik.World()
+    for c in centres:
+        world.add_sphere(c, radius)
+    return world
+
+
+def _read_clear(robot, model, q, centres, radius=0.01) -> float:
+    """The clearance from balls ``centres`` of the links :func:`blocked_targets` reads for a ring about the last
+    joint (those on frames 1, ``n - 1`` and ``n``; the links between are not read)."""
+    n, frames = robot.dof, np.asarray(model.sphere_frame)
+    read = np.isin(frames, (1, n - 1, n))
+    c = _placed(robot, model, np.ascontiguousarray(q, dtype=np.float64).tobytes())[0][read]
+    d = c[:, None] - centres[None]
+    return float((np.sqrt((d * d).sum(axis=2)) - model.arrays()[0][read, 3][:, None] - radius).min())
+
+
+def test_the_sweeps_halving_never_blocks_a_pose_that_a_free_configuration_reaches_within_the_tolerance():
+    """A ring of balls about the last joint's axis over the circle its wrist link's outer sphere turns on, just
+    clear of the wrist: where the configuration is free, the target moved 0.999 x tol_pos towards the ring (every
+    wrist sphere that much nearer it at every value of the last joint) is reached within the tolerance, so it is
+    never blocked at any depth of the halving (the links between, which the ring's circle crosses, are not what the
+    proof reads: the links it reads are free); a ring 1 mm into the wrist (more than the slack, less than one step's
+    motion) is blocked by the halving and not by the plain sweep. With half the slack the first case is called
+    blocked."""
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    free = caught = 0
+    for q in _q(robot, 6, seed=23):
+        q = q[None]
+        T = np.asarray(robot.fk(q))[0]
+        for side in (1.0, -1.0):
+            tol_pos, tol_rot = 1e-3, 1e-4  # slack 1.02 mm on the built-in panda's wrist lever
+            ring, axis = _wrist_ring(robot, model, q, side, 1e-6)
+            world = _balls(ring)
+            if _read_clear(robot, model, q, ring) >= 0:  # the hand may touch the ring
+                Tm = T.copy()
+                Tm[:3, 3] += side * 0.999 * tol_pos * axis  # q reaches Tm within tol_pos
+                for depth in (0, 4, 6):
+                    blocked = blocked_targets(robot, model, world, Tm[None], tol_pos, tol_rot, self_collision=False,
+                                              depth=depth)  # fmt: skip
+                    assert not blocked[0]
+                free += 1
+            world = _balls(_wrist_ring(robot, model, q, side, -1e-3)[0])
+            plain, halved = (
+                blocked_targets(robot, model, world, T[None], 1e-4, 1e-3, self_collision=False, depth=d)[0]
+                for d in (0, 4)
+            )
+            assert collides(robot, q, world, model=model, self_collision=False)[0]
+            caught += bool(halved and not plain)
+    assert free >= 3 and caught >= 3
+
+
+def test_the_halvings_motion_bound_never_blocks_a_pose_free_only_between_two_swept_values():
+    """A ring of balls on the circle the wrist's outer sphere turns on, with a hole just wide enough that the
+    configuration's wrist is free there, the last joint set halfway between two of the sweep's values: the pieces
+    next to it collide at their centres by more than the slack (the sphere runs head-on into the ball at the hole's
+    edge) but are free at their edge, so the pose is never blocked at any depth (with half the motion bound it is)."""
+    from nik.kernels.chain import LOWER, UPPER
+
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    n = robot.dof
+    (_, joints), _ = kernel_arguments(robot, model, nik.World(), self_collision=False)
+    lo, hi = joints[n - 1, LOWER], joints[n - 1, UPPER]
+    h = min(hi - lo, 2 * np.pi) / 179  # blocked_targets' 180 values of the last joint
+    checked = 0
+    for q in _q(robot, 4, seed=29):
+        q = q[None].copy()
+        q[0, n - 1] = lo + (np.floor((q[0, n - 1] - lo) / h) + 0.5) * h
+        T = np.asarray(robot.fk(q))
+
+        hole = [1.5, 1.5]  # the narrowest hole (rad each way) that frees the links the proof reads: both edges touch
+        for side in (0, 1):
+            a, b = 0.0, 1.5
+            for _ in range(28):
+                hole[side] = 0.5 * (a + b)
+                ring = _wrist_ring(robot, model, q, 1.0, 0.0, hole=hole)[0]
+                a, b = (a, hole[side]) if _read_clear(robot, model, q, ring) >= 0 else (hole[side], b)
+            hole[side] = b
+        world = _balls(_wrist_ring(robot, model, q, 1.0, 0.0, hole=hole)[0])
+        for depth in (0, 4):  # slack 0.12 mm, less than a third of the least row next to the hole
+            assert not blocked_targets(robot, model, world, T, 1e-4, 1e-4, self_collision=False, depth=depth)[0]
+        checked += 1
+    assert checked >= 3
+
+
+def test_a_negative_halving_depth_is_refused_in_one_line():
+    robot = nik.load_robot("panda")
+    T = np.asarray(robot.fk(_q(robot, 1, seed=31)))
+    with pytest.raises(ValueError, match="depth must be >= 0"):
+        blocked_targets(robot, collision_model(robot), nik.World(), T, 1e-4, 1e-3, depth=-1)

@@ -682,9 +682,47 @@ def _lever(spheres, sphere_frame, k, M, prismatic):
 
 
 @kernel
+def _piece_blocked(G, joints, F, X, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                   self_on, sweep, j, k, n, g, Tj, rho, slack, x, half, depth, stack):  # fmt: skip
+    """Whether every value of joint ``j`` within ``half`` of ``x`` leaves the links on frame ``k`` colliding for every
+    configuration within ``slack`` of the pose (:func:`blocked_poses`'s sweep ``sweep``: 0 the first joint, 1 the
+    last). A piece is blocked where the row at its centre is below ``-(rho * half + slack)`` (a sphere moves at most
+    ``rho`` per unit of the joint); else, unless that row is at least ``-slack`` or the piece is ``depth`` halvings
+    deep, its two halves are judged the same way (``stack (depth + 2, 2)``: scratch)."""
+    top = 0
+    stack[0, 0], stack[0, 1] = x, half
+    while top >= 0:
+        c, w = stack[top, 0], stack[top, 1]
+        top -= 1
+        prismatic = joints[j, PRISMATIC] != 0.0
+        if sweep == 0:  # F[1] = G[0] J(q1)
+            _start(Tj, G[0])
+            _joint(Tj, prismatic, c + joints[j, OFFSET])
+            for r in range(3):
+                for col in range(4):
+                    F[1, r, col] = Tj[r, col]
+        else:  # F[n - 1] = F[n] (G[n - 1] J(qn))^-1
+            _start(Tj, G[n - 1])
+            _joint(Tj, prismatic, c + joints[j, OFFSET])
+            _rigid_inverse_times(F[n], Tj, F[n - 1])
+        _place_frame(F, spheres, sphere_frame, k, X)  # frames 0 and n stay placed
+        reach = rho * w + slack  # a row at least -reach here may be free somewhere in the piece
+        worst = _sweep_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                            self_on, k, n, g, -reach)  # fmt: skip
+        if worst < -reach:
+            continue
+        if worst >= -slack or w <= half / 2.0**depth * 1.5:  # may be free here, or as fine as allowed
+            return False
+        stack[top + 1, 0], stack[top + 1, 1] = c - w / 2, w / 2
+        stack[top + 2, 0], stack[top + 2, 1] = c + w / 2, w / 2
+        top += 2
+    return True
+
+
+@kernel
 def blocked_poses(
     G, joints, T, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, slack, samples,
-    out,
+    depth, out,
 ):  # fmt: skip
     """``out (B,)`` bool: no configuration whose tool pose is within ``slack`` of ``T[b] (4, 4)`` is free, proven
     by the rows the pose fixes (metres; ``slack`` bounds how far a sphere on the last two frames moves between two
@@ -696,7 +734,14 @@ def blocked_poses(
     its range: the links on frame 1 move with the first joint alone, the links on frame ``n - 1`` with the pose and
     the last joint alone; their rows against the world and the links on frames 0, their own and ``n`` are swept
     (blocked where, for every value, the smallest row plus what a sphere moves between two values and ``slack`` is
-    below 0). Never True for a pose that has a free configuration within the tolerances."""
+    below 0). Never True for a pose that has a free configuration within the tolerances.
+
+    Each value stands for the piece of the range around it (half a step each side); a piece whose row is not low
+    enough to block it all is halved, up to ``depth`` times (the two halves judged at their centres with half the
+    motion), rather than ending the sweep: a pose whose swept link collides at every value but by less than the
+    motion over one step is proven on a finer step only where it needs one (:func:`_piece_blocked`). The sweep ends
+    (not proven) at once where a value's row is at least ``-slack`` (a configuration there may be free), or where a
+    piece ``depth`` halvings deep is still open; ``depth`` 0 is the plain sweep."""
     n = joints.shape[0]
     S = spheres.shape[0]
     F = np.zeros((n + 1, 3, 4))
@@ -713,6 +758,7 @@ def blocked_poses(
     Mw = np.empty((3, 4))  # the last joint turns frame n - 1 about the z axis of G[n - 1]
     _start(Mw, G[n - 1])
     sweeps = 2 if n >= 3 else (1 if n == 2 else 0)
+    stack = np.empty((depth + 2, 2))  # the open pieces of one value's halving (centre, half width), depth first
     for b in range(T.shape[0]):
         out[b] = False
         for r in range(3):
@@ -739,21 +785,9 @@ def blocked_poses(
             blocked = True
             for i in range(samples):
                 x = lo + ((i * 7919) % samples) * h  # a stride through the range: a free value is met early
-                if sweep == 0:  # F[1] = G[0] J(q1)
-                    _start(Tj, G[0])
-                    _joint(Tj, prismatic, x + joints[j, OFFSET])
-                    for r in range(3):
-                        for c in range(4):
-                            F[1, r, c] = Tj[r, c]
-                else:  # F[n - 1] = F[n] (G[n - 1] J(qn))^-1
-                    _start(Tj, G[n - 1])
-                    _joint(Tj, prismatic, x + joints[j, OFFSET])
-                    _rigid_inverse_times(F[n], Tj, F[n - 1])
-                _place_frame(F, spheres, sphere_frame, k, X)  # frames 0 and n stay placed
-                reach = rho * h / 2 + slack  # a row at least -reach here may be free somewhere near
-                worst = _sweep_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                                    w_capsules, self_on, k, n, g, -reach)  # fmt: skip
-                if worst >= -reach:
+                if not _piece_blocked(G, joints, F, X, lb, spheres, sphere_frame, body_start, pairs, w_spheres,
+                                      w_boxes, w_capsules, self_on, sweep, j, k, n, g, Tj, rho, slack, x, h / 2,
+                                      depth, stack):  # fmt: skip
                     blocked = False
                     break
             if blocked:
