@@ -61,15 +61,15 @@ def blocked_targets(
     The halving (``depth`` 4: pieces down to 1/16 of a step) proves a swept link that collides at every value by
     less than one step's motion (measured on the same scene: one more target on seed 2); ``depth=0`` is the plain
     sweep."""
-    from nik.kernels.collision import blocked_poses
+    from nik.kernels.collision import blocked_poses, hand_lever
 
     if depth < 0:
         raise ValueError(f"blocked_targets: depth must be >= 0 (halvings of a step), got {depth}")
     (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
     spheres, frames, n = rest[0], rest[1], joints.shape[0]
     tool = G[n][:3, 3]
-    levers = [0.0, *np.linalg.norm(spheres[frames == n, :3] - tool, axis=1)]
-    hand = float(max(levers))
+    hand = float(hand_lever(G, spheres, frames))
+    levers = [hand]
     if n >= 2:  # frame n - 1 turns about the tool's last joint: bounded by its distance to that frame's origin
         inv = np.linalg.inv(G[n - 1])
         wrist = spheres[frames == n - 1, :3] @ inv[:3, :3].T + inv[:3, 3]

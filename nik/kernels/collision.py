@@ -41,6 +41,7 @@ __all__ = [
     "collision_distances_batch",
     "collision_residual",
     "collision_rows_batch",
+    "hand_lever",
     "link_bounds",
     "overlaps_batch",
     "residual_bounded",
@@ -663,6 +664,21 @@ def _rigid_inverse_times(A, M, out):
             out[r, c] = A[r, 0] * M[c, 0] + A[r, 1] * M[c, 1] + A[r, 2] * M[c, 2]
     for r in range(3):
         out[r, 3] = A[r, 3] - (out[r, 0] * M[0, 3] + out[r, 1] * M[1, 3] + out[r, 2] * M[2, 3])
+
+
+@kernel
+def hand_lever(G, spheres, sphere_frame):
+    """The farthest a sphere centre on the last frame (``n = G.shape[0] - 1``, the tool's: it rides with the pose)
+    lies from the tool point ``G[n][:3, 3]`` (metres; 0 with none there): a pose within ``tol_rot`` of a target moves
+    such a sphere by at most ``tol_pos + tol_rot * lever``. Read by the blocked-pose proof's fixed rows
+    (:func:`nik.collision.compiled.blocked_targets`) and the collision LM's finishing step."""
+    n = G.shape[0] - 1
+    lever = 0.0
+    for k in range(spheres.shape[0]):
+        if sphere_frame[k] == n:
+            x, y, z = spheres[k, 0] - G[n, 0, 3], spheres[k, 1] - G[n, 1, 3], spheres[k, 2] - G[n, 2, 3]
+            lever = max(lever, math.sqrt(x * x + y * y + z * z))
+    return lever
 
 
 @kernel

@@ -71,7 +71,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import _chain
-from nik.kernels.collision import collides_in, link_bounds, residual_in, rows_work
+from nik.kernels.collision import collides_in, hand_lever, link_bounds, residual_in, rows_work
 from nik.kernels.lm import (
     _STREAM,
     CLASSIC,
@@ -263,14 +263,8 @@ def collision_lm(
         fbnd[k] = tol_pos / (math.sqrt(3.0) * DEAD_ZONE)
         fbnd[3 + k] = tol_rot / (math.sqrt(3.0) * DEAD_ZONE)
     fmargin = FINISH_MARGIN * tol_pos
-    # the most a pose within the tolerances moves a sphere of the last frame (its lever: the farthest centre from the
-    # tool point): the overlap the finishing step is tried on
-    lever = 0.0
-    for k in range(spheres.shape[0]):
-        if sphere_frame[k] == n:
-            x, y, z = spheres[k, 0] - G[n, 0, 3], spheres[k, 1] - G[n, 1, 3], spheres[k, 2] - G[n, 2, 3]
-            lever = max(lever, math.sqrt(x * x + y * y + z * z))
-    slack = tol_pos + tol_rot * lever
+    # the most a pose within the tolerances moves a sphere of the last frame: the overlap the finishing step is tried on
+    slack = tol_pos + tol_rot * hand_lever(G, spheres, sphere_frame)
     qf = np.empty(n)
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
