@@ -84,19 +84,20 @@ def _place_frame(F, spheres, sphere_frame, k, X):
 
 
 @kernel
-def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, row):
-    """``row[m] += sign * v . dc/dq_m`` for a point ``(x, y, z)`` riding on frame ``frame``."""
+def _add_point_jacobian(F, joints, frame, x, y, z, vx, vy, vz, sign, J, k):
+    """``J[k, m] += sign * v . dc/dq_m`` for a point ``(x, y, z)`` riding on frame ``frame`` (row ``k`` by index, not
+    a row view: a view costs two atomic reference counts)."""
     for m in range(frame):
         zx, zy, zz = F[m + 1, 0, 2], F[m + 1, 1, 2], F[m + 1, 2, 2]
         if joints[m, PRISMATIC] != 0.0:
-            row[m] += sign * (vx * zx + vy * zy + vz * zz)
+            J[k, m] += sign * (vx * zx + vy * zy + vz * zz)
         else:
             rx, ry, rz = x - F[m + 1, 0, 3], y - F[m + 1, 1, 3], z - F[m + 1, 2, 3]
             cx, cy, cz = zy * rz - zz * ry, zz * rx - zx * rz, zx * ry - zy * rx
-            row[m] += sign * (vx * cx + vy * cy + vz * cz)
+            J[k, m] += sign * (vx * cx + vy * cy + vz * cz)
 
 
-@kernel
+@kernel(inline="always")
 def _radial(dx, dy, dz, r, g, want):
     """Signed distance ``|d| - r`` of the offset ``d = (dx, dy, dz)`` from a point to its nearest point on a core (a
     sphere's centre, a capsule's segment), its gradient ``d / |d|`` in ``g (3,)`` where ``want`` (+z where
@@ -110,14 +111,14 @@ def _radial(dx, dy, dz, r, g, want):
     return n - r
 
 
-@kernel
+@kernel(inline="always")
 def _sphere_distance(x, y, z, w, o, g, want):
     """Signed distance from the point ``(x, y, z)`` to the world's sphere ``w[o]``, its gradient in ``g (3,)``
     where ``want``."""
     return _radial(x - w[o, 0], y - w[o, 1], z - w[o, 2], w[o, 3], g, want)
 
 
-@kernel
+@kernel(inline="always")
 def _capsule_distance(x, y, z, w, o, g, want):
     """Signed distance from the point ``(x, y, z)`` to the world's capsule ``w[o]``, its gradient in ``g (3,)``
     where ``want``."""
@@ -131,16 +132,15 @@ def _capsule_distance(x, y, z, w, o, g, want):
     return _radial(x - (ax + t * bx), y - (ay + t * by), z - (az + t * bz), w[o, 6], g, want)
 
 
-@kernel
+@kernel(inline="always")
 def _box_distance(x, y, z, w, o, g, want):
     """Signed distance from the point ``(x, y, z)`` to the world's box ``w[o]`` (exact SDF), its gradient in ``g``
     where ``want``."""
-    b = w[o]
-    px, py, pz = x - b[9], y - b[10], z - b[11]
-    lx = b[0] * px + b[3] * py + b[6] * pz  # R^T (p - c)
-    ly = b[1] * px + b[4] * py + b[7] * pz
-    lz = b[2] * px + b[5] * py + b[8] * pz
-    qx, qy, qz = abs(lx) - b[12], abs(ly) - b[13], abs(lz) - b[14]
+    px, py, pz = x - w[o, 9], y - w[o, 10], z - w[o, 11]  # w[o, k], not a row view w[o]: no reference count
+    lx = w[o, 0] * px + w[o, 3] * py + w[o, 6] * pz  # R^T (p - c)
+    ly = w[o, 1] * px + w[o, 4] * py + w[o, 7] * pz
+    lz = w[o, 2] * px + w[o, 5] * py + w[o, 8] * pz
+    qx, qy, qz = abs(lx) - w[o, 12], abs(ly) - w[o, 13], abs(lz) - w[o, 14]
     qmax = max(qx, max(qy, qz))
     if not want:
         if qmax > 0:
@@ -160,13 +160,13 @@ def _box_distance(x, y, z, w, o, g, want):
             gy = math.copysign(1.0, ly)
         else:
             gz = math.copysign(1.0, lz)
-    g[0] = b[0] * gx + b[1] * gy + b[2] * gz
-    g[1] = b[3] * gx + b[4] * gy + b[5] * gz
-    g[2] = b[6] * gx + b[7] * gy + b[8] * gz
+    g[0] = w[o, 0] * gx + w[o, 1] * gy + w[o, 2] * gz
+    g[1] = w[o, 3] * gx + w[o, 4] * gy + w[o, 5] * gz
+    g[2] = w[o, 6] * gx + w[o, 7] * gy + w[o, 8] * gz
     return d
 
 
-@kernel
+@kernel(inline="always")
 def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g, want=False):
     """Signed distance from ``(x, y, z)`` to obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule), its gradient
     in ``g`` where ``want`` (the scans skip it: computed once for the nearest)."""
@@ -178,20 +178,20 @@ def _obstacle_one(x, y, z, kind, o, w_spheres, w_boxes, w_capsules, g, want=Fals
 
 
 @kernel
-def _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, out):
-    """``out (4,)``: a sphere holding obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule): centre, radius."""
+def _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, out, m):
+    """``out[m] (4,)``: a sphere holding obstacle ``o`` of ``kind`` (0 sphere, 1 box, 2 capsule): centre, radius."""
     if kind == 0:
         for r in range(4):
-            out[r] = w_spheres[o, r]
+            out[m, r] = w_spheres[o, r]
     elif kind == 1:
-        b = w_boxes[o]
-        out[0], out[1], out[2] = b[9], b[10], b[11]
-        out[3] = math.sqrt(b[12] * b[12] + b[13] * b[13] + b[14] * b[14])
+        b = w_boxes
+        out[m, 0], out[m, 1], out[m, 2] = b[o, 9], b[o, 10], b[o, 11]
+        out[m, 3] = math.sqrt(b[o, 12] * b[o, 12] + b[o, 13] * b[o, 13] + b[o, 14] * b[o, 14])
     else:
-        c = w_capsules[o]
-        dx, dy, dz = c[3] - c[0], c[4] - c[1], c[5] - c[2]
-        out[0], out[1], out[2] = 0.5 * (c[0] + c[3]), 0.5 * (c[1] + c[4]), 0.5 * (c[2] + c[5])
-        out[3] = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz) + c[6]
+        c = w_capsules
+        dx, dy, dz = c[o, 3] - c[o, 0], c[o, 4] - c[o, 1], c[o, 5] - c[o, 2]
+        out[m, 0], out[m, 1], out[m, 2] = 0.5 * (c[o, 0] + c[o, 3]), 0.5 * (c[o, 1] + c[o, 4]), 0.5 * (c[o, 2] + c[o, 5])
+        out[m, 3] = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz) + c[o, 6]
 
 
 @kernel
@@ -220,7 +220,7 @@ def link_bounds(spheres, body_start, bounds):
             bounds[link, 3] = max(bounds[link, 3], math.sqrt(dx * dx + dy * dy + dz * dz) + spheres[s, 3])
 
 
-@kernel
+@kernel(inline="always")
 def _place_link(F, spheres, sphere_frame, body_start, link, X, placed):
     """The world positions of link ``link``'s spheres in ``X``, once per evaluation (``placed[link]``)."""
     if placed[link]:
@@ -308,7 +308,7 @@ def _rows_in(
     for kind, count in ((0, w_spheres.shape[0]), (2, w_capsules.shape[0]), (1, w_boxes.shape[0])):
         for o in range(count):
             all_kinds[m], all_which[m] = kind, o
-            _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, Ob[m])
+            _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, Ob, m)
             m += 1
     for link in range(L):
         s0, s1 = body_start[link], body_start[link + 1]
@@ -354,7 +354,7 @@ def _rows_in(
         if want_jacobian and bs >= 0 and best <= lower:
             _obstacle_one(X[bs, 0], X[bs, 1], X[bs, 2], kinds[bk], which[bk], w_spheres, w_boxes, w_capsules, gb, True)
             _add_point_jacobian(
-                F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J[P + link]
+                F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2], 1.0, J, P + link
             )
         if d[P + link] < cutoff:
             hit = True
@@ -408,8 +408,8 @@ def _rows_in(
             nn = math.sqrt(dx * dx + dy * dy + dz * dz)
             if nn > 0:
                 vx, vy, vz = dx / nn, dy / nn, dz / nn
-                _add_point_jacobian(F, joints, sphere_frame[bi], X[bi, 0], X[bi, 1], X[bi, 2], vx, vy, vz, 1.0, J[p])
-                _add_point_jacobian(F, joints, sphere_frame[bj], X[bj, 0], X[bj, 1], X[bj, 2], vx, vy, vz, -1.0, J[p])
+                _add_point_jacobian(F, joints, sphere_frame[bi], X[bi, 0], X[bi, 1], X[bi, 2], vx, vy, vz, 1.0, J, p)
+                _add_point_jacobian(F, joints, sphere_frame[bj], X[bj, 0], X[bj, 1], X[bj, 2], vx, vy, vz, -1.0, J, p)
         if d[p] < cutoff:
             hit = True
             if stop:
