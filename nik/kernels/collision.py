@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import LOWER, OFFSET, PRISMATIC, UPPER, _joint, _start, _times
+from nik.kernels.chain import LOWER, OFFSET, PRISMATIC, UPPER, _joint, _start
 
 __all__ = [
     "blocked_poses",
@@ -50,19 +50,35 @@ __all__ = [
 
 @kernel
 def _frames(G, joints, q, F):
-    """``F (n + 1, 3, 4)``: identity, then the frame after each joint."""
+    """``F (n + 1, 3, 4)``: identity, then the frame after each joint: ``F[k + 1] = F[k] G[k] J(q[k])`` (``F[0] G[0]``
+    read as ``G[0]``), the products of :func:`nik.kernels.chain._times` and :func:`nik.kernels.chain._joint` written
+    out in place (the same operations, so the same bits; no scratch frame to allocate, no row views to count)."""
     n = q.shape[0]
     for r in range(3):
         for k in range(4):
             F[0, r, k] = 1.0 if r == k else 0.0
-    T = np.empty((3, 4))
-    _start(T, G[0])
     for i in range(n):
-        _joint(T, joints[i, PRISMATIC] != 0.0, q[i] + joints[i, OFFSET])
-        for r in range(3):
-            for k in range(4):
-                F[i + 1, r, k] = T[r, k]
-        _times(T, G[i + 1])
+        if i == 0:
+            for r in range(3):
+                for k in range(4):
+                    F[1, r, k] = G[0, r, k]
+        else:
+            for r in range(3):
+                t0, t1, t2, t3 = F[i, r, 0], F[i, r, 1], F[i, r, 2], F[i, r, 3]
+                F[i + 1, r, 0] = t0 * G[i, 0, 0] + t1 * G[i, 1, 0] + t2 * G[i, 2, 0]
+                F[i + 1, r, 1] = t0 * G[i, 0, 1] + t1 * G[i, 1, 1] + t2 * G[i, 2, 1]
+                F[i + 1, r, 2] = t0 * G[i, 0, 2] + t1 * G[i, 1, 2] + t2 * G[i, 2, 2]
+                F[i + 1, r, 3] = t0 * G[i, 0, 3] + t1 * G[i, 1, 3] + t2 * G[i, 2, 3] + t3
+        theta = q[i] + joints[i, OFFSET]
+        if joints[i, PRISMATIC] != 0.0:
+            for r in range(3):
+                F[i + 1, r, 3] += F[i + 1, r, 2] * theta
+        else:
+            c, sn = math.cos(theta), math.sin(theta)
+            for r in range(3):
+                x, y = F[i + 1, r, 0], F[i + 1, r, 1]
+                F[i + 1, r, 0] = x * c + y * sn
+                F[i + 1, r, 1] = y * c - x * sn
 
 
 @kernel
@@ -190,7 +206,8 @@ def _obstacle_bound(kind, o, w_spheres, w_boxes, w_capsules, out, m):
     else:
         c = w_capsules
         dx, dy, dz = c[o, 3] - c[o, 0], c[o, 4] - c[o, 1], c[o, 5] - c[o, 2]
-        out[m, 0], out[m, 1], out[m, 2] = 0.5 * (c[o, 0] + c[o, 3]), 0.5 * (c[o, 1] + c[o, 4]), 0.5 * (c[o, 2] + c[o, 5])
+        out[m, 0], out[m, 1] = 0.5 * (c[o, 0] + c[o, 3]), 0.5 * (c[o, 1] + c[o, 4])
+        out[m, 2] = 0.5 * (c[o, 2] + c[o, 5])
         out[m, 3] = 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz) + c[o, 6]
 
 
@@ -321,9 +338,11 @@ def _rows_in(
             kind, o = all_kinds[t], all_which[t]
             dx, dy, dz = Bc[link, 0] - Ob[t, 0], Bc[link, 1] - Ob[t, 1], Bc[link, 2] - Ob[t, 2]
             bound = math.sqrt(dx * dx + dy * dy + dz * dz) - Ob[t, 3] - bounds[link, 3]
-            if bound <= cutoff and kind != 0:  # the bounding spheres within reach: the obstacle's own distance
-                bound = _obstacle_one(Bc[link, 0], Bc[link, 1], Bc[link, 2], kind, o, w_spheres, w_boxes, w_capsules,
-                                      g) - bounds[link, 3]  # fmt: skip
+            if bound <= cutoff and kind == 1:  # the bounding spheres within reach: the obstacle's own distance
+                bound = _box_distance(Bc[link, 0], Bc[link, 1], Bc[link, 2], w_boxes, o, g, False) - bounds[link, 3]
+            elif bound <= cutoff and kind == 2:
+                x, y, z = Bc[link, 0], Bc[link, 1], Bc[link, 2]
+                bound = _capsule_distance(x, y, z, w_capsules, o, g, False) - bounds[link, 3]
             if bound > cutoff:
                 lower = min(lower, bound)
             else:
