@@ -477,3 +477,32 @@ def test_a_negative_halving_depth_is_refused_in_one_line():
     T = np.asarray(robot.fk(_q(robot, 1, seed=31)))
     with pytest.raises(ValueError, match="depth must be >= 0"):
         blocked_targets(robot, collision_model(robot), nik.World(), T, 1e-4, 1e-3, depth=-1)
+
+
+@pytest.mark.parametrize("prismatic", [(), (1, 4)])
+def test_the_rows_frames_are_the_chains_products_bit_for_bit(prismatic):
+    """The rows' frames (written out in place) are the chain's own products ``G[0] J(q0) G[1] J(q1) ...`` of
+    :mod:`nik.kernels.chain` to the bit, revolute and prismatic joints alike, and end at the forward kinematics."""
+    from nik.kernels.chain import OFFSET, PRISMATIC, _joint, _start, _times, fk
+    from nik.kernels.collision import _frames
+
+    robot = nik.load_robot("panda")
+    G, joints = robot.chain_arrays()
+    joints = joints.copy()
+    for k in prismatic:
+        joints[k, PRISMATIC] = 1.0
+    n = robot.dof
+    for q in _q(robot, 50, seed=15):
+        F = np.empty((n + 1, 3, 4))
+        _frames(G, joints, q, F)
+        T = np.empty((3, 4))
+        _start(T, G[0])
+        for i in range(n):
+            _joint(T, joints[i, PRISMATIC] != 0.0, q[i] + joints[i, OFFSET])
+            np.testing.assert_array_equal(F[i + 1], T)
+            _times(T, G[i + 1])
+        np.testing.assert_array_equal(F[0], np.eye(4)[:3])
+        if not prismatic:
+            full = np.empty((4, 4))
+            fk(G, joints, q, full)
+            np.testing.assert_allclose(T, full[:3], rtol=0, atol=1e-12)
