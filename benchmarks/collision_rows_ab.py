@@ -112,7 +112,7 @@ def _loops(mod):
     return rows, check
 
 
-def _rows_ab(robot, model, world, visited, loops, rounds):
+def _rows_ab(seed, robot, model, world, visited, loops, rounds):
     """Print the rows-call and check rows of the table for one seed; assert the variants agree bit for bit."""
     from nik.collision.compiled import kernel_arguments
 
@@ -139,7 +139,7 @@ def _rows_ab(robot, model, world, visited, loops, rounds):
         assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True)), f"{what}: the variants differ"
         ta, tb = (cpu[k] for k in loops)
         ratio = statistics.median(y / x for x, y in zip(ta, tb, strict=True))
-        print(f"| {what} ({len(Q)} configurations) | {1e6 * statistics.median(ta):.2f} "
+        print(f"| {seed} | {what} ({len(Q)} configurations) | {1e6 * statistics.median(ta):.2f} "
               f"| {1e6 * statistics.median(tb):.2f} | {ratio:.3f} |", flush=True)  # fmt: skip
 
 
@@ -178,8 +178,7 @@ def main(argv=None) -> None:
         print("\n| seed | call | A us/call CPU | B us/call CPU | B / A |\n|---|---|---|---|---|")
         for seed, (world, T) in problems.items():
             visited = _visited(clm, nik.IKSolver(robot, world=world), T)
-            print(f"| {seed} ", end="")
-            _rows_ab(robot, model, world, visited, loops, args.rounds)
+            _rows_ab(seed, robot, model, world, visited, loops, args.rounds)
     if args.no_solve:
         return
     stats = {"iters": 0}
