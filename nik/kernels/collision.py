@@ -17,8 +17,9 @@ sphere and obstacle): ``n . (dc_i/dq - dc_j/dq)``, with ``dc/dq`` column ``m`` e
 :func:`collision_residual` turns them into LM rows ``max(0, margin - d)`` and ``-dd/dq`` where active.
 
 A broad phase skips the sphere-by-sphere minimum of a row whose lower bound (from a bounding sphere per link,
-placed with the link) is above the cutoff: ``margin`` in :func:`collision_residual` and :func:`collides_batch`,
-none (exact rows) in :func:`collision_distances` and :func:`collision_distances_batch`.
+placed with the link, and for the pairs a capsule per link, :func:`link_capsules`) is above the cutoff: ``margin``
+in :func:`collision_residual` and :func:`collides_batch`, none (exact rows) in :func:`collision_distances` and
+:func:`collision_distances_batch`.
 
 The reference is :mod:`nik.collision.distance` (torch); the tests compare the two and check the Jacobians
 by finite differences.
@@ -43,6 +44,7 @@ __all__ = [
     "collision_rows_batch",
     "hand_lever",
     "link_bounds",
+    "link_capsules",
     "overlaps_batch",
     "residual_bounded",
 ]
@@ -384,8 +386,9 @@ def _rows_in(
 
     The broad phase, each test a lower bound of the distances it skips (a signed distance is 1-Lipschitz, so a
     bounding sphere's distance minus its radius bounds every sphere inside it): a pair of links whose bounding
-    spheres are apart by more than ``cutoff`` is that bound; else a sphere of one link farther than ``cutoff``
-    from the other link's bounding sphere is skipped; a link and an obstacle whose bound is above ``cutoff``
+    spheres are apart by more than ``cutoff`` is that bound, then likewise their capsules (where the scratch holds
+    them: :func:`rows_work`); else a sphere of one link farther than ``cutoff`` from the other link's capsule (or
+    bounding sphere) is skipped; a link and an obstacle whose bound is above ``cutoff``
     likewise. A row is the smallest of its exact distances and its skipped bounds, so below ``cutoff`` it equals
     the all-pairs minimum (the minimising pair is never skipped)."""
     n = q.shape[0]
