@@ -102,6 +102,7 @@ class CollideCfg:
     tries: int = 16
     patience: int = 0
     finish: int = 10
+    descents: int = 4
 
 
 @dataclass(frozen=True)
@@ -374,7 +375,7 @@ def _collision_solve(robot, s: Setup, plan, cfg: CollideCfg, goal, T, starts, n_
     collision_lm(G, joints, np.ascontiguousarray(T), np.ascontiguousarray(starts), np.asarray(n_starts, dtype=np.int64),
                  np.ascontiguousarray(half[:k]), np.ascontiguousarray(modes[:k]), opts, iopts,
                  np.asarray(restarts, dtype=np.int64), cfg.tries, cfg.patience, seed_state(plan.seed), *rest, margin,
-                 cfg.weight, cfg.finish, q, free, done, it, pos, rot)  # fmt: skip
+                 cfg.weight, cfg.finish, cfg.descents, q, free, done, it, pos, rot)  # fmt: skip
     return q, done, it
 
 
