@@ -97,8 +97,8 @@ def main(argv=None) -> None:
                     res = safe.solve(T, seed=ss)
                     got[name] = np.asarray(res.success)
                 a, b = got.values()
-                diffs.append(f"solver seed {ss}: {int(a.sum())} / {int(b.sum())} solved, only A {np.flatnonzero(a & ~b)}"
-                             f", only B {np.flatnonzero(b & ~a)}")  # fmt: skip
+                diffs.append(f"solver seed {ss}: {int(a.sum())} / {int(b.sum())} solved, "
+                             f"only A {np.flatnonzero(a & ~b)}, only B {np.flatnonzero(b & ~a)}")  # fmt: skip
             cpu = {k: [] for k in ["plain", *variants]}
             info = {}
             for r in range(args.rounds):

@@ -225,16 +225,17 @@ def _finish(G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w
 @kernel
 def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, sphere_frame, body_start, pairs,
              w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts, fmargin, finish,
-             stall_limit, pool, pool_S, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, qp, wf, wi, work,
-             qf, J0):  # fmt: skip
+             stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, qp, wf,
+             wi, work, qf, J0):  # fmt: skip
     """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw
     nearest the pose among ``tries`` (a target none of whose draws is free gets no start), taken to the pose by the
     pose-only LM, judged by the sum :func:`_descend` starts from (pose rows + ``w2`` times the rows at ``margin``:
-    one rows call without the Jacobian) and put in ``pool (count, n)``, ``porder`` their indices by that sum, lowest
-    first (stable). A start that is done as it stands (the pose reached and free), or done by the finishing step
-    (``fin``: at the pose, overlapping by at most ``slack``), ends the preparation. Returns ``(m, hit, iterations,
-    pos, rot)``: the starts kept, the index in ``pool`` of the done one (-1: none; then ``pos, rot`` are inf), the
-    iterations spent (the pose-only LM's and the finishing step's)."""
+    one rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in ``pool_S``, the smallest row in
+    ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start that is done as it stands
+    (the pose reached and free), or done by the finishing step (``fin``: at the pose, overlapping by at most
+    ``slack``), ends the preparation. Returns ``(m, hit, iterations, pos, rot)``: the starts kept, the index in
+    ``pool`` of the done one (-1: none; then ``pos, rot`` are inf), the iterations spent (the pose-only LM's and the
+    finishing step's)."""
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     total = 0
     m = 0
@@ -280,7 +281,7 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
             porder[k] = porder[k - 1]
             k -= 1
         porder[k] = m
-        pool_S[m] = S
+        pool_S[m], pool_near[m] = S, near
         m += 1
     return m, -1, total, math.inf, math.inf
 
@@ -340,7 +341,8 @@ def collision_lm(
     most = 1
     for b in range(B):
         most = max(most, restarts[b])
-    pool, pool_S, porder = np.empty((most, n)), np.empty(most), np.empty(most, dtype=np.int64)
+    pool, pool_S, pool_near = np.empty((most, n)), np.empty(most), np.empty(most)
+    porder = np.empty(most, dtype=np.int64)
     J0 = np.empty((0, n))  # the rows without their Jacobian
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
@@ -373,21 +375,25 @@ def collision_lm(
                 m, hit, its, p_h, r_h = _prepare(
                     G, joints, Tt[b], bnd, mode, opts, iopts, restarts[b], tries, rng, spheres, sphere_frame,
                     body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts,
-                    fmargin, finish, stall_limit, pool, pool_S, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g,
-                    dq, qc, qp, wf, wi, work, qf, J0,
+                    fmargin, finish, stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
+                    Jrc, A, g, dq, qc, qp, wf, wi, work, qf, J0,
                 )  # fmt: skip
                 total += its
                 if hit >= 0:
                     best_S, best_free, best_done, best_pos, best_rot = 0.0, True, True, p_h, r_h
                     _copy(pool[hit], best_q)
                     break
-                # the best `descents`, and every start at most as far off as the pose reached with one sphere the
-                # margin deep (a row of 2 margin): the starts the collision LM solves from (module docstring)
+                # the best `descents`, every start at most as far off as the pose reached with one sphere the
+                # margin deep (a row of 2 margin) and every free one: the starts the collision LM solves from, in
+                # their order (module docstring)
                 nu = m
                 if descents > 0:
-                    nu = min(m, descents)
-                    while nu < m and pool_S[porder[nu]] <= w2 * 4.0 * margin * margin:
-                        nu += 1
+                    nu = 0
+                    for k in range(m):
+                        i = porder[k]
+                        if k < descents or pool_S[i] <= w2 * 4.0 * margin * margin or pool_near[i] >= 0.0:
+                            porder[nu] = i
+                            nu += 1
                 if nu == 0:
                     break
             if s < H:
