@@ -245,8 +245,8 @@ def test_nik_solve_scene_avoids_the_obstacles_and_the_plot_draws_them(tmp_path, 
 def test_a_blocked_target_runs_the_collision_lm_from_the_best_few_uniform_starts_only():
     """Each target's tool point lies inside a 4 cm ball, so every configuration at its pose collides: the uniform
     starts are all drawn and taken to the pose, but the collision LM runs from the best ``descents`` of them by the
-    sum it starts from (and any as close as a sphere a margin deep), not from all 16: fewer iterations on every
-    target, none done, the same answer for the same seed."""
+    sum it starts from (and any as close as a sphere a margin deep, or free), not from all 16: fewer iterations on
+    every target, none done, the same answer for the same seed."""
     from nik.collision.compiled import kernel_arguments
     from nik.kernels.collision_lm import collision_lm
     from nik.kernels.lm import CLASSIC, lm_options, seed_state
