@@ -94,11 +94,12 @@ class CollideCfg:
     step (a start at the pose that overlaps by less than the tolerance can move the hand, solved inside the tolerance;
     0: off); ``descents``: the uniform restarts the collision LM runs from, at least (every restart is drawn and taken
     to the pose first, then ranked by the sum the collision LM starts from; the best ``descents`` run, and any further
-    one at most as far off as the pose with one sphere a margin deep; <= 0: all, ranked). It trades the restarts a
-    target solves late for time on the targets no restart solves: on the built-in panda's scene (seeds 0-2, 1,000
-    targets, solver seeds 0-15) no target lost or won against running all 16, the pass with the restarts 0.57-1.0 x
-    the time, the whole solve 0.83 x on seed 2, 0.96-1.0 x on seeds 0-1; 3 was the fewest that lost nothing over 135
-    targets that reach the restarts on scene seeds 0-10 (``benchmarks/collision_restarts_ab.py``)."""
+    one at most as far off as the pose with one sphere a margin deep, or free; <= 0: all, ranked). It trades the
+    restarts a target solves late for time on the targets no restart solves: on the built-in panda's scene (seeds
+    0-2, 1,000 targets, solver seeds 0-15) no target lost or won against main's 16 descents, the pass with the
+    restarts 0.54-0.79 x the time on seed 2, 0.86-0.90 x on seed 0, 1.0 x on seed 1 (whose restarts end early
+    anyway); the kernel alone on 37 captured calls of scene seeds 0-10: 0.82 x, no target lost
+    (``benchmarks/collision_restarts_ab.py``, docs/collisions.md, Round 8)."""
 
     margin: float = 0.005
     weight: float = 1.0
