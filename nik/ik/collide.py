@@ -96,7 +96,7 @@ class CollideCfg:
     to the pose first, then ranked by the sum the collision LM starts from; the best ``descents`` run, and any further
     one at most as far off as the pose with one sphere a margin deep, or free; <= 0: all, ranked). It trades the
     restarts a target solves late for time on the targets no restart solves: on the built-in panda's scene (seeds
-    0-2, 1,000 targets, solver seeds 0-15) no target lost or won against main's 16 descents, the pass with the
+    0-2, 1,000 targets, solver seeds 0-15) no target lost or won against the collision LM from all 16, the pass with the
     restarts 0.54-0.79 x the time on seed 2, 0.86-0.90 x on seed 0, 1.0 x on seed 1 (whose restarts end early
     anyway); the kernel alone on 37 captured calls of scene seeds 0-10: 0.82 x, no target lost
     (``benchmarks/collision_restarts_ab.py``, docs/collisions.md, Round 8)."""
