@@ -92,7 +92,14 @@ class CollideCfg:
     ``patience``: end a target's uniform restarts after that many in a row that do not lower its best sum by 1 %
     (0: off, the default; :mod:`nik.kernels.collision_lm` says what it trades); ``finish``: iterations of the finishing
     step (a start at the pose that overlaps by less than the tolerance can move the hand, solved inside the tolerance;
-    0: off)."""
+    0: off); ``descents``: the uniform restarts the collision LM runs from, at least (every restart is drawn and taken
+    to the pose first, then ranked by the sum the collision LM starts from; the best ``descents`` run, and any further
+    one at most as far off as the pose with one sphere a margin deep, or free; <= 0: all, ranked). It trades the
+    restarts a target solves late for time on the targets no restart solves: on the built-in panda's scene (seeds
+    0-2, 1,000 targets, solver seeds 0-15) no target lost or won against the collision LM from all 16, the pass with the
+    restarts 0.54-0.79 x the time on seed 2, 0.86-0.90 x on seed 0, 1.0 x on seed 1 (whose restarts end early
+    anyway); the kernel alone on 37 captured calls of scene seeds 0-10: 0.82 x, no target lost
+    (``benchmarks/collision_restarts_ab.py``, docs/collisions.md, Round 8)."""
 
     margin: float = 0.005
     weight: float = 1.0
@@ -102,6 +109,7 @@ class CollideCfg:
     tries: int = 16
     patience: int = 0
     finish: int = 10
+    descents: int = 4
 
 
 @dataclass(frozen=True)
@@ -374,7 +382,7 @@ def _collision_solve(robot, s: Setup, plan, cfg: CollideCfg, goal, T, starts, n_
     collision_lm(G, joints, np.ascontiguousarray(T), np.ascontiguousarray(starts), np.asarray(n_starts, dtype=np.int64),
                  np.ascontiguousarray(half[:k]), np.ascontiguousarray(modes[:k]), opts, iopts,
                  np.asarray(restarts, dtype=np.int64), cfg.tries, cfg.patience, seed_state(plan.seed), *rest, margin,
-                 cfg.weight, cfg.finish, q, free, done, it, pos, rot)  # fmt: skip
+                 cfg.weight, cfg.finish, cfg.descents, q, free, done, it, pos, rot)  # fmt: skip
     return q, done, it
 
 

@@ -21,15 +21,23 @@ Starts, per target, in order: the ``n_starts[b]`` given ones, the answer that co
 hypotheses or the closed form's other branches, ranked (:func:`_rank_starts`) once the first start is not done
 (it ends most targets: 44 of 55 on the panda's scene, and ranking costs a collision check per start): the free ones,
 nearest the pose first; the colliding ones dropped (a colliding hypothesis mostly lands on a colliding answer; LM
-from it would spend the budget the uniform starts use better); then up to ``restarts[b]`` uniform starts, each the
-collision-free draw nearest the pose (lowest pose error) among ``tries`` (a draw that collides is dropped before
-any iteration), taken to the pose first by LM without the collision rows (the pose LM of :mod:`nik.kernels.lm`,
-the call's goal, its iteration limits; its answer may collide), then on from there with them: an iteration without
-the rows costs a small part of one with them (which a configuration near obstacles dominates), and the collision
-LM from a pose reached ends most targets in a few iterations, as from a colliding answer (measured on the built-in
-panda's scene, 1,000 targets, seeds 0-2: the pass with the restarts 0.70-0.92 x the time, the whole solve
-0.81-0.96 x, success 99.7 %, 99.7 %, 99.0 % against 99.7 %, 99.6 %, 98.9 %; the 116-sphere fit of example-robot-data's
-panda: the whole solve 0.92-1.13 x, success equal or one target more).
+from it would spend the budget the uniform starts use better); then the uniform starts, ranked before any collision
+iteration (:func:`_prepare`): all ``restarts[b]`` of them drawn, each the collision-free draw nearest the pose (lowest
+pose error) among ``tries`` (a draw that collides is dropped before any iteration), taken to the pose by LM without
+the collision rows (the pose LM of :mod:`nik.kernels.lm`, the call's goal, its iteration limits; its answer may
+collide: an iteration without the rows costs a small part of one with them, which a configuration near obstacles
+dominates, and the collision LM from a pose reached ends most targets in a few iterations, as from a colliding
+answer) and judged by the sum the collision LM starts from (the pose rows plus ``weight^2`` times the rows at
+``margin``, one rows call without the Jacobian); one that is done as it stands, or by the finishing step, ends the
+target. The collision LM then runs from them lowest sum first, from the best ``descents``, every further one whose
+sum is at most ``weight^2 (2 margin)^2`` (the pose reached with one sphere a margin deep) and every one the pose LM
+left free (short of the pose: it holds the free side of an obstacle that the starts at the pose overlap; such starts
+solve 37 % of the time on targets some restart solves, the colliding ones 14 %); ``descents <= 0``: from all. The
+ranking pays on every target that reaches the restarts (the best-ranked start that solves a target was the first in
+78 of 86 targets; 137 targets of the built-in panda's scene, scene seeds 0-10), the bound on those no configuration
+solves for the spheres (the collision LM ran from all 16: now from 8 on average). The free ones are kept because of
+one target (scene seed 1, solver seed 13) whose only solving start was free, 109 mm off the pose, 13th by its sum.
+Measured on scene seeds 0-2 (1,000 targets each): see ``CollideCfg.descents`` (:mod:`nik.ik.collide`).
 The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
 reached with the spheres overlapping by millimetres beats a free configuration far from the pose). A start that
 ends free but held off the goal by the margin rows (the goal lies nearer an obstacle than ``margin``), with a
@@ -71,7 +79,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import _chain
-from nik.kernels.collision import collides_in, hand_lever, link_bounds, residual_in, rows_work
+from nik.kernels.collision import _rows_in, collides_in, hand_lever, link_bounds, residual_in, rows_work
 from nik.kernels.lm import (
     _STREAM,
     CLASSIC,
@@ -218,10 +226,74 @@ def _finish(G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w
 
 
 @kernel
+def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, sphere_frame, body_start, pairs,
+             w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts, fmargin, finish,
+             stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, qp, wf,
+             wi, work, qf, J0):  # fmt: skip
+    """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw
+    nearest the pose among ``tries`` (a target none of whose draws is free gets no start), taken to the pose by the
+    pose-only LM, judged by the sum :func:`_descend` starts from (pose rows + ``w2`` times the rows at ``margin``:
+    one rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in ``pool_S``, the smallest row in
+    ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start that is done as it stands
+    (the pose reached and free), or done by the finishing step (``fin``: at the pose, overlapping by at most
+    ``slack``), ends the preparation. Returns ``(m, hit, iterations, pos, rot)``: the starts kept, the index in
+    ``pool`` of the done one (-1: none; then ``pos, rot`` are inf), the iterations spent (the pose-only LM's and the
+    finishing step's)."""
+    rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
+    total = 0
+    m = 0
+    for _ in range(count):
+        qs = pool[m]
+        best_draw = math.inf
+        for _ in range(tries):
+            _draw(joints, rng, qc)
+            _chain(G, joints, qc, Tc)
+            Ed = _score(Tt, Tc, rw, bnd, mode, ec, d)
+            if Ed < best_draw and not collides_in(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
+                                                  w_boxes, w_capsules, self_on, 0.0, r, lb, wf, wi):  # fmt: skip
+                best_draw = Ed
+                _copy(qc, qs)
+        if best_draw == math.inf:
+            continue
+        # to the pose by LM without the collision rows (an iteration a small part of the cost of one with them)
+        its, _, _, _ = _lm_one_bounded(G, joints, Tt, qs, bnd, mode, opts, iopts, 0, rng, qp, work)
+        total += its
+        _copy(qp, qs)
+        E, p_s, r_s, reached = _eval(G, joints, qs, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
+        _rows_in(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r,
+                 J0, False, margin, lb, False, wf, wi)  # fmt: skip
+        near = math.inf
+        S = E
+        for k in range(r.shape[0]):
+            near = min(near, r[k])
+            if r[k] < margin:
+                S += w2 * (margin - r[k]) * (margin - r[k])
+        if reached and near >= 0.0:  # done as it stands (the collision LM would stop before its first iteration)
+            return m, m, total, p_s, r_s
+        if fin and p_s <= tol_pos and r_s <= tol_rot and -slack <= near < 0.0:
+            fdone, p_f, r_f, _, its = _finish(
+                G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
+                self_on, fmargin, w2, lb, fopts, finish, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq,
+                qc, wf, wi, qf,
+            )  # fmt: skip
+            total += its
+            if fdone:
+                return m, m, total, p_f, r_f
+        k = m  # insertion sort (stable): a handful of starts
+        while k > 0 and pool_S[porder[k - 1]] > S:
+            porder[k] = porder[k - 1]
+            k -= 1
+        porder[k] = m
+        pool_S[m], pool_near[m] = S, near
+        m += 1
+    return m, -1, total, math.inf, math.inf
+
+
+@kernel
 def collision_lm(
     G, joints, Tt, starts, n_starts, bounds, modes, opts, iopts, restarts, tries, patience, seed,
     spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, weight, finish,
-    q, free, done_out, iterations, pos, rot,
+    descents, q, free, done_out, iterations, pos, rot,
 ):  # fmt: skip
     """LM with collision rows for each target ``Tt[b] (4, 4)`` (module docstring).
 
@@ -233,6 +305,8 @@ def collision_lm(
         restarts: (B,) int64 uniform starts each target may draw at most; ``tries``: draws per uniform start.
         seed: (1,) uint64; ``margin``: metres, the collision rows' reach; ``weight``: their weight.
         finish: iteration limit of the finishing step (module docstring; 0: none).
+        descents: the uniform starts the collision LM runs from, at least: the best by the sum it starts from
+            (also every one near the pose or free: module docstring; <= 0: all of them).
         q: (B, n) out, inside the limits; free, done_out: (B,) bool out (collision-free; reached and free);
         iterations: (B,) int64 out; pos, rot: (B,) float64 out, the pose errors of ``q`` (m, rad).
     """
@@ -266,6 +340,13 @@ def collision_lm(
     # the most a pose within the tolerances moves a sphere of the last frame: the overlap the finishing step is tried on
     slack = tol_pos + tol_rot * hand_lever(G, spheres, sphere_frame)
     qf = np.empty(n)
+    # the uniform starts of a target, drawn and taken to the pose before any collision iteration, and their order
+    most = 1
+    for b in range(B):
+        most = max(most, restarts[b])
+    pool, pool_S, pool_near = np.empty((most, n)), np.empty(most), np.empty(most)
+    porder = np.empty(most, dtype=np.int64)
+    J0 = np.empty((0, n))  # the rows without their Jacobian
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
@@ -279,38 +360,51 @@ def collision_lm(
         H = 1 if n_starts[b] > 0 else 0
         order[0] = 0
         ranked = n_starts[b] <= 1
+        nu, prepared = restarts[b], restarts[b] <= 0  # uniform starts left to run; drawn and ranked yet
         s = -1
-        while s + 1 < H + restarts[b] or not ranked:
+        while s + 1 < H + nu or not ranked:
             s += 1
             if s == H and not ranked:
                 ranked = True
                 H = _rank_starts(G, joints, Tt[b], starts[b], n_starts[b], rw, bnd, mode, spheres, sphere_frame,
                                  body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d,
                                  r, Jr, lb, wf, wi)  # fmt: skip
-                if s >= H + restarts[b]:
+                if s >= H + nu:
+                    break
+            if s == H and not prepared:
+                # every uniform start drawn and taken to the pose first, then the collision LM from the best
+                # `descents` by the sum it starts from, lowest first (module docstring)
+                prepared = True
+                m, hit, its, p_h, r_h = _prepare(
+                    G, joints, Tt[b], bnd, mode, opts, iopts, restarts[b], tries, rng, spheres, sphere_frame,
+                    body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts,
+                    fmargin, finish, stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
+                    Jrc, A, g, dq, qc, qp, wf, wi, work, qf, J0,
+                )  # fmt: skip
+                total += its
+                if hit >= 0:
+                    best_S, best_free, best_done, best_pos, best_rot = 0.0, True, True, p_h, r_h
+                    _copy(pool[hit], best_q)
+                    break
+                # the best `descents`, every start at most as far off as the pose reached with one sphere the
+                # margin deep (a row of 2 margin) and every free one: the starts the collision LM solves from, in
+                # their order (module docstring)
+                nu = m
+                if descents > 0:
+                    nu = 0
+                    for k in range(m):
+                        i = porder[k]
+                        if k < descents or pool_S[i] <= w2 * 4.0 * margin * margin or pool_near[i] >= 0.0:
+                            porder[nu] = i
+                            nu += 1
+                if nu == 0:
                     break
             if s < H:
                 _copy(starts[b, order[s]], qs)
                 _bounds(joints, qs)
-            else:  # the free draw nearest the pose (by its error) among `tries`
-                best_draw = math.inf
-                for _ in range(tries):
-                    _draw(joints, rng, qc)
-                    _chain(G, joints, qc, Tc)
-                    Ed = _score(Tt[b], Tc, rw, bnd, mode, ec, d)
-                    if Ed < best_draw and not collides_in(G, joints, qc, spheres, sphere_frame, body_start, pairs,
-                                                          w_spheres, w_boxes, w_capsules, self_on, 0.0, r, lb, wf,
-                                                          wi):  # fmt: skip
-                        best_draw = Ed
-                        _copy(qc, qs)
-                if best_draw == math.inf:
-                    continue
-                # to the pose first by LM without the collision rows (an iteration a tenth of the cost): the
-                # collision LM then starts near the pose, as from a colliding answer
-                its, _, _, _ = _lm_one_bounded(G, joints, Tt[b], qs, bnd, mode, opts, iopts, 0, rng, qp, work)
-                total += its
-                _copy(qp, qs)
-            if fin:
+            else:
+                _copy(pool[porder[s - H]], qs)
+            if fin and s < H:
                 # at the pose and overlapping by less than the tolerance can move the hand: the finishing step first
                 _, p_s, r_s, _ = _eval(G, joints, qs, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
                 if p_s <= tol_pos and r_s <= tol_rot:
