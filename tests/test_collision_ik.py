@@ -312,3 +312,27 @@ def test_ranked_uniform_starts_solve_the_targets_every_start_solves():
     assert not collides(robot, q4, world).any()  # the exact check of the answers called done
     Tq = robot.fk(q4)  # FK round trip
     assert np.linalg.norm(Tq[:, :3, 3] - T[:, :3, 3], axis=1).max() <= 1e-4
+
+
+def test_a_start_that_stops_making_progress_ends_after_four_stalled_iterations():
+    """The collision LM's default stall count is 4 (measured: the panda's scene loses no target and spends 8-11 %
+    fewer collision-LM iterations than with 5): a target the spheres block at its pose (the hand inside a ball, so
+    no answer is free) spends fewer iterations than with 5, and the same targets are solved in a scene."""
+    from nik.ik.collide import CollideCfg
+
+    robot = nik.load_robot("panda")
+    T = _poses(robot, 3, seed=3)
+    for Ti in T:  # a ball engulfs the hand: blocked at every configuration
+        world = nik.World().add_sphere(Ti[:3, 3], 0.08)
+        default, five = (nik.IKSolver(robot, world=world) for _ in range(2))
+        five.collide_cfg = CollideCfg(stall_iters=5)
+        a, b = default.solve(Ti[None]), five.solve(Ti[None])
+        assert not a.success[0] and not b.success[0] and not a.collision_free[0]
+        assert a.iterations[0] < b.iterations[0]
+    world = _table_and_box()
+    T = _poses(robot, 48, seed=5, world=world)
+    default, five = nik.IKSolver(robot, world=world), nik.IKSolver(robot, world=world)
+    five.collide_cfg = CollideCfg(stall_iters=5)
+    a, b = default.solve(T), five.solve(T)
+    assert np.array_equal(a.success, b.success) and a.success.mean() > 0.9
+    assert not collides(robot, a.q[a.collision_free], world).any()
