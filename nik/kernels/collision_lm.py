@@ -229,9 +229,11 @@ def _finish(G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w
 def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, sphere_frame, body_start, pairs,
              w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts, fmargin, finish,
              stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, qp, wf,
-             wi, work, qf, J0):  # fmt: skip
+             wi, work, qf, J0, drawn, draw_E):  # fmt: skip
     """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw
-    nearest the pose among ``tries`` (a target none of whose draws is free gets no start), taken to the pose by the
+    nearest the pose among ``tries`` (a target none of whose draws is free gets no start; the draws in ``drawn
+    (tries, n)``, their pose errors in ``draw_E (tries,)``, checked for collisions nearest first up to the first
+    free one: the same start as checking each draw nearer than the nearest free one so far, fewer checks), taken to the pose by the
     pose-only LM, judged by the sum :func:`_descend` starts from (pose rows + ``w2`` times the rows at ``margin``:
     one rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in ``pool_S``, the smallest row in
     ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start that is done as it stands
@@ -244,16 +246,25 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
     m = 0
     for _ in range(count):
         qs = pool[m]
-        best_draw = math.inf
-        for _ in range(tries):
-            _draw(joints, rng, qc)
-            _chain(G, joints, qc, Tc)
-            Ed = _score(Tt, Tc, rw, bnd, mode, ec, d)
-            if Ed < best_draw and not collides_in(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres,
-                                                  w_boxes, w_capsules, self_on, 0.0, r, lb, wf, wi):  # fmt: skip
-                best_draw = Ed
-                _copy(qc, qs)
-        if best_draw == math.inf:
+        for t in range(tries):
+            _draw(joints, rng, drawn[t])
+            _chain(G, joints, drawn[t], Tc)
+            draw_E[t] = _score(Tt, Tc, rw, bnd, mode, ec, d)
+        # the free draw nearest the pose (the first of equals): the draws checked nearest first, up to a free one
+        found = False
+        while not found:
+            best_draw, t = math.inf, -1
+            for k in range(tries):
+                if draw_E[k] < best_draw:
+                    best_draw, t = draw_E[k], k
+            if t < 0:
+                break
+            draw_E[t] = math.inf
+            found = not collides_in(G, joints, drawn[t], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                                    w_capsules, self_on, 0.0, r, lb, wf, wi)  # fmt: skip
+            if found:
+                _copy(drawn[t], qs)
+        if not found:
             continue
         # to the pose by LM without the collision rows (an iteration a small part of the cost of one with them)
         its, _, _, _ = _lm_one_bounded(G, joints, Tt, qs, bnd, mode, opts, iopts, 0, rng, qp, work)
@@ -347,6 +358,7 @@ def collision_lm(
     pool, pool_S, pool_near = np.empty((most, n)), np.empty(most), np.empty(most)
     porder = np.empty(most, dtype=np.int64)
     J0 = np.empty((0, n))  # the rows without their Jacobian
+    drawn, draw_E = np.empty((max(tries, 1), n)), np.empty(max(tries, 1))  # a uniform start's draws
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
@@ -379,7 +391,7 @@ def collision_lm(
                     G, joints, Tt[b], bnd, mode, opts, iopts, restarts[b], tries, rng, spheres, sphere_frame,
                     body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts,
                     fmargin, finish, stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
-                    Jrc, A, g, dq, qc, qp, wf, wi, work, qf, J0,
+                    Jrc, A, g, dq, qc, qp, wf, wi, work, qf, J0, drawn, draw_E,
                 )  # fmt: skip
                 total += its
                 if hit >= 0:
