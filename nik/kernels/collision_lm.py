@@ -230,17 +230,16 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
              w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts, fmargin, finish,
              stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, qp, wf,
              wi, work, qf, J0, drawn, draw_E):  # fmt: skip
-    """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw
-    nearest the pose among ``tries`` (a target none of whose draws is free gets no start; the draws in ``drawn
-    (tries, n)``, their pose errors in ``draw_E (tries,)``, checked for collisions nearest first up to the first
-    free one: the same start as checking each draw nearer than the nearest free one so far, fewer checks), taken to the pose by the
-    pose-only LM, judged by the sum :func:`_descend` starts from (pose rows + ``w2`` times the rows at ``margin``:
-    one rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in ``pool_S``, the smallest row in
-    ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start that is done as it stands
-    (the pose reached and free), or done by the finishing step (``fin``: at the pose, overlapping by at most
-    ``slack``), ends the preparation. Returns ``(m, hit, iterations, pos, rot)``: the starts kept, the index in
-    ``pool`` of the done one (-1: none; then ``pos, rot`` are inf), the iterations spent (the pose-only LM's and the
-    finishing step's)."""
+    """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw nearest
+    the pose among ``tries`` (a target none of whose draws is free gets no start; the draws in ``drawn (tries, n)``,
+    their pose errors in ``draw_E (tries,)``, checked for collisions nearest first up to the first free one: the same
+    start as checking each draw nearer than the nearest free one so far, fewer checks), taken to the pose by the
+    pose-only LM, judged by the sum :func:`_descend` starts from (pose rows + ``w2`` times the rows at ``margin``: one
+    rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in ``pool_S``, the smallest row in
+    ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start that is done as it stands (the
+    pose reached and free), or done by the finishing step (``fin``: at the pose, overlapping by at most ``slack``), ends
+    the preparation. Returns ``(m, hit, iterations, pos, rot)``: the starts kept, the index in ``pool`` of the done one
+    (-1: none; then ``pos, rot`` are inf), the iterations spent (the pose-only LM's and the finishing step's)."""
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     total = 0
     m = 0
