@@ -336,3 +336,55 @@ def test_a_start_that_stops_making_progress_ends_after_four_stalled_iterations()
     a, b = default.solve(T), five.solve(T)
     assert np.array_equal(a.success, b.success) and a.success.mean() > 0.9
     assert not collides(robot, a.q[a.collision_free], world).any()
+
+
+def test_a_uniform_start_is_the_free_draw_nearest_the_pose_with_fewer_collision_checks():
+    """A uniform start's ``tries`` draws are checked for collisions nearest the pose first, up to the first free one:
+    the start is the one the rule before picked (in the order drawn, each draw nearer than the nearest free one so
+    far checked, the free ones kept), found with at most as many collision checks on every start and fewer in all."""
+    from nik.collision.compiled import kernel_arguments
+    from nik.kernels.chain import _chain
+    from nik.kernels.collision import collides_in, link_bounds, rows_work
+    from nik.kernels.collision_lm import _nearest_free
+    from nik.kernels.lm import CLASSIC, ROT_WEIGHT, _draw, _score, lm_options
+
+    robot = nik.load_robot("panda")
+    model = collision_model(robot)
+    world = _table_and_box()
+    T = _poses(robot, 8, seed=7, world=world)
+    (G, joints), rest = kernel_arguments(robot, model, world)
+    spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on = rest
+    opts, _ = lm_options()
+    rw, n, tries = opts[ROT_WEIGHT], robot.dof, 16
+    R = pairs.shape[0] + body_start.shape[0] - 1
+    r, lb, Tc, ec, d = np.empty(R), np.empty((body_start.shape[0] - 1, 4)), np.empty((3, 4)), np.empty(6), np.empty(6)
+    link_bounds(spheres, body_start, lb)
+    wf, wi = rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules)
+    bnd, drawn, draw_E, qs, qc = np.zeros(6), np.empty((tries, n)), np.empty(tries), np.empty(n), np.empty(n)
+
+    def hits(q):
+        return collides_in(G, joints, q, *rest, 0.0, r, lb, wf, wi)
+
+    ours_checks, before_checks, starts = 0, 0, 0
+    for b, Tt in enumerate(T):
+        rng, ref = np.array([b + 1], dtype=np.uint64), np.array([b + 1], dtype=np.uint64)
+        for _ in range(4):  # four starts a target from one stream
+            found, checks = _nearest_free(G, joints, Tt, rw, bnd, CLASSIC, tries, rng, *rest, Tc, ec, d, r, lb, wf,
+                                          wi, drawn, draw_E, qs)  # fmt: skip
+            best, kept, before = np.inf, None, 0  # the rule before, on the same stream
+            for _ in range(tries):
+                _draw(joints, ref, qc)
+                _chain(G, joints, qc, Tc)
+                e = _score(Tt, Tc, rw, bnd, CLASSIC, ec, d)
+                if e < best:
+                    before += 1
+                    if not hits(qc):
+                        best, kept = e, qc.copy()
+            np.testing.assert_array_equal(rng, ref)  # the same draws consumed
+            assert found == (kept is not None)
+            if found:
+                np.testing.assert_array_equal(qs, kept)
+                assert not hits(qs)
+            assert checks <= before
+            ours_checks, before_checks, starts = ours_checks + checks, before_checks + before, starts + 1
+    assert ours_checks < before_checks

@@ -226,43 +226,56 @@ def _finish(G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w
 
 
 @kernel
+def _nearest_free(G, joints, Tt, rw, bnd, mode, tries, rng, spheres, sphere_frame, body_start, pairs, w_spheres,
+                  w_boxes, w_capsules, self_on, Tc, ec, d, r, lb, wf, wi, drawn, draw_E, qs):  # fmt: skip
+    """One uniform start's draw: ``tries`` configurations drawn from ``rng`` into ``drawn (tries, n)``, their pose
+    errors (:func:`nik.kernels.lm._score`) in ``draw_E (tries,)``; the free one nearest the pose (the first of equals)
+    copied into ``qs (n,)``. The draws are checked for collisions nearest the pose first, up to the first free one:
+    the same start as checking, in the order drawn, each draw nearer than the nearest free one so far (the rule before
+    this one), with fewer checks (that rule checks every new nearest, free or not). Returns ``(found, checks)``:
+    whether a draw is free, the collision checks made; ``draw_E`` is left inf at the draws checked."""
+    for t in range(tries):
+        _draw(joints, rng, drawn[t])
+        _chain(G, joints, drawn[t], Tc)
+        draw_E[t] = _score(Tt, Tc, rw, bnd, mode, ec, d)
+    checks = 0
+    while True:
+        best, t = math.inf, -1
+        for k in range(tries):
+            if draw_E[k] < best:
+                best, t = draw_E[k], k
+        if t < 0:
+            return False, checks
+        draw_E[t] = math.inf
+        checks += 1
+        if not collides_in(G, joints, drawn[t], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
+                           w_capsules, self_on, 0.0, r, lb, wf, wi):  # fmt: skip
+            _copy(drawn[t], qs)
+            return True, checks
+
+
+@kernel
 def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, sphere_frame, body_start, pairs,
              w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts, fmargin, finish,
              stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, qp, wf,
              wi, work, qf, J0, drawn, draw_E):  # fmt: skip
     """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw nearest
-    the pose among ``tries`` (a target none of whose draws is free gets no start; the draws in ``drawn (tries, n)``,
-    their pose errors in ``draw_E (tries,)``, checked for collisions nearest first up to the first free one: the same
-    start as checking each draw nearer than the nearest free one so far, fewer checks), taken to the pose by the
-    pose-only LM, judged by the sum :func:`_descend` starts from (pose rows + ``w2`` times the rows at ``margin``: one
-    rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in ``pool_S``, the smallest row in
-    ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start that is done as it stands (the
-    pose reached and free), or done by the finishing step (``fin``: at the pose, overlapping by at most ``slack``), ends
-    the preparation. Returns ``(m, hit, iterations, pos, rot)``: the starts kept, the index in ``pool`` of the done one
-    (-1: none; then ``pos, rot`` are inf), the iterations spent (the pose-only LM's and the finishing step's)."""
+    the pose among ``tries`` (:func:`_nearest_free`, scratch ``drawn``, ``draw_E``; a target none of whose draws is free
+    gets no start), taken to the pose by the pose-only LM, judged by the sum :func:`_descend` starts from (pose rows +
+    ``w2`` times the rows at ``margin``: one rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in
+    ``pool_S``, the smallest row in ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start
+    that is done as it stands (the pose reached and free), or done by the finishing step (``fin``: at the pose,
+    overlapping by at most ``slack``), ends the preparation. Returns ``(m, hit, iterations, pos, rot)``: the starts
+    kept, the index in ``pool`` of the done one (-1: none; then ``pos, rot`` are inf), the iterations spent (the
+    pose-only LM's and the finishing step's)."""
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     total = 0
     m = 0
     for _ in range(count):
         qs = pool[m]
-        for t in range(tries):
-            _draw(joints, rng, drawn[t])
-            _chain(G, joints, drawn[t], Tc)
-            draw_E[t] = _score(Tt, Tc, rw, bnd, mode, ec, d)
-        # the free draw nearest the pose (the first of equals): the draws checked nearest first, up to a free one
-        found = False
-        while not found:
-            best_draw, t = math.inf, -1
-            for k in range(tries):
-                if draw_E[k] < best_draw:
-                    best_draw, t = draw_E[k], k
-            if t < 0:
-                break
-            draw_E[t] = math.inf
-            found = not collides_in(G, joints, drawn[t], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                                    w_capsules, self_on, 0.0, r, lb, wf, wi)  # fmt: skip
-            if found:
-                _copy(drawn[t], qs)
+        found, _ = _nearest_free(G, joints, Tt, rw, bnd, mode, tries, rng, spheres, sphere_frame, body_start, pairs,
+                                 w_spheres, w_boxes, w_capsules, self_on, Tc, ec, d, r, lb, wf, wi, drawn, draw_E,
+                                 qs)  # fmt: skip
         if not found:
             continue
         # to the pose by LM without the collision rows (an iteration a small part of the cost of one with them)
