@@ -68,6 +68,8 @@ restarts' luck (no other target reaches the step; seed 2's failures are proven b
 Cost per iteration (what the measurements found): the collision rows of a candidate dominate; a candidate whose
 pose rows alone are no better than the current sum is rejected without them (the same decision: the sum only
 adds), and the step's normal equations run over the rows that push only.
+A descent ends when done, after ``stall_iters`` iterations in a row that do not lower its sum by ``stall_rel`` of
+it, at its iteration limit, or at a kept step that lowers the sum by less than ``converged`` of it (converged).
 Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
 """
 
@@ -153,13 +155,14 @@ def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame,
 
 @kernel
 def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-             self_on, margin, w2, lb, opts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq,
-             qc, wf, wi, norms):  # fmt: skip
+             self_on, margin, w2, lb, opts, limit, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A,
+             g, dq, qc, wf, wi, norms):  # fmt: skip
     """LM with collision rows of reach ``margin`` from ``qs (n,)`` (moved in place) towards ``Tt`` until done (the
     pose within the tolerances and free), stalled or ``limit`` iterations; returns ``(S, pos, rot, near, done,
     iterations)``: the sum, the pose errors, the smallest row (exact where at most ``margin``). ``norms``: the pose
     counts as reached only where also its position error <= ``opts[TOL_POS]`` and its angle <= ``opts[TOL_ROT]``
-    (the success judge; the finishing step's bounds reach past it)."""
+    (the success judge; the finishing step's bounds reach past it). ``conv_rel``: it also ends at a kept step that
+    lowers the sum by less than that fraction of it (converged: ``CollideCfg.converged``; 0: never)."""
     n = qs.shape[0]
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     lambda0, lam_up, lam_down = opts[LAMBDA0], opts[LAMBDA_UP], opts[LAMBDA_DOWN]
@@ -194,6 +197,8 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
                 donec = reached_c and near_c >= 0.0
         kept, lam = _judge(good, S, Sc, donec, lam, lam_down, lam_up, lam_min, lam_max)
         stall = _stalled(kept, S, Sc, stall, stall_rel)
+        # a kept step that lowers the sum by less than `conv_rel` of it: the descent has converged (its end)
+        converged = kept and S - Sc < conv_rel * S
         if kept:
             _copy(qc, qs)
             _copy(Jc.ravel(), J.ravel())
@@ -201,15 +206,15 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
             _copy(rc, r)
             _copy(Jrc.ravel(), Jr.ravel())
             S, p_e, r_e, near, done = Sc, p_c, r_c, near_c, donec
-        if stall >= stall_limit:
+        if stall >= stall_limit or converged:
             break
     return S, p_e, r_e, near, done, total
 
 
 @kernel
 def _finish(G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-            fmargin, w2, lb, fopts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, wf, wi,
-            qf):  # fmt: skip
+            fmargin, w2, lb, fopts, limit, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc,
+            wf, wi, qf):  # fmt: skip
     """The finishing step from ``qs (n,)`` (module docstring): :func:`_descend` with the pose rows' dead zone the box
     inscribed in the tolerances (``fbnd``, rotation weight ``fopts[ROT_WEIGHT] = tol_pos / tol_rot``), the rows'
     reach ``fmargin``, done by the success judge's norms and free at margin 0; ``qs`` moves only where it is done.
@@ -217,8 +222,8 @@ def _finish(G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w
     _copy(qs, qf)
     _, p_f, r_f, near, done, its = _descend(
         G, joints, Tt, fbnd, -1, qf, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-        self_on, fmargin, w2, lb, fopts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc,
-        wf, wi, True,
+        self_on, fmargin, w2, lb, fopts, limit, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g,
+        dq, qc, wf, wi, True,
     )  # fmt: skip
     if done:
         _copy(qf, qs)
@@ -257,8 +262,8 @@ def _nearest_free(G, joints, Tt, rw, bnd, mode, tries, rng, spheres, sphere_fram
 @kernel
 def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, sphere_frame, body_start, pairs,
              w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts, fmargin, finish,
-             stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, qp, wf,
-             wi, work, qf, J0, drawn, draw_E):  # fmt: skip
+             stall_limit, conv_rel, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq,
+             qc, qp, wf, wi, work, qf, J0, drawn, draw_E):  # fmt: skip
     """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw nearest
     the pose among ``tries`` (:func:`_nearest_free`, scratch ``drawn``, ``draw_E``; a target none of whose draws is free
     gets no start), taken to the pose by the pose-only LM, judged by the sum :func:`_descend` starts from (pose rows +
@@ -296,8 +301,8 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
         if fin and p_s <= tol_pos and r_s <= tol_rot and -slack <= near < 0.0:
             fdone, p_f, r_f, _, its = _finish(
                 G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                self_on, fmargin, w2, lb, fopts, finish, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq,
-                qc, wf, wi, qf,
+                self_on, fmargin, w2, lb, fopts, finish, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc,
+                A, g, dq, qc, wf, wi, qf,
             )  # fmt: skip
             total += its
             if fdone:
@@ -316,7 +321,7 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
 def collision_lm(
     G, joints, Tt, starts, n_starts, bounds, modes, opts, iopts, restarts, tries, patience, seed,
     spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, weight, finish,
-    descents, q, free, done_out, iterations, pos, rot,
+    descents, converged, q, free, done_out, iterations, pos, rot,
 ):  # fmt: skip
     """LM with collision rows for each target ``Tt[b] (4, 4)`` (module docstring).
 
@@ -330,6 +335,8 @@ def collision_lm(
         finish: iteration limit of the finishing step (module docstring; 0: none).
         descents: the uniform starts the collision LM runs from, at least: the best by the sum it starts from
             (also every one near the pose or free: module docstring; <= 0: all of them).
+        converged: a descent ends at a kept step that lowers its sum by less than this fraction of it (0: off;
+            :attr:`nik.ik.collide.CollideCfg.converged`).
         q: (B, n) out, inside the limits; free, done_out: (B,) bool out (collision-free; reached and free);
         iterations: (B,) int64 out; pos, rot: (B,) float64 out, the pose errors of ``q`` (m, rad).
     """
@@ -402,8 +409,8 @@ def collision_lm(
                 m, hit, its, p_h, r_h = _prepare(
                     G, joints, Tt[b], bnd, mode, opts, iopts, restarts[b], tries, rng, spheres, sphere_frame,
                     body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts,
-                    fmargin, finish, stall_limit, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
-                    Jrc, A, g, dq, qc, qp, wf, wi, work, qf, J0, drawn, draw_E,
+                    fmargin, finish, stall_limit, converged, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc,
+                    r, rc, Jr, Jrc, A, g, dq, qc, qp, wf, wi, work, qf, J0, drawn, draw_E,
                 )  # fmt: skip
                 total += its
                 if hit >= 0:
@@ -437,8 +444,8 @@ def collision_lm(
                     if -slack <= near_s < 0.0:
                         fdone, p_f, r_f, near_f, its = _finish(
                             G, joints, Tt[b], qs, fbnd, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                            w_capsules, self_on, fmargin, w2, lb, fopts, finish, stall_limit, T, Tc, e, ec, d, J, Jc,
-                            r, rc, Jr, Jrc, A, g, dq, qc, wf, wi, qf,
+                            w_capsules, self_on, fmargin, w2, lb, fopts, finish, stall_limit, converged, T, Tc, e, ec,
+                            d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, wf, wi, qf,
                         )  # fmt: skip
                         total += its
                         if fdone:
@@ -447,8 +454,8 @@ def collision_lm(
                             break
             S, p_e, r_e, near, done, its = _descend(
                 G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                w_capsules, self_on, margin, w2, lb, opts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
-                Jrc, A, g, dq, qc, wf, wi, False,
+                w_capsules, self_on, margin, w2, lb, opts, limit, stall_limit, converged, T, Tc, e, ec, d, J, Jc, r,
+                rc, Jr, Jrc, A, g, dq, qc, wf, wi, False,
             )  # fmt: skip
             total += its
             if not done and margin > 0.0 and near >= 0.0 and S < best_S:
@@ -457,8 +464,8 @@ def collision_lm(
                 _copy(qs, qp)
                 S0, p0, r0, near0, done0, its = _descend(
                     G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                    w_capsules, self_on, 0.0, w2, lb, opts, limit, stall_limit, T, Tc, e, ec, d, J, Jc, r, rc, Jr,
-                    Jrc, A, g, dq, qc, wf, wi, False,
+                    w_capsules, self_on, 0.0, w2, lb, opts, limit, stall_limit, converged, T, Tc, e, ec, d, J, Jc, r,
+                    rc, Jr, Jrc, A, g, dq, qc, wf, wi, False,
                 )  # fmt: skip
                 total += its
                 if done0:
