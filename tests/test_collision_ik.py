@@ -242,33 +242,38 @@ def test_nik_solve_scene_avoids_the_obstacles_and_the_plot_draws_them(tmp_path, 
     assert err.startswith("nik solve: error: scene file") and "\n" not in err
 
 
+def _uniform_only(robot, world, T, descents):
+    """The collision LM kernel on ``T (B, 4, 4)`` from uniform starts only (16 restarts of 16 draws, no given start,
+    solver seed 0, the converged stop off): ``(q, free, done, iterations)``."""
+    from nik.collision.compiled import kernel_arguments
+    from nik.kernels.collision_lm import collision_lm
+    from nik.kernels.lm import CLASSIC, lm_options, seed_state
+
+    (G, joints), rest = kernel_arguments(robot, collision_model(robot), world)
+    opts, iopts = lm_options(iters=30, stall_iters=5)
+    B, n = len(T), robot.dof
+    q, free, done = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=bool)
+    its, pos, rot = np.empty(B, dtype=np.int64), np.empty(B), np.empty(B)
+    collision_lm(G, joints, T, np.zeros((B, 1, n)), np.zeros(B, dtype=np.int64), np.zeros((B, 6)),
+                 np.full(B, CLASSIC, dtype=np.int64), opts, iopts, np.full(B, 16, dtype=np.int64), 16, 0,
+                 seed_state(0), *rest, 0.005, 1.0, 10, descents, 0.0, q, free, done, its, pos, rot)  # fmt: skip
+    return q, free, done, its
+
+
 def test_a_blocked_target_runs_the_collision_lm_from_the_best_few_uniform_starts_only():
     """Each target's tool point lies inside a 4 cm ball, so every configuration at its pose collides: the uniform
     starts are all drawn and taken to the pose, but the collision LM runs from the best ``descents`` of them by the
     sum it starts from (and any as close as a sphere a margin deep, or free), not from all 16: fewer iterations on
     every target, none done, the same answer for the same seed."""
-    from nik.collision.compiled import kernel_arguments
-    from nik.kernels.collision_lm import collision_lm
-    from nik.kernels.lm import CLASSIC, lm_options, seed_state
-
     robot = nik.load_robot("panda")
-    model = collision_model(robot)
     q = robot.sample(64, generator=torch.Generator().manual_seed(3), dtype=torch.float64).numpy()
     T = np.ascontiguousarray(robot.fk(q[~collides(robot, q)][:6]))
     world = nik.World()
     for t in T:
         world = world.add_sphere(t[:3, 3], 0.04)
-    (G, joints), rest = kernel_arguments(robot, model, world)
-    opts, iopts = lm_options(iters=30, stall_iters=5)
-    B, n = len(T), robot.dof
 
     def solve(descents):
-        q, free, done = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=bool)
-        its, pos, rot = np.empty(B, dtype=np.int64), np.empty(B), np.empty(B)
-        collision_lm(G, joints, T, np.zeros((B, 1, n)), np.zeros(B, dtype=np.int64), np.zeros((B, 6)),
-                     np.full(B, CLASSIC, dtype=np.int64), opts, iopts, np.full(B, 16, dtype=np.int64), 16, 0,
-                     seed_state(0), *rest, 0.005, 1.0, 10, descents, 0.0, q, free, done, its, pos, rot)  # fmt: skip
-        return q, free, done, its
+        return _uniform_only(robot, world, T, descents)
 
     q4, free4, done4, its4 = solve(4)
     q_all, free_all, done_all, its_all = solve(0)  # 0: every uniform start (ranked), the work before the bound
@@ -285,24 +290,12 @@ def test_ranked_uniform_starts_solve_the_targets_every_start_solves():
     """Poses of free configurations among a table, a box and a ball, solved from uniform starts only (no given
     start): the collision LM from the best 4 starts by their starting sum solves every target that running it from
     all 16 solves."""
-    from nik.collision.compiled import kernel_arguments
-    from nik.kernels.collision_lm import collision_lm
-    from nik.kernels.lm import CLASSIC, lm_options, seed_state
-
     robot = nik.load_robot("panda")
-    model = collision_model(robot)
     world = _table_and_box()
     T = _poses(robot, 24, seed=5, world=world)
-    (G, joints), rest = kernel_arguments(robot, model, world)
-    opts, iopts = lm_options(iters=30, stall_iters=5)
-    B, n = len(T), robot.dof
 
     def solve(descents):
-        q, free, done = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=bool)
-        its, pos, rot = np.empty(B, dtype=np.int64), np.empty(B), np.empty(B)
-        collision_lm(G, joints, T, np.zeros((B, 1, n)), np.zeros(B, dtype=np.int64), np.zeros((B, 6)),
-                     np.full(B, CLASSIC, dtype=np.int64), opts, iopts, np.full(B, 16, dtype=np.int64), 16, 0,
-                     seed_state(0), *rest, 0.005, 1.0, 10, descents, 0.0, q, free, done, its, pos, rot)  # fmt: skip
+        q, _, done, _ = _uniform_only(robot, world, T, descents)
         return q, done
 
     q4, done4 = solve(4)

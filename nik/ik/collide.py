@@ -99,7 +99,7 @@ class CollideCfg:
     0-2, 1,000 targets, solver seeds 0-15) no target lost or won against the collision LM from all 16, the pass with the
     restarts 0.54-0.79 x the time on seed 2, 0.86-0.90 x on seed 0, 1.0 x on seed 1 (whose restarts end early
     anyway); the kernel alone on 37 captured calls of scene seeds 0-10: 0.82 x, no target lost
-    (``benchmarks/collision_restarts_ab.py``, docs/collisions.md, Round 8).
+    (``benchmarks/collision_lm_ab.py``, docs/collisions.md, Round 8).
 
     ``stall_iters = 4`` (was 5): a start ends after 4 iterations in a row that do not lower its sum by 0.1 %.
     Measured (built-in panda's scene, 1,000 targets, scene seeds 0-2, solver seeds 0-3: docs/collisions.md, Round 8):
