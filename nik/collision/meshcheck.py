@@ -227,7 +227,15 @@ def mesh_urdf(robot, model, urdf=None) -> Path | None:
 
 def mesh_check(robot, model, urdf=None, *, required: bool = False) -> MeshCheck | None:
     """The :class:`MeshCheck` of ``robot`` with the pairs of ``model`` (module docstring), cached per robot; None
-    where coal or the meshes are missing (``required``: a one-line ``ImportError`` / ``ValueError`` instead)."""
+    where coal or the meshes are missing (``required``: a one-line ``ImportError`` / ``ValueError`` instead).
+
+    A check found is also kept per model and ``urdf`` argument, so a solve with a mesh verdict does not look for the
+    URDF again (resolving its path and reading its files took ~120 us a call); a missing one is looked for each
+    call (coal or the meshes may be installed meanwhile)."""
+    fast = robot.__dict__.setdefault("_mesh_check_of", {})
+    got = fast.get((id(model), None if urdf is None else str(urdf)))
+    if got is not None and got[0] is model:  # the model held beside its check: its id is not reused
+        return got[1]
     path = mesh_urdf(robot, model, urdf)
     if path is None:
         if required:
@@ -243,4 +251,5 @@ def mesh_check(robot, model, urdf=None, *, required: bool = False) -> MeshCheck 
             if required:
                 raise
             return None
+    fast[(id(model), None if urdf is None else str(urdf))] = (model, memo[key])
     return memo[key]
