@@ -1,7 +1,7 @@
 """Collision-free IK speed on the panda in a scene (issue 35 item 4): time per target against the same solver
 without a world, per stage, and the collision-free success.
 
-    python benchmarks/collision_speed.py [--targets 1000] [--seed 0] [--rounds 5] [--builtin]
+    python benchmarks/collision_speed.py [--targets 1000] [--seed 0] [--rounds 5] [--builtin] [--mesh-verdict]
 
 The panda of example-robot-data (its URDF with collision meshes: arm, hand, fingers), its sphere model fitted to
 the meshes (:func:`nik.collision.collision_model`, cached), the scene of ``benchmarks/collisions.py`` (a table and
@@ -17,6 +17,12 @@ outcome: success, answers called free that collide on the meshes (must be 0), ta
 ``--builtin``: nik's built-in ``panda`` with its shipped model (spheres fitted to the same meshes, tighter:
 :mod:`nik.collision.builtin`) instead, the targets and the mesh check as above (coal on example-robot-data's meshes,
 the model's pairs), what a user of ``nik.load_robot("panda")`` gets.
+
+``--mesh-verdict``: a third solver in the rotation, ``IKSolver(robot, world=scene, mesh_verdict="auto")`` (the meshes
+judge ``collision_free``, coal; :mod:`nik.ik.collide`): its success, answers it calls free that collide on the meshes
+(must be 0), time per target and ratio to no world, and its stages (with the configurations coal was asked about:
+where the spheres cover the meshes, only those the spheres call colliding). The code measured is the one on
+``sys.path`` (``PYTHONPATH``), so the same file measures an older checkout's verdict.
 """
 
 from __future__ import annotations
@@ -88,6 +94,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rounds", type=int, default=5, help="timed rounds per solver, interleaved")
     ap.add_argument("--builtin", action="store_true", help="the built-in panda and its shipped model")
+    ap.add_argument("--mesh-verdict", action="store_true", help="a third solver: the meshes judge (coal)")
     args = ap.parse_args(argv)
     from collisions import panda_urdf, scene
 
@@ -117,38 +124,51 @@ def main(argv=None) -> None:
     T = np.ascontiguousarray(robot.fk(Q[~mesh.collides(Q, world)][: args.targets]))
     plain = nik.IKSolver(robot, self_collision=False)
     safe = nik.IKSolver(robot, world=world)
+    solvers = [("plain", plain), ("safe", safe)]
+    if args.mesh_verdict:
+        solvers.append(("judged", nik.IKSolver(robot, world=world, mesh_verdict="auto")))
     print(f"nik at {Path(nik.__file__).resolve().parent.parent}")
     which = "built-in, shipped spheres" if args.builtin else "example-robot-data, arm + hand + fingers"
     print(f"panda ({which}), {len(T)} targets from configurations the meshes call free")
     print(f"in a scene of {sum(world.counts())} obstacles (table + 10), seed {args.seed}; model: {model}; one thread")
-    plain.solve(T), safe.solve(T)  # compile / load the kernels, and one full call each, before timing
-    cpu = {"plain": [], "safe": []}
-    wall = {"plain": [], "safe": []}
+    for _, solver in solvers:  # compile / load the kernels, and one full call each, before timing
+        solver.solve(T)
+    cpu = {name: [] for name, _ in solvers}
+    wall = {name: [] for name, _ in solvers}
     out = {}
     for _ in range(args.rounds):
-        for name, solver in (("plain", plain), ("safe", safe)):
+        for name, solver in solvers:
             t, c = time.perf_counter(), time.process_time()
             out[name] = solver.solve(T)
             wall[name].append((time.perf_counter() - t) / len(T))
             cpu[name].append((time.process_time() - c) / len(T))
-    ratios = [s / p for s, p in zip(cpu["safe"], cpu["plain"], strict=True)]
-    r0, r1 = out["plain"], out["safe"]
-    free = np.asarray(r1.collision_free)
-    false_free = int(mesh.collides(np.asarray(r1.q)[free], world).sum())
+    labels = {"plain": "no world", "safe": "scene + self", "judged": "scene + self, meshes judge"}
     print("\n| solver | success | collision-free | called free, mesh colliding | us/target CPU | us/target wall |")
     print("|---|---|---|---|---|---|")
-    for name, key, r in (("no world", "plain", r0), ("scene + self", "safe", r1)):
-        cf = "-" if r.collision_free is None else f"{np.mean(r.collision_free):.1%}"
-        ff = "-" if r.collision_free is None else str(false_free)
+    for key, _ in solvers:
+        r = out[key]
+        cf = ff = "-"
+        if r.collision_free is not None:
+            free = np.asarray(r.collision_free)
+            cf, ff = f"{np.mean(free):.1%}", str(int(mesh.collides(np.asarray(r.q)[free], world).sum()))
         print(
-            f"| {name} | {np.mean(r.success):.1%} | {cf} | {ff} | {1e6 * statistics.median(cpu[key]):.0f} "
+            f"| {labels[key]} | {np.mean(r.success):.1%} | {cf} | {ff} | {1e6 * statistics.median(cpu[key]):.0f} "
             f"| {1e6 * statistics.median(wall[key]):.0f} |"
         )
-    print(
-        f"ratio scene / no world (CPU, median of {args.rounds} interleaved rounds): {statistics.median(ratios):.2f}x "
-        f"(rounds: {', '.join(f'{x:.2f}' for x in ratios)})"
-    )
-    _stages(robot, safe, T, len(T))
+    for key, _ in solvers[1:]:
+        ratios = [s / p for s, p in zip(cpu[key], cpu["plain"], strict=True)]
+        print(
+            f"ratio {labels[key]} / no world (CPU, median of {args.rounds} interleaved rounds): "
+            f"{statistics.median(ratios):.2f}x (rounds: {', '.join(f'{x:.2f}' for x in ratios)})"
+        )
+    if args.mesh_verdict:
+        judged = np.asarray(out["judged"].success)
+        spheres = np.asarray(out["safe"].success)
+        print(f"meshes judge vs spheres, same targets: {int((judged & ~spheres).sum())} won, "
+              f"{int((spheres & ~judged).sum())} lost")  # fmt: skip
+    for key, solver in solvers[1:]:
+        print(f"\n{labels[key]}:")
+        _stages(robot, solver, T, len(T))
 
 
 def _stages(robot, safe, T, B: int) -> None:
@@ -156,10 +176,17 @@ def _stages(robot, safe, T, B: int) -> None:
     import nik.collision.compiled as compiled
     import nik.ik.collide as collide
     import nik.kernels.collision_lm as clm
+    from nik.collision.meshcheck import MeshCheck
 
     timer = _Timer()
-    originals = [
-        (collide.Setup, "colliding", timer.wrap(collide.Setup, "colliding", "check")),
+    checks = ["steering", "judge"] if hasattr(collide.Setup, "judge") else ["colliding"]
+    originals = [(collide.Setup, c, timer.wrap(collide.Setup, c, f"check ({c})")) for c in checks]
+    asked = []  # configurations coal was asked about (the verdict and the names)
+    for attr in ("collides", "collision_names"):
+        fn = getattr(MeshCheck, attr)
+        originals.append((MeshCheck, attr, fn))
+        setattr(MeshCheck, attr, _counted(fn, asked))
+    originals += [
         (collide.Setup, "names", timer.wrap(collide.Setup, "names", "names")),
         (collide, "_starts", timer.wrap(collide, "_starts", "starts (hypotheses)")),
         (clm, "collision_lm", timer.wrap(clm, "collision_lm", "re-solve (LM with collision rows)")),
@@ -184,7 +211,18 @@ def _stages(robot, safe, T, B: int) -> None:
         it = f"{sum(its)} ({', '.join(map(str, its[:3]))})" if its else ""
         print(f"| {name} | {1e6 * spent / B:.1f} | {timer.calls[name]} | {timer.items.get(name, '')} | {it} |")
     print(f"| total | {1e6 * total / B:.1f} | | |")
-    print(f"success {np.mean(res.success):.1%}, collision-free {np.mean(res.collision_free):.1%}")
+    print(f"success {np.mean(res.success):.1%}, collision-free {np.mean(res.collision_free):.1%}; coal asked about "
+          f"{sum(asked)} configurations in {len(asked)} calls")  # fmt: skip
+
+
+def _counted(fn, asked: list):
+    """``fn`` (a :class:`nik.collision.meshcheck.MeshCheck` method taking ``Q``), counting the configurations."""
+
+    def counted(self, Q, *a, **k):
+        asked.append(len(np.asarray(Q).reshape(-1, self.robot.dof)))
+        return fn(self, Q, *a, **k)
+
+    return counted
 
 
 if __name__ == "__main__":

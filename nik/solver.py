@@ -101,7 +101,9 @@ class IKSolver:
             (:mod:`nik.ik.collide`).
         mesh_verdict: who judges ``collision_free``: False (default) the spheres; ``"auto"`` the robot's collision
             meshes (coal) where coal and the meshes are there, else the spheres; True the meshes (a one-line error
-            without them); a URDF path: that URDF's meshes (:func:`nik.collision.meshcheck.mesh_check`).
+            without them); a URDF path: that URDF's meshes (:func:`nik.collision.meshcheck.mesh_check`). Where the
+            sphere model was fitted to those very meshes (:func:`nik.collision.meshcheck.spheres_cover`), coal judges
+            only the answers the spheres call colliding; else every answer (:mod:`nik.ik.collide`).
     """
 
     def __init__(

@@ -11,6 +11,10 @@ the meshes of the URDF named, else of the URDF the sphere model was fitted to (i
 where a shipped model names its vendor's URDF, that one), else of the robot's own URDF; the pairs the model leaves
 out by decision (same frame, adjacent, the SRDF's, always touching, removed) are left out, the ones it left out by
 sampling ("never") are checked.
+
+:func:`spheres_cover` says when the sphere model's "free" is already the meshes' "free" (every surface triangle a
+fit sees lies inside one of its link's spheres: :mod:`nik.collision.fit`), so that the verdict need only ask coal
+about what the spheres call colliding (:class:`nik.ik.collide.Setup`).
 """
 
 from __future__ import annotations
@@ -19,14 +23,16 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MeshCheck", "mesh_check", "mesh_urdf"]
+__all__ = ["MeshCheck", "fitted_urdf", "mesh_check", "mesh_urdf", "spheres_cover"]
 
 
 class MeshCheck:
     """Mesh-level collision verdicts for ``robot`` (loaded from the URDF ``urdf``).
 
     Attributes:
+        urdf: the URDF the meshes come from.
         links: link names with geometry.
+        frames: nik's frame of each link.
         pairs: ``(a, b)`` index pairs checked: every pair but links on the same frame, adjacent links (parent
             and child) and the ``skip`` pairs of link names (e.g. those an SRDF disables), as nik's model before
             sampling; :meth:`drop_always` removes the pairs in contact in every configuration given.
@@ -43,6 +49,7 @@ class MeshCheck:
 
         self._coal = coal
         self.robot = robot
+        self.urdf = Path(urdf)
         bodies = urdf_bodies(robot, urdf)
         self.links = [b.name for b in bodies]
         self.frames = [b.frame for b in bodies]
@@ -146,6 +153,63 @@ class MeshCheck:
         return out
 
 
+def fitted_urdf(model) -> Path | None:
+    """The URDF ``model``'s spheres were fitted to, from its ``source``: ``"urdf:PATH"``, or
+    ``"example-robot-data:REL"`` (a shipped model, :func:`nik.collision.builtin.erd_path`); None for any other source
+    (capsules, radii given by the user) or where the file is missing."""
+    source = model.source
+    if source.startswith("urdf:"):
+        path = Path(source[len("urdf:") :])
+    elif source.startswith("example-robot-data:"):  # a shipped model (nik.collision.builtin)
+        from nik.collision.builtin import erd_path
+
+        path = erd_path(source[len("example-robot-data:") :])
+    else:
+        return None
+    return path if path is not None and path.is_file() else None
+
+
+def spheres_cover(model, mesh: MeshCheck) -> bool:
+    """Whether ``model``'s spheres cover ``mesh``'s meshes on the pairs ``mesh`` checks, so that a configuration the
+    spheres call free (margin 0) is free on the meshes, and coal need only judge the ones they call colliding.
+
+    The conditions (all, checked once per pair of model and check, memoised on ``mesh``):
+
+    - the spheres were fitted to the very file whose meshes judge: ``model.source`` (:func:`fitted_urdf`) resolves
+      to ``mesh.urdf``. A fit is an exact surface cover (:mod:`nik.collision.fit`: every surface triangle of a link,
+      curved primitives as the polyhedra :class:`MeshCheck` tests too, lies inside one of its spheres; the shipped
+      models' centres rounded with radii grown to match), so where no two spheres of a checked pair overlap no two
+      triangles do, and where no sphere reaches an obstacle no triangle does (coal tests mesh surfaces, as the
+      cover promises). Another URDF (given explicitly), capsules or radii given by the user promise nothing: every
+      answer is judged by coal;
+    - no pair left out by sampling: no ``"never"`` in ``model.left_out`` (the meshes check those pairs, the spheres
+      do not);
+    - (defensive, what the first two imply for a fit of this robot) every link ``mesh`` tests is one of the model's,
+      on the same frame, and every pair ``mesh`` checks is one of the model's.
+
+    The model's ``source`` is trusted: a model file edited by hand after its fit is not detected."""
+    memo = mesh.__dict__.setdefault("_covers", {})
+    got = memo.get(id(model))
+    if got is not None and got[0] is model:  # the model kept alive beside its answer: an id is not reused
+        return got[1]
+    memo[id(model)] = (model, _covers(model, mesh))
+    return memo[id(model)][1]
+
+
+def _covers(model, mesh: MeshCheck) -> bool:
+    """:func:`spheres_cover`'s conditions, computed."""
+    fitted = fitted_urdf(model)
+    if fitted is None or fitted.resolve() != mesh.urdf.resolve():
+        return False
+    if any(why == "never" for why in model.left_out.values()):
+        return False
+    frame = {name: int(f) for name, f in zip(model.links, model.frames, strict=True)}
+    if any(frame.get(name) != int(f) for name, f in zip(mesh.links, mesh.frames, strict=True)):
+        return False
+    pairs = {tuple(sorted(p)) for p in model.pair_names()}
+    return all(tuple(sorted((mesh.links[a], mesh.links[b]))) in pairs for a, b in mesh.pairs)
+
+
 def mesh_urdf(robot, model, urdf=None) -> Path | None:
     """The URDF whose collision meshes judge ``robot``'s answers (module docstring), or None where there is none."""
     from nik.collision.model import _has_collision, _urdf_of
@@ -155,12 +219,7 @@ def mesh_urdf(robot, model, urdf=None) -> Path | None:
         if not path.is_file() or not _has_collision(path):
             raise ValueError(f"mesh verdict: {path} is not a URDF file with <collision> geometry")
         return path
-    fitted = Path(model.source[len("urdf:") :]) if model.source.startswith("urdf:") else None
-    if model.source.startswith("example-robot-data:"):  # a shipped model (nik.collision.builtin)
-        from nik.collision.builtin import erd_path
-
-        fitted = erd_path(model.source[len("example-robot-data:") :])
-    for path in (fitted, _urdf_of(robot)):
+    for path in (fitted_urdf(model), _urdf_of(robot)):
         if path is not None and path.is_file() and _has_collision(path):
             return path
     return None
@@ -168,7 +227,15 @@ def mesh_urdf(robot, model, urdf=None) -> Path | None:
 
 def mesh_check(robot, model, urdf=None, *, required: bool = False) -> MeshCheck | None:
     """The :class:`MeshCheck` of ``robot`` with the pairs of ``model`` (module docstring), cached per robot; None
-    where coal or the meshes are missing (``required``: a one-line ``ImportError`` / ``ValueError`` instead)."""
+    where coal or the meshes are missing (``required``: a one-line ``ImportError`` / ``ValueError`` instead).
+
+    A check found is also kept per model and ``urdf`` argument, so a solve with a mesh verdict does not look for the
+    URDF again (resolving its path and reading its files took ~120 us a call); a missing one is looked for each
+    call (coal or the meshes may be installed meanwhile)."""
+    fast = robot.__dict__.setdefault("_mesh_check_of", {})
+    got = fast.get((id(model), None if urdf is None else str(urdf)))
+    if got is not None and got[0] is model:  # the model held beside its check: its id is not reused
+        return got[1]
     path = mesh_urdf(robot, model, urdf)
     if path is None:
         if required:
@@ -184,4 +251,5 @@ def mesh_check(robot, model, urdf=None, *, required: bool = False) -> MeshCheck 
             if required:
                 raise
             return None
+    fast[(id(model), None if urdf is None else str(urdf))] = (model, memo[key])
     return memo[key]

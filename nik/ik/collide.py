@@ -24,9 +24,9 @@ branches that are free, nearest the pose first (colliding ones dropped before an
 drawn collision-free. A target left by the first pass whose pose alone proves every answer colliding
 (:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first and the last
 joint's links swept over their range) is not solved on (it would fail after the whole restart budget); with the
-meshes judging, or a tolerant goal (``bounds``: no pose is fixed), it is. Where the re-solve ends off the goal,
-once more from its answer with the rows at margin 0 (:func:`_solve_free`). The torch backend runs the same
-compiled kernel on the CPU (the answers go there and back).
+meshes judging where the spheres do not cover them (below), or a tolerant goal (``bounds``: no pose is fixed), it
+is. Where the re-solve ends off the goal, once more from its answer with the rows at margin 0 (:func:`_solve_free`).
+The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
 
 **Constraints compose** (issue 34): every mix of ``bounds=``, ``q_rest=``, a world and self-collision, in
 :meth:`~nik.IKSolver.solve` and :meth:`~nik.IKSolver.solve_all`, on both backends:
@@ -49,10 +49,30 @@ each mix within 1 point of the same mix without the world (benchmarks/results/co
 answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it. With a mesh
 verdict (``IKSolver(mesh_verdict=)``: ``"auto"`` where coal is installed and the robot has collision meshes,
 True (required), a URDF path, False: the default) the meshes judge instead (:func:`nik.collision.meshcheck.mesh_check`,
-coal): every answer is checked on them, and only those colliding on the meshes are solved again, so a
-conservative sphere model never turns a free answer into a failure (the spheres steer, the meshes judge; it costs
-one coal check per answer, 0.6-2.7 ms on the panda). ``res.collisions`` names what overlaps in each colliding
-answer (``"linkA|linkB"``, ``"link|box 2"``; :func:`nik.collision.collision_names`).
+coal), in one of two ways, chosen once per call by :func:`nik.collision.meshcheck.spheres_cover`
+(:attr:`Setup.covered`):
+
+- **the spheres cover the meshes**: the model was fitted to the very URDF whose meshes judge (its ``source``) and
+  checks every pair they check (no pair left out by sampling, ``"never"``): the built-in panda, ur5 and xarm7 with
+  example-robot-data installed, and an arm whose model nik fitted to its URDF where the sampling left no pair out. A
+  fit is an exact surface cover (:mod:`nik.collision.fit`), so an answer the spheres call free is free on the
+  meshes, and coal need only judge what they call colliding: the stage runs as without a verdict (the spheres
+  steer: the answers they call colliding are solved again, the blocked-pose proof spares the restarts), then coal
+  judges the answers the spheres still call colliding; where a re-solved answer fails (off the goal, or colliding
+  on the meshes) but the call's own answer met the goal and is free on the meshes, the own answer is returned (a
+  conservative sphere model must never turn a free answer into a failure). The price of the choice: an own answer
+  free on the meshes that the spheres call colliding is solved again like any other (it may move, or change branch),
+  and kept only where the spheres find no free answer. Measured (built-in panda, a table and 10 obstacles, 1,000
+  targets, scene seeds 0-2, ``benchmarks/collision_speed.py --builtin --mesh-verdict``; docs/collisions.md, Round 10):
+  success 99.8 / 99.9 / 99.8 % (the spheres judging: 99.8 / 99.7 / 98.9 %, no target lost against them), 0 answers
+  called free that collide on the meshes, 21 / 24 / 35 us a target against 19 / 21 / 26 with the spheres judging
+  (coal asked about 3 / 4 / 16 configurations of the call's 1,000 answers; before, every answer: 507 / 607 / 498 us);
+- **otherwise** (another URDF named, capsules, radii given, a pair left out by sampling) the spheres promise nothing
+  about the meshes: every answer is checked on them and only those colliding there are solved again, without the
+  blocked-pose proof (it does not bind the meshes); one coal check per answer (0.6-2.7 ms on the panda).
+
+``res.collisions`` names what overlaps in each colliding answer (``"linkA|linkB"``, ``"link|box 2"``;
+:func:`nik.collision.collision_names`), by the verdict's check.
 
 Choices (:class:`CollideCfg`): margin 5 mm (the rows push the spheres that far apart, the verdict needs 0), weight
 1 (a millimetre of penetration costs as much as a millimetre of pose error), 30 iterations per start,
@@ -124,11 +144,11 @@ class CollideCfg:
     the closed form's other branches, ranked: the pass that follows a failed re-solve from the answer); the answer
     and the uniform restarts keep ``converged``. A hypothesis's descent that ends a target mostly does so in a few
     steps (Round 9); those that do not creep on to the colliding local minimum where the restarts end too. Measured
-    (docs/collisions.md, Round 10): the kernel on the 176 captured calls of that pass (built-in panda's scene, 1,000
+    (docs/collisions.md, Round 11): the kernel on the 176 captured calls of that pass (built-in panda's scene, 1,000
     targets, scene seeds 0-10, solver seeds 0-15): iterations -6.4 % (seed 2: -7.3 %, seed 1: -21.6 %, seed 0:
     +0.6 %), the same targets done; whole solves (scene seeds 0-10, solver seeds 0-3) the same targets solved, 0
     answers called free that collide on the meshes. 4e-2 loses a target (seed 1, solver seed 8); 1e-2 or 2e-2 for
-    the uniform restarts too, or for them alone, loses one (seed 9, 5 of 16 solver seeds; seed 10)."""
+    the uniform restarts too, or for them alone, loses targets (seed 9's on 5 of 16 solver seeds; one on seed 10)."""
 
     margin: float = 0.005
     weight: float = 1.0
@@ -145,18 +165,21 @@ class CollideCfg:
 
 @dataclass(frozen=True)
 class Setup:
-    """The collision check of one call: the arm's ``model``, the ``world`` (None: self only), ``self_on`` and the
-    ``mesh`` check that judges (a :class:`nik.collision.meshcheck.MeshCheck`; None: the spheres judge)."""
+    """The collision check of one call: the arm's ``model``, the ``world`` (None: self only), ``self_on``, the
+    ``mesh`` check that judges (a :class:`nik.collision.meshcheck.MeshCheck`; None: the spheres judge) and
+    ``covered``: the spheres cover those meshes on the pairs they check
+    (:func:`nik.collision.meshcheck.spheres_cover`), so a configuration the spheres call free is free on the meshes
+    and coal judges only the ones they call colliding."""
 
     model: object
     world: object
     self_on: bool
     mesh: object = None
+    covered: bool = False
 
-    def colliding(self, robot, q: np.ndarray) -> np.ndarray:
-        """``(B,)`` bool, the verdict for ``q: (B, dof)``: the meshes' where they judge, else the spheres'."""
-        if self.mesh is not None:
-            return self.mesh.collides(q, self.world, self_collision=self.self_on)
+    def spheres(self, robot, q: np.ndarray) -> np.ndarray:
+        """``(B,)`` bool, the sphere check of ``q: (B, dof)`` (:func:`nik.kernels.collision.collides_batch`, margin
+        0), whoever judges."""
         from nik.kernels.collision import collides_batch
 
         (G, joints), rest = self.arguments(robot)
@@ -164,13 +187,42 @@ class Setup:
         collides_batch(G, joints, np.ascontiguousarray(q, dtype=np.float64), *rest, 0.0, hit)
         return hit
 
-    def names(self, robot, q: np.ndarray) -> list:
-        """What overlaps in each of ``q: (B, dof)`` (:func:`nik.collision.collision_names`), by the verdict's check."""
-        if self.mesh is not None:
-            return self.mesh.collision_names(q, self.world, self_collision=self.self_on)
-        from nik.collision.compiled import collision_names_compiled
+    def steering(self, robot, q: np.ndarray) -> np.ndarray:
+        """``(B,)`` bool, the check :func:`resolve` solves again by: the spheres', unless the meshes judge and the
+        spheres do not cover them (then the meshes': only what collides on them is solved again)."""
+        if self.mesh is not None and not self.covered:
+            return self.mesh.collides(q, self.world, self_collision=self.self_on)
+        return self.spheres(robot, q)
 
-        return collision_names_compiled(robot, q, self.world, model=self.model, self_collision=self.self_on)
+    def judge(self, robot, q: np.ndarray, hit: np.ndarray) -> np.ndarray:
+        """``(B,)`` bool, the verdict for ``q: (B, dof)`` given ``hit``, :meth:`steering`'s for it: the meshes' on
+        the rows ``hit`` calls colliding where the spheres cover them (the others are free on the meshes), else
+        ``hit`` itself (a copy)."""
+        hit = np.array(hit, dtype=bool)
+        if self.mesh is not None and self.covered and hit.any():
+            hit[hit] = self.mesh.collides(np.asarray(q)[hit], self.world, self_collision=self.self_on)
+        return hit
+
+    def colliding(self, robot, q: np.ndarray) -> np.ndarray:
+        """``(B,)`` bool, the verdict for ``q: (B, dof)``: the meshes' where they judge (coal asked only about the
+        configurations the spheres call colliding where the spheres cover the meshes), else the spheres'."""
+        return self.judge(robot, q, self.steering(robot, q))
+
+    def names(self, robot, q: np.ndarray) -> list:
+        """What overlaps in each of ``q: (B, dof)`` (:func:`nik.collision.collision_names`), by the verdict's check
+        (where the spheres cover the meshes, coal names only the rows the spheres call colliding; the rest None)."""
+        if self.mesh is None:
+            from nik.collision.compiled import collision_names_compiled
+
+            return collision_names_compiled(robot, q, self.world, model=self.model, self_collision=self.self_on)
+        q = np.asarray(q, dtype=np.float64).reshape(-1, robot.dof)
+        rows = np.flatnonzero(self.spheres(robot, q)) if self.covered else np.arange(len(q))
+        out = [None] * len(q)
+        if rows.size:
+            for i, names in zip(rows, self.mesh.collision_names(q[rows], self.world, self_collision=self.self_on),
+                                strict=True):  # fmt: skip
+                out[i] = names
+        return out
 
     def arguments(self, robot):
         """``(G, joints), rest``: :func:`nik.collision.compiled.kernel_arguments`."""
@@ -262,7 +314,11 @@ def setup(robot, world, self_collision, mesh_verdict=False) -> Setup | None:
 
         urdf = None if isinstance(mesh_verdict, bool) or mesh_verdict == "auto" else mesh_verdict
         mesh = mesh_check(robot, model, urdf, required=mesh_verdict != "auto")
-    return Setup(model, world, self_on, mesh)
+    if mesh is None:
+        return Setup(model, world, self_on)
+    from nik.collision.meshcheck import spheres_cover
+
+    return Setup(model, world, self_on, mesh, spheres_cover(model, mesh))
 
 
 def _numpy(x) -> np.ndarray:
@@ -453,10 +509,11 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     float32 = _numpy(res.q).dtype == np.float32
     goal = _goal(robot, plan, B, float32)
     model, half, modes, opts, iopts = goal
-    hit = s.colliding(robot, q)
+    hit = s.steering(robot, q)  # the spheres, unless the meshes judge without their cover (today's flow)
     reach = np.ones(B, dtype=bool) if res.reachable is None else _numpy(res.reachable).astype(bool)
     idx = np.nonzero(hit & reach)[0]
     success = _numpy(res.success).astype(bool).copy()
+    q_own, own_ok, done = q.copy(), success.copy(), np.zeros(0, dtype=bool)  # the call's own answers
     pos, rot, it = (_numpy(x).copy() for x in (res.pos_err, res.rot_err, res.iterations))
     axis = None if res.axis_err is None else _numpy(res.axis_err).copy()
     changed = np.zeros(B, dtype=bool)
@@ -478,7 +535,7 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
             robot, s, plan, cfg, kgoal, Tn, first[:, None], np.ones(k), np.zeros(k), cfg.margin
         )
         miss = np.flatnonzero(~done)
-        if miss.size and s.mesh is None and getattr(plan, "bounds", None) is None:
+        if miss.size and (s.mesh is None or s.covered) and getattr(plan, "bounds", None) is None:
             # a pose whose own rows collide has no free answer: not solved on (a tolerant goal fixes no pose)
             from nik.collision.compiled import blocked_targets
 
@@ -495,9 +552,11 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
             )
             qk[miss], done[miss], itk[miss] = qm, dm, itk[miss] + itm
         q[idx], it[idx] = qk, it[idx] + itk
-        hit[idx] = s.colliding(robot, qk)  # the verdict of the new answers (the others' stands)
+        hit[idx] = s.steering(robot, qk)  # the check of the new answers (the others' stands)
         success[idx] = done & ~hit[idx]
         changed[idx] = True
+    if s.mesh is not None and s.covered:  # the meshes judge what the spheres still call colliding
+        _meshes_judge(robot, s, q, hit, success, changed, idx, done, q_own, own_ok)
     if plan.q_rest is not None:
         from nik.ik.goals import rest_target
 
@@ -522,6 +581,25 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
     for i, names in zip(np.nonzero(hit)[0], s.names(robot, q[hit]), strict=True):
         out.collisions[i] = names or []  # [] only where the verdict's margin 0 and the names' rounding differ
     return out
+
+
+def _meshes_judge(robot, s: Setup, q, hit, success, changed, idx, done, q_own, own_ok) -> None:
+    """:func:`resolve`'s verdict where the spheres cover the meshes (:attr:`Setup.covered`), in place: the meshes
+    judge the answers ``q`` the spheres call colliding (``hit``: the others are free on the meshes); a re-solved
+    answer (rows ``idx``, ``done`` where it met the goal) that fails, where the call's own answer ``q_own`` met the
+    goal (``own_ok``) and is free on the meshes, gives way to it, unchanged (``changed`` off: its errors stand): a
+    conservative sphere model must never turn a free answer into a failure. The re-solve steered by the spheres
+    (the answers they call colliding solved again, the blocked-pose proof sparing the restarts), so both the
+    re-solved answers still colliding and the own answers asked about are ones the spheres call colliding: coal is
+    asked about nothing else."""
+    hit[:] = s.judge(robot, q, hit)
+    if not idx.size:
+        return
+    success[idx] = done & ~hit[idx]
+    back = idx[~success[idx] & own_ok[idx]]
+    if back.size:
+        own = back[~s.mesh.collides(q_own[back], s.world, self_collision=s.self_on)]
+        q[own], hit[own], success[own], changed[own] = q_own[own], False, True, False
 
 
 def path_waypoints(solver, q: np.ndarray, world, success: np.ndarray):
