@@ -186,7 +186,7 @@ def main(argv=None) -> None:
     def counting(lm):
         def call(*a, **k):
             got = lm(*a, **k)
-            stats["iters"] += int(np.asarray(a[-3]).sum())  # the kernel's iterations (B,), filled by the call
+            stats["iters"] += int(np.asarray(a[29]).sum())  # the kernel's iterations (its 30th argument)
             return got
 
         return call

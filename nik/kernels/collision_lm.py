@@ -69,7 +69,8 @@ Cost per iteration (what the measurements found): the collision rows of a candid
 pose rows alone are no better than the current sum is rejected without them (the same decision: the sum only
 adds), and the step's normal equations run over the rows that push only.
 A descent ends when done, after ``stall_iters`` iterations in a row that do not lower its sum by ``stall_rel`` of
-it, at its iteration limit, or at a kept step that lowers the sum by less than ``converged`` of it (converged).
+it, at its iteration limit, or at a kept step that lowers the sum by less than ``converged`` of it (converged;
+``converged_given`` for the given starts after the first: :attr:`nik.ik.collide.CollideCfg.converged_given`).
 Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
 """
 
@@ -321,7 +322,7 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
 def collision_lm(
     G, joints, Tt, starts, n_starts, bounds, modes, opts, iopts, restarts, tries, patience, seed,
     spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, weight, finish,
-    descents, converged, q, free, done_out, iterations, pos, rot,
+    descents, converged, q, free, done_out, iterations, pos, rot, converged_given=-1.0,
 ):  # fmt: skip
     """LM with collision rows for each target ``Tt[b] (4, 4)`` (module docstring).
 
@@ -336,7 +337,9 @@ def collision_lm(
         descents: the uniform starts the collision LM runs from, at least: the best by the sum it starts from
             (also every one near the pose or free: module docstring; <= 0: all of them).
         converged: a descent ends at a kept step that lowers its sum by less than this fraction of it (0: off;
-            :attr:`nik.ik.collide.CollideCfg.converged`).
+            :attr:`nik.ik.collide.CollideCfg.converged`): the first given start's and the uniform starts'.
+        converged_given: the same for the other given starts (the network's hypotheses or the closed form's
+            branches; < 0, the default: ``converged``; :attr:`nik.ik.collide.CollideCfg.converged_given`).
         q: (B, n) out, inside the limits; free, done_out: (B,) bool out (collision-free; reached and free);
         iterations: (B,) int64 out; pos, rot: (B,) float64 out, the pose errors of ``q`` (m, rad).
     """
@@ -345,6 +348,7 @@ def collision_lm(
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     limit, stall_limit = iopts[ITERS], iopts[STALL_ITERS]
     w2 = weight * weight
+    conv_given = converged if converged_given < 0.0 else converged_given
     T, Tc = np.empty((3, 4)), np.empty((3, 4))
     e, ec, d = np.empty(6), np.empty(6), np.empty(6)
     J, Jc = np.empty((6, n)), np.empty((6, n))
@@ -452,9 +456,11 @@ def collision_lm(
                             best_S, best_free, best_done, best_pos, best_rot = 0.0, True, True, p_f, r_f
                             _copy(qs, best_q)
                             break
+            # the other given starts (the hypotheses) stop at `conv_given`; the answer and the restarts at `converged`
+            conv = conv_given if 0 < s < H else converged
             S, p_e, r_e, near, done, its = _descend(
                 G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                w_capsules, self_on, margin, w2, lb, opts, limit, stall_limit, converged, T, Tc, e, ec, d, J, Jc, r,
+                w_capsules, self_on, margin, w2, lb, opts, limit, stall_limit, conv, T, Tc, e, ec, d, J, Jc, r,
                 rc, Jr, Jrc, A, g, dq, qc, wf, wi, False,
             )  # fmt: skip
             total += its
