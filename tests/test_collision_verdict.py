@@ -72,19 +72,34 @@ def test_bad_mesh_verdict_is_one_line():
 @pytest.fixture(scope="module")
 def panda_meshes():
     pytest.importorskip("coal", reason="the mesh verdict needs coal (pip install 'nik[collision-check]')")
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    bench = _bench_collisions()
     try:
-        from collisions import panda_urdf, scene
-    finally:
-        sys.path.pop(0)
-    try:
-        urdf = panda_urdf()
+        urdf = bench.panda_urdf()
     except SystemExit:
         pytest.skip("example-robot-data's panda (with meshes) is not installed")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         robot = nik.load_robot(urdf, end_link="panda_hand")
-    return robot, urdf, scene(0)
+    return robot, urdf, bench.scene(0)
+
+
+def _bench_collisions():
+    """benchmarks/collisions.py as a module: its example-robot-data panda (``panda_urdf``) and its scene (``scene``:
+    a table and 10 boxes, spheres and capsules)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        import collisions
+    finally:
+        sys.path.pop(0)
+    return collisions
+
+
+def _false_alarms(robot, coal, world) -> np.ndarray:
+    """``(6, dof)``: seeded configurations the spheres call colliding in ``world`` and ``coal`` calls free."""
+    q = robot.sample(400, generator=torch.Generator().manual_seed(4), dtype=torch.float64).numpy()
+    q = q[collides(robot, q, world) & ~coal.collides(q, world)][:6]
+    assert len(q) == 6
+    return q
 
 
 def _coal(robot, urdf):
@@ -110,9 +125,7 @@ def test_mesh_verdict_agrees_with_coal(panda_meshes):
 def test_meshes_free_what_the_spheres_call_colliding(panda_meshes):
     robot, urdf, world = panda_meshes
     coal = _coal(robot, urdf)
-    q = robot.sample(400, generator=torch.Generator().manual_seed(4), dtype=torch.float64).numpy()
-    q = q[collides(robot, q, world) & ~coal.collides(q, world)][:6]  # the spheres' false alarms
-    assert len(q) == 6
+    q = _false_alarms(robot, coal, world)
     T = np.ascontiguousarray(robot.fk(q))
     # the model is fitted to these meshes (no pair left out by sampling): the spheres steer (each answer solved
     # again), the meshes judge; where the spheres cannot free one, the call's own answer (free on the meshes) stands
@@ -137,9 +150,7 @@ def test_without_the_cover_an_answer_free_on_the_meshes_is_kept(panda_meshes):
     nik.collision.set_collision_model(robot, model)
     assert not spheres_cover(model, mesh_check(robot, model))
     coal = _coal(robot, urdf)
-    q = robot.sample(400, generator=torch.Generator().manual_seed(4), dtype=torch.float64).numpy()
-    q = q[collides(robot, q, world) & ~coal.collides(q, world)][:6]  # the spheres' false alarms
-    assert len(q) == 6
+    q = _false_alarms(robot, coal, world)
     T = np.ascontiguousarray(robot.fk(q))
     judged = nik.IKSolver(robot, world=world, mesh_verdict=True).solve(T, q_near=q)
     np.testing.assert_allclose(judged.q, q, atol=1e-9)  # kept: no re-solve of an answer free on the meshes
@@ -202,7 +213,7 @@ def test_coal_judges_only_what_the_spheres_call_colliding(builtin_panda, monkeyp
     from nik.collision.meshcheck import MeshCheck
 
     robot, _, mesh = builtin_panda
-    world = _bench_scene(2)
+    world = _bench_collisions().scene(2)
     T = _mesh_free_targets(robot, mesh, world, 400, seed=2)
     asked = []
     for attr in ("collides", "collision_names"):
@@ -228,16 +239,6 @@ def _recorded(fn, asked: list):
         return fn(self, Q, *a, **k)
 
     return recorded
-
-
-def _bench_scene(seed: int) -> nik.World:
-    """The scene of benchmarks/collisions.py (a table and 10 boxes, spheres and capsules)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    try:
-        from collisions import scene
-    finally:
-        sys.path.pop(0)
-    return scene(seed)
 
 
 def _hand_over_a_block(robot, mesh, gap: float):

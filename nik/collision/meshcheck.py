@@ -232,8 +232,8 @@ def mesh_check(robot, model, urdf=None, *, required: bool = False) -> MeshCheck 
     A check found is also kept per model and ``urdf`` argument, so a solve with a mesh verdict does not look for the
     URDF again (resolving its path and reading its files took ~120 us a call); a missing one is looked for each
     call (coal or the meshes may be installed meanwhile)."""
-    fast = robot.__dict__.setdefault("_mesh_check_of", {})
-    got = fast.get((id(model), None if urdf is None else str(urdf)))
+    fast, fast_key = robot.__dict__.setdefault("_mesh_check_of", {}), (id(model), None if urdf is None else str(urdf))
+    got = fast.get(fast_key)
     if got is not None and got[0] is model:  # the model held beside its check: its id is not reused
         return got[1]
     path = mesh_urdf(robot, model, urdf)
@@ -251,5 +251,5 @@ def mesh_check(robot, model, urdf=None, *, required: bool = False) -> MeshCheck 
             if required:
                 raise
             return None
-    fast[(id(model), None if urdf is None else str(urdf))] = (model, memo[key])
+    fast[fast_key] = (model, memo[key])
     return memo[key]
