@@ -17,12 +17,12 @@ today, and fit a model (seconds) inside a solve. A world or an attached model is
 
 **What the stage does** (:func:`resolve`, after the main pipeline, both backends): every answer is checked
 (:func:`nik.kernels.collision.collides_batch`, margin 0); the ones that collide (within reach) are solved again by
-LM with collision rows (:mod:`nik.kernels.collision_lm`): first from the answer alone (it keeps a path or
-``q_near`` on its branch, and ends most targets); then, from that pass's answer, the network's other hypotheses or the closed form's other
-branches that are free, nearest the pose first (colliding ones dropped before any iteration), then uniform restarts
-drawn collision-free. A target left by the first pass whose pose alone proves every answer colliding
-(:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first and the last
-joint's links swept over their range) is not solved on (it would fail after the whole restart budget); with the
+LM with collision rows (:mod:`nik.kernels.collision_lm`): first from the answer alone (it keeps a path or ``q_near``
+on its branch, and ends most targets); then, from that pass's answer, the network's other hypotheses or the closed
+form's other branches that are free, nearest the pose first (colliding ones dropped before any iteration), then
+uniform restarts drawn collision-free. A target left by the first pass whose pose alone proves every answer
+colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first and the
+last joint's links swept over their range) is not solved on (it would fail after the whole restart budget); with the
 meshes judging where the spheres do not cover them (below), or a tolerant goal (``bounds``: no pose is fixed), it
 is. Where the re-solve ends off the goal, once more from its answer with the rows at margin 0 (:func:`_solve_free`).
 The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
