@@ -17,18 +17,17 @@ today, and fit a model (seconds) inside a solve. A world or an attached model is
 
 **What the stage does** (:func:`resolve`, after the main pipeline, both backends): every answer is checked
 (:func:`nik.kernels.collision.collides_batch`, margin 0); the ones that collide (within reach) are solved again by
-LM with collision rows (:mod:`nik.kernels.collision_lm`): first from the answer alone (it keeps a path or
-``q_near`` on its branch; it ends most targets, 44 of 55 on the panda's scene, so the rest of the stage runs for
-the few it leaves); then, from that pass's answer, the network's other hypotheses or the closed form's other
-branches that are free, nearest the pose first (colliding ones dropped before any iteration), then uniform restarts
-drawn collision-free. A target left by the first pass whose pose alone proves every answer colliding
-(:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first and the last
-joint's links swept over their range) is not solved on (it would fail after the whole restart budget); with the
+LM with collision rows (:mod:`nik.kernels.collision_lm`): first from the answer alone (it keeps a path or ``q_near``
+on its branch, and ends most targets); then, from that pass's answer, the network's other hypotheses or the closed
+form's other branches that are free, nearest the pose first (colliding ones dropped before any iteration), then
+uniform restarts drawn collision-free. A target left by the first pass whose pose alone proves every answer
+colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the world or the base, the first and the
+last joint's links swept over their range) is not solved on (it would fail after the whole restart budget); with the
 meshes judging where the spheres do not cover them (below), or a tolerant goal (``bounds``: no pose is fixed), it
 is. Where the re-solve ends off the goal, once more from its answer with the rows at margin 0 (:func:`_solve_free`).
 The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
 
-**Constraints compose** (issue 34): every mix of ``bounds=``, ``q_rest=``, a world and self-collision, in
+**Constraints compose**: every mix of ``bounds=``, ``q_rest=``, a world and self-collision, in
 :meth:`~nik.IKSolver.solve` and :meth:`~nik.IKSolver.solve_all`, on both backends:
 
 - the re-solve keeps the call's goal: the collision LM's pose rows are the bounded residual with its dead zones
@@ -63,10 +62,10 @@ coal), in one of two ways, chosen once per call by :func:`nik.collision.meshchec
   conservative sphere model must never turn a free answer into a failure). The price of the choice: an own answer
   free on the meshes that the spheres call colliding is solved again like any other (it may move, or change branch),
   and kept only where the spheres find no free answer. Measured (built-in panda, a table and 10 obstacles, 1,000
-  targets, scene seeds 0-2, ``benchmarks/collision_speed.py --builtin --mesh-verdict``; docs/collisions.md, Round 10):
+  targets, scene seeds 0-2, ``benchmarks/collision_speed.py --builtin --mesh-verdict``, docs/collisions.md):
   success 99.8 / 99.9 / 99.8 % (the spheres judging: 99.8 / 99.7 / 98.9 %, no target lost against them), 0 answers
   called free that collide on the meshes, 21 / 24 / 35 us a target against 19 / 21 / 26 with the spheres judging
-  (coal asked about 3 / 4 / 16 configurations of the call's 1,000 answers; before, every answer: 507 / 607 / 498 us);
+  (coal asked about 3 / 4 / 16 configurations of the call's 1,000 answers);
 - **otherwise** (another URDF named, capsules, radii given, a pair left out by sampling) the spheres promise nothing
   about the meshes: every answer is checked on them and only those colliding there are solved again, without the
   blocked-pose proof (it does not bind the meshes); one coal check per answer (0.6-2.7 ms on the panda).
@@ -107,48 +106,22 @@ __all__ = [
 
 @dataclass(frozen=True)
 class CollideCfg:
-    """Settings of the collision stage (module docstring): ``margin`` metres, ``weight`` of the collision rows,
-    ``iters`` / ``stall_iters`` per start, ``restarts`` uniform starts per target, ``tries`` draws per start,
-    ``patience``: end a target's uniform restarts after that many in a row that do not lower its best sum by 1 %
-    (0: off, the default; :mod:`nik.kernels.collision_lm` says what it trades); ``finish``: iterations of the finishing
-    step (a start at the pose that overlaps by less than the tolerance can move the hand, solved inside the tolerance;
-    0: off); ``descents``: the uniform restarts the collision LM runs from, at least (every restart is drawn and taken
-    to the pose first, then ranked by the sum the collision LM starts from; the best ``descents`` run, and any further
-    one at most as far off as the pose with one sphere a margin deep, or free; <= 0: all, ranked). It trades the
-    restarts a target solves late for time on the targets no restart solves: on the built-in panda's scene (seeds
-    0-2, 1,000 targets, solver seeds 0-15) no target lost or won against the collision LM from all 16, the pass with the
-    restarts 0.54-0.79 x the time on seed 2, 0.86-0.90 x on seed 0, 1.0 x on seed 1 (whose restarts end early
-    anyway); the kernel alone on 37 captured calls of scene seeds 0-10: 0.82 x, no target lost
-    (``benchmarks/collision_lm_ab.py``, docs/collisions.md, Round 8).
+    """Settings of the collision stage (:mod:`nik.kernels.collision_lm` says how each is used).
 
-    ``stall_iters = 4`` (was 5): a start ends after 4 iterations in a row that do not lower its sum by 0.1 %.
-    Measured (built-in panda's scene, 1,000 targets, scene seeds 0-2, solver seeds 0-3: docs/collisions.md, Round 8):
-    the collision LM's iterations -9, -9, -7 %, the same targets solved, 0 answers called free that collide on the
-    meshes. 3 saves more (-19, -16, -23 %, the same targets) but moves a re-solved answer to another local minimum
-    often enough to break a posture check of tests/test_compose.py (an answer without ``q_rest`` landing nearer the
-    posture than the one with it). Swept and left: margin 2-8 mm, weight 0.5-4, the damping's start (1e-5 to 1), its
-    rise (2, 10) and fall (0.1, 0.5), iters 15-40 (none saves as much on every seed without losing a target).
+    ``margin`` (m): the clearance the collision rows ask for; ``weight``: of the collision rows against the pose
+    rows; ``iters`` / ``stall_iters``: per start (a start ends after ``stall_iters`` iterations in a row that lower
+    its sum by less than 0.1 %); ``restarts``: uniform starts per target; ``tries``: draws per start (the free draw
+    nearest the pose is kept); ``patience``: end a target's uniform restarts after that many in a row that do not
+    lower its best sum by 1 % (0: off); ``finish``: iterations of the finishing step (a start at the pose that
+    overlaps by less than the tolerance can move the hand within it; 0: off); ``descents``: the uniform restarts
+    the collision LM runs from, ranked by their starting sum (further ones only where nearly free; <= 0: all);
+    ``converged`` / ``converged_given``: a descent ends at a kept step that lowers its sum by less than that
+    fraction of it (the answer and the restarts / the other given starts; 0: off).
 
-    ``converged = 2e-3``: a start also ends at the first kept step that lowers its sum by less than that fraction of
-    it (the descent has converged: a local minimum that collides, or a free compromise the margin rows hold off the
-    pose, which otherwise creeps on or waits out the stall count with ``|dq| ~ 0``; 0: off). It trades descents that
-    would creep on to an answer after such a step for iterations; one setting for every pass of the collision LM, like
-    ``stall_iters``. Measured (built-in panda's scene, 1,000 targets, scene seeds 0-2, solver seeds 0-3:
-    docs/collisions.md, Round 9): the collision LM's iterations -14, -13, -11 % (the first pass from the answer -12,
-    -18, -18 %), the same targets solved, 0 answers called free that collide on the meshes. 1e-3 saves less (-11, -7,
-    -9 %), 1e-6 -2 to -5 %; 3e-3 saves more (-16, -18, -12 %, the same targets) but lands a re-solve in another local
-    minimum that breaks the posture check of tests/test_compose.py (as ``stall_iters = 3`` does); 1e-2 loses a target
-    (seed 2).
-
-    ``converged_given = 2e-2``: the same stop for the given starts after the first (the network's other hypotheses or
-    the closed form's other branches, ranked: the pass that follows a failed re-solve from the answer); the answer
-    and the uniform restarts keep ``converged``. A hypothesis's descent that ends a target mostly does so in a few
-    steps (Round 9); those that do not creep on to the colliding local minimum where the restarts end too. Measured
-    (docs/collisions.md, Round 11): the kernel on the 176 captured calls of that pass (built-in panda's scene, 1,000
-    targets, scene seeds 0-10, solver seeds 0-15): iterations -6.4 % (seed 2: -7.3 %, seed 1: -21.6 %, seed 0:
-    +0.6 %), the same targets done; whole solves (scene seeds 0-10, solver seeds 0-3) the same targets solved, 0
-    answers called free that collide on the meshes. 4e-2 loses a target (seed 1, solver seed 8); 1e-2 or 2e-2 for
-    the uniform restarts too, or for them alone, loses targets (seed 9's on 5 of 16 solver seeds; one on seed 10)."""
+    The defaults were chosen on the built-in panda's scenes (``benchmarks/collision_speed.py``,
+    ``benchmarks/collision_lm_ab.py``): each saves iterations without losing a target there. Fewer ``restarts``
+    trade success on the hardest targets for time; a tighter ``stall_iters`` (3) or ``converged`` (3e-3) saves
+    more iterations but moves some re-solved answers to another local minimum."""
 
     margin: float = 0.005
     weight: float = 1.0

@@ -8,70 +8,37 @@ rows ``max(0, margin - d)``: one per checked link pair and one per link against 
     minimise |e(q)|^2 + weight^2 |r(q)|^2
 
 The step is the damped Gauss-Newton step of :mod:`nik.kernels.lm_step` (Marquardt damping, the active set at the
-limits, steps capped at ``max_step`` and brought inside the limits) on the pose rows with the collision rows as its
-extra rows; the damping rule is its :func:`~nik.kernels.lm_step._judge`. A candidate is kept when
-it lowers the sum, or when it is done: within the pose tolerances (or inside the bounds) **and** free (every
-row's distance ``d >= 0``, the verdict of :func:`nik.kernels.collision.collides_batch` with margin 0). Stopping
-at the first done candidate matters: the margin rows still pull when ``0 <= d < margin``, and where the goal
-needs the arm closer than the margin the minimum of the sum is a compromise whose pose error may exceed the
-tolerance; the path to it passes through done points.
+limits, steps capped at ``max_step`` and brought inside the limits) with the collision rows as extra rows. A
+candidate is kept when it lowers the sum, or when it is **done**: within the pose tolerances (or inside the bounds)
+and free (every row's distance ``d >= 0``, margin 0). Stopping at the first done candidate matters: the margin rows
+still pull when ``0 <= d < margin``, and where the goal needs the arm closer than the margin the minimum of the sum
+is a compromise that may miss the tolerance; the path to it passes through done points.
 
-Starts, per target, in order: the ``n_starts[b]`` given ones, the answer that collided first (near the caller's
-``q_near`` or a path's previous waypoint: LM from it keeps the answer on its branch), then the network's other
-hypotheses or the closed form's other branches, ranked (:func:`_rank_starts`) once the first start is not done
-(it ends most targets: 44 of 55 on the panda's scene, and ranking costs a collision check per start): the free ones,
-nearest the pose first; the colliding ones dropped (a colliding hypothesis mostly lands on a colliding answer; LM
-from it would spend the budget the uniform starts use better); then the uniform starts, ranked before any collision
-iteration (:func:`_prepare`): all ``restarts[b]`` of them drawn, each the collision-free draw nearest the pose (lowest
-pose error) among ``tries`` (a draw that collides is dropped before any iteration), taken to the pose by LM without
-the collision rows (the pose LM of :mod:`nik.kernels.lm`, the call's goal, its iteration limits; its answer may
-collide: an iteration without the rows costs a small part of one with them, which a configuration near obstacles
-dominates, and the collision LM from a pose reached ends most targets in a few iterations, as from a colliding
-answer) and judged by the sum the collision LM starts from (the pose rows plus ``weight^2`` times the rows at
-``margin``, one rows call without the Jacobian); one that is done as it stands, or by the finishing step, ends the
-target. The collision LM then runs from them lowest sum first, from the best ``descents``, every further one whose
-sum is at most ``weight^2 (2 margin)^2`` (the pose reached with one sphere a margin deep) and every one the pose LM
-left free (short of the pose: it holds the free side of an obstacle that the starts at the pose overlap; such starts
-solve 37 % of the time on targets some restart solves, the colliding ones 14 %); ``descents <= 0``: from all. The
-ranking pays on every target that reaches the restarts (the best-ranked start that solves a target was the first in
-78 of 86 targets; 137 targets of the built-in panda's scene, scene seeds 0-10), the bound on those no configuration
-solves for the spheres (the collision LM ran from all 16: now from 8 on average). The free ones are kept because of
-one target (scene seed 1, solver seed 13) whose only solving start was free, 109 mm off the pose, 13th by its sum.
-Measured on scene seeds 0-2 (1,000 targets each): see ``CollideCfg.descents`` (:mod:`nik.ik.collide`).
-The first start that is done ends the target; otherwise the answer is the start with the lowest sum (a pose
-reached with the spheres overlapping by millimetres beats a free configuration far from the pose). A start that
-ends free but held off the goal by the margin rows (the goal lies nearer an obstacle than ``margin``), with a
-lower sum than every start before it, goes on at once with the rows at margin 0 (the verdict's); done there, it
-ends the target (measured on the panda's scene: 3 of 10 such targets, that otherwise spent the whole budget
-before the caller's margin-0 pass). ``patience > 0`` ends a target's uniform restarts after that many in a row
-that do not lower the best sum by 1 % (off by default: on the panda's scene it saved 30 % of the stage's time
-but lost 3 of 1,000 targets that the 10th-16th restart solves).
+Starts, per target, in order, the first done one ending the target:
 
-The finishing step (``finish > 0`` iterations; classic goals only: a tolerant goal's rows have their dead zones
-already): a start that reaches the pose within the tolerances but whose spheres overlap by at most what a pose within
-them can move a sphere of the last frame (``tol_pos + tol_rot * lever``, the lever the farthest such centre from the
-tool point) is first run by the same LM with other pose rows: the dead zone of :mod:`nik.kernels.lm`'s tolerant goal
-(rotation mode -1), its zone the box inscribed in the tolerances (half-widths ``tol / sqrt(3)`` per axis: inside the
-zone the norms stay within ``tol_pos`` and ``tol_rot``), the rotation rows weighted ``tol_pos / tol_rot`` (a turn up to
-the rotation tolerance costs what a shift up to the position tolerance does; with the default 0.5 m/rad the step moves
-the sphere by shifting the position only, which the tolerance allows 0.1 mm of, while a turn of 0.1 deg moves a sphere
-0.1 m from the tool point 0.17 mm), the collision rows reaching ``0.2 tol_pos`` (at margin 0 they approach ``d = 0``
-from the overlapping side and never cross it). It is done by the success judge itself: position error ``<= tol_pos``,
-angle ``<= tol_rot`` (the norms: its bounds, twice the zone, reach past them) and free at margin 0; done, it ends the
-target; else the start goes on unchanged. Where it pays: first, from a start at the pose (the answer that collided,
-usually): from a compromise the classic rows left (0.08 mm off, all of it in position) it failed on the one such target
-of the panda's scene, from the answer it ends it in 2 iterations; run after each descent instead, it solved nothing and
-cost iterations. Measured (built-in panda's scene, 1,000 targets, seeds 0-2, solver seeds 0-9): seed 0's target that
-spent the restart budget is solved (99.8 % from 99.7 %, iterations -8 %, time 0.92 x); seeds 1-2 unchanged within the
-restarts' luck (no other target reaches the step; seed 2's failures are proven blocked or overlap by 1.9-12 mm).
+1. the ``n_starts[b]`` given ones: the answer that collided (near the caller's ``q_near`` or a path's previous
+   waypoint: it keeps the answer on its branch), then the network's other hypotheses or the closed form's other
+   branches, ranked once the first is not done (:func:`_rank_starts`: the free ones nearest the pose first, the
+   colliding ones dropped);
+2. ``restarts[b]`` uniform starts (:func:`_prepare`): each the collision-free draw nearest the pose among ``tries``,
+   taken to the pose by the pose LM of :mod:`nik.kernels.lm` without the collision rows, then ranked by the sum the
+   collision LM starts from; the collision LM runs from the best ``descents``, from every further one within
+   ``weight^2 (2 margin)^2`` of the pose and from every one left free short of the pose (``descents <= 0``: all).
 
-Cost per iteration (what the measurements found): the collision rows of a candidate dominate; a candidate whose
-pose rows alone are no better than the current sum is rejected without them (the same decision: the sum only
-adds), and the step's normal equations run over the rows that push only.
-A descent ends when done, after ``stall_iters`` iterations in a row that do not lower its sum by ``stall_rel`` of
-it, at its iteration limit, or at a kept step that lowers the sum by less than ``converged`` of it (converged;
-``converged_given`` for the given starts after the first: :attr:`nik.ik.collide.CollideCfg.converged_given`).
-Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one per target (same seed, same answer).
+Where no start is done, the answer is the start with the lowest sum. A start that ends free but held off the goal by
+the margin rows goes on at once with the rows at margin 0. ``patience > 0`` ends a target's uniform restarts after
+that many in a row that do not lower its best sum by 1 %.
+
+The finishing step (``finish > 0`` iterations; classic goals only): a start within the pose tolerances whose
+spheres overlap by at most what a pose within them can move a sphere of the last frame is first run with the dead
+zone of the tolerant goal (the box inscribed in the tolerances, rotation rows weighted ``tol_pos / tol_rot``) and
+collision rows reaching ``FINISH_MARGIN * tol_pos``; it is done by the success judge itself (position, angle, free).
+
+A descent ends when done, after ``stall_iters`` iterations in a row that do not lower its sum by ``stall_rel``, at
+its iteration limit, or at a kept step that lowers the sum by less than ``converged`` of it (``converged_given``
+for the given starts after the first). A candidate whose pose rows alone are no better than the current sum is
+rejected without computing its collision rows. Random numbers: the splitmix64 stream of :mod:`nik.kernels.lm`, one
+per target (same seed, same answer). The settings and what they trade: :class:`nik.ik.collide.CollideCfg`.
 """
 
 from __future__ import annotations
