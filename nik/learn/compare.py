@@ -59,6 +59,7 @@ __all__ = [
     "run_one",
     "table",
     "verdict",
+    "MIN_SEEDS",
     "plot",
     "compare",
     "build_parser",
@@ -328,10 +329,25 @@ def _groups(results: list[dict]):
                 yield net_name, method, rs
 
 
+def _num(v: float) -> str:
+    """A figure for the verdict: 3 significant digits, no exponent (1234 -> 1234, 12.34 -> 12.3, 0.01234 -> 0.0123)."""
+    v = float(v)
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
+    digits = max(0, 2 - int(math.floor(math.log10(abs(v)))))
+    return f"{v:.{digits}f}"
+
+
+#: Seeds a ranking needs before it can count as established.
+MIN_SEEDS = 3
+
+
 def verdict(results: list[dict]) -> list[str]:
     """One line per network and metric of :data:`METRICS`: the best method by its mean over the seeds, the
-    runner-up, the margin and the standard deviations; established only when every seed of the winner beats
-    every seed of the runner-up (never with one seed)."""
+    runner-up, the margin and the standard deviations over the seeds. The ranking counts as established only
+    with at least :data:`MIN_SEEDS` seeds each and every seed of the winner better than every seed of the
+    runner-up (with 3 seeds each, a chance of 1 in 10 when the two methods are alike); with one seed there is no
+    spread and it is never established."""
     lines = []
     for net_name in NETS:
         groups = {m: rs for n, m, rs in _groups(results) if n == net_name}
@@ -346,16 +362,21 @@ def verdict(results: list[dict]) -> list[str]:
             order = sorted(vals, key=lambda m: statistics.mean(vals[m]))
             w, r = order[0], order[1]
             mw, mr = statistics.mean(vals[w]), statistics.mean(vals[r])
-            head = f"- {net_name} net, {label}: best {w} {mw:.3g} {unit}, then {r} {mr:.3g} (margin {mr - mw:.2g} {unit}"
+            text = f"- {net_name} net, {label}: best {w} {_num(mw)} {unit}, then {r} {_num(mr)} {unit}"
+            text += f", margin {_num(mr - mw)}"
             if n_seeds < 2:
-                text = f"{head}); one seed: the ranking is not established (no spread over seeds)"
+                text += "; one seed: the ranking is not established (no spread over seeds)"
             else:
                 sw, sr = statistics.stdev(vals[w]), statistics.stdev(vals[r])
-                clear = max(vals[w]) < min(vals[r])
-                text = (
-                    f"{head}, sd over {n_seeds} seeds {sw:.2g} and {sr:.2g}): "
-                    + (f"established (every seed of {w} beats every seed of {r})" if clear else "not established (the seeds overlap)")
-                )
+                text += f" against sd {_num(sw)} and {_num(sr)} over {n_seeds} seeds: "
+                if max(vals[w]) >= min(vals[r]):
+                    text += "not established (the seeds overlap)"
+                elif n_seeds < MIN_SEEDS:
+                    text += (
+                        f"not established (every seed of {w} beats every seed of {r}, but {n_seeds} seeds are too few)"
+                    )
+                else:
+                    text += f"established (every seed of {w} beats every seed of {r})"
             if not all(x["all_phases"] in (True, "True") for x in groups[w]):
                 text += f"; {w} did not run all its phases"
             lines.append(text + ".")
@@ -394,8 +415,8 @@ def table(results: list[dict], cfg: RunCfg) -> str:
     best = max(float(r["within_0.003deg_frac"]) for r in results)
     lines += [
         "",
-        "Verdict (lower is better; a ranking is established when every seed of the best method beats every "
-        "seed of the runner-up):",
+        f"Verdict (lower is better; a ranking is established when at least {MIN_SEEDS} seeds ran and every seed "
+        "of the best method beats every seed of the runner-up):",
         "",
         *verdict(results),
         "",
