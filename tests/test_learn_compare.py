@@ -52,9 +52,9 @@ def test_verdict_names_the_winner_per_metric_with_its_margin_against_the_spread_
     clear += [_result("lbfgs", s, v) for s, v in enumerate((30.0, 31.0, 32.0))]
     lines = verdict(clear)
     assert len(lines) == len(METRICS)
-    for line, (_, label, _) in zip(lines, METRICS, strict=True):
-        assert f"paper net, {label}: best adam 10.5" in line and "then bp 21.0" in line
-        assert "margin 10.5 against sd 0.500 and 1.00 over 3 seeds: established" in line
+    for line, (_, label, unit) in zip(lines, METRICS, strict=True):
+        assert f"paper net, {label}: best adam 10.5 {unit}, then bp 21.0 {unit}" in line
+        assert f"margin 10.5 {unit} against sd 0.500 and 1.00 over 3 seeds: established" in line
 
     overlap = [_result("adam", s, v) for s, v in enumerate((10.0, 12.0, 14.0))]
     overlap += [_result("bp", s, v) for s, v in enumerate((13.0, 13.5, 14.5))]

@@ -363,7 +363,7 @@ def verdict(results: list[dict]) -> list[str]:
             w, r = order[0], order[1]
             mw, mr = statistics.mean(vals[w]), statistics.mean(vals[r])
             text = f"- {net_name} net, {label}: best {w} {_num(mw)} {unit}, then {r} {_num(mr)} {unit}"
-            text += f", margin {_num(mr - mw)}"
+            text += f", margin {_num(mr - mw)} {unit}"
             if n_seeds < 2:
                 text += "; one seed: the ranking is not established (no spread over seeds)"
             else:
