@@ -55,9 +55,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     ap.add_argument(
         "--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="SEED", help="seeds, one run each (default 0 1 2)"
     )
-    ap.add_argument(
-        "--methods", nargs="+", default=list(METHODS), choices=METHODS, help="methods (default all five)"
-    )
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS, help="methods (default all five)")
     ap.add_argument(
         "--nets",
         nargs="+",
