@@ -91,6 +91,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
         "--runs-dir",
         type=Path,
         default=None,
+        metavar="RUNS",
         help="folder of the runs' checkpoints, RUNS/NET/METHOD/seedSEED/ (default runs/compare/DATA)",
     )
     ap.add_argument(

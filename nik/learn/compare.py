@@ -193,7 +193,7 @@ def _method_args(cfg: RunCfg, net_name: str, method: str, seed: int) -> list[str
     return args
 
 
-def _phases(model, method: str, steps: int, n_train: int, batch: int) -> dict:
+def _phases(model, method: str, steps: int, batch: int) -> dict:
     """What ran: steps, DE generations and BP steps, the samples a step, whether every phase of the method ran."""
     if method not in ("de", "de_bp"):
         return {"de_generations": "", "bp_steps": "", "samples_a_step": batch, "all_phases": True}
@@ -240,7 +240,7 @@ def run_one(cfg: RunCfg, net_name: str, method: str, seed: int) -> tuple[dict, l
     steps = int(trainer.global_step)
     n_train = int(dm.train_data[0].shape[0])
     batch = min(dm.batch_size or n_train, n_train)
-    ran = _phases(model, method, steps, n_train, batch)
+    ran = _phases(model, method, steps, batch)
     if cfg.steps is not None and steps >= cfg.steps:
         stopped = "steps"
     elif method == "de" and ran["de_generations"] >= cfg.de_generations:
