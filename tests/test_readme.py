@@ -69,6 +69,7 @@ SHRINK = [
         "--budget 45 --seeds 0 1 2",
         "--budget 0.5 --seeds 0 --nets paper --methods adam --runs-dir runs/compare_readme",
     ),
+    ("--steps 100 --de-generations 60 --seeds 0 1 2", "--steps 2 --de-generations 1 --seeds 0"),
     ("paper_d.py --out runs/paper_d", "paper_d.py --runs 1 --out runs/paper_d"),
     (
         "nik train stanford --minutes 20 ",

@@ -71,10 +71,13 @@ def register(sub) -> None:
 
     p = sub.add_parser(
         "compare",
-        help="compare the training methods (bp, adam, lbfgs, de, de_bp) on one dataset and time budget",
-        description="Train every method on the same dataset and split with the same wall-clock budget and "
-        "several seeds, for paper C's 6-8-6 net and the realistic default; write a Markdown table, CSVs "
-        "and a plot of validation loss against wall-clock time.",
+        help="compare the training methods (bp, adam, lbfgs, de, de_bp) on one dataset and budget; names a winner",
+        description="Train every method on the same dataset and split under the same budget (--steps: "
+        "reproducible; --budget: wall-clock seconds, kept inside the steps) with several seeds, for paper C's "
+        "6-8-6 net and the realistic default, and evaluate each on the test split. Writes a Markdown table "
+        "(what each run ran, what stopped it, DE's subset size) with a verdict per metric (the best method, "
+        "its margin against the spread over the seeds, whether the ranking is established), CSVs and a plot of "
+        "validation loss against wall-clock time (docs/training.md).",
     )
     build_parser(p)
     p.set_defaults(func=_cmd_compare)

@@ -26,15 +26,74 @@ _SPECIAL_CKPT = ("last", "best", "hpc", "registry")
 
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
-    """The arguments of ``nik compare`` (:func:`nik.learn.compare.compare`); here, so that parsing imports no torch."""
+    """The arguments of ``nik compare`` (:func:`nik.learn.compare.compare`); here, so that parsing imports no torch.
+
+    Every option's help states its default. The values are checked by :func:`nik.learn.compare.check_args`
+    before any work (``nik compare`` refuses a bad value in one line, exit status 2)."""
     ap = ap or argparse.ArgumentParser(description="Compare bp, adam, lbfgs, de, de_bp on one dataset and budget")
-    ap.add_argument("--data", type=Path, default=Path("data/kuka_kr_100k"))
-    ap.add_argument("--budget", type=float, default=60.0, help="wall-clock seconds per run")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--methods", nargs="+", default=METHODS, choices=METHODS)
-    ap.add_argument("--nets", nargs="+", default=list(NET_NAMES), choices=list(NET_NAMES))
-    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/learners_kuka_kr"))
-    ap.add_argument("--runs-dir", type=Path, default=Path("runs/compare"))
+    ap.add_argument(
+        "--data", type=Path, default=Path("data/kuka_kr_100k"), help="dataset folder (default data/kuka_kr_100k)"
+    )
+    ap.add_argument(
+        "--budget",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="wall-clock seconds of training per run, kept inside the steps (a DE generation or an L-BFGS step is "
+        "abandoned when the time is up); default 60 when --steps is not given, else none. Timed runs differ "
+        "from one repetition to the next",
+    )
+    ap.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="training steps per run (an optimiser step on a batch, an L-BFGS step of up to 20 iterations, a DE "
+        "generation, a BP step of de_bp): the reproducible budget, the same seed gives the same table; "
+        "default none. With --budget too, whichever ends first",
+    )
+    ap.add_argument(
+        "--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="SEED", help="seeds, one run each (default 0 1 2)"
+    )
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS, help="methods (default all five)")
+    ap.add_argument(
+        "--nets",
+        nargs="+",
+        default=list(NET_NAMES),
+        choices=list(NET_NAMES),
+        help="paper: paper C's 6-8-6 tanh net; default: nik.nets.DEFAULT, 3 x 256 SiLU (default both)",
+    )
+    ap.add_argument(
+        "--de-samples",
+        type=int,
+        default=1000,
+        metavar="N",
+        help="de, de_bp: each DE generation scores every individual on the same random N-sample subset of the "
+        "training split (parents re-scored on it); 0: the whole split, as paper C (default 1000)",
+    )
+    ap.add_argument(
+        "--de-generations",
+        type=int,
+        default=500,
+        metavar="N",
+        help="de, de_bp: DE generations (de_bp then continues by BP; de stops) (default 500, paper C)",
+    )
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="PREFIX",
+        help="writes PREFIX.md (table and verdict), PREFIX.csv (one row per run), PREFIX_history.csv and "
+        "PREFIX.png (validation loss against time) (default runs/compare/DATA/compare, DATA the dataset "
+        "folder's name)",
+    )
+    ap.add_argument(
+        "--runs-dir",
+        type=Path,
+        default=None,
+        metavar="RUNS",
+        help="folder of the runs' checkpoints, RUNS/NET/METHOD/seedSEED/ (default runs/compare/DATA)",
+    )
     ap.add_argument(
         "--threads",
         type=int,

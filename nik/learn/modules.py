@@ -13,6 +13,14 @@ under DDP (each rank its share of the batches, gradients averaged); validation m
 across ranks (``sync_dist``), the counters are summed over ranks and ``wall_s`` is the slowest rank's.
 DE splits each generation's population across the ranks (see :class:`DEIK`).
 
+Keeping a wall-clock budget (``keep_budget = True``, set by ``nik compare``): Lightning's ``Timer`` stops a run
+only after the step that crosses ``trainer.max_time``, which on a large network is seconds (a full-batch L-BFGS
+step, a DE generation). With ``keep_budget`` the module also checks the clock inside its steps: a step is not
+started when the time left is shorter than the last one took; a DE generation is abandoned between its sample
+chunks (the population stays as it was after the last whole generation); an L-BFGS step is abandoned between
+loss evaluations and the weights go back to the best point it evaluated. One process only (under several
+processes the ranks would have to agree on the clock: Lightning's ``Timer`` alone then).
+
 Checkpoints carry ``checkpoint["nik"]`` (robot definition, hash, architecture; plain data) so that
 :func:`nik.nets.load_checkpoint` reads them with ``torch.load(weights_only=True)``.
 """
@@ -30,7 +38,11 @@ from nik.learn.losses import LOSSES, evaluate, joint_mse, pose_loss
 from nik.learn.population import flat_params, init_population, population_fitness, sample_chunk, set_flat_params
 from nik.nets import IKNet, checkpoint_extra
 
-__all__ = ["IKModule", "GradientIK", "DEIK"]
+__all__ = ["IKModule", "GradientIK", "DEIK", "OutOfTime"]
+
+
+class OutOfTime(Exception):
+    """Raised inside a step when the wall-clock budget ends before the step can finish (``keep_budget``)."""
 
 
 def _all_gather(t: torch.Tensor) -> torch.Tensor:
@@ -79,6 +91,14 @@ class IKModule(L.LightningModule):
         #: the command line of this run (set by train.py's CLI and ``nik train``), recorded in checkpoints
         self.run_command: str | None = None
         self._earlier_commands: list[str] = []  # of the runs this one resumed
+        #: check the clock inside steps so that a ``trainer.max_time`` budget is kept (see the module's docstring)
+        self.keep_budget = False
+        #: set when the module stopped the run for the clock (``keep_budget``); ``train_s``: seconds from the start
+        #: of training to its end, as Lightning's Timer counts ``max_time`` (set when training ends)
+        self.stopped_for_time = False
+        self.train_s: float | None = None
+        self._step_s = 0.0  # duration of the last training step (seconds)
+        self._step_t0: float | None = None
 
     # -- network ---------------------------------------------------------------
     def net_config(self) -> dict:
@@ -128,6 +148,41 @@ class IKModule(L.LightningModule):
     # -- timing and metrics ------------------------------------------------------------
     def on_fit_start(self) -> None:
         self._t0 = time.perf_counter()
+
+    def time_left(self) -> float | None:
+        """Seconds left of the trainer's wall-clock budget (its ``Timer``, from ``trainer.max_time``), None
+        without one, or when ``keep_budget`` is off or several processes train."""
+        if not self.keep_budget or self._trainer is None or self.trainer.world_size > 1:
+            return None
+        timer = next((cb for cb in self.trainer.callbacks if type(cb).__name__ == "Timer"), None)
+        if timer is None or getattr(timer, "_duration", None) is None:
+            return None
+        return timer.time_remaining("train")
+
+    def step_cost_s(self) -> float:
+        """Seconds the next step is expected to need before it can be abandoned: the last step's duration
+        (subclasses that can abandon a step part-way return less)."""
+        return self._step_s
+
+    def on_train_batch_start(self, batch, batch_idx):
+        left = self.time_left()
+        if left is not None and left <= self.step_cost_s():
+            self.stopped_for_time = True
+            self.trainer.should_stop = True
+            return -1  # Lightning: skip the rest of the epoch; should_stop ends the fit
+        self._step_t0 = time.perf_counter()
+        return None
+
+    def on_train_batch_end(self, outputs, batch, batch_idx) -> None:
+        if self._step_t0 is not None:
+            self._step_s = time.perf_counter() - self._step_t0
+
+    def on_train_start(self) -> None:
+        self._train_t0 = time.perf_counter()
+
+    def on_train_end(self) -> None:
+        # from the start of training to its end, as Lightning's Timer counts a max_time budget
+        self.train_s = time.perf_counter() - getattr(self, "_train_t0", self._t0 or time.perf_counter())
 
     @property
     def wall_s(self) -> float:
@@ -241,6 +296,36 @@ class GradientIK(IKModule):
         loss = self.batch_loss(batch)
         self.log("train_loss", loss, on_step=False, on_epoch=True, batch_size=batch[0].shape[0], sync_dist=True)
         return loss
+
+    def step_cost_s(self) -> float:
+        # an L-BFGS step can be abandoned between its loss evaluations: one evaluation is the unit
+        if self.hparams.optimizer == "lbfgs":
+            return getattr(self, "_eval_s", 0.0)
+        return self._step_s
+
+    def optimizer_step(self, epoch, batch_idx, optimizer, optimizer_closure=None):
+        if self.hparams.optimizer != "lbfgs" or self.time_left() is None:
+            return super().optimizer_step(epoch, batch_idx, optimizer, optimizer_closure)
+        best = {"loss": math.inf, "w": flat_params(self.net)}
+
+        def closure():
+            left = self.time_left()
+            if left is not None and left <= getattr(self, "_eval_s", 0.0):
+                raise OutOfTime
+            t0 = time.perf_counter()
+            loss = optimizer_closure()
+            self._eval_s = time.perf_counter() - t0
+            value = float(loss)
+            if value < best["loss"]:  # the weights at which the loss was evaluated
+                best["loss"], best["w"] = value, flat_params(self.net)
+            return loss
+
+        try:
+            optimizer.step(closure=closure)
+        except OutOfTime:
+            set_flat_params(self.net, best["w"])  # a line search may have left the weights at a trial point
+            self.stopped_for_time = True
+            self.trainer.should_stop = True
 
     def _progress(self) -> float:
         """Fraction of the run done, in [0, 1]: the larger of the step and the time fractions."""
@@ -370,9 +455,7 @@ class DEIK(IKModule):
         rank = self.trainer.global_rank if world > 1 else 0
 
         def local(W: torch.Tensor, chunk: int) -> torch.Tensor:
-            self.loss_evals += W.shape[0]
-            self.sample_evals += W.shape[0] * T.shape[0]
-            return population_fitness(
+            value = population_fitness(
                 net,
                 W,
                 x,
@@ -382,7 +465,11 @@ class DEIK(IKModule):
                 rot_weight=h.rot_weight,
                 pose_weight=h.pose_weight,
                 chunk=chunk,
+                between_chunks=self._chunk_clock() if self.time_left() is not None else None,
             )
+            self.loss_evals += W.shape[0]  # counted when the evaluation completed
+            self.sample_evals += W.shape[0] * T.shape[0]
+            return value
 
         def fitness(W: torch.Tensor) -> torch.Tensor:
             m = W.shape[0]
@@ -398,6 +485,26 @@ class DEIK(IKModule):
             return _all_gather(part).reshape(-1)[:m]
 
         return fitness
+
+    def step_cost_s(self) -> float:
+        # a DE generation can be abandoned between sample chunks; a BP step cannot
+        return self._step_s if not self.in_de_phase else 0.0
+
+    def _chunk_clock(self):
+        """A check run before each sample chunk of a fitness evaluation: raises :class:`OutOfTime` when the time
+        left is shorter than the last chunk took."""
+        last = {"t": None}
+
+        def check() -> None:
+            now = time.perf_counter()
+            if last["t"] is not None:
+                self._chunk_s = now - last["t"]
+            left = self.time_left()
+            if left is not None and left <= getattr(self, "_chunk_s", 0.0):
+                raise OutOfTime
+            last["t"] = now
+
+        return check
 
     def _check_same_batch(self, T: torch.Tensor, q: torch.Tensor) -> None:
         """Under several processes: every rank must see the same batch (DE's fitness is one function)."""
@@ -440,15 +547,23 @@ class DEIK(IKModule):
         fitness = self._fitness_fn(T, q)
         if self.de_state is not None and self.de_state.x.device != T.device:  # resumed from a checkpoint
             self.de_state = DEState(*(v.to(T.device) if isinstance(v, torch.Tensor) else v for v in self.de_state))
-        if self.de_state is None:
-            x0 = init_population(self.net, self.cfg.pop_size, generator=self.generator)
-            x0[0] = flat_params(self.net)  # the net's own initial weights are one of the individuals
-            lo, hi = self._bounds(x0)
-            if lo is not None:
-                x0 = x0.clamp(float(lo), float(hi))
-            self.de_state = de_init(x0, fitness(x0), self.cfg, lower=lo, upper=hi)
-        else:
-            self.de_state = de_step(self.de_state, fitness, self.cfg, generator=self.generator, reevaluate=subsample)
+        try:
+            if self.de_state is None:
+                clock = self._chunk_clock() if self.time_left() is not None else None
+                x0 = init_population(self.net, self.cfg.pop_size, generator=self.generator, between_chunks=clock)
+                x0[0] = flat_params(self.net)  # the net's own initial weights are one of the individuals
+                lo, hi = self._bounds(x0)
+                if lo is not None:
+                    x0 = x0.clamp(float(lo), float(hi))
+                self.de_state = de_init(x0, fitness(x0), self.cfg, lower=lo, upper=hi)
+            else:
+                self.de_state = de_step(
+                    self.de_state, fitness, self.cfg, generator=self.generator, reevaluate=subsample
+                )
+        except OutOfTime:  # keep_budget: the generation is abandoned, the population is the last whole one
+            self.stopped_for_time = True
+            self.trainer.should_stop = True
+            return None
         set_flat_params(self.net, self.de_state.best_x)
         best = self.de_state.best_fitness
         self.history.append(best)

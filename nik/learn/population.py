@@ -11,6 +11,8 @@ batch ``NP x chunk`` (220 networks on 10,000 samples would be 2.2 million FK eva
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
@@ -92,6 +94,7 @@ def population_fitness(
     max_elements: int = 2**21,
     max_fk: int = 2**18,
     chunk: int | None = None,
+    between_chunks: Callable[[], None] | None = None,
 ) -> torch.Tensor:
     """Loss of every network of the population on the same samples.
 
@@ -108,6 +111,7 @@ def population_fitness(
             order of the sums over samples; each network's fitness is otherwise computed on its own,
             so a slice of the population evaluated with the whole population's chunk gives the same
             bits as the whole (how DE splits a population across processes).
+        between_chunks: called before each chunk (a clock check that may raise to abandon the evaluation).
 
     Returns:
         (NP,) fitness, the mean over the N samples exactly as the single-network loss computes it.
@@ -119,6 +123,8 @@ def population_fitness(
         chunk = sample_chunk(net, n_pop, x.shape[1], loss=loss, max_elements=max_elements, max_fk=max_fk)
     total = torch.zeros(n_pop, dtype=W.dtype, device=W.device)
     for i in range(0, n, chunk):
+        if between_chunks is not None:
+            between_chunks()
         xs = x[i : i + chunk]
         y = population_raw(net, W, xs)
         part = torch.zeros_like(total)
@@ -134,14 +140,31 @@ def population_fitness(
 
 
 @torch.no_grad()
-def init_population(net, n: int, *, generator: torch.Generator | None = None) -> torch.Tensor:
+def init_population(
+    net,
+    n: int,
+    *,
+    generator: torch.Generator | None = None,
+    between_chunks: Callable[[], None] | None = None,
+) -> torch.Tensor:
     """``(n, P)`` initial weights, each individual drawn like PyTorch's default ``nn.Linear`` init:
-    ``U(-1/sqrt(fan_in), 1/sqrt(fan_in))`` for weights and biases of each layer."""
+    ``U(-1/sqrt(fan_in), 1/sqrt(fan_in))`` for weights and biases of each layer.
+
+    ``between_chunks``: called before each block of about a million draws (a clock check that may raise to
+    abandon the draw); the blocks consume the generator in the same order, so the values do not depend on it."""
     p = next(net.parameters())
-    cols = []
+    device = generator.device if generator is not None else torch.device("cpu")
+    width = sum(out * inp + out for out, inp in net.layer_shapes())
+    pop = torch.empty(n, width, dtype=p.dtype, device=p.device)
+    k = 0
     for out, inp in net.layer_shapes():
-        bound = 1.0 / inp**0.5
-        device = generator.device if generator is not None else torch.device("cpu")
-        u = torch.rand(n, out * inp + out, generator=generator, device=device, dtype=torch.float64)
-        cols.append((2 * u - 1) * bound)
-    return torch.cat(cols, dim=1).to(p.device, p.dtype)
+        bound, cols = 1.0 / inp**0.5, out * inp + out
+        rows = n if between_chunks is None else max(1, 2**20 // cols)
+        for i in range(0, n, rows):
+            if between_chunks is not None:
+                between_chunks()
+            m = min(rows, n - i)
+            u = torch.rand(m, cols, generator=generator, device=device, dtype=torch.float64)
+            pop[i : i + m, k : k + cols] = u.mul_(2).sub_(1).mul_(bound)  # (2u - 1) bound, in place: same values
+        k += cols
+    return pop
