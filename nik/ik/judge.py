@@ -44,8 +44,9 @@ of that per pose. So whether it serves is decided for each call type on its own,
   starts, the solver's guess without a network where there is no closed form; on an arm with a closed form a
   network is there because it was asked for in place of the closed form, which stays its fallback, so it is judged
   against uniform starts too), :data:`TIME_ROUNDS` (3) rounds interleaved, the least CPU time of each kept (the
-  process's CPU time, :func:`time.process_time`: what the calls cost, whatever else the machine runs; a network's
-  batch forward pass spread over several torch threads counts the CPU of all of them);
+  calling thread's, :func:`time.thread_time`: on a busy machine wall time counts whatever else ran meanwhile; the
+  calling thread's time is the call's wall time on an idle one, a batch forward pass spread over several torch
+  threads included, and it counts the wait for torch's other threads where they are held up);
 - ``batch``: a call of more poses: one batch of :data:`BATCH_PROBES` (512) poses likewise (above
   :data:`nik.ik.backends.compiled.PACKED_MAX_BATCH`, so the forward pass runs as a large batch's does).
 
@@ -188,8 +189,14 @@ def verdict(net, robot) -> Verdict:
 
 def earns(net, robot, arm_frame: bool = False) -> bool:
     """Whether ``net`` earns its place as ``robot``'s guess (:func:`verdict`; ``arm_frame``: it was made for the bare
-    arm, :func:`nik.ik.plan.in_arm_frame`). Warns once per network where it does not."""
-    v = verdict(net, robot.arm if arm_frame else robot)
+    arm, :func:`nik.ik.plan.in_arm_frame`). Warns once per network where it does not. A network whose file records
+    the verdict (:func:`record`) is not judged again: the record's share of wins decides."""
+    judged = robot.arm if arm_frame else robot
+    rec = _recorded(net, judged, _weights_version(net), "multistart")
+    if rec is not None:
+        v = Verdict(rec.wins >= MIN_WINS, rec.wins, math.nan, math.nan, PROBES)
+    else:
+        v = verdict(net, judged)
     if not v.earns:
         _COUNTS["dropped"] += 1
         try:
@@ -198,10 +205,13 @@ def earns(net, robot, arm_frame: bool = False) -> bool:
         except TypeError:
             seen = False
         if not seen:
+            median = "" if math.isnan(v.net_median) else (
+                f"; median error {v.net_median:.3f} against {v.uniform_median:.3f}, m + 0.1 rad"
+            )  # fmt: skip
             warnings.warn(
                 f"the network given for {robot.name} guesses no better than uniform starts (its best hypothesis is "
-                f"the better start on {v.wins:.0%} of {v.probes} probe poses; median error {v.net_median:.3f} "
-                f"against {v.uniform_median:.3f}, m + 0.1 rad): solving without it (nik.ik.judge)",
+                f"the better start on {v.wins:.0%} of {v.probes} probe poses{median}): solving without it "
+                "(nik.ik.judge)",
                 UserWarning,
                 stacklevel=5,  # the caller of IKSolver.solve (or .initial_source)
             )
@@ -271,26 +281,29 @@ def _deferring() -> bool:
 
 
 def _fastest(solvers, call, rounds: int) -> list[float]:
-    """The least CPU time (seconds, the process's: :func:`time.process_time`) of ``rounds`` runs of
-    ``call(solver)`` per solver, interleaved (A B, B A, ...)."""
+    """The least CPU time (seconds, of this thread: :func:`time.thread_time`) of ``rounds`` runs of ``call(solver)``
+    per solver, interleaved (A B, B A, ...)."""
     best = [math.inf] * len(solvers)
     for r in range(rounds):
         order = range(len(solvers)) if r % 2 == 0 else reversed(range(len(solvers)))
         for i in order:
-            t0 = time.process_time()
+            t0 = time.thread_time()
             call(solvers[i])
-            best[i] = min(best[i], time.process_time() - t0)
+            best[i] = min(best[i], time.thread_time() - t0)
     return best
 
 
-def measure(net, robot, solver_type, arm_frame: bool = False, baseline: str = "multistart") -> Use:
+def measure(
+    net, robot, solver_type, arm_frame: bool = False, baseline: str = "multistart", *, always: bool = False
+) -> Use:
     """Time ``net`` on ``robot``'s probes (module docstring, "Per call type") with solvers of ``solver_type``
     (:class:`nik.IKSolver`, given by the caller: this room lies below it); ``baseline`` is the guess without it
-    (``multistart`` or ``analytic``: the closed form). Not kept (:func:`use` keeps it); about 0.1-0.3 s."""
+    (``multistart`` or ``analytic``: the closed form). A network that loses on wins serves no call type and is not
+    timed unless ``always`` (the figures of a report). Not kept (:func:`use` keeps it); about 0.1-0.3 s."""
     import numpy as np
 
     v = verdict(net, robot.arm if arm_frame else robot)
-    if not v.earns:
+    if not v.earns and not always:
         return Use(False, False, v.wins, baseline=baseline, how="wins")
     if _deferring():
         return Use(True, True, v.wins, baseline=baseline, how="provisional")
@@ -317,17 +330,19 @@ def measure(net, robot, solver_type, arm_frame: bool = False, baseline: str = "m
     _COUNTS["timed"] += 1
     pose_us = tuple(1e6 * t / POSE_PROBES for t in one)
     batch_us = tuple(1e6 * t / BATCH_PROBES for t in many)
-    return Use(pose_us[0] <= pose_us[1], batch_us[0] <= batch_us[1], v.wins, pose_us, batch_us, baseline)
+    pays = (v.earns and pose_us[0] <= pose_us[1], v.earns and batch_us[0] <= batch_us[1])
+    return Use(*pays, v.wins, pose_us, batch_us, baseline, "measured" if v.earns else "wins")
 
 
 def record(net, robot, solver_type, baselines=("multistart",)) -> dict:
     """What a network's file records of :func:`measure` (``network_use`` in the pair's JSON): for ``robot`` (the
-    arm it was made for) and each of ``baselines``, the decision and the figures, with the probes' sizes (timed with
-    solvers of ``solver_type``: :func:`measure`)."""
+    arm it was made for) and each of ``baselines``, the decision and the figures (timed even where it loses on wins),
+    with the probes' sizes (timed with solvers of ``solver_type``: :func:`measure`)."""
     against = {}
     for b in baselines:
-        u = measure(net, robot, solver_type, baseline=b)
-        against[b] = {"pose": u.pose, "batch": u.batch, "pose_us": list(u.pose_us), "batch_us": list(u.batch_us)}
+        u = measure(net, robot, solver_type, baseline=b, always=True)
+        figures = {k: [None if math.isnan(x) else x for x in getattr(u, k)] for k in ("pose_us", "batch_us")}
+        against[b] = {"pose": u.pose, "batch": u.batch, **figures}  # figures null: not timed (lost on wins)
         wins = u.wins
     return {
         "robot_hash": robot.definition_hash,
@@ -349,10 +364,12 @@ def _recorded(net, robot, version: tuple, baseline: str) -> Use | None:
         if rec["robot_hash"] != robot.definition_hash:
             return None
         r = rec["against"][baseline]
-        return Use(
-            bool(r["pose"]), bool(r["batch"]), float(rec["wins"]), tuple(map(float, r["pose_us"])),
-            tuple(map(float, r["batch_us"])), baseline, "record",
-        )  # fmt: skip
+
+        def us(k) -> tuple:
+            return tuple(math.nan if x is None else float(x) for x in r[k])
+
+        return Use(bool(r["pose"]), bool(r["batch"]), float(rec["wins"]), us("pose_us"), us("batch_us"), baseline,
+                   "record")  # fmt: skip
     except (KeyError, TypeError, ValueError):  # another record's shape: measured instead
         return None
 

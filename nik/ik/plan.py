@@ -148,7 +148,7 @@ def _choose(main, single_pose, given, backend, robot, settings, call, asked, sol
 def network_use(solver) -> dict:
     """:attr:`nik.IKSolver.network_use`: the :class:`nik.ik.judge.Use` of the network that serves ``solver``'s calls
     on the CPU, as a dict; ``how`` says where the decision comes from."""
-    from nik.ik.judge import Use, earns, use, verdict
+    from nik.ik.judge import Use, use
 
     s = solver
     net = s._net
@@ -160,12 +160,7 @@ def network_use(solver) -> dict:
         return Use(bool(s._use_asked["pose"]), bool(s._use_asked["batch"]), how="asked").as_dict()
     if "none" in (s.refine, s.fallback):
         return Use(True, True, how=f"asked (refine={s.refine!r}, fallback={s.fallback!r})").as_dict()
-    robot = s.robot
-    arm_frame = in_arm_frame(robot, net)
-    if s._given and not earns(net, robot, arm_frame):
-        v = verdict(net, robot.arm if arm_frame else robot)
-        return Use(False, False, v.wins, how="wins").as_dict()
-    return use(net, robot, type(s), arm_frame).as_dict()
+    return use(net, s.robot, type(s), in_arm_frame(s.robot, net)).as_dict()  # a loser on wins: how == "wins"
 
 
 def check_use(value) -> dict | None:
