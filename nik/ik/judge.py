@@ -269,15 +269,11 @@ def call_type(n_poses: int | None) -> str:
 
 def _deferring() -> bool:
     """True while the compiled solve cannot be timed without waiting for its first compile (module docstring)."""
-    from nik.kernels import background
+    from nik.kernels import background, driver
 
-    if background.BUSY:
-        return True
     if not background.defer_allowed():  # NIK_COMPILE=wait: compiled on the caller's thread, as every call does
         return False
-    from nik.kernels import driver
-
-    return not driver.solve.signatures and background.cold(driver.solve)
+    return not driver.solve.signatures and background.cold(driver.solve)  # as the one-pose path asks
 
 
 def _fastest(solvers, call, rounds: int) -> list[float]:
