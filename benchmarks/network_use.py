@@ -17,7 +17,7 @@ One torch thread, one process, CPU. For the pair given (e.g. from ``nik train AR
   target; the ratio (no network / with) is the speed-up.
 
 Goals (issue 48): one pose <= 1.0x no network; batch >= 1.5x faster. ``--record-shipped`` measures the shipped
-networks' records (:func:`nik.ik.networks.record_use`, ``--rounds`` rounds of the probes, one thread) and writes
+networks' records (:func:`nik.learn.report.record_use`, ``--rounds`` rounds of the probes, one thread) and writes
 them into their JSON files.
 """
 
@@ -47,7 +47,7 @@ def _q(values, p: float) -> float:
 def record_shipped(rounds: int) -> list[str]:
     """Write the record of every shipped pair (module docstring); the lines printed."""
     from nik.ik import judge
-    from nik.ik.networks import record_use
+    from nik.learn.report import record_use
     from nik.nets.pretrained import PRETRAINED_DIR
 
     judge.TIME_ROUNDS = rounds

@@ -184,7 +184,8 @@ class IKSolver:
         without), "batch_us": (with, without), "wins": share, "baseline": "multistart", "how": ...}``. ``pose``:
         calls of one pose; ``batch``: calls of more. A network serves a call type where it earns its place (``wins``:
         its best hypothesis a better start than uniform ones) and is no slower there than the solver without it
-        (``*_us``: microseconds of CPU per pose on seeded probes, with and without it: LM from uniform starts).
+        (``*_us``: microseconds of CPU per pose on seeded probes, with and without it: LM from uniform starts; for
+        one pose per call the median call).
         ``how``: ``record`` (read from the network's file: ``nik train`` writes it), ``measured`` (timed in this
         process on first use, about 0.1-0.3 s, kept per network), ``wins`` (set aside on wins, not timed),
         ``asked`` (set here), ``no network`` (:mod:`nik.ik.judge`). The torch backend (GPU targets, swarms)

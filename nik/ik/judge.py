@@ -40,7 +40,9 @@ can exceed the LM iterations it saves there, while a batch's forward pass (torch
 of that per pose. So whether it serves is decided for each call type on its own, by time on seeded probes:
 
 - ``pose``: a call of one pose (the one-pose path, :mod:`nik.ik.backends.one_pose`, or the general path with one
-  target): :data:`POSE_PROBES` (32) poses solved one call each, with the network and without it (LM from uniform
+  target): :data:`POSE_PROBES` (32) poses solved one call each, interleaved call by call, compared by the median
+  over the poses of each pose's time (the typical call; the tail a network shortens does not buy a slower median),
+  with the network and without it (LM from uniform
   starts, the solver's guess without a network where there is no closed form; on an arm with a closed form a
   network is there because it was asked for in place of the closed form, which stays its fallback, so it is judged
   against uniform starts too), :data:`TIME_ROUNDS` (3) rounds interleaved, the least CPU time of each kept (the
@@ -228,8 +230,8 @@ class Use:
     Attributes:
         pose, batch: it serves calls of one pose / of more poses.
         wins: the share of the wins probes where its best hypothesis is the better start (:class:`Verdict`).
-        pose_us: ``(with, without)`` microseconds per pose, one pose per call, on :data:`POSE_PROBES` poses (NaN:
-            not timed, e.g. it lost on wins).
+        pose_us: ``(with, without)`` microseconds of one call of one pose, the median over :data:`POSE_PROBES`
+            poses (NaN: not timed, e.g. it lost on wins).
         batch_us: ``(with, without)`` microseconds per pose in a batch of :data:`BATCH_PROBES`.
         baseline: what guesses without it: ``multistart`` (uniform starts) or ``analytic`` (the closed form).
         how: ``record`` (read from the network's file), ``measured`` (timed in this process), ``wins`` (lost on
@@ -313,18 +315,14 @@ def measure(
     poses, batch = [T[i] for i in range(POSE_PROBES)], T[POSE_PROBES:]
     solvers = (with_net, without)
 
-    def one_each(s) -> None:
-        for p in poses:
-            s.solve(p)
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for s in solvers:  # loads the kernels, packs the network: not timed
             s.solve(poses[0])
-        one = _fastest(solvers, one_each, TIME_ROUNDS)
+        one = np.array([_fastest(solvers, lambda s, p=p: s.solve(p), TIME_ROUNDS) for p in poses])  # (P, 2)
         many = _fastest(solvers, lambda s: s.solve(batch), TIME_ROUNDS)
     _COUNTS["timed"] += 1
-    pose_us = tuple(1e6 * t / POSE_PROBES for t in one)
+    pose_us = tuple(float(x) for x in 1e6 * np.median(one, axis=0))
     batch_us = tuple(1e6 * t / BATCH_PROBES for t in many)
     pays = (v.earns and pose_us[0] <= pose_us[1], v.earns and batch_us[0] <= batch_us[1])
     return Use(*pays, v.wins, pose_us, batch_us, baseline, "measured" if v.earns else "wins")

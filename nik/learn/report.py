@@ -70,7 +70,7 @@ def use_lines(use: dict) -> list[str]:
             f"  no network for single poses or batches: its best hypothesis is the better start on {use['wins']:.0%} "
             f"of the probe poses (it needs {MIN_WINS:.0%}); the times with it, for the record:"
         )
-    for call, key, probes in (("single poses", "pose", f"{POSE_PROBES} poses, one call each"),
+    for call, key, probes in (("single poses", "pose", f"{POSE_PROBES} poses, one call each, the median call"),
                               ("batches", "batch", f"one batch of {BATCH_PROBES}")):  # fmt: skip
         w, wo = use[f"{key}_us"]
         if math.isnan(w + wo):
