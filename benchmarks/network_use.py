@@ -11,10 +11,11 @@ One torch thread, one process, CPU. For the pair given (e.g. from ``nik train AR
 - **one pose per call**: ``IKSolver(robot, checkpoint=PAIR)`` (the solver's choice) against
   ``IKSolver(robot, checkpoint=None)``, ``--n-one`` (500) FK targets of uniform joints (seeded), the two solvers
   interleaved pose by pose (A B A B ...), numpy ``(4, 4)`` poses (the one-pose path); median and p99 of one call,
-  microseconds, the ratio of the medians; also the network forced (``network_use = {"pose": True, ...}``) to show
-  what it would cost;
+  microseconds of wall time, and the median CPU time of this thread (``time.thread_time``: on a shared machine, wall
+  time counts what else ran), the ratios of the medians; also the network forced
+  (``network_use = {"pose": True, ...}``) to show what it would cost;
 - **a batch** of ``--n-batch`` (2,000) targets: the same three, ``--reps`` (5) interleaved rounds, the median per
-  target; the ratio (no network / with) is the speed-up.
+  target (wall and CPU); the ratio (no network / with) is the speed-up.
 
 Goals (issue 48): one pose <= 1.0x no network; batch >= 1.5x faster. ``--record-shipped`` measures the shipped
 networks' records (:func:`nik.learn.report.record_use`, ``--rounds`` rounds of the probes, one thread) and writes
@@ -79,44 +80,51 @@ def measure(robot, pair: str, n_one: int, n_batch: int, reps: int, seed: int) ->
         f"{use['pose_us'][1]:.1f} us without; batch {use['batch_us'][0]:.1f} us with, {use['batch_us'][1]:.1f} us "
         f"without a pose (wins {use['wins']:.0%}, against {use['baseline']})",
         "",
-        "| case | solver | guess | success | median us | p99 us | vs no network |",
-        "|---|---|---|---|---|---|---|",
+        "| case | solver | guess | success | median us (wall) | p99 us (wall) | median us (CPU) | vs no network "
+        "(wall / CPU) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     To = _targets(robot, n_one, seed)
     for s in names.values():  # first calls (kernels, packing) not timed
         s.solve(To[0])
         s.solve(To[:300])
     one = {k: [] for k in names}
+    cpu = {k: [] for k in names}
     ok = {k: 0 for k in names}
     src = {}
     for i in range(n_one):
         for k, s in names.items():
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             res = s.solve(To[i])
             one[k].append(time.perf_counter() - t0)
+            cpu[k].append(time.thread_time() - c0)
             ok[k] += int(res.success[0])
             src[k] = res.source
-    base = statistics.median(one["no network"])
+    base, base_cpu = statistics.median(one["no network"]), statistics.median(cpu["no network"])
     for k in names:
-        med = statistics.median(one[k])
+        med, med_cpu = statistics.median(one[k]), statistics.median(cpu[k])
         lines.append(
             f"| one pose per call ({n_one}) | {k} | {src[k]} | {100 * ok[k] / n_one:.1f}% | {1e6 * med:.1f} | "
-            f"{1e6 * _q(one[k], 0.99):.1f} | {med / base:.2f}x the time |"
+            f"{1e6 * _q(one[k], 0.99):.1f} | {1e6 * med_cpu:.1f} | {med / base:.2f}x / {med_cpu / base_cpu:.2f}x "
+            "the time |"
         )
     Tb = _targets(robot, n_batch, seed + 1)
     many = {k: [] for k in names}
+    many_cpu = {k: [] for k in names}
     for _ in range(reps):
         for k, s in names.items():
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             res = s.solve(Tb)
             many[k].append(time.perf_counter() - t0)
+            many_cpu[k].append(time.thread_time() - c0)
             ok[k], src[k] = float(np.mean(res.success)), res.source
-    base = statistics.median(many["no network"])
+    base, base_cpu = statistics.median(many["no network"]), statistics.median(many_cpu["no network"])
     for k in names:
-        med = statistics.median(many[k])
+        med, med_cpu = statistics.median(many[k]), statistics.median(many_cpu[k])
         lines.append(
             f"| batch of {n_batch} ({reps} rounds) | {k} | {src[k]} | {100 * ok[k]:.1f}% | "
-            f"{1e6 * med / n_batch:.1f} / pose | {1e6 * max(many[k]) / n_batch:.1f} (max) | {base / med:.2f}x faster |"
+            f"{1e6 * med / n_batch:.1f} / pose | {1e6 * max(many[k]) / n_batch:.1f} (max) | "
+            f"{1e6 * med_cpu / n_batch:.1f} / pose | {base / med:.2f}x / {base_cpu / med_cpu:.2f}x faster |"
         )
     return lines
 
