@@ -248,3 +248,22 @@ def test_a_file_that_records_the_decision_is_used_without_a_probe_until_its_weig
         next(net.parameters()).mul_(1.0)
     with pytest.raises(AssertionError, match="a probe ran"):
         judge.use(net, robot, nik.IKSolver, arm_frame=True)
+
+
+def test_a_checkpoint_without_a_record_is_timed_once_on_first_use_and_kept_for_the_process(tmp_path, one_thread):
+    """Issue 50 item 11: a network of train.py's kind (a Lightning-format checkpoint: no JSON, no record) is timed
+    on its first call and serves each call type only where it paid, for every solver of the process."""
+    robot = nik.load_robot("ur5")
+    path = save_checkpoint(nik.models.load_pretrained(robot), tmp_path / "plain.ckpt")
+    timed = judge.counts()["timed"]
+    first = nik.IKSolver(robot, checkpoint=str(path), analytic=False)
+    use = first.network_use
+    assert use["how"] == "measured" and judge.counts()["timed"] == timed + 1
+    for key in ("pose", "batch"):
+        w, wo = use[f"{key}_us"]
+        assert use[key] == (w <= wo) and w > 0 and wo > 0
+    T = _targets(robot, 30, seed=6)
+    assert first.solve(T[0]).source == ("network" if use["pose"] else "multistart")
+    assert first.solve(T).source == ("network" if use["batch"] else "multistart")
+    again = nik.IKSolver(robot, checkpoint=str(path), analytic=False)
+    assert again.net is first.net and again.network_use == use and judge.counts()["timed"] == timed + 1
