@@ -187,7 +187,7 @@ class IKSolver:
         (``*_us``: microseconds of CPU per pose on seeded probes, with and without it: LM from uniform starts; for
         one pose per call the median call).
         ``how``: ``record`` (read from the network's file: ``nik train`` writes it), ``measured`` (timed in this
-        process on first use, about 0.1-0.3 s, kept per network), ``wins`` (set aside on wins, not timed),
+        process on first use, 0.12-0.18 s of CPU, kept per network), ``wins`` (set aside on wins, not timed),
         ``asked`` (set here), ``no network`` (:mod:`nik.ik.judge`). The torch backend (GPU targets, swarms)
         follows the wins verdict alone. Reading it measures where needed.
 

@@ -40,29 +40,32 @@ can exceed the LM iterations it saves there, while a batch's forward pass (torch
 of that per pose. So whether it serves is decided for each call type on its own, by time on seeded probes:
 
 - ``pose``: a call of one pose (the one-pose path, :mod:`nik.ik.backends.one_pose`, or the general path with one
-  target): :data:`POSE_PROBES` (32) poses solved one call each, interleaved call by call, compared by the median
-  over the poses of each pose's time (the typical call; the tail a network shortens does not buy a slower median),
-  with the network and without it (LM from uniform
-  starts, the solver's guess without a network where there is no closed form; on an arm with a closed form a
-  network is there because it was asked for in place of the closed form, which stays its fallback, so it is judged
-  against uniform starts too), :data:`TIME_ROUNDS` (3) rounds interleaved, the least CPU time of each kept (the
-  calling thread's, :func:`time.thread_time`: on a busy machine wall time counts whatever else ran meanwhile; the
-  calling thread's time is the call's wall time on an idle one, a batch forward pass spread over several torch
-  threads included, and it counts the wait for torch's other threads where they are held up);
-- ``batch``: a call of more poses: one batch of :data:`BATCH_PROBES` (512) poses likewise (above
-  :data:`nik.ik.backends.compiled.PACKED_MAX_BATCH`, so the forward pass runs as a large batch's does).
+  target): :data:`POSE_PROBES` (32) poses solved one call each, with the network and without it, interleaved call
+  by call, :data:`TIME_ROUNDS` (3) rounds; each pose's least time is kept and the two are compared by the median
+  over the poses (the typical call: a tail the network shortens does not buy a slower median call);
+- ``batch``: a call of more poses: one batch of :data:`BATCH_PROBES` (512) poses, with and without, 3 interleaved
+  rounds, the least time of each (above :data:`nik.ik.backends.compiled.PACKED_MAX_BATCH`, so the forward pass runs
+  as a large batch's does; a call of a few poses follows this decision too).
+
+Without the network means LM from uniform starts: the solver's guess without a network where the arm has no closed
+form; on an arm with a closed form a network is there because it was asked for in place of the closed form (which
+stays its fallback), so it is judged against uniform starts too. Times are the CPU time of the calling thread
+(:func:`time.thread_time`): on a busy machine wall time counts whatever else ran meanwhile; the calling thread's time
+is the call's wall time on an idle machine, a batch forward pass spread over several torch threads included, and it
+counts the wait for torch's other threads where they are held up.
 
 The network serves a call type where it earns its place (wins, above) and its time there is at most the time without
-it (``pose_us``, ``batch_us``: microseconds per pose, with and without). Cost of a measurement: about 0.1-0.3 s once
-per network, robot and weights in a process (the probes' solves, mostly without the network; more for a
-slow network), none where the network's file records the decision: ``nik train`` measures it once after training
-and writes it in the pair's JSON (``network_use``, :func:`record`; the shipped pairs carry one too), and a network
-loaded from such a file (:func:`nik.nets.pair.load_pair`) uses the record while its weights are unchanged. A
-network without a record (a Lightning checkpoint of ``train.py``, a network set by hand) is measured on the first
-call that needs it and the decision kept per network object (every solver of the process shares it). While the
-kernels are not compiled yet (their first compile runs in the background, :mod:`nik.kernels.background`) the
-decision is the wins verdict alone, not kept, and timed on a later call. The torch backend (GPU targets, swarms)
-keeps the wins verdict alone: the probes time the CPU's kernels.
+it (``pose_us``, ``batch_us``: microseconds per pose, with and without). Cost of a measurement: 0.12-0.18 s of CPU
+(panda's and ur5's shipped networks, a 2-minute ``nik train`` network of a 6-joint arm; the wall time on an idle
+machine, 1.2-1.4 s on this shared one under load 10), the wins verdict included, once per network, robot and
+weights in a process (more for a slow network); none where the network's file records the decision: ``nik train``
+measures it once after training and writes it in the pair's JSON (``network_use``, :func:`record`; the shipped pairs
+carry one too), and a network loaded from such a file (:func:`nik.nets.pair.load_pair`) uses the record, wins
+included, while its weights are unchanged. A network without a record (a Lightning checkpoint of ``train.py``, a
+network set by hand) is measured on the first call that needs it and the decision kept per network object (every
+solver of the process shares it). While the kernels are not compiled yet (their first compile runs in the
+background, :mod:`nik.kernels.background`) the decision is the wins verdict alone, not kept, and timed on a later
+call. The torch backend (GPU targets, swarms) keeps the wins verdict alone: the probes time the CPU's kernels.
 """
 
 from __future__ import annotations
@@ -297,7 +300,7 @@ def measure(
     """Time ``net`` on ``robot``'s probes (module docstring, "Per call type") with solvers of ``solver_type``
     (:class:`nik.IKSolver`, given by the caller: this room lies below it); ``baseline`` is the guess without it
     (``multistart`` or ``analytic``: the closed form). A network that loses on wins serves no call type and is not
-    timed unless ``always`` (the figures of a report). Not kept (:func:`use` keeps it); about 0.1-0.3 s."""
+    timed unless ``always`` (the figures of a report). Not kept (:func:`use` keeps it); 0.12-0.18 s of CPU."""
     import numpy as np
 
     v = verdict(net, robot.arm if arm_frame else robot)

@@ -21,9 +21,9 @@
    (:mod:`nik.learn.usage`: on an arm with a closed form the closed form stays the default, and
    ``checkpoint=PATH`` uses the network);
 6. **what pays** (:func:`nik.learn.report.record_use`, before the install): whether the network pays for single
-   poses and for batches on this machine's CPU, timed on the seeded probes of :mod:`nik.ik.judge` (0.1-0.3 s) and
-   written into the JSON, so that a solver loading the network uses it only for the call types where it pays
-   without measuring again (:attr:`nik.IKSolver.network_use`);
+   poses and for batches on this machine's CPU, timed on the seeded probes of :mod:`nik.ik.judge` (0.12-0.18 s of
+   CPU) and written into the JSON, so that a solver loading the network uses it only for the call types where it
+   pays without measuring again (:attr:`nik.IKSolver.network_use`);
 7. **evaluation** (:func:`nik.learn.report.network_report`): raw error, network + LM against no network on a batch
    and on single poses, and per call type what the solver uses with the probes' times with and without it.
 """

@@ -85,7 +85,7 @@ def use_lines(use: dict) -> list[str]:
 
 def record_use(path, robot=None) -> dict:
     """Measure whether the exported network at ``path`` (``NAME.safetensors``) pays per call type on the CPU for the
-    arm it was made for (:func:`nik.ik.judge.record`: against uniform starts; about 0.1-0.3 s) and write it into its
+    arm it was made for (:func:`nik.ik.judge.record`: against uniform starts; 0.12-0.18 s of CPU) and write it into its
     JSON as ``network_use`` (the pair replaced whole: :func:`nik.nets.pair.write_pair_files`; the weights untouched),
     so that a solver loading it decides without measuring. ``robot``: the arm (None: the one the JSON records).
     Returns the record."""
