@@ -35,12 +35,22 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from nik.ik import backends, collide, every, networks, stages
 from nik.ik.backends.one_pose import one_pose
 from nik.ik.costs import solve as solve_costs
-from nik.ik.plan import REFINE_METHODS, Plan, check_settings, resolve_fallback, solver_plan, with_goal
+from nik.ik.plan import (
+    REFINE_METHODS,
+    Plan,
+    check_settings,
+    check_use,
+    network_use,
+    resolve_fallback,
+    solver_plan,
+    with_goal,
+)
 from nik.ik.result import IKResult
 from nik.ik.targets import as_poses, as_q_near, check_tolerances
 from nik.robots import Robot, load_robot
@@ -136,6 +146,7 @@ class IKSolver:
         self._net, self._net_one, self._given = networks.solver_networks(
             checkpoint, self.robot, self.device, self.closed_form
         )
+        self._use_asked = None
         self._plans, self.world, self.self_collision = {}, world, collide.check_self_collision(self_collision)
         self.mesh_verdict = collide.check_mesh_verdict(mesh_verdict)
 
@@ -167,6 +178,26 @@ class IKSolver:
         found with the main one (``checkpoint="auto"``); None where there is none."""
         return self._net_one
 
+    @property
+    def network_use(self) -> dict:
+        """Which call types the network serves on the CPU, and why: ``{"pose": bool, "batch": bool, "pose_us": (with,
+        without), "batch_us": (with, without), "wins": share, "baseline": "multistart", "how": ...}``. ``pose``:
+        calls of one pose; ``batch``: calls of more. A network serves a call type where it earns its place (``wins``:
+        its best hypothesis a better start than uniform ones) and is no slower there than the solver without it
+        (``*_us``: microseconds of CPU per pose on seeded probes, with and without it: LM from uniform starts; for
+        one pose per call the median call).
+        ``how``: ``record`` (read from the network's file: ``nik train`` writes it), ``measured`` (timed in this
+        process on first use, 0.12-0.18 s of CPU, kept per network), ``wins`` (set aside on wins, not timed),
+        ``asked`` (set here), ``no network`` (:mod:`nik.ik.judge`). The torch backend (GPU targets, swarms)
+        follows the wins verdict alone. Reading it measures where needed.
+
+        Set ``{"pose": bool, "batch": bool}`` to decide by hand (None: decided as above)."""
+        return network_use(self)
+
+    @network_use.setter
+    def network_use(self, value) -> None:
+        self._use_asked = check_use(value)
+
     def __repr__(self) -> str:
         net, closed = self.has_network, self.closed_form
         return f"IKSolver(robot={self.robot.name!r}, network={net}, analytic={closed}, refine={self.refine!r})"
@@ -185,10 +216,13 @@ class IKSolver:
         tol_rot: float = DEFAULT_TOL_ROT,
         seed: int = 0,
         max_iters: int | None = None,
+        poses: int | None = None,
     ) -> Plan:
         """The :class:`~nik.ik.plan.Plan` of a call on ``backend`` (``"compiled"`` | ``"torch"``) with these
-        tolerances, seed and iteration cap: resolved here, once, from the solver's settings (:mod:`nik.ik.plan`)."""
-        return solver_plan(self, backend, tol_pos, tol_rot, seed, max_iters)
+        tolerances, seed and iteration cap, for a call of ``poses`` targets (1: a single pose; None: a batch; the
+        network serves each on its own terms: :attr:`network_use`): resolved here, once, from the solver's settings
+        (:mod:`nik.ik.plan`)."""
+        return solver_plan(self, backend, tol_pos, tol_rot, seed, max_iters, "pose" if poses == 1 else "batch")
 
     # -- public -----------------------------------------------------------
     def initial_guess(self, T_target, *, q_near=None, seed: int = 0, representation: str | None = None) -> torch.Tensor:
@@ -262,7 +296,8 @@ class IKSolver:
         check_tolerances(tol_pos, tol_rot)
         be = backends.choose(self, T_target)
         if plan is None:
-            plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters)
+            n = _count(T_target)
+            plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters, poses=n)
         plan = with_goal(plan, bounds, q_rest, rest_weight)
         return solve_costs(self, be, plan, T_target, q_near, representation, world, costs)
 
@@ -365,3 +400,17 @@ class IKSolver:
             max_step=step, world=world, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits,
             bounds=bounds, q_rest=q_rest, costs=costs,
         )  # fmt: skip
+
+
+def _count(T_target) -> int | None:
+    """How many poses ``T_target`` holds by its shape (``(4, 4)``, ``(7,)``, ``(6,)``: one; ``(B, ...)``: B), None
+    where it has no shape (the checks of :mod:`nik.ik.targets` word the error)."""
+    shape = getattr(T_target, "shape", None)
+    if shape is None:
+        try:
+            shape = np.shape(T_target)
+        except Exception:  # noqa: BLE001 - ragged input: the targets' check words it
+            return None
+    if len(shape) <= 1 or tuple(shape) == (4, 4):
+        return 1
+    return int(shape[0])

@@ -1,8 +1,11 @@
-"""nik.ik.judge: a given network that guesses no better than uniform starts gives way (issue 37 item 4)."""
+"""nik.ik.judge: a given network that guesses no better than uniform starts gives way (issue 37 item 4); a network
+serves single poses and batches each only where it pays (issue 48 item 1, issue 50 item 11)."""
 
 from __future__ import annotations
 
 import copy
+import json
+import time
 import warnings
 
 import numpy as np
@@ -143,3 +146,124 @@ def test_a_network_is_judged_once_and_again_after_its_weights_change():
             p.copy_(s)
     again = judge.verdict(net, robot)
     assert judge.counts()["judged"] == judged + 2 and again.earns and not first.earns
+
+
+class _CostlyForward(torch.nn.Module):
+    """A network whose forward pass costs ``cost`` seconds of CPU a call (busy, not asleep: the judge times CPU),
+    whatever the batch, with the guesses of ``net`` behind it; not packed for the kernels, so every call runs it."""
+
+    def __init__(self, net, cost: float):
+        super().__init__()
+        self.inner, self.cost, self.robot, self.in_mean = net, cost, net.robot, net.in_mean
+
+    def _spend(self) -> None:
+        end = time.process_time() + self.cost
+        while time.process_time() < end:
+            pass
+
+    def forward(self, T):
+        self._spend()
+        return self.inner(T)
+
+    def hypotheses(self, T):
+        self._spend()
+        return self.inner.hypotheses(T)
+
+
+@pytest.fixture
+def one_thread():
+    """One torch thread (the issue's protocol): two threads on a loaded two-core machine wait on each other."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_a_network_that_helps_batches_but_slows_single_poses_serves_batches_only(one_thread):
+    robot = nik.load_robot("panda")
+    net = _CostlyForward(nik.models.load_pretrained(robot), cost=1e-3)  # 1 ms a forward pass, whatever the batch
+    solver = nik.IKSolver(robot, analytic=False)
+    solver.net = net
+    timed = judge.counts()["timed"]
+    use = solver.network_use
+    assert use["how"] == "measured" and use["pose"] is False and use["batch"] is True and use["wins"] >= 0.9
+    assert use["pose_us"][0] > 1000 > use["pose_us"][1]  # the forward pass's millisecond is one pose's cost
+    assert use["batch_us"][0] < use["batch_us"][1]  # spread over the batch, its guesses save more than it costs
+    T = _targets(robot, 64, seed=9)
+    one, many = solver.solve(T[0]), solver.solve(T)
+    assert one.source == "multistart" and bool(one.success.all())
+    assert many.source == "network" and bool(many.success.all())
+    assert solver.plan(poses=1).net is None and solver.plan().net is net
+    other = nik.IKSolver(robot, analytic=False)
+    other.net = net
+    assert other.network_use["pose"] is False and other.solve(T[0]).source == "multistart"
+    assert judge.counts()["timed"] == timed + 1  # measured once per network in the process
+    solver.network_use = {"pose": True, "batch": False}  # decided by hand
+    assert solver.solve(T[0]).source == "network" and solver.solve(T).source == "multistart"
+    assert solver.network_use["how"] == "asked"
+    solver.network_use = None
+    assert solver.solve(T[0]).source == "multistart" and solver.solve(T).source == "network"
+    with pytest.raises(ValueError, match="network_use"):
+        solver.network_use = {"pose": 1}
+
+
+def test_network_use_says_why_without_a_network_and_for_the_raw_guess():
+    robot = nik.load_robot("panda")
+    assert nik.IKSolver(robot, checkpoint=None).network_use["how"] == "no network"
+    raw = nik.IKSolver(robot, refine="none")
+    assert raw.network_use["pose"] and raw.network_use["batch"] and raw.network_use["how"].startswith("asked")
+
+
+def _no_probe(*args, **kwargs):
+    raise AssertionError("a probe ran")
+
+
+def test_a_file_that_records_the_decision_is_used_without_a_probe_until_its_weights_change(
+    tmp_path, monkeypatch, one_thread
+):
+    from nik.learn.report import record_use
+    from nik.nets.pair import save_pair
+
+    robot = nik.load_robot("ur5")
+    path = save_pair(nik.models.load_pretrained(robot), tmp_path / "mine.safetensors")
+    rec = record_use(path)
+    meta = json.loads(path.with_suffix(".json").read_text())
+    assert meta["network_use"] == rec and rec["robot_hash"] == robot.arm_hash and rec["wins"] >= 0.9
+    decided = rec["against"]["multistart"]
+    assert isinstance(decided["pose"], bool) and isinstance(decided["batch"], bool)
+    assert all(x > 0 for x in decided["pose_us"] + decided["batch_us"])
+    assert decided["pose"] == (decided["pose_us"][0] <= decided["pose_us"][1])
+    for probe in ("measure", "verdict"):
+        monkeypatch.setattr(judge, probe, _no_probe)
+    solver = nik.IKSolver(robot, checkpoint=str(path), analytic=False)
+    use = solver.network_use
+    assert use["how"] == "record" and (use["pose"], use["batch"]) == (decided["pose"], decided["batch"])
+    T = _targets(robot, 40, seed=4)
+    one, many = solver.solve(T[0]), solver.solve(T)
+    assert one.source == ("network" if decided["pose"] else "multistart") and bool(one.success.all())
+    assert many.source == ("network" if decided["batch"] else "multistart") and bool(many.success.all())
+    net = solver.net
+    assert judge.use(net, robot, nik.IKSolver, arm_frame=True).how == "record"  # made for the bare arm
+    with torch.no_grad():  # trained further in place: the record no longer speaks for it
+        next(net.parameters()).mul_(1.0)
+    with pytest.raises(AssertionError, match="a probe ran"):
+        judge.use(net, robot, nik.IKSolver, arm_frame=True)
+
+
+def test_a_checkpoint_without_a_record_is_timed_once_on_first_use_and_kept_for_the_process(tmp_path, one_thread):
+    """Issue 50 item 11: a network of train.py's kind (a Lightning-format checkpoint: no JSON, no record) is timed
+    on its first call and serves each call type only where it paid, for every solver of the process."""
+    robot = nik.load_robot("ur5")
+    path = save_checkpoint(nik.models.load_pretrained(robot), tmp_path / "plain.ckpt")
+    timed = judge.counts()["timed"]
+    first = nik.IKSolver(robot, checkpoint=str(path), analytic=False)
+    use = first.network_use
+    assert use["how"] == "measured" and judge.counts()["timed"] == timed + 1
+    for key in ("pose", "batch"):
+        w, wo = use[f"{key}_us"]
+        assert use[key] == (w <= wo) and w > 0 and wo > 0
+    T = _targets(robot, 30, seed=6)
+    assert first.solve(T[0]).source == ("network" if use["pose"] else "multistart")
+    assert first.solve(T).source == ("network" if use["batch"] else "multistart")
+    again = nik.IKSolver(robot, checkpoint=str(path), analytic=False)
+    assert again.net is first.net and again.network_use == use and judge.counts()["timed"] == timed + 1

@@ -197,3 +197,52 @@ def test_train_without_install_says_how_to_install_and_prints_notes_as_one_line(
     note = [line for line in err.splitlines() if "default tool link" in line]
     assert len(note) == 1 and note[0].startswith("nik: note: panda.urdf: default tool link 'panda_hand_tcp'")
     assert "Warning" not in err and "load_urdf(" not in err  # no category, no source line
+
+
+def test_nik_train_records_per_call_type_what_pays_and_its_report_says_it(tmp_path, capsys, monkeypatch):
+    """Issue 48 item 1: the exported JSON carries the decision and its figures (no probe when loaded); the report
+    gives, for single poses and for batches, the time with and without the network and what the solver uses."""
+    from nik.ik import judge
+
+    arm = _arm(tmp_path)
+    out = tmp_path / "mine.safetensors"
+    args = ["train", str(arm), *TINY, "--eval-batch", "20", "--eval-one", "2", "--runs", str(tmp_path / "runs")]
+    assert main([*args, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    rec = json.loads(out.with_suffix(".json").read_text())["network_use"]
+    robot = nik.load_robot(arm)
+    assert rec["robot_hash"] == robot.definition_hash and 0.0 <= rec["wins"] <= 1.0
+    decided = rec["against"]["multistart"]
+    lines = {}
+    for call, key in (("single poses:", "pose"), ("batches:", "batch")):
+        (line,) = [ln for ln in printed.splitlines() if ln.strip().startswith(call)]
+        lines[key] = line
+        w, wo = decided[f"{key}_us"]
+        assert w > 0 and wo > 0 and f"{w:.1f} us a pose with the network, {wo:.1f} us without" in line
+        assert ("the network" if decided[key] else "no network") == line.split(":", 1)[1].split("(")[0].strip()
+        assert decided[key] == (rec["wins"] >= judge.MIN_WINS and w <= wo)
+    assert "what IKSolver(robot, checkpoint=PATH) uses, per call type" in printed
+    assert (tmp_path / "runs" / "test_arm" / "report.txt").read_text().count(lines["pose"].strip()) == 1
+    for probe in ("measure", "verdict"):  # the file decides: nothing is measured again
+        monkeypatch.setattr(judge, probe, lambda *a, **k: (_ for _ in ()).throw(AssertionError("a probe ran")))
+    solver = nik.IKSolver(robot, checkpoint=str(out))
+    use = solver.network_use
+    assert use["how"] == "record" and (use["pose"], use["batch"]) == (decided["pose"], decided["batch"])
+    T = robot.fk(robot.sample(6, generator=torch.Generator().manual_seed(5), dtype=torch.float64))
+    with pytest.warns(UserWarning) if rec["wins"] < judge.MIN_WINS else _no_warning():
+        one = solver.solve(T[:1])
+    assert one.source == ("network" if decided["pose"] else "multistart") and bool(one.success.all())
+    assert solver.solve(T).source == ("network" if decided["batch"] else "multistart")
+
+
+def _no_warning():
+    import contextlib
+    import warnings
+
+    @contextlib.contextmanager
+    def ctx():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            yield
+
+    return ctx()

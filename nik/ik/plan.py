@@ -19,7 +19,12 @@ A :class:`Plan` is data. The torch backend interprets it with a Python loop over
 4. a given or installed network that does not earn its place (:mod:`nik.ik.judge`: on seeded probe poses its best
    hypothesis is a better start than the best of 16 uniform configurations less than half the time; judged once per
    network and robot) gives way to the guess of 3 in the plans that refine and have a fallback (one warning per
-   network); ``refine="none"`` and ``fallback="none"`` keep it (they ask what the network delivers).
+   network); ``refine="none"`` and ``fallback="none"`` keep it (they ask what the network delivers);
+5. on the compiled backend (the CPU) the network that would serve, shipped ones included, serves a call type only
+   where it pays there (:func:`nik.ik.judge.use`: a call of one pose, or of more, each timed with and without it on
+   seeded probes, or read from the record its file carries); where it does not, the guess of 3 serves that call type
+   (no warning: :attr:`nik.IKSolver.network_use` says what serves and why). ``IKSolver.network_use = {...}`` sets the
+   choice by hand.
 
 **Tolerances.** ``tol_pos, tol_rot`` are the asked ones (success is measured against them). Float32 targets are
 refined to :data:`FLOAT32_MARGIN` times them on *both* backends (compiled: in float64, then rounded to float32; torch:
@@ -34,7 +39,16 @@ from typing import Any
 
 from nik.lm.batched import LMCfg
 
-__all__ = ["FLOAT32_MARGIN", "Plan", "choose_network", "in_arm_frame", "resolve_fallback", "with_goal"]
+__all__ = [
+    "FLOAT32_MARGIN",
+    "Plan",
+    "check_use",
+    "choose_network",
+    "in_arm_frame",
+    "network_use",
+    "resolve_fallback",
+    "with_goal",
+]
 
 #: Float32 targets are refined to this fraction of the asked tolerance (both backends; module docstring).
 FLOAT32_MARGIN = 0.5
@@ -94,21 +108,73 @@ class Plan:
         return self.tol_pos * m, self.tol_rot * m
 
 
-def choose_network(main, single_pose, given: bool, backend: str, robot=None, refine="none", fallback="none"):
+def choose_network(
+    main, single_pose, given: bool, backend: str, robot=None, refine="none", fallback="none", *, call="batch",
+    asked=None, solver_type=None,
+):  # fmt: skip
     """The network that guesses (module docstring, "Which guess serves"): ``main`` (the solver's network) unless it
     is the shipped one (``given`` False) and the call runs on the compiled backend, where the arm's ``single_pose``
     network serves when it has one. Where the plan refines and has a fallback (``refine``, ``fallback``: the
     solver's settings), a given or installed network that does not earn its place on ``robot``
     (:func:`nik.ik.judge.earns`: its best hypothesis no better a start than uniform ones) gives way: None
-    (the closed form or uniform starts serve)."""
-    if main is not None and not given and single_pose is not None and backend == "compiled":
-        return single_pose
-    if main is not None and given and robot is not None and "none" not in (refine, fallback):
-        from nik.ik.judge import earns
+    (the closed form or uniform starts serve); on the compiled backend a network gives way for a ``call`` type
+    (``"pose"`` | ``"batch"``) where it does not pay (:func:`nik.ik.judge.use`, timed with solvers of
+    ``solver_type``: :class:`nik.IKSolver`; None: not timed, the wins alone), unless ``asked``
+    (``{"pose": bool, "batch": bool}``) decides."""
+    return _choose(main, single_pose, given, backend, robot, (refine, fallback), call, asked, solver_type)[0]
 
-        if not earns(main, robot, in_arm_frame(robot, main)):
-            return None
-    return main
+
+def _choose(main, single_pose, given, backend, robot, settings, call, asked, solver_type) -> tuple:
+    """``(network or None, final)``: :func:`choose_network`; ``final`` False where the decision is provisional (the
+    kernels still compiling: :func:`nik.ik.judge.use`), so that the plan is not kept."""
+    net = main
+    if main is not None and not given and single_pose is not None and backend == "compiled":
+        net = single_pose
+    if net is None or robot is None or "none" in settings:
+        return net, True
+    if asked is not None:
+        return (net if asked[call] else None), True
+    from nik.ik.judge import earns, use
+
+    arm_frame = in_arm_frame(robot, net)
+    if given and not earns(net, robot, arm_frame):
+        return None, True
+    if backend != "compiled" or solver_type is None:
+        return net, True
+    u = use(net, robot, solver_type, arm_frame)
+    return (net if u.serves(call) else None), u.how != "provisional"
+
+
+def network_use(solver) -> dict:
+    """:attr:`nik.IKSolver.network_use`: the :class:`nik.ik.judge.Use` of the network that serves ``solver``'s calls
+    on the CPU, as a dict; ``how`` says where the decision comes from."""
+    from nik.ik.judge import Use, use
+
+    s = solver
+    net = s._net
+    if net is not None and not s._given and s._net_one is not None:
+        net = s._net_one
+    if net is None:
+        return Use(False, False, how="no network").as_dict()
+    if s._use_asked is not None:
+        return Use(bool(s._use_asked["pose"]), bool(s._use_asked["batch"]), how="asked").as_dict()
+    if "none" in (s.refine, s.fallback):
+        return Use(True, True, how=f"asked (refine={s.refine!r}, fallback={s.fallback!r})").as_dict()
+    return use(net, s.robot, type(s), in_arm_frame(s.robot, net)).as_dict()  # a loser on wins: how == "wins"
+
+
+def check_use(value) -> dict | None:
+    """``IKSolver.network_use = value`` checked: None, or ``{"pose": bool, "batch": bool}`` (a ``ValueError`` of one
+    line otherwise)."""
+    if value is None:
+        return None
+    if (
+        not isinstance(value, dict)
+        or set(value) - {"pose", "batch"}
+        or not all(isinstance(value.get(k), bool) for k in ("pose", "batch"))
+    ):
+        raise ValueError(f"network_use: expected None or {{'pose': bool, 'batch': bool}}, got {value!r}")
+    return {"pose": value["pose"], "batch": value["batch"]}
 
 
 _ARM_FRAME: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -150,15 +216,17 @@ def with_goal(plan: Plan, bounds=None, q_rest=None, rest_weight: float = 0.1, *,
 REFINE_METHODS = ("none", "pso", "sapso", "ipso", "ga", "lm")
 
 
-def solver_plan(solver, backend: str, tol_pos: float, tol_rot: float, seed: int, max_iters) -> Plan:
-    """The plan of one :meth:`nik.IKSolver.plan` call: resolved once per settings and call arguments (a plan is
-    immutable) and kept on the solver (at most 65 kept)."""
+def solver_plan(solver, backend: str, tol_pos: float, tol_rot: float, seed: int, max_iters, call="batch") -> Plan:
+    """The plan of one :meth:`nik.IKSolver.plan` call (``call``: ``"pose"`` for a call of one pose, ``"batch"``):
+    resolved once per settings and call arguments (a plan is immutable) and kept on the solver (at most 65 kept)."""
     s = solver
+    asked = s._use_asked
     key = (backend, tol_pos, tol_rot, seed, max_iters, s._net, s._given, s.fallback, s.refine, id(s.swarm_cfg),
-           s.polish, s.closed_form)  # fmt: skip
+           s.polish, s.closed_form, call, None if asked is None else tuple(asked.values()))  # fmt: skip
     plan = solver._plans.get(key)
     if plan is None:  # resolved once per settings and call arguments (a plan is immutable)
-        net = choose_network(s._net, s._net_one, s._given, backend, s.robot, s.refine, s.fallback)
+        net, final = _choose(s._net, s._net_one, s._given, backend, s.robot, (s.refine, s.fallback), call, asked,
+                             type(s))  # fmt: skip
         src = "network" if net is not None else "analytic" if solver.closed_form else "multistart"
         lm_cfg = solver.swarm_cfg if isinstance(solver.swarm_cfg, LMCfg) else None
         plan = Plan(
@@ -167,8 +235,9 @@ def solver_plan(solver, backend: str, tol_pos: float, tol_rot: float, seed: int,
             fallback=solver.fallback, tol_pos=float(tol_pos), tol_rot=float(tol_rot), seed=int(seed),
             swarm_cfg=solver.swarm_cfg, polish=solver.polish,
         )  # fmt: skip
-        solver._plans = {} if len(solver._plans) > 64 else solver._plans
-        solver._plans[key] = plan
+        if final:
+            solver._plans = {} if len(solver._plans) > 64 else solver._plans
+            solver._plans[key] = plan
     return plan
 
 

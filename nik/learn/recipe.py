@@ -20,8 +20,12 @@
    finds it for this arm by definition hash (:mod:`nik.nets.registry`), and says how to get it
    (:mod:`nik.learn.usage`: on an arm with a closed form the closed form stays the default, and
    ``checkpoint=PATH`` uses the network);
-6. **evaluation** (:func:`nik.learn.report.network_report`): raw error, and network + LM against no
-   network on a batch and on single poses.
+6. **what pays** (:func:`nik.learn.report.record_use`, before the install): whether the network pays for single
+   poses and for batches on this machine's CPU, timed on the seeded probes of :mod:`nik.ik.judge` (0.12-0.18 s of
+   CPU) and written into the JSON, so that a solver loading the network uses it only for the call types where it
+   pays without measuring again (:attr:`nik.IKSolver.network_use`);
+7. **evaluation** (:func:`nik.learn.report.network_report`): raw error, network + LM against no network on a batch
+   and on single poses, and per call type what the solver uses with the probes' times with and without it.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ import torch
 from nik.errors import DatasetError
 from nik.learn.callbacks import History, StableLastCheckpoint
 from nik.learn.multi import CurvePlot, MultiSolutionIK
-from nik.learn.report import network_report
+from nik.learn.report import network_report, record_use
 from nik.nets.pretrained import save
 from nik.nets.registry import install
 from nik.robots import Robot, load_robot
@@ -284,6 +288,7 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
     if model._earlier_commands:
         training["resumed_from_commands"] = list(model._earlier_commands)
     save(net, out, training=training, role="single_pose" if cfg.single_pose else None)
+    record_use(out, robot)  # whether it pays per call type, in the JSON: solvers that load it need not measure
     write(f"nik train: wrote {out} and {out.with_suffix('.json')}")
     result = TrainResult(
         out=out,

@@ -7,7 +7,11 @@ The JSON holds what rebuilds and checks the network:
 - ``net``: the architecture (:meth:`config` of :mod:`nik.nets.multi`, ``kind`` included);
 - ``weights_sha256``, ``weights_bytes``: the SHA-256 and size of the ``.safetensors`` file beside it;
 - ``training``: the command that really ran (``sys.argv``), the data it used, counters;
-- ``validation``: its recorded error on a seeded validation set (:func:`nik.nets.pretrained.validation_error`).
+- ``validation``: its recorded error on a seeded validation set (:func:`nik.nets.pretrained.validation_error`);
+- ``network_use`` (optional): whether it pays per call type on the CPU, with the figures
+  (:func:`nik.ik.judge.record`, written by ``nik train``: :func:`nik.learn.report.record_use`); :func:`load_pair`
+  attaches it to the network (``net.network_use_record``: the record and the weights' version counters, so a network
+  trained further in place is measured again).
 
 :func:`load_pair` checks, in this order, that the files exist, the JSON parses and has every field, the
 weights' SHA-256 matches, the robot's definition hash matches, the architecture is known and every tensor
@@ -211,7 +215,10 @@ def load_pair(path: str | Path, *, robot: Robot | str | Path | None = None):
     if problem is not None:
         raise CheckpointError(f"{st} does not fit the architecture in {js.name}: {problem}")
     net.load_state_dict(state)
-    return net.to(torch.float32).eval()
+    net = net.to(torch.float32).eval()
+    if isinstance(meta.get("network_use"), dict):  # per call type, whether it pays (nik.ik.judge): valid while the
+        net.network_use_record = (meta["network_use"], tuple(p._version for p in net.parameters()))  # weights stay
+    return net
 
 
 _STAGED = re.compile(r"^\.(?P<name>.+)\.(?P<kind>new|ready|del)-(?P<pid>\d+)-(?P<tag>[0-9a-f]+)\.(safetensors|json)$")

@@ -132,7 +132,7 @@ def entry(solver, tol_pos, tol_rot, seed, f32: bool):
         if background.cold(_SOLVE):  # nothing compiled on this machine: the general path answers from torch while
             return _LATER  # the driver compiles (nik.kernels.background); asked again on the next call
     generation = _models.generation
-    plan = solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed)
+    plan = solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, poses=1)
     model = _models.model_of(solver.robot, plan.lm_cfg)
     packed = None
     if plan.source == "network":
