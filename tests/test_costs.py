@@ -104,6 +104,33 @@ def test_collision_term_matches_the_compiled_rows_and_finite_differences(panda):
     assert torch.equal(term.check(q), ~hit) and hit.any() and (~hit).any()
 
 
+@pytest.mark.parametrize("name", ["panda", "ur5", "stanford"])  # 7 joints, 6 joints, a prismatic joint
+def test_manipulability_term_compiled_rows_match_the_torch_twin_and_finite_differences(name):
+    from nik.costs.manipulability import EPS, measure
+    from nik.kernels.manipulability import EPS as KERNEL_EPS
+
+    assert EPS == KERNEL_EPS
+    robot = nik.load_robot(name)
+    term = nik.costs.manipulability(robot, weight=0.2)
+    q = _configs(robot, 8, 40)
+    rk, Jk = term.compiled(q.numpy())  # the numba kernel
+    r = term.residual(q)  # the torch twin
+    J = robot.jacobian(q)
+    w = torch.linalg.det(J @ J.transpose(-1, -2)).sqrt()  # Yoshikawa's measure written out here
+    torch.testing.assert_close(measure(robot, q), w, atol=1e-12, rtol=1e-9)
+    np.testing.assert_allclose(rk[:, 0], (1.0 / (w + EPS)).numpy(), rtol=1e-8)
+    np.testing.assert_allclose(r.detach().numpy(), rk, rtol=1e-8)
+    fd = _fd(term.residual, q, h=1e-7)
+    np.testing.assert_allclose(Jk, fd.numpy(), rtol=1e-4, atol=1e-6 * np.abs(fd.numpy()).max())
+    _, Ja = nik.costs.term.autograd_jacobian(term.residual, q)
+    np.testing.assert_allclose(Jk, Ja.numpy(), rtol=1e-6, atol=1e-9 * np.abs(Ja.numpy()).max())
+    re, Je = term.evaluate(q)  # float64 CPU: the kernel's
+    np.testing.assert_allclose(Je.numpy(), Jk, atol=0, rtol=0)
+    assert term.check(q).all() and not term.hard  # a preference
+    with pytest.raises(ValueError, match="weight"):
+        nik.costs.manipulability(robot, weight=-1.0)
+
+
 def test_smoothness_and_step_cap_match_finite_differences():
     g = torch.Generator().manual_seed(6)
     path = torch.cumsum(0.1 * torch.randn(7, 3, generator=g, dtype=torch.float64), 0)
