@@ -13,9 +13,9 @@ geometric Jacobian itself: with ``z_k`` the axis of joint ``k`` and ``J_i = [v_i
 - 0 otherwise (a prismatic joint turns nothing),
 
 and ``d log w / dq_k = sum_i M_i . dJ_i/dq_k`` with ``M = (J J^T)^-1 J`` (``J (J^T J)^-1`` below 6 joints), solved
-by a Cholesky factorisation of the ``6 x 6`` (``n x n``) matrix, regularised by :data:`RIDGE` times its trace so a
-singular configuration (one whose matrix will not factorise without it) gives a finite direction. The torch twin (:class:`nik.costs.manipulability.ManipulabilityTerm`)
-is the reference the tests compare against.
+by a Cholesky factorisation of the ``6 x 6`` (``n x n``) matrix; one that will not factorise (a singular
+configuration) is factorised again with a ridge of :data:`RIDGE` times its trace, so the direction stays finite.
+The torch twin (:class:`nik.costs.manipulability.ManipulabilityTerm`) is the reference the tests compare against.
 """
 
 from __future__ import annotations
