@@ -20,11 +20,12 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain
+from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain, _chain_jacobian
 from nik.kernels.closed import guess as closed_guess
 from nik.kernels.lm import (
     _STREAM,
     CLASSIC,
+    MANIPULABILITY,
     MAX_STEP,
     ROT_WEIGHT,
     TOL_POS,
@@ -41,6 +42,8 @@ from nik.kernels.lm import (
     turns_toward,
 )
 from nik.kernels.lm_step import _damped_step, _judge
+from nik.kernels.manipulability import EPS as MANIP_EPS
+from nik.kernels.manipulability import _manipulability
 from nik.kernels.poses import reach_flags
 from nik.kernels.seeded import lm_starts, merge, ranked_hypotheses
 from nik.tolerances import NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS
@@ -390,6 +393,22 @@ def solve_bounded(
 
 
 @kernel
+def _preference(G, joints, q, q_rest, weight, mw, T6, J6, A6, M6, grad):
+    """``(cost, w)`` of the null-space step's preferences at ``q (n,)``: ``|q - q_rest|^2`` where ``mw == 0`` (the
+    posture alone), else ``weight^2 |q - q_rest|^2 / 2 + (mw / (w + EPS))^2 / 2`` with ``w`` the manipulability
+    (:mod:`nik.kernels.manipulability`), ``grad (n,)`` then the gradient of ``log w``."""
+    n = q.shape[0]
+    dist = 0.0
+    for i in range(n):
+        dist += (q[i] - q_rest[i]) ** 2
+    if mw == 0.0:
+        return dist, 0.0
+    _chain_jacobian(G, joints, q, T6, J6)
+    w = _manipulability(J6, joints, A6, M6, grad)
+    return 0.5 * weight * weight * dist + 0.5 * (mw / (w + MANIP_EPS)) ** 2, w
+
+
+@kernel
 def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damping, ok, pos, rot, d):
     """In place: the answers ``q: (B, n)`` where ``ok[b]`` moved towards ``q_rest: (B, n)`` in the null space of the
     task, never leaving it (see :mod:`nik.ik.goals`).
@@ -407,14 +426,22 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     :func:`solve_bounded`'s).
     A target whose task has as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space
     and is left as it is.
+
+    With ``opts[MANIPULABILITY] = mw > 0`` (:func:`nik.costs.manipulability`) the step also asks ``s * mw`` times the
+    Gauss-Newton step of the residual ``1 / (w + EPS)``, ``(w + EPS) grad(w) / |grad(w)|^2`` (the step that would
+    double Yoshikawa's ``w`` to first order), and a step is kept where the cost of :func:`_preference` falls
+    (``weight = 0`` with ``q_rest`` anything: the manipulability alone).
     """
     B, n = q.shape
     rw, tol_pos, tol_rot, max_step = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT], opts[MAX_STEP]
+    mw = opts[MANIPULABILITY]
     Tc = np.empty((3, 4))
     J, Jc = np.empty((6, n)), np.empty((6, n))
     e, ec, dd = np.empty(6), np.empty(6), np.empty(6)
     A, g = np.empty((n, n)), np.empty(n)
     qp, qc, dq = np.empty(n), np.empty(n), np.empty(n)
+    T6, J6, A6, M6 = np.empty((3, 4)), np.empty((6, n)), np.empty((6, 6)), np.empty((6, n))
+    grad, gradc = np.empty(n), np.empty(n)
     free = joints.copy()  # no joint held at a limit: the step slides along it and the clamp follows (as before)
     for i in range(n):
         free[i, LOWER], free[i, UPPER] = -math.inf, math.inf
@@ -432,17 +459,23 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
         _, p, r, done = _eval(G, joints, q[b], T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, J, e, dd)
         if not done:
             continue
-        dist = 0.0
-        for i in range(n):
-            dist += (q[b, i] - q_rest[b, i]) ** 2
+        dist, w = _preference(G, joints, q[b], q_rest[b], weight, mw, T6, J6, A6, M6, grad)
         lam = 1.0  # 1 / s
         for _ in range(iters):
             s = 1.0 / lam
+            gm = 0.0  # the manipulability's share: s mw (w + EPS) grad(w) / |grad(w)|^2, grad(w) = w grad(log w)
+            if mw > 0.0 and w > 0.0:
+                g2 = 0.0
+                for i in range(n):
+                    g2 += grad[i] * grad[i]
+                if g2 > 0.0:
+                    gm = s * mw * (w + MANIP_EPS) / (w * g2)
             for i in range(n):
-                qp[i] = q[b, i] + s * weight * (q_rest[b, i] - q[b, i])
+                qp[i] = q[b, i] + s * weight * (q_rest[b, i] - q[b, i]) + gm * grad[i]
             good = _damped_step(J, e, None, None, 0.0, qp, damping, q[b], free, 0.0, 0.0, math.inf, A, g, dq)
             big = 0.0
             dc = math.inf
+            wc = 0.0
             if good:
                 for i in range(n):
                     big = max(big, abs(dq[i]))
@@ -451,16 +484,16 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
             if good:
                 _bounds(joints, qc)
                 _, pc, rc, donec = _eval(G, joints, qc, T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, dd)
-                dc = 0.0
-                for i in range(n):
-                    dc += (qc[i] - q_rest[b, i]) ** 2
+                dc, wc = _preference(G, joints, qc, q_rest[b], weight, mw, T6, J6, A6, M6, gradc)
                 good = donec
             kept, lam = _judge(good, dist, dc, False, lam, 0.5, 2.0, 1.0, math.inf)
             if kept:
                 _copy(qc, q[b])
                 _copy(Jc.ravel(), J.ravel())
                 _copy(ec, e)
-                dist, p, r = dc, pc, rc
+                dist, p, r, w = dc, pc, rc, wc
+                if mw > 0.0:
+                    _copy(gradc, grad)
                 if big < 1e-9:
                     break
             elif lam > 64.0:
