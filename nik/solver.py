@@ -309,7 +309,7 @@ class IKSolver:
         """
         T = as_poses(T_target, representation)
         r = route(self, costs, T, tol_pos=tol_pos, tol_rot=tol_rot, world=world, bounds=bounds, q_rest=q_rest,
-                  rest_weight=rest_weight)  # the built-in terms as keywords (nik.ik.costs.route)
+                  rest_weight=rest_weight)  # fmt: skip
         check_tolerances(r.tol_pos, r.tol_rot)
         plan = r.goal(r.solver.plan(backend="torch", tol_pos=r.tol_pos, tol_rot=r.tol_rot, seed=seed))
         Q = collide.solve_all(r.solver, plan, T, r.world, n_starts=n_starts, dedupe_tol=dedupe_tol)
