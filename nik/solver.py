@@ -40,6 +40,7 @@ import torch
 
 from nik.ik import backends, collide, every, networks, stages
 from nik.ik.backends.one_pose import one_pose
+from nik.ik.costs import route, solve_routed
 from nik.ik.costs import solve as solve_costs
 from nik.ik.plan import (
     REFINE_METHODS,
@@ -289,8 +290,13 @@ class IKSolver:
         Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
+        if costs is not None:  # the built-in terms take their keyword's compiled route (nik.ik.costs.route)
+            call = dict(tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, q_near=q_near, max_iters=max_iters, plan=plan,
+                        representation=representation, world=world, bounds=bounds, q_rest=q_rest,
+                        rest_weight=rest_weight)  # fmt: skip
+            return solve_routed(self, T_target, costs, call)
         if plan is None and q_near is None and max_iters is None and representation is None and world is None:
-            res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is q_rest is costs is None else None
+            res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is q_rest is None else None
             if res is not None:  # one pose in one kernel call (nik.ik.backends.one_pose)
                 return res
         check_tolerances(tol_pos, tol_rot)
@@ -337,11 +343,12 @@ class IKSolver:
         constraint kept (:mod:`nik.ik.every`).
         """
         T = as_poses(T_target, representation)
-        check_tolerances(tol_pos, tol_rot)
-        plan = with_goal(self.plan(backend="torch", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds, q_rest,
-                         rest_weight)  # fmt: skip
-        Q = collide.solve_all(self, plan, T, world, n_starts=n_starts, dedupe_tol=dedupe_tol)
-        return every.with_costs(self, plan, T, world, costs, Q, dedupe_tol)
+        r = route(self, costs, T, tol_pos=tol_pos, tol_rot=tol_rot, world=world, bounds=bounds, q_rest=q_rest,
+                  rest_weight=rest_weight)  # fmt: skip
+        check_tolerances(r.tol_pos, r.tol_rot)
+        plan = r.goal(r.solver.plan(backend="torch", tol_pos=r.tol_pos, tol_rot=r.tol_rot, seed=seed))
+        Q = collide.solve_all(r.solver, plan, T, r.world, n_starts=n_starts, dedupe_tol=dedupe_tol)
+        return every.with_costs(r.solver, plan, T, r.world, r.costs, Q, dedupe_tol)
 
     def solve_path(
         self,

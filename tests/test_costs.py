@@ -104,6 +104,33 @@ def test_collision_term_matches_the_compiled_rows_and_finite_differences(panda):
     assert torch.equal(term.check(q), ~hit) and hit.any() and (~hit).any()
 
 
+@pytest.mark.parametrize("name", ["panda", "ur5", "stanford"])  # 7 joints, 6 joints, a prismatic joint
+def test_manipulability_term_compiled_rows_match_the_torch_twin_and_finite_differences(name):
+    from nik.costs.manipulability import EPS, measure
+    from nik.kernels.manipulability import EPS as KERNEL_EPS
+
+    assert EPS == KERNEL_EPS
+    robot = nik.load_robot(name)
+    term = nik.costs.manipulability(robot, weight=0.2)
+    q = _configs(robot, 8, 40)
+    rk, Jk = term.compiled(q.numpy())  # the numba kernel
+    r = term.residual(q)  # the torch twin
+    J = robot.jacobian(q)
+    w = torch.linalg.det(J @ J.transpose(-1, -2)).sqrt()  # Yoshikawa's measure written out here
+    torch.testing.assert_close(measure(robot, q), w, atol=1e-12, rtol=1e-9)
+    np.testing.assert_allclose(rk[:, 0], (1.0 / (w + EPS)).numpy(), rtol=1e-8)
+    np.testing.assert_allclose(r.detach().numpy(), rk, rtol=1e-8)
+    fd = _fd(term.residual, q, h=1e-7)
+    np.testing.assert_allclose(Jk, fd.numpy(), rtol=1e-4, atol=1e-6 * np.abs(fd.numpy()).max())
+    _, Ja = nik.costs.term.autograd_jacobian(term.residual, q)
+    np.testing.assert_allclose(Jk, Ja.numpy(), rtol=1e-6, atol=1e-9 * np.abs(Ja.numpy()).max())
+    re, Je = term.evaluate(q)  # float64 CPU: the kernel's
+    np.testing.assert_allclose(Je.numpy(), Jk, atol=0, rtol=0)
+    assert term.check(q).all() and not term.hard  # a preference
+    with pytest.raises(ValueError, match="weight"):
+        nik.costs.manipulability(robot, weight=-1.0)
+
+
 def test_smoothness_and_step_cap_match_finite_differences():
     g = torch.Generator().manual_seed(6)
     path = torch.cumsum(0.1 * torch.randn(7, 3, generator=g, dtype=torch.float64), 0)
@@ -340,3 +367,78 @@ def test_solve_path_with_a_user_term_bounds_a_world_and_timing(panda):
 
     half = torch.from_numpy(parse_bounds("axis_z").expand(10))
     assert within_bounds(T, panda.fk(res.q), half).all()
+
+
+# -- built-in terms given via costs= take their keyword's compiled route ---------------------------------------------
+def _same(a, b) -> bool:
+    return torch.equal(torch.as_tensor(a.q), torch.as_tensor(b.q)) and torch.equal(a.success, b.success)
+
+
+def test_builtin_terms_via_costs_give_the_keyword_answers(panda):
+    solver = nik.IKSolver(panda)
+    T = panda.fk(_configs(panda, 12, 50))
+    assert _same(solver.solve(T, costs=[nik.costs.posture(panda, "mid", weight=0.3)]),
+                 solver.solve(T, q_rest="mid", rest_weight=0.3))  # fmt: skip
+    bounds = (1e-3, 1e-3, 1e-3, math.inf, math.inf, math.inf)
+    assert _same(solver.solve(T, costs=[nik.costs.bounded_pose(panda, T, bounds), nik.costs.limits(panda)]),
+                 solver.solve(T, bounds=bounds))  # fmt: skip
+    assert _same(solver.solve(T, costs=[nik.costs.pose(panda, T, tol_pos=1e-3)]), solver.solve(T, tol_pos=1e-3))
+    from dataclasses import replace
+
+    plan = solver.plan(backend="compiled")
+    manip = solver.solve(T, costs=[nik.costs.manipulability(panda, weight=0.2)])
+    assert _same(manip, solver.solve(T, plan=replace(plan, manipulability=0.2)))
+    Q = solver.solve_all(T[:1], costs=[nik.costs.posture(panda, "mid")])
+    assert torch.equal(Q, solver.solve_all(T[:1], q_rest="mid"))
+
+
+def test_a_custom_term_beside_builtin_terms_gives_the_keyword_answers(panda):
+    solver = nik.IKSolver(panda)
+    T = panda.fk(_configs(panda, 4, 51))
+    term = nik.costs.custom(lambda q: (q[:, :1] - 3.0).clamp(min=0), name="j1_below_3")  # met by every answer
+    a = solver.solve(T, costs=[nik.costs.posture(panda, "mid"), term])
+    b = solver.solve(T, q_rest="mid", costs=[term])
+    assert _same(a, b) and a.success.all()
+
+
+def test_a_posture_term_and_q_rest_together_is_one_line(panda):
+    solver = nik.IKSolver(panda)
+    T = panda.fk(_configs(panda, 1, 52))
+    with pytest.raises(ValueError, match="posture term and q_rest= both given"):
+        solver.solve(T, q_rest="mid", costs=[nik.costs.posture(panda, "mid")])
+    with pytest.raises(ValueError, match="two 'manipulability' terms"):
+        solver.solve(T, costs=[nik.costs.manipulability(panda), nik.costs.manipulability(panda)])
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])  # the null-space step (7 joints); the closed form's branch (6)
+def test_manipulability_term_raises_the_measure_and_keeps_success(name):
+    from nik.costs.manipulability import measure
+
+    robot = nik.load_robot(name)
+    solver = nik.IKSolver(robot)
+    T = robot.fk(_configs(robot, 30, 53))
+    plain = solver.solve(T)
+    res = solver.solve(T, costs=[nik.costs.manipulability(robot, weight=0.2)])
+    assert torch.equal(res.success, plain.success) and res.success.all()
+    w0, w1 = measure(robot, plain.q), measure(robot, res.q)
+    assert (w1 >= w0 * (1 - 1e-9)).all() and w1.mean() > 1.1 * w0.mean()
+    pos, rot = nik.pose_error(T, robot.fk(res.q))
+    assert (pos <= 1e-4).all() and (rot <= 1.745e-3).all()
+
+
+def test_manipulability_term_in_solve_all_and_solve_path(panda):
+    from nik.costs.manipulability import measure
+
+    solver = nik.IKSolver(panda)
+    q0 = _configs(panda, 1, 54)[0]
+    T0 = panda.fk(q0)
+    Q = solver.solve_all(T0[None], n_starts=32, costs=[nik.costs.manipulability(panda)])
+    w = measure(panda, Q)
+    assert Q.shape[0] >= 2 and (w[:-1] >= w[1:]).all()  # highest first
+    path = T0.repeat(12, 1, 1).clone()
+    path[:, 0, 3] += torch.linspace(0, 0.06, 12, dtype=torch.float64)
+    plain = solver.solve_path(path, q0)
+    res = solver.solve_path(path, q0, costs=[nik.costs.manipulability(panda)])
+    assert res.success.all() and plain.success.all()
+    assert measure(panda, res.q).mean() > measure(panda, plain.q).mean()
+    assert res.path.largest_step <= res.path.max_step

@@ -549,3 +549,39 @@ def test_per_joint_generated_fk_broadcasts_and_matches_robot_fk(name):
     for i, e in enumerate(entries):
         r, c = divmod(i, 4)
         assert_close(torch.as_tensor(e, dtype=torch.float64).expand(2, 2, 2, 5), T[..., r, c], atol=1e-12, rtol=0)
+
+
+def _fd_jacobian(robot, q, h=1e-6):
+    """``(6, dof)`` by central differences of ``robot.fk``: the position's derivative, and the angular velocity
+    ``vee(dR R^T)`` of the rotation's."""
+    T0 = robot.fk(q)
+    cols = []
+    for i in range(robot.dof):
+        dq = torch.zeros_like(q)
+        dq[i] = h
+        Tp, Tm = robot.fk(q + dq), robot.fk(q - dq)
+        lin = (Tp[:3, 3] - Tm[:3, 3]) / (2 * h)
+        W = (Tp[:3, :3] - Tm[:3, :3]) / (2 * h) @ T0[:3, :3].T
+        cols.append(torch.cat([lin, torch.stack([W[2, 1], W[0, 2], W[1, 0]])]))
+    return torch.stack(cols, dim=1)
+
+
+@pytest.mark.parametrize("name", ["kuka_kr", "rebot_v_6r", "panda", "stanford"])  # DH, POE, URDF, prismatic
+def test_robot_jacobian_equals_finite_differences_of_fk(name):
+    robot = nik.load_robot(name)
+    q = random_q(robot, 5, seed=11)
+    J = robot.jacobian(q)
+    assert J.shape == (5, 6, robot.dof) and J.dtype == torch.float64
+    for b in range(5):
+        assert_close(J[b], _fd_jacobian(robot, q[b]), atol=1e-7, rtol=0)
+    assert_close(robot.jacobian(q[2]), J[2])  # (dof,) in, (6, dof) out
+    assert robot.jacobian(q.reshape(5, 1, robot.dof)).shape == (5, 1, 6, robot.dof)
+    assert robot.jacobian(q.float()).dtype == torch.float32
+    np_J = robot.jacobian(q[0].numpy())
+    assert isinstance(np_J, torch.Tensor) and np_J.dtype == torch.float64
+
+
+def test_robot_jacobian_is_differentiable_gradcheck():
+    robot = nik.load_robot("stanford")  # a prismatic joint among revolute ones
+    q = random_q(robot, 2, seed=12).requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda x: robot.jacobian(x), (q,), eps=1e-6, atol=1e-6)

@@ -88,6 +88,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from nik.ik.goals import preference, prefers
+
 __all__ = [
     "CollideCfg",
     "Setup",
@@ -261,7 +263,7 @@ def after_solve(solver, backend, plan, T_target, q_near, representation, world):
 
     from nik.ik.targets import as_poses
 
-    first = plan if plan.q_rest is None else replace(plan, q_rest=None)
+    first = plan if plan.q_rest is None and not plan.manipulability else replace(plan, q_rest=None, manipulability=0.0)
     res = backend.solve(solver.robot, first, T_target, q_near, representation)
     return resolve(solver.robot, plan, as_poses(T_target, representation), res, s, getattr(solver, "collide_cfg", None))
 
@@ -345,6 +347,11 @@ def _goal(robot, plan, B: int, float32: bool):
     model = model_of(robot, plan.lm_cfg)
     half, modes = _modes_half(plan, B, plan.float32_margin if float32 else 1.0)
     opts, iopts = model.lm.options(*plan.stage_tolerances(float32))
+    if plan.manipulability > 0.0:  # read by the posture step only (nik.ik.goals.preference)
+        from nik.kernels.lm import MANIPULABILITY
+
+        opts = opts.copy()
+        opts[MANIPULABILITY] = plan.manipulability
     return model, np.ascontiguousarray(half), np.ascontiguousarray(modes), opts, iopts
 
 
@@ -495,11 +502,9 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
         k = idx.size
         kgoal = (model, half[idx], modes[idx], opts, iopts)
         first = q[idx]
-        if plan.q_rest is not None:  # the first start moved towards q_rest first (the re-solve lands nearer it)
-            from nik.ik.goals import rest_target
-
-            rest_free(robot, None, kgoal, Tn, first, success[idx], rest_target(robot, plan.q_rest, B)[idx],
-                      plan.rest_weight)  # fmt: skip
+        if prefers(plan):  # the first start moved towards q_rest first (the re-solve lands nearer it)
+            qr, weight, _ = preference(robot, plan, B, None)
+            rest_free(robot, None, kgoal, Tn, first, success[idx], qr[idx], weight)
         # from the answer alone first: it ends most targets (44 of 55 on the panda's scene), without the
         # hypotheses, the blocked-pose proof or the restarts, which only the rest get
         # (the margin-0 pass of :func:`_solve_free` waits for the second pass: measured, it costs more there than
@@ -530,12 +535,10 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
         changed[idx] = True
     if s.mesh is not None and s.covered:  # the meshes judge what the spheres still call colliding
         _meshes_judge(robot, s, q, hit, success, changed, idx, done, q_own, own_ok)
-    if plan.q_rest is not None:
-        from nik.ik.goals import rest_target
-
+    if prefers(plan):
         ok = success & ~hit
-        qr, push = rest_target(robot, plan.q_rest, B), _pusher(robot, s, plan, cfg, goal, Tnp)
-        changed |= rest_free(robot, s, goal, Tnp, q, ok, qr, plan.rest_weight, push)
+        (qr, weight, _), push = preference(robot, plan, B, None), _pusher(robot, s, plan, cfg, goal, Tnp)
+        changed |= rest_free(robot, s, goal, Tnp, q, ok, qr, weight, push)
     if changed.any():
         if float32:  # rounded and clamped into the float32 limits, as the answer is returned, then judged
             q[changed] = np.clip(q[changed].astype(np.float32), model.lo32, model.hi32)
@@ -629,7 +632,7 @@ def all_solutions(solver, plan, T: torch.Tensor, Q: torch.Tensor, world=None, de
 
     robot = solver.robot
     s = setup(robot, solver.world if world is None else world, solver.self_collision, solver.mesh_verdict)
-    if s is None and plan.q_rest is None:
+    if s is None and not prefers(plan):
         return Q
     q = np.ascontiguousarray(_numpy(Q), dtype=np.float64).reshape(-1, robot.dof)
     Tq = np.ascontiguousarray(np.repeat(_numpy(T).astype(np.float64).reshape(1, 4, 4), q.shape[0] + 1, axis=0))
@@ -660,17 +663,20 @@ def all_solutions(solver, plan, T: torch.Tensor, Q: torch.Tensor, world=None, de
     ok = _judge(model, plan, Tk, q)[0]
     q = np.ascontiguousarray(q[ok])
     Tk = np.ascontiguousarray(Tk[ok])
-    if plan.q_rest is not None and q.shape[0]:
-        from nik.ik.goals import rest_target
-
-        qr = rest_target(robot, plan.q_rest, 1).repeat(q.shape[0], axis=0)
+    if prefers(plan) and q.shape[0]:
+        qr, weight, _ = preference(robot, plan, q.shape[0], None)
         goal = _goal(robot, plan, q.shape[0], float32)
         push = None if s is None else _pusher(robot, s, plan, cfg, goal, Tk)
-        rest_free(robot, s, goal, Tk, q, np.ones(q.shape[0], dtype=bool), qr, plan.rest_weight, push)
+        rest_free(robot, s, goal, Tk, q, np.ones(q.shape[0], dtype=bool), qr, weight, push)
         if float32:
             q = np.clip(q.astype(np.float32), model.lo32, model.hi32).astype(np.float64)
         keep = _judge(model, plan, Tk, q)[0]
-        q, qr = q[keep], qr[keep]
-        q = q[np.argsort(((q - qr) ** 2).sum(1), kind="stable")]
+        q, qr = np.ascontiguousarray(q[keep]), qr[keep]
+        if plan.q_rest is not None:  # nearest q_rest first, else the highest manipulability first
+            q = q[np.argsort(((q - qr) ** 2).sum(1), kind="stable")]
+        else:
+            from nik.costs.manipulability import manipulability
+
+            q = q[np.argsort(manipulability(robot).compiled(q)[0][:, 0], kind="stable")]
     out = torch.from_numpy(np.ascontiguousarray(q)).to(dtype=Q.dtype, device=Q.device)
     return dedupe(out, tol=dedupe_tol, prismatic=robot.prismatic)

@@ -1,5 +1,20 @@
 """A user's cost terms in a call (``solve(T, costs=[...])``, ``solve_all(..., costs=)``): the problem of the call.
 
+**Built-in terms take the compiled route of their keyword** (:func:`route`): a term of :mod:`nik.costs` given via
+``costs=`` becomes the keyword it equals before anything runs, so it costs what that keyword costs:
+
+- :func:`nik.costs.posture` -> ``q_rest=`` its posture, ``rest_weight=`` its weight (in (0, 1]; 0 drops it);
+- :func:`nik.costs.bounded_pose` -> ``bounds=`` its bounds; :func:`nik.costs.pose` -> the goal itself, its
+  ``tol_pos`` / ``tol_rot`` the call's (both must be of the call's targets);
+- :func:`nik.costs.limits` -> nothing (the limits always hold);
+- :func:`nik.costs.collision` -> ``world=`` its world, the collision stage with its ``self_collision`` and margin;
+- :func:`nik.costs.manipulability` -> the plan's ``manipulability`` (:mod:`nik.ik.goals`: the null-space step, the
+  closed form's branch of the highest measure).
+
+A term given twice, or beside the keyword it equals with another value (a posture and ``q_rest=``), is a one-line
+``ValueError``. Only the other terms (:func:`nik.costs.custom`, a user's :class:`nik.costs.Term`) run the torch
+problem below, beside the call's own terms.
+
 After the usual pipeline (guess, refine, the goal and collision stages) gives a pose solution, the call's terms
 are assembled into one problem (:class:`nik.lm.problem.Problem`) and solved by :func:`nik.lm.problem.solve_problem`
 from that answer (its choices: :mod:`nik.lm.problem`):
@@ -27,12 +42,15 @@ targets fail a term and names the first.
 
 from __future__ import annotations
 
+import copy
 import warnings
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
-__all__ = ["HYPOTHESES", "UNIFORM_STARTS", "apply", "call_terms", "check_costs", "solve"]
+__all__ = ["HYPOTHESES", "UNIFORM_STARTS", "Route", "apply", "call_terms", "check_costs", "route", "solve",
+           "solve_routed"]  # fmt: skip
 
 #: Uniform starts a target whose terms are still unmet draws after the pipeline's other starts.
 UNIFORM_STARTS = 4
@@ -58,6 +76,130 @@ def check_costs(costs) -> list:
     return list(items)
 
 
+@dataclass
+class Route:
+    """The keywords of a call after its built-in terms were turned into them (:func:`route`); ``costs`` the terms
+    left for the torch problem (None: none), ``solver`` the solver to run (a copy where a collision term changes its
+    self-collision check or margin)."""
+
+    solver: object
+    tol_pos: float
+    tol_rot: float
+    world: object = None
+    bounds: object = None
+    q_rest: object = None
+    rest_weight: float = 0.1
+    manipulability: float = 0.0
+    costs: list | None = field(default=None)
+
+    def plain(self, solver) -> bool:
+        """Nothing but the pose asked, on ``solver`` itself (the one-pose path may answer)."""
+        plain = self.world is self.bounds is self.q_rest is self.costs is None
+        return plain and self.manipulability == 0.0 and self.solver is solver
+
+    def goal(self, plan):
+        """``plan`` with this call's goal and preferences (:func:`nik.ik.plan.with_goal`, the manipulability)."""
+        from dataclasses import replace
+
+        from nik.ik.plan import with_goal
+
+        plan = with_goal(plan, self.bounds, self.q_rest, self.rest_weight)
+        return replace(plan, manipulability=self.manipulability) if self.manipulability else plan
+
+
+def _same_targets(term, T, name: str) -> None:
+    Tt = term.T.to(torch.float64)
+    T = T.to(device="cpu", dtype=torch.float64)
+    if Tt.shape[-3] not in (1, T.shape[0]) or not torch.allclose(Tt.cpu().expand_as(T), T, atol=1e-9, rtol=0):
+        raise ValueError(f"costs: the {name} term's targets are not the call's (give the goal as the call's targets)")
+
+
+def route(solver, costs, T, *, tol_pos, tol_rot, world=None, bounds=None, q_rest=None, rest_weight=0.1) -> Route:
+    """The call's keywords with the built-in terms of ``costs`` turned into them (module docstring); ``T``: the
+    call's targets ``(B, 4, 4)`` (a callable giving them: read only where a pose term needs them). One-line
+    ``ValueError`` on a term given twice or beside its keyword with another value."""
+    from nik.costs.collision import MARGIN, CollisionTerm
+    from nik.costs.limits import LimitsTerm
+    from nik.costs.manipulability import ManipulabilityTerm
+    from nik.costs.pose import BoundedPoseTerm, PoseTerm
+    from nik.costs.posture import PostureTerm
+    from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+
+    out = Route(solver, tol_pos, tol_rot, world, bounds, q_rest, rest_weight)
+    if costs is None:
+        return out
+    items = check_costs(costs)
+    seen, rest = set(), []
+    for t in items:
+        kind = type(t)
+        if kind in (PostureTerm, PoseTerm, BoundedPoseTerm, CollisionTerm, ManipulabilityTerm):
+            if kind in seen:
+                raise ValueError(f"costs: two {t.name!r} terms of the same kind; give one")
+            seen.add(kind)
+        if kind is LimitsTerm:
+            continue
+        if kind is PostureTerm:
+            if q_rest is not None:
+                raise ValueError("costs: a posture term and q_rest= both given; give one")
+            if t.weight == 0.0:
+                continue
+            if not 0.0 < t.weight <= 1.0:
+                raise ValueError(f"costs: the posture term's weight is the share of the way each step asks, in (0, 1]; "
+                                 f"got {t.weight!r}")  # fmt: skip
+            out.q_rest, out.rest_weight = t.q_rest, t.weight
+        elif kind is BoundedPoseTerm:
+            if bounds is not None:
+                raise ValueError("costs: a bounded_pose term and bounds= both given; give one")
+            _same_targets(t, T() if callable(T) else T, "bounded_pose")
+            out.bounds = t.bounds
+        elif kind is PoseTerm:
+            _same_targets(t, T() if callable(T) else T, "pose")
+            given = (tol_pos, tol_rot) != (DEFAULT_TOL_POS, DEFAULT_TOL_ROT)
+            if given and (t.tol_pos, t.tol_rot) != (tol_pos, tol_rot):
+                raise ValueError("costs: the pose term's tolerances differ from tol_pos= / tol_rot=; give one")
+            out.tol_pos, out.tol_rot = t.tol_pos, t.tol_rot
+        elif kind is CollisionTerm:
+            if world is not None and t.world is not None and t.world is not world:
+                raise ValueError("costs: a collision term's world and world= differ; give one")
+            out.world = t.world if t.world is not None else world
+            cfg = getattr(solver, "collide_cfg", None)
+            margin = cfg.margin if cfg is not None else MARGIN
+            own = solver.self_collision if solver.self_collision is not None else True  # None: on where checked
+            if t.self_collision != own or t.margin != margin:
+                from dataclasses import replace
+
+                from nik.ik.collide import CollideCfg
+
+                out.solver = copy.copy(out.solver)
+                out.solver.self_collision = t.self_collision
+                out.solver.collide_cfg = replace(cfg or CollideCfg(), margin=t.margin)
+        elif kind is ManipulabilityTerm:
+            out.manipulability = t.weight
+        else:
+            rest.append(t)
+    out.costs = rest or None
+    return out
+
+
+def solve_routed(solver, T_target, costs, call: dict):
+    """:meth:`nik.IKSolver.solve` with ``costs`` given: the built-in terms turned into keywords (:func:`route`), then
+    the call as :meth:`~nik.IKSolver.solve` makes it (the torch problem only for the terms left); ``call``: the other
+    arguments of :meth:`~nik.IKSolver.solve` by name."""
+    from nik.ik import backends
+    from nik.ik.targets import as_poses, check_tolerances
+
+    rep = call["representation"]
+    keys = ("tol_pos", "tol_rot", "world", "bounds", "q_rest", "rest_weight")
+    r = route(solver, costs, lambda: as_poses(T_target, rep), **{k: call[k] for k in keys})
+    check_tolerances(r.tol_pos, r.tol_rot)
+    be = backends.choose(r.solver, T_target)
+    plan = call["plan"]
+    if plan is None:
+        plan = r.solver.plan(backend=be.name, tol_pos=r.tol_pos, tol_rot=r.tol_rot, seed=call["seed"],
+                             max_iters=call["max_iters"])  # fmt: skip
+    return solve(r.solver, be, r.goal(plan), T_target, call["q_near"], rep, r.world, r.costs)
+
+
 def call_terms(solver, plan, T: torch.Tensor, world, costs: list, *, q_rest=None, rest_weight=None):
     """``(terms, limits, setup)``: the call's terms for targets ``T: (B, 4, 4)`` float64 (module docstring), the
     limits term and the collision check (:class:`nik.ik.collide.Setup` or None)."""
@@ -74,6 +216,8 @@ def call_terms(solver, plan, T: torch.Tensor, world, costs: list, *, q_rest=None
     q_rest = plan.q_rest if q_rest is None else q_rest
     if q_rest is not None:
         terms.append(C.posture(robot, q_rest, weight=plan.rest_weight if rest_weight is None else rest_weight))
+    if getattr(plan, "manipulability", 0.0) > 0.0:
+        terms.append(C.manipulability(robot, weight=plan.manipulability))
     s = collide.setup(robot, solver.world if world is None else world, solver.self_collision, solver.mesh_verdict)
     if s is not None:
         terms.append(C.collision(robot, s.world, self_collision=s.self_on, model=s.model))

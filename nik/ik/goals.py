@@ -32,6 +32,11 @@ the middle of the joint ranges (distance from the limits). A 6-joint arm without
 answers do not move (to rounding; the residual step only polishes them). :data:`REST_ITERS` steps at most.
 Where a collision check is active the posture is applied by the collision stage instead, after its re-solve and
 before its verdict, never ending in a collision (:func:`nik.ik.collide.rest_free`).
+
+**Manipulability** (``plan.manipulability``: :func:`nik.costs.manipulability` given via ``costs=``) takes the same
+route: the same null-space step, its preference step raising Yoshikawa's measure as well (:func:`preference`;
+:func:`nik.kernels.driver.rest_posture`), and on an arm with a closed form, before it, the closed-form branch of the
+highest measure among those that meet the goal (:func:`most_manipulable`; not under a collision check).
 """
 
 from __future__ import annotations
@@ -43,8 +48,8 @@ import torch
 
 from nik.ik.result import IKResult
 
-__all__ = ["REST_DAMPING", "REST_ITERS", "all_solutions_bounded", "rest_target", "rest_torch", "solve_compiled",
-           "solve_torch"]  # fmt: skip
+__all__ = ["REST_DAMPING", "REST_ITERS", "all_solutions_bounded", "most_manipulable", "preference", "prefers",
+           "rest_target", "rest_torch", "solve_compiled", "solve_torch"]  # fmt: skip
 
 #: Most null-space steps towards ``q_rest`` per target.
 REST_ITERS = 50
@@ -73,6 +78,55 @@ def rest_target(robot, q_rest, batch: int) -> np.ndarray:
     if not np.isfinite(q).all():
         raise ValueError("q_rest: NaN or infinite joint angle")
     return np.broadcast_to(q.reshape(-1, dof), (batch, dof)).copy()
+
+
+def prefers(plan) -> bool:
+    """Whether the plan asks the null-space step for anything: a posture (``q_rest``) or the manipulability."""
+    return plan.q_rest is not None or plan.manipulability > 0.0
+
+
+def preference(robot, plan, B: int, opts: np.ndarray | None) -> tuple[np.ndarray, float, np.ndarray | None]:
+    """``(q_rest (B, dof), rest_weight, opts)`` of :func:`nik.kernels.driver.rest_posture` for the plan's
+    preferences: without ``q_rest`` zeros and weight 0 (the manipulability alone); ``opts`` a copy with
+    ``plan.manipulability`` in its ``MANIPULABILITY`` entry where that is set (``opts`` itself otherwise)."""
+    from nik.kernels.lm import MANIPULABILITY
+
+    if plan.q_rest is None:
+        qr, weight = np.zeros((B, robot.dof)), 0.0
+    else:
+        qr, weight = rest_target(robot, plan.q_rest, B), float(plan.rest_weight)
+    if plan.manipulability > 0.0 and opts is not None:
+        opts = opts.copy()
+        opts[MANIPULABILITY] = plan.manipulability
+    return qr, weight, opts
+
+
+def most_manipulable(robot, model, T: np.ndarray, q: np.ndarray, ok: np.ndarray, check) -> np.ndarray:
+    """``(B,)`` bool, which rows changed: ``q: (B, dof)`` in place, where ``ok``, replaced by the closed form's
+    solution of ``T: (B, 4, 4)`` of the highest manipulability among those ``check(rows, q_rows) -> (k,) bool``
+    accepts (the goal of targets ``rows`` by FK), where that is higher than the answer's own; nothing on an arm
+    without a closed form."""
+    from nik.costs.manipulability import manipulability
+
+    changed = np.zeros(q.shape[0], dtype=bool)
+    idx = np.flatnonzero(ok)
+    if model.closed is None or idx.size == 0:
+        return changed
+    Tk = np.ascontiguousarray(T[idx])
+    sols, valid = model.closed_solutions(Tk)  # (k, 8, n), (k, 8)
+    k, m, n = sols.shape
+    flat = np.ascontiguousarray(np.where(valid[..., None], sols, 0.0).reshape(k * m, n))
+    good = valid.reshape(-1).copy()
+    if good.any():
+        good[good] = check(np.repeat(idx, m)[good], np.ascontiguousarray(flat[good]))
+    term = manipulability(robot)
+    r = np.where(good, term.compiled(flat)[0][:, 0], np.inf).reshape(k, m)  # 1 / (w + eps): lowest is best
+    own = term.compiled(np.ascontiguousarray(q[idx]))[0][:, 0]
+    best = r.argmin(1)
+    better = r[np.arange(k), best] < own
+    q[idx[better]] = sols[better, best[better]]
+    changed[idx[better]] = True
+    return changed
 
 
 def _modes_half(plan, B: int, margin: float):
@@ -150,10 +204,12 @@ def solve_compiled(backend, robot, plan, T_target, q_near, representation) -> IK
     seed = lm.seed_state(plan.seed)
     driver.solve_bounded(model.G, model.joints, job.T, starts, half, modes, opts, iopts, iopts_multi,
                          budget.astype(np.int64), seed, q, ok, it, pos, rot, d)  # fmt: skip
-    if plan.q_rest is not None:
-        qr = rest_target(robot, plan.q_rest, B)
-        driver.rest_posture(model.G, model.joints, job.T, q, half, modes, opts, qr, float(plan.rest_weight),
-                            REST_ITERS, REST_DAMPING, ok, pos, rot, d)  # fmt: skip
+    if prefers(plan):
+        if plan.manipulability > 0.0:
+            most_manipulable(robot, model, job.T, q, ok, lambda rows, qk: _inside(model, job.T, rows, qk, modes, half))
+        qr, weight, popts = preference(robot, plan, B, opts)
+        driver.rest_posture(model.G, model.joints, job.T, q, half, modes, popts, qr, weight, REST_ITERS, REST_DAMPING,
+                            ok, pos, rot, d)  # fmt: skip
     if float32:  # rounded, clamped into the float32 limits, measured again against the asked bounds
         q = np.clip(q.astype(np.float32), model.lo32, model.hi32)
         full, _ = _modes_half(plan, B, 1.0)
@@ -166,16 +222,35 @@ def solve_compiled(backend, robot, plan, T_target, q_near, representation) -> IK
 
 
 def rest_compiled(plan, job, answers) -> None:
-    """In place: the successful answers (classic tolerances) moved towards ``plan.q_rest`` (compiled)."""
-    from nik.kernels import driver
+    """In place: the successful answers (classic tolerances) moved towards ``plan.q_rest`` and a higher
+    manipulability (module docstring; compiled)."""
+    from nik.kernels import driver, lm
 
     model, B = job.model, job.size
     opts, _ = model.lm.options(job.tol_pos, job.tol_rot, plan.max_iters)
     half, modes = _modes_half(plan, B, 1.0)
-    qr = rest_target(job.robot, plan.q_rest, B)
-    driver.rest_posture(model.G, model.joints, job.T, answers.q, half, modes, opts, qr, float(plan.rest_weight),
-                        REST_ITERS, REST_DAMPING, answers.ok(job), answers.pos_err, answers.rot_err,
-                        np.empty((B, 6)))  # fmt: skip
+    ok = answers.ok(job)
+    if plan.manipulability > 0.0:
+
+        def within(rows, qk):
+            pos, rot = np.empty(len(qk)), np.empty(len(qk))
+            lm.pose_errors(model.G, model.joints, np.ascontiguousarray(job.T[rows]), qk, pos, rot)
+            return (pos <= job.tol_pos) & (rot <= job.tol_rot)
+
+        if most_manipulable(job.robot, model, job.T, answers.q, ok, within).any():
+            lm.pose_errors(model.G, model.joints, job.T, answers.q, answers.pos_err, answers.rot_err)
+    qr, weight, popts = preference(job.robot, plan, B, opts)
+    driver.rest_posture(model.G, model.joints, job.T, answers.q, half, modes, popts, qr, weight, REST_ITERS,
+                        REST_DAMPING, ok, answers.pos_err, answers.rot_err, np.empty((B, 6)))  # fmt: skip
+
+
+def _inside(model, T: np.ndarray, rows: np.ndarray, q: np.ndarray, modes: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """``(k,)`` bool: ``q: (k, n)`` inside the bounds ``half[rows]`` of targets ``T[rows]`` (modes ``modes[rows]``)."""
+    from nik.kernels import lm
+
+    d = np.empty((len(q), 6))
+    lm.bounded_errors(model.G, model.joints, np.ascontiguousarray(T[rows]), q, np.ascontiguousarray(modes[rows]), d)
+    return (np.abs(d) <= half[rows]).all(1)
 
 
 # -- torch ---------------------------------------------------------------------------------------------------------
@@ -219,7 +294,7 @@ def solve_torch(backend, robot, plan, T_target, q_near, representation) -> IKRes
         restarts=None if plan.restarts or plan.fallback != "none" else 0,
     )
     q = robot.clamp(q).to(T.dtype)
-    if plan.q_rest is not None:
+    if prefers(plan):
         ok = within_bounds(T, robot.fk(q), stage_half)
         q = rest_torch(robot, T, q, ok, plan, stage_half, job.tol_pos, job.tol_rot)
     Tq = robot.fk(q)
@@ -244,7 +319,8 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
     from nik.poses import within_bounds
 
     rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None else 0.5
-    qr = torch.from_numpy(rest_target(robot, plan.q_rest, q.shape[0])).to(q)
+    qr, weight, _ = preference(robot, plan, q.shape[0], None)
+    qr = torch.from_numpy(qr).to(q)
     q = q.clone()
     s = torch.where(ok, 1.0, 0.0).to(q)
     w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=q.dtype, device=q.device)
@@ -267,19 +343,20 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
             3 - torch.isinf(half[:, 3:]).sum(-1).to(q).clamp(max=1)
         )
     s = torch.where(live < q.shape[1], s, torch.zeros_like(s))  # no null space: nothing to move
-    dist = (q - qr).square().sum(-1)
+    dist, up = _preference_torch(robot, q, qr, weight, plan.manipulability)
     for _ in range(REST_ITERS):
         if not bool((s >= 1.0 / 64.0).any()):
             break
-        z = s[:, None] * plan.rest_weight * (qr - q)
+        z = s[:, None] * (weight * (qr - q) + up)
         rhs = e - (J @ z[..., None])[..., 0]
         y = torch.linalg.solve(J @ J.transpose(-1, -2) + eye, rhs[..., None])[..., 0]
         dq = z + (J.transpose(-1, -2) @ y[..., None])[..., 0]
         qc = robot.clamp(q + dq)
         ec, Jc, done = task(qc)
-        dc = (qc - qr).square().sum(-1)
+        dc, upc = _preference_torch(robot, qc, qr, weight, plan.manipulability)
         good = (s >= 1.0 / 64.0) & done & (dc < dist) & (dq.abs().amax(-1) <= max_step) & torch.isfinite(dq).all(-1)
         q = torch.where(good[:, None], qc, q)
+        up = torch.where(good[:, None], upc, up)
         e = torch.where(good[:, None], ec, e)
         J = torch.where(good[:, None, None], Jc, J)
         dist = torch.where(good, dc, dist)
@@ -287,8 +364,27 @@ def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> t
     return q
 
 
+def _preference_torch(robot, q: torch.Tensor, qr: torch.Tensor, weight: float, mw: float):
+    """``(cost (B,), up (B, dof))``: :func:`nik.kernels.driver.rest_posture`'s preference cost of ``q`` and the
+    manipulability's step ``mw (w + EPS) grad(w) / |grad(w)|^2`` (zeros without it), in torch."""
+    dist = (q - qr).square().sum(-1)
+    if mw <= 0.0:
+        return dist, torch.zeros_like(q)
+    from nik.costs.manipulability import EPS, measure
+
+    with torch.enable_grad():
+        x = q.detach().clone().requires_grad_(True)
+        w = measure(robot, x)
+        (gw,) = torch.autograd.grad(w.sum(), x)
+    w = w.detach()
+    g2 = gw.square().sum(-1, keepdim=True)
+    up = torch.where(g2 > 0, mw * (w + EPS)[:, None] * gw / torch.where(g2 > 0, g2, torch.ones_like(g2)), 0.0)
+    return 0.5 * weight * weight * dist + 0.5 * (mw / (w + EPS)) ** 2, up
+
+
 def rest_stage(plan, job, answers):
-    """The stages' posture step (classic tolerances, torch): the successful answers moved towards ``plan.q_rest``."""
+    """The stages' posture step (classic tolerances, torch): the successful answers moved towards ``plan.q_rest``
+    (and a higher manipulability)."""
     from nik.poses import pose_error
 
     ok = answers.ok(job)

@@ -80,6 +80,9 @@ class Plan:
             classic tolerances; then the goal stages of :mod:`nik.ik.goals` solve the call on either backend.
         q_rest: a preferred posture (``"mid"``, ``(dof,)`` or ``(B, dof)`` radians) or None; rest_weight: the share
             of the way to it each null-space step asks (:mod:`nik.ik.goals`).
+        manipulability: the weight of :func:`nik.costs.manipulability` given via ``costs=`` (0: none): the
+            null-space step raises Yoshikawa's measure, the closed form's branch of the highest one is chosen
+            (:mod:`nik.ik.goals`).
     """
 
     source: str
@@ -101,6 +104,7 @@ class Plan:
     bounds: Any = None
     q_rest: Any = None
     rest_weight: float = 0.1
+    manipulability: float = 0.0
 
     def stage_tolerances(self, float32: bool) -> tuple[float, float]:
         """``(tol_pos, tol_rot)`` the stages refine to: the asked ones, times :attr:`float32_margin` for float32."""

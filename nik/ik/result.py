@@ -102,8 +102,7 @@ class TensorResult(IKResult):
     ``success``, ``iterations``, ``reachable``) is ``torch.from_numpy`` of the kernel's output, as the batch path
     returns it (same dtype, shape, memory), made on first read (a microsecond each) rather than for every field of
     every call; the other fields are those of a plain result. Built by :meth:`of`; the dataclass constructor (and
-    ``dataclasses.replace``) gives one whose fields are all set. The one-pose path may set ``q`` and ``success`` at
-    once to tensors on the same arrays (its output slot's, made before the call: :mod:`nik.ik.backends.one_pose`)."""
+    ``dataclasses.replace``) gives one whose fields are all set."""
 
     q = _Tensor(0)
     pos_err = _Tensor(1)

@@ -316,8 +316,9 @@ def fallback(plan: Plan, job: Job, answers: Answers) -> Answers:
 
 def final_check(plan: Plan, job: Job, answers: Answers) -> IKResult:
     """Stage 6: the result, with success measured against the asked tolerances and reachability attached; with
-    ``plan.q_rest`` the successful answers first moved towards it in the null space (:mod:`nik.ik.goals`)."""
-    if plan.q_rest is not None:
+    ``plan.q_rest`` (or ``plan.manipulability``) the successful answers first moved towards it in the null space
+    (:mod:`nik.ik.goals`)."""
+    if plan.q_rest is not None or plan.manipulability > 0.0:
         from nik.ik import goals
 
         if job.model is not None:

@@ -20,11 +20,12 @@ import math
 import numpy as np
 
 from nik.kernels._jit import kernel
-from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain
+from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain, _chain_jacobian
 from nik.kernels.closed import guess as closed_guess
 from nik.kernels.lm import (
     _STREAM,
     CLASSIC,
+    MANIPULABILITY,
     MAX_STEP,
     ROT_WEIGHT,
     TOL_POS,
@@ -41,6 +42,8 @@ from nik.kernels.lm import (
     turns_toward,
 )
 from nik.kernels.lm_step import _damped_step, _judge
+from nik.kernels.manipulability import EPS as MANIP_EPS
+from nik.kernels.manipulability import _manipulability
 from nik.kernels.poses import reach_flags
 from nik.kernels.seeded import lm_starts, merge, ranked_hypotheses
 from nik.tolerances import NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS
@@ -48,6 +51,8 @@ from nik.tolerances import NEAR_FAR, NEAR_PRIOR, NEAR_PRIOR_STEPS
 __all__ = ["FALLBACK_ANALYTIC", "FALLBACK_MULTISTART", "FALLBACK_NONE", "SOURCE_ANALYTIC", "SOURCE_MULTISTART",
            "SOURCE_NETWORK", "rest_posture", "solve", "solve_bounded"]  # fmt: skip
 
+#: The manipulability's null-space step stops after a kept step that lowers its cost by less than this share of it.
+MANIP_STALL = 0.02
 #: Codes of the plan's guess source and fallback.
 SOURCE_NETWORK, SOURCE_ANALYTIC, SOURCE_MULTISTART = 0, 1, 2
 FALLBACK_NONE, FALLBACK_ANALYTIC, FALLBACK_MULTISTART = 0, 1, 2
@@ -390,6 +395,34 @@ def solve_bounded(
 
 
 @kernel
+def _geometric(G, joints, q, J, rw, mode, T6, J6):
+    """``J6 (6, n)``: the geometric Jacobian at ``q``, from the task's ``J`` where that is it (the classic error:
+    rotation rows times ``rw``), else by :func:`nik.kernels.chain._chain_jacobian` (scratch ``T6``)."""
+    if mode == CLASSIC and rw != 0.0:
+        for r in range(6):
+            f = 1.0 if r < 3 else 1.0 / rw
+            for i in range(q.shape[0]):
+                J6[r, i] = J[r, i] * f
+    else:
+        _chain_jacobian(G, joints, q, T6, J6)
+
+
+@kernel
+def _preference(joints, q, q_rest, weight, mw, J6, A6, M6, grad):
+    """``(cost, w)`` of the null-space step's preferences at ``q (n,)``: ``|q - q_rest|^2`` where ``mw == 0`` (the
+    posture alone), else ``weight^2 |q - q_rest|^2 / 2 + (mw / (w + EPS))^2 / 2`` with ``w`` the manipulability of
+    the geometric Jacobian ``J6`` (:mod:`nik.kernels.manipulability`), ``grad (n,)`` then the gradient of ``log w``."""
+    n = q.shape[0]
+    dist = 0.0
+    for i in range(n):
+        dist += (q[i] - q_rest[i]) ** 2
+    if mw == 0.0:
+        return dist, 0.0
+    w = _manipulability(J6, joints, A6, M6, grad)
+    return 0.5 * weight * weight * dist + 0.5 * (mw / (w + MANIP_EPS)) ** 2, w
+
+
+@kernel
 def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damping, ok, pos, rot, d):
     """In place: the answers ``q: (B, n)`` where ``ok[b]`` moved towards ``q_rest: (B, n)`` in the null space of the
     task, never leaving it (see :mod:`nik.ik.goals`).
@@ -407,14 +440,23 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     :func:`solve_bounded`'s).
     A target whose task has as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space
     and is left as it is.
+
+    With ``opts[MANIPULABILITY] = mw > 0`` (:func:`nik.costs.manipulability`) the step also asks ``s * mw`` times the
+    Gauss-Newton step of the residual ``1 / (w + EPS)``, ``(w + EPS) grad(w) / |grad(w)|^2`` (the step that would
+    double Yoshikawa's ``w`` to first order), and a step is kept where the cost of :func:`_preference` falls
+    (``weight = 0`` with ``q_rest`` anything: the manipulability alone); it stops after a kept step that lowers that
+    cost by less than :data:`MANIP_STALL` of it (the measure has no target to reach).
     """
     B, n = q.shape
     rw, tol_pos, tol_rot, max_step = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT], opts[MAX_STEP]
+    mw = opts[MANIPULABILITY]
     Tc = np.empty((3, 4))
     J, Jc = np.empty((6, n)), np.empty((6, n))
     e, ec, dd = np.empty(6), np.empty(6), np.empty(6)
     A, g = np.empty((n, n)), np.empty(n)
     qp, qc, dq = np.empty(n), np.empty(n), np.empty(n)
+    T6, J6, A6, M6 = np.empty((3, 4)), np.empty((6, n)), np.empty((6, 6)), np.empty((6, n))
+    grad, gradc = np.empty(n), np.empty(n)
     free = joints.copy()  # no joint held at a limit: the step slides along it and the clamp follows (as before)
     for i in range(n):
         free[i, LOWER], free[i, UPPER] = -math.inf, math.inf
@@ -432,17 +474,25 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
         _, p, r, done = _eval(G, joints, q[b], T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, J, e, dd)
         if not done:
             continue
-        dist = 0.0
-        for i in range(n):
-            dist += (q[b, i] - q_rest[b, i]) ** 2
+        if mw > 0.0:
+            _geometric(G, joints, q[b], J, rw, mode, T6, J6)
+        dist, w = _preference(joints, q[b], q_rest[b], weight, mw, J6, A6, M6, grad)
         lam = 1.0  # 1 / s
         for _ in range(iters):
             s = 1.0 / lam
+            gm = 0.0  # the manipulability's share: s mw (w + EPS) grad(w) / |grad(w)|^2, grad(w) = w grad(log w)
+            if mw > 0.0 and w > 0.0:
+                g2 = 0.0
+                for i in range(n):
+                    g2 += grad[i] * grad[i]
+                if g2 > 0.0:
+                    gm = s * mw * (w + MANIP_EPS) / (w * g2)
             for i in range(n):
-                qp[i] = q[b, i] + s * weight * (q_rest[b, i] - q[b, i])
+                qp[i] = q[b, i] + s * weight * (q_rest[b, i] - q[b, i]) + gm * grad[i]
             good = _damped_step(J, e, None, None, 0.0, qp, damping, q[b], free, 0.0, 0.0, math.inf, A, g, dq)
             big = 0.0
             dc = math.inf
+            wc = 0.0
             if good:
                 for i in range(n):
                     big = max(big, abs(dq[i]))
@@ -451,17 +501,20 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
             if good:
                 _bounds(joints, qc)
                 _, pc, rc, donec = _eval(G, joints, qc, T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, dd)
-                dc = 0.0
-                for i in range(n):
-                    dc += (qc[i] - q_rest[b, i]) ** 2
+                if mw > 0.0:
+                    _geometric(G, joints, qc, Jc, rw, mode, T6, J6)
+                dc, wc = _preference(joints, qc, q_rest[b], weight, mw, J6, A6, M6, gradc)
                 good = donec
             kept, lam = _judge(good, dist, dc, False, lam, 0.5, 2.0, 1.0, math.inf)
             if kept:
                 _copy(qc, q[b])
                 _copy(Jc.ravel(), J.ravel())
                 _copy(ec, e)
-                dist, p, r = dc, pc, rc
-                if big < 1e-9:
+                stall = mw > 0.0 and dist - dc < MANIP_STALL * dist
+                dist, p, r, w = dc, pc, rc, wc
+                if mw > 0.0:
+                    _copy(gradc, grad)
+                if big < 1e-9 or stall:
                     break
             elif lam > 64.0:
                 break

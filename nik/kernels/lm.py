@@ -71,6 +71,8 @@ __all__ = [
 # entries of opts (float64) and iopts (int64), see lm_options
 ROT_WEIGHT, LAMBDA0, LAMBDA_UP, LAMBDA_DOWN, LAMBDA_MIN, LAMBDA_MAX = 0, 1, 2, 3, 4, 5
 EPS, MAX_STEP, STALL_REL, TOL_POS, TOL_ROT = 6, 7, 8, 9, 10
+#: the weight of the manipulability preference of :func:`nik.kernels.driver.rest_posture` (0: none; only it reads it)
+MANIPULABILITY = 11
 FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS, TAIL_AFTER, TAIL_ITERS, TAIL_STALL_ITERS = range(7)
 
 _TWO_PI = 2.0 * math.pi
@@ -117,7 +119,7 @@ def lm_options(
     ``tail_after`` (default: none) run ``tail_iters`` iterations at most and stop after ``tail_stall_iters``
     without progress (defaults ``iters`` and ``stall_iters``): longer runs for the hard targets that are left.
     """
-    opts = np.empty(11)
+    opts = np.zeros(12)  # opts[MANIPULABILITY] = 0: set per call by the preference's caller
     opts[[ROT_WEIGHT, LAMBDA0, LAMBDA_UP, LAMBDA_DOWN, LAMBDA_MIN, LAMBDA_MAX]] = (
         rot_weight, lambda0, lambda_up, lambda_down, lambda_min, lambda_max
     )  # fmt: skip

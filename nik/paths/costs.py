@@ -20,6 +20,7 @@ by the problem: ``res.path.closure`` is measured again.
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 
 import numpy as np
@@ -46,14 +47,112 @@ def _split(costs) -> tuple[list, list]:
 def solve_path(solver, T_path, q_start=None, *, costs=None, timing=False, vel_limits=None, acc_limits=None,
                **kw):  # fmt: skip
     """:func:`nik.paths.solve.solve_path` (same arguments), then the problem of the module docstring where
-    ``costs`` are given."""
+    ``costs`` are given. The built-in terms take their keyword's route first (:func:`nik.ik.costs.route`; a posture
+    term's ``q_rest``, its weight unused: the path's own pulls serve it), the manipulability the path's null-space
+    step (:func:`_manipulable`); only the other terms make the problem."""
     if costs is None:
         return search_path(solver, T_path, q_start, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+    from nik.ik.costs import route
+    from nik.paths.solve import _poses
+
     per, path_terms = _split(costs)
-    with warnings.catch_warnings(record=True):  # folded into the final report's warning
-        warnings.simplefilter("always")
+    keys = ("tol_pos", "tol_rot", "world", "bounds", "q_rest")
+    r = route(solver, per or None, lambda: torch.from_numpy(_poses(T_path, kw.get("representation"))[0]),
+              **{k: kw.get(k) for k in keys})  # fmt: skip
+    q_rest = r.q_rest[0] if isinstance(r.q_rest, torch.Tensor) and r.q_rest.shape[0] == 1 else r.q_rest
+    kw.update(tol_pos=r.tol_pos, tol_rot=r.tol_rot, world=r.world, bounds=r.bounds, q_rest=q_rest)
+    solver, per = r.solver, r.costs or []
+    if not per and not path_terms and not r.manipulability:
+        return search_path(solver, T_path, q_start, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+    more = bool(per or path_terms)
+    with warnings.catch_warnings(record=True) if more else contextlib.nullcontext():  # folded into the report's
+        if more:
+            warnings.simplefilter("always")
         res = search_path(solver, T_path, q_start, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+    if r.manipulability:
+        res = _manipulable(solver, T_path, q_start, res, r.manipulability, None if more else timing,
+                           (vel_limits, acc_limits), kw)  # fmt: skip
+    if not more:
+        return res
     return _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, acc_limits, **kw)
+
+
+def _manipulable(solver, T_path, q_start, res, weight: float, timing, limits: tuple, kw: dict):
+    """``res`` with the reached waypoints moved in the null space of their poses towards a higher manipulability (the
+    null-space step of :func:`nik.kernels.driver.rest_posture`, as a pose's), all at once, one step a sweep (at most
+    :data:`nik.ik.goals.REST_ITERS` sweeps), stopping before a sweep that makes a step larger than ``max_step`` (or the
+    path's largest step before) or a waypoint collide that did not; kept where every waypoint is still within its goal
+    by FK (a closed path's ``closure`` measured again), else ``res`` as it was. ``timing``
+    (None: not timed here), ``limits``: ``(vel_limits, acc_limits)`` of :func:`nik.paths.solve._time`."""
+    from dataclasses import replace
+
+    from nik.ik import collide
+    from nik.ik.goals import REST_DAMPING, REST_ITERS
+    from nik.ik.model import model_of
+    from nik.kernels import driver
+    from nik.kernels.lm import CLASSIC, MANIPULABILITY
+    from nik.paths.solve import _closure, _poses, _report, _time
+
+    robot = solver.robot
+    Tn, dtype, device = _poses(T_path, kw.get("representation"))
+    N, n = Tn.shape[0], robot.dof
+    q = np.ascontiguousarray(res.q.detach().cpu().numpy(), dtype=np.float64)
+    ok = res.success.cpu().numpy().astype(bool)
+    if kw.get("bounds") is None:
+        half, modes = np.zeros((N, 6)), np.full(N, CLASSIC, dtype=np.int64)
+    else:
+        from nik.ik.bounds import parse_bounds
+
+        goal = parse_bounds(kw["bounds"], batch=N, tol_pos=kw["tol_pos"], tol_rot=kw["tol_rot"])
+        half, modes = np.ascontiguousarray(goal.expand(N)), np.ascontiguousarray(goal.modes(N))
+    model = model_of(robot, None)
+    opts = model.lm.options(kw["tol_pos"], kw["tol_rot"])[0].copy()
+    opts[MANIPULABILITY] = weight
+    q0 = None if q_start is None else np.asarray(torch.as_tensor(q_start).cpu(), dtype=np.float64).reshape(n)
+
+    def largest(x):
+        prev = np.concatenate([(x[:1] if q0 is None else q0[None]), x[:-1]])
+        return np.abs(x - prev).max()
+
+    bound = max(res.path.max_step, largest(q))
+    s = collide.setup(robot, solver.world if kw.get("world") is None else kw["world"], solver.self_collision)
+    hit = None if s is None else s.colliding(robot, q)
+    qm, scratch = q.copy(), (np.empty(N), np.empty(N), np.empty((N, 6)))
+    for _ in range(REST_ITERS):  # one step per waypoint a sweep: the path moves as one, its steps watched
+        qn = qm.copy()
+        driver.rest_posture(model.G, model.joints, Tn, qn, half, modes, opts, np.zeros((N, n)), 0.0, 1, REST_DAMPING,
+                            ok, *scratch)  # fmt: skip
+        if largest(qn) > bound or (s is not None and (s.colliding(robot, qn) & ~hit).any()):
+            break
+        qm, moved = qn, np.abs(qn - qm).max()
+        if moved < 1e-9:
+            break
+    keep = bool((qm != q).any())
+    if keep:  # every moved waypoint is still within its goal (the step's own test); checked again by FK
+        Tq = robot.fk(torch.from_numpy(qm))
+        from nik.poses import pose_error, tool_error, within_bounds
+
+        T = torch.from_numpy(Tn)
+        p, rt = pose_error(T, Tq)
+        if kw.get("bounds") is None:
+            within = ((p <= kw["tol_pos"]) & (rt <= kw["tol_rot"])).numpy()
+        else:
+            within = within_bounds(T, Tq, torch.from_numpy(half)).numpy()
+        keep = bool((within | ~ok).all())
+    if not keep:
+        if timing:
+            _time(res.path, robot, q, timing, *limits)
+        return res
+    report = _report(robot, qm, q0, ok, res.path.reasons, res.path.max_step)
+    report.closed, report.warning = res.path.closed, res.path.warning
+    report.closure = _closure(qm, model.wraps) if report.closed else None
+    if timing:
+        _time(report, robot, qm, timing, *limits)
+    like = dict(dtype=dtype, device=device)
+    out = replace(res, q=torch.from_numpy(qm).to(**like), pos_err=p.to(**like), rot_err=rt.to(**like), path=report)
+    if kw.get("bounds") is not None and res.axis_err is not None:
+        out.axis_err = tool_error(T, Tq, torch.from_numpy(modes)).to(**like)
+    return out
 
 
 def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, acc_limits, *, tol_pos, tol_rot,

@@ -574,6 +574,23 @@ class Robot:
         T, J = chain_jacobian(q.reshape(-1, self.dof), G, off, prismatic=self.prismatic_or_none)
         return to_homogeneous(T).reshape(*batch, 4, 4), J.reshape(*batch, 6, self.dof)
 
+    def jacobian(self, q: torch.Tensor) -> torch.Tensor:
+        """The geometric Jacobian of the tool (flange and tool frame) in the base frame.
+
+        Args:
+            q: ``(..., dof)`` radians (metres for prismatic joints); any leading batch shape, any float
+                dtype/device (a numpy array or a list: float64).
+
+        Returns:
+            ``(..., 6, dof)`` in ``q``'s dtype and device, rows linear velocity (m/s per unit of joint speed) then
+            angular velocity (rad/s): a revolute joint's column ``[z_i x (p - p_i); z_i]``, a prismatic one's
+            ``[z_i; 0]``. Differentiable with respect to ``q`` (the torch closed form of
+            :func:`nik.kinematics.chain_jacobian`, the one :meth:`fk_and_jacobian` and the LM use).
+        """
+        if not isinstance(q, _Tensor):
+            q = _tensor_of(_joint_array(q))
+        return self.fk_and_jacobian(q)[1]
+
     @property
     def prismatic_or_none(self) -> torch.Tensor | None:
         """:attr:`prismatic`, or None for an all-revolute arm (the kernels' fast path)."""

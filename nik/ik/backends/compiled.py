@@ -286,7 +286,7 @@ class CompiledBackend:
 
         answers = Answers(q, pos, rot, iters)
         answers._ok = ok
-        if plan.q_rest is not None:  # the preferred posture, in the null space (nik.ik.goals)
+        if plan.q_rest is not None or plan.manipulability > 0.0:  # the preferences, in the null space (nik.ik.goals)
             from nik.ik.goals import rest_compiled
 
             rest_compiled(plan, job, answers)
