@@ -130,3 +130,36 @@ def test_an_xarm7_circle_the_search_left_at_3_5_deg_is_followed_in_steps_under_3
     steps = np.abs(np.diff(np.concatenate([q0.numpy()[None], res.q.numpy()]), axis=0)).max()
     assert steps <= math.radians(3.0)
     assert res.path.closure <= math.radians(0.1)
+
+
+@pytest.mark.parametrize("seed, radius", [(0, 0.4), (3, 0.6), (10, 0.4)])
+def test_a_ur5_loop_out_of_reach_in_the_middle_is_neither_closed_nor_continued_by_a_jump(seed, radius):
+    """Issue 49 item 3: ur5 circles whose middle leaves the reach (no ``q_start``, loop detected). Main closed them
+    with a 180-196 deg step between two reached waypoints and went on with 15 deg steps between others, every such
+    waypoint flagged reached. Now: no step above ``max_step`` between two successful neighbours; ``success`` is FK's
+    verdict except where a reached waypoint is reached only by such a step from a reached one; the loop, which closes
+    only by a jump here, is left open: ``res.path.closed`` False, ``closure`` the gap, the warning says it."""
+    from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
+
+    robot = nik.load_robot("ur5")
+    T, _ = _circle(robot, seed, radius, n=120)
+    with pytest.warns(UserWarning) as caught:
+        res = nik.IKSolver(robot).solve_path(T)
+    q, ok = res.q.numpy(), res.success.numpy()
+    pe, re = nik.pose_error(T, robot.fk(res.q))
+    fk = ((pe <= DEFAULT_TOL_POS) & (re <= DEFAULT_TOL_ROT)).numpy()
+    assert not fk.all()  # the middle is out of reach
+    max_step = res.path.max_step
+    steps = np.abs(np.diff(q, axis=0)).max(axis=1)
+    assert not (ok[1:] & ok[:-1] & (steps > max_step)).any()
+    jump = np.concatenate([[False], fk[1:] & fk[:-1] & (steps > max_step)])
+    np.testing.assert_array_equal(ok, fk & ~jump)
+    assert [r == "reached only by a step above max_step from the waypoint before" for r in res.path.reasons] == list(
+        jump
+    )
+    message = str(caught[0].message)
+    assert not res.path.closed
+    assert res.path.closure == pytest.approx(np.abs(q[-1] - q[0]).max(), abs=1e-9)  # ur5's joints: +-180 deg
+    assert res.path.closure > max_step and "the loop is left open" in message
+    if jump.any():
+        assert f"waypoint {int(np.argmax(jump | ~fk))} of 120" in message
