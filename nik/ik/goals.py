@@ -43,8 +43,9 @@ import torch
 
 from nik.ik.result import IKResult
 
-__all__ = ["REST_CANDIDATE_ITERS", "REST_DAMPING", "REST_ITERS", "REST_UNIFORM", "all_solutions_bounded",
-           "nearest_candidates", "rest_target", "rest_torch", "solve_compiled", "solve_torch"]  # fmt: skip
+__all__ = ["REST_CANDIDATE_ITERS", "REST_DAMPING", "REST_HYPOTHESES", "REST_ITERS", "REST_UNIFORM",
+           "all_solutions_bounded", "nearest_candidates", "nearest_candidates_torch", "rest_target", "rest_torch",
+           "solve_compiled", "solve_torch"]  # fmt: skip
 
 #: Most null-space steps towards ``q_rest`` per target.
 REST_ITERS = 50
@@ -55,6 +56,8 @@ REST_DAMPING = 1e-8
 REST_CANDIDATE_ITERS = 30
 #: Uniform starts of :func:`nearest_candidates` where the plan has no network.
 REST_UNIFORM = 8
+#: The network's hypotheses that :func:`nearest_candidates` refines: those nearest ``q_rest`` before refinement.
+REST_HYPOTHESES = 4
 
 
 def rest_target(robot, q_rest, batch: int) -> np.ndarray:
@@ -206,7 +209,9 @@ def nearest_candidates(plan, job, answers, qr: np.ndarray) -> None:
         hyp = answers.hypotheses
         if hyp is None:
             hyp = job.backend.network(plan, job)[0]
-        starts.append(np.asarray(hyp, dtype=np.float64)[idx])
+        hyp = np.asarray(hyp, dtype=np.float64)[idx]
+        near = np.argsort(np.linalg.norm(hyp - qr[idx, None], axis=-1), axis=1, kind="stable")[:, :REST_HYPOTHESES]
+        starts.append(np.take_along_axis(hyp, near[..., None], axis=1))
     else:
         g = np.random.default_rng(int(plan.seed))
         starts.append(g.uniform(model.lo, model.hi, (idx.size, REST_UNIFORM, n)))
@@ -345,11 +350,59 @@ def rest_stage(plan, job, answers):
     """The stages' posture step (classic tolerances, torch): the successful answers moved towards ``plan.q_rest``."""
     from nik.poses import pose_error
 
+    nearest_candidates_torch(plan, job, answers)
     ok = answers.ok(job)
     q = rest_torch(job.robot, job.T, answers.q, ok, plan, None, job.tol_pos, job.tol_rot)
     pos, rot = pose_error(job.T, job.robot.fk(q))
     answers.q, answers.pos_err, answers.rot_err, answers._ok = q, pos, rot, None
     return answers
+
+
+def nearest_candidates_torch(plan, job, answers) -> None:
+    """In place (torch): :func:`nearest_candidates` on the torch backend: the successful answers of a redundant arm
+    replaced by the candidate nearest ``plan.q_rest`` that meets the goal, among the answer, LM from ``q_rest`` and
+    LM from the :data:`REST_HYPOTHESES` network hypotheses nearest it (``answers.hypotheses``; without them
+    :data:`REST_UNIFORM` uniform starts), batched (:func:`nik.lm.lm_solve`, no restarts, at most
+    :data:`REST_CANDIDATE_ITERS` iterations)."""
+    from nik.lm import lm_solve
+    from nik.poses import pose_error
+
+    robot, T = job.robot, job.T
+    n = robot.dof
+    ok = answers.ok(job)
+    if n <= 6 or not bool(ok.any()):
+        return
+    idx = torch.nonzero(ok).flatten()
+    qr = torch.from_numpy(rest_target(robot, plan.q_rest, T.shape[0])).to(answers.q)[idx]
+    starts = [qr[:, None]]
+    if answers.hypotheses is not None:
+        hyp = answers.hypotheses[idx].to(answers.q)
+        near = (hyp - qr[:, None]).norm(dim=-1).argsort(dim=1, stable=True)[:, :REST_HYPOTHESES]
+        starts.append(torch.gather(hyp, 1, near[..., None].expand(-1, -1, n)))
+    else:
+        g = torch.Generator(device=T.device).manual_seed(int(plan.seed))
+        starts.append(robot.sample(idx.numel() * REST_UNIFORM, generator=g, dtype=T.dtype, device=T.device)
+                      .reshape(idx.numel(), REST_UNIFORM, n))  # fmt: skip
+    S = robot.clamp(torch.cat(starts, 1))
+    m, K = S.shape[:2]
+    Tk = T[idx].repeat_interleave(K, dim=0)
+    q, it = lm_solve(robot, Tk, S.reshape(m * K, n), cfg=plan.lm_cfg, tol_pos=job.tol_pos, tol_rot=job.tol_rot,
+                     max_iters=REST_CANDIDATE_ITERS, restarts=0)  # fmt: skip
+    q = robot.clamp(q).to(T.dtype)
+    pos, rot = pose_error(Tk, robot.fk(q))
+    good = ((pos <= job.tol_pos) & (rot <= job.tol_rot)).reshape(m, K)
+    q, pos, rot = q.reshape(m, K, n), pos.reshape(m, K), rot.reshape(m, K)
+    dist = torch.where(good, (q - qr[:, None]).norm(dim=-1), torch.full_like(pos, float("inf")))
+    best = dist.argmin(1)
+    rows = torch.arange(m, device=T.device)
+    take = dist[rows, best] < (answers.q[idx] - qr).norm(dim=-1)
+    at, pick = idx[take], (rows[take], best[take])
+    answers.q, answers.pos_err, answers.rot_err = answers.q.clone(), answers.pos_err.clone(), answers.rot_err.clone()
+    answers.q[at] = q[pick].to(answers.q.dtype)
+    answers.pos_err[at] = pos[pick].to(answers.pos_err.dtype)
+    answers.rot_err[at] = rot[pick].to(answers.rot_err.dtype)
+    answers.iterations[idx] += it.reshape(m, K).sum(1).to(answers.iterations.dtype)
+    answers._ok = None
 
 
 # -- solve_all -----------------------------------------------------------------------------------------------------
