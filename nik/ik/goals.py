@@ -21,8 +21,13 @@ and for the targets still outside, LM from uniform starts with the restart budge
 reach, a free position axis lifting the reach test; none at all where the plan has neither restarts nor a
 fallback). Float32 targets are refined to the plan's float32 margin of the bounds and measured again after rounding.
 
-**Preferred postures** (``q_rest``, ``rest_weight``; the plan's). After the answer is found, each target that
-succeeded moves towards ``q_rest`` in the null space of its task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
+**Preferred postures** (``q_rest``, ``rest_weight``; the plan's). After the answer is found, on a redundant arm (more
+joints than the task's 6 rows) each target that succeeded first takes the candidate nearest ``q_rest`` that meets the
+goal: the answer, LM from ``q_rest`` and LM from the network's :data:`REST_HYPOTHESES` hypotheses nearest it (without
+a network, :data:`REST_UNIFORM` uniform starts), a short refinement each (:func:`nearest_candidates`; torch:
+:func:`nearest_candidates_torch`); its cost is those LM runs (xarm7 and panda, one thread: about twice the time of
+``q_rest`` without them, ``benchmarks/goals.py --rest``). Then it moves towards ``q_rest`` in the null space of its
+task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
 ``z = s * rest_weight * (q_rest - q)`` (``e, J``: the task's residual and Jacobian, classic or bounded, the rows of
 free axes zero, so a free axis adds a direction of the null space), kept only where FK of the result is still within
 tolerance (the stages' tolerance: nothing is lost) and nearer ``q_rest``; a refused step halves ``s``,

@@ -53,7 +53,10 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    :data:`SEARCH_TRIGGER` (:func:`_flatten`, kept only where nothing gets worse).
 7. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
-   on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
+   on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration). A waypoint that FK
+   reaches but only by a step above ``max_step`` from a reached neighbour counts as not reached (:func:`jumps`,
+   reason :data:`JUMP_REASON`): a path is never continued by a jump between two successes. The step from
+   ``q_start`` into the first waypoint is warned about, not flagged (the arm gets there before the path).
 
 **Closed loops** (``closed=None``: detected when the last pose equals the first within the tolerances; True /
 False force it): the last row of joints equals the first, so the cycle repeats without a jump. Closed-form arms:
@@ -63,7 +66,11 @@ LM chain's drift in the null space), :func:`_close_loop` solves the last waypoin
 difference back over the path, kept only when no waypoint is lost and no step grows beyond ``max_step`` (or the
 largest step before). On joints that turn past a full turn (``wraps``) the rows are equal modulo whole turns: a
 path that takes such a joint once around ends one turn further (turning back would be a jump); ``res.path.closure``
-reports the gap.
+reports the gap. A loop is never closed by a jump: where the closed answer has a step above ``max_step`` between two
+reached waypoints, the path is solved again as open and that answer kept where it reaches more waypoints (as many:
+where its largest step between reached waypoints is smaller by :data:`SEARCH_GAIN`); such a loop, and one whose last
+row stays more than ``max_step`` from its first, is left open: ``res.path.closed`` False, ``closure`` the gap, the
+warning says it (:func:`open_note`). The second solve costs as much as the first, on loops with a jump only.
 
 **Tolerant paths** (``bounds=``, :mod:`nik.ik.bounds`): with one free tool axis on a closed-form arm the candidates
 are the closed form's branches at sampled angles about it (:func:`_branches`) and the dynamic programming picks the
@@ -79,7 +86,9 @@ waypoint missed or a step above ``max_step``) has posture rows towards it (:clas
 
 **Timing** (``timing=True`` or a dict of :func:`nik.paths.timing.time_path` keywords): the answer is timed after the
 path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
-one-line ValueError before any work): ``res.path.t``, ``qd``, ``qdd``, ``timing``.
+one-line ValueError before any work): ``res.path.t``, ``qd``, ``qdd``, ``timing``. A broken path (a waypoint not
+reached, a step between waypoints above ``max_step``) gets no schedule: those stay None and the warning says why
+(:func:`_time`); ``nik path --timing`` then writes no ``t_s`` column and exits 1.
 
 **Settings**: the solver's, as :meth:`~nik.IKSolver.solve` reads them. The LM config (``swarm_cfg`` an
 :class:`nik.lm.LMCfg`) is the chains' and polishes' LM; ``fallback="multistart"`` (the default without a closed
@@ -115,7 +124,17 @@ from nik.ik.targets import check_tolerances, pose_array, q_near_array
 from nik.paths.trajopt import polish_path
 from nik.tolerances import score
 
-__all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
+__all__ = [
+    "JUMP_REASON",
+    "PATH_MAX_STEP",
+    "PATH_PULL",
+    "PATH_PULL_CAP",
+    "PATH_RESTARTS",
+    "jumps",
+    "open_note",
+    "solve_path",
+    "untimed_reason",
+]
 
 #: Default threshold of a reconfiguration: a step (largest joint motion between two waypoints) above it is
 #: reported and warned about, radians (10 degrees).
@@ -214,10 +233,11 @@ def solve_path(
             is infeasible, reason ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"``
             (the motion).
         closed: None: the path is closed when its last pose equals its first within the tolerances (position and
-            rotation); True / False force it. A closed path returns joints whose last row equals its first (module
-            docstring, "closed loops").
+            rotation); True / False force it. A closed path returns joints whose last row equals its first, unless it
+            closes only by a step above ``max_step``: then it is left open (module docstring, "closed loops").
         timing: True (or a dict of :func:`nik.paths.timing.time_path` keywords: ``tool_speed``, ``vel_scale``,
-            ``acc_scale``) times the trajectory: ``res.path.t``, ``qd``, ``qdd`` and ``timing``.
+            ``acc_scale``) times the trajectory: ``res.path.t``, ``qd``, ``qdd`` and ``timing``; a broken path (a
+            waypoint not reached, a step above ``max_step``) is not timed (None, and the warning says why).
         vel_limits, acc_limits: ``(dof,)`` joint speed / acceleration limits of the timing (default the robot's).
         bounds: a tolerant goal for every waypoint (:func:`nik.ik.bounds.parse_bounds`: ``"axis_z"``, 6 numbers,
             ``(N, 6)``); None: ``tol_pos`` / ``tol_rot``. Module docstring, "tolerant paths".
