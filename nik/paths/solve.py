@@ -1212,8 +1212,11 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     c_ok = _final_check(run, chain[0])[2] & ((chain[0] >= model.lo - 1e-9) & (chain[0] <= model.hi + 1e-9)).all(axis=1)
     if col is not None:
         c_ok &= ~_colliding(model, chain[0], col)
+    c_ok &= ~jumps(chain[0], c_ok, max_step)  # a waypoint reached only by a jump is missed (the report's rule)
+    s_ok = ok.T[rows, choice]
+    s_ok &= ~jumps(found, s_ok, max_step)
     c_cost = _path_cost(chain[0], c_ok, run.q0, wraps, max_step)
-    s_cost = _path_cost(found, ok.T[rows, choice], run.q0, wraps, max_step)
+    s_cost = _path_cost(found, s_ok, run.q0, wraps, max_step)
     if c_cost[:2] < s_cost[:2] or (c_cost[:2] == s_cost[:2] and s_cost[2] > c_cost[2] - SEARCH_GAIN):
         return chain
     return found, found_its, sources[int(of[choice[0]])] if of[choice[0]] >= 0 else "search"
