@@ -25,8 +25,9 @@ fallback). Float32 targets are refined to the plan's float32 margin of the bound
 joints than the task's 6 rows) each target that succeeded first takes the candidate nearest ``q_rest`` that meets the
 goal: the answer, LM from ``q_rest`` and LM from the network's :data:`REST_HYPOTHESES` hypotheses nearest it (without
 a network, :data:`REST_UNIFORM` uniform starts), a short refinement each (:func:`nearest_candidates`; torch:
-:func:`nearest_candidates_torch`); its cost is those LM runs (xarm7 and panda, one thread: about twice the time of
-``q_rest`` without them, ``benchmarks/goals.py --rest``). Then it moves towards ``q_rest`` in the null space of its
+:func:`nearest_candidates_torch`); its cost is those LM runs (xarm7 and panda, one thread: 0.36-0.38 ms a target,
+1.6-1.8x ``q_rest`` without them; the mean distance to the middle 1.01x that of the nearest solution ``solve_all``
+finds, was 1.25-1.42x: ``benchmarks/results/goals_rest.md``). Then it moves towards ``q_rest`` in the null space of its
 task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
 ``z = s * rest_weight * (q_rest - q)`` (``e, J``: the task's residual and Jacobian, classic or bounded, the rows of
 free axes zero, so a free axis adds a direction of the null space), kept only where FK of the result is still within
@@ -197,13 +198,13 @@ def nearest_candidates(plan, job, answers, qr: np.ndarray) -> None:
     """In place (compiled): each successful answer of a redundant arm (more joints than the task's 6 rows: the null
     space that :func:`nik.kernels.driver.rest_posture` moves in) replaced by the candidate nearest ``qr: (B, dof)``
     (Euclidean joint distance) among those that meet the goal. The candidates: the answer, LM from ``qr`` itself, and
-    LM from each of the network's hypotheses (``answers.hypotheses``, else the backend's guess stage anew; without a
-    network, :data:`REST_UNIFORM` uniform starts): LM without restarts, at most :data:`REST_CANDIDATE_ITERS`
-    iterations, kept where it converges within the stage tolerances (inside the limits: the kernels clamp). The null
-    space is a continuum and the guess lands on one stretch of it; moving along it from there ends near that guess
-    (xarm7, 200 targets: 1.42x the distance of the nearest solution ``solve_all`` finds; with the candidates 1.05x,
-    ``benchmarks/goals.py --rest``). A 6-joint arm has no null space: its answers stay (the closed form's branch is the
-    plan's choice, ``q_near`` picks among them)."""
+    LM from the network's :data:`REST_HYPOTHESES` hypotheses nearest ``qr`` (``answers.hypotheses``, else the
+    backend's guess stage anew; without a network, :data:`REST_UNIFORM` uniform starts): LM without restarts, at most
+    :data:`REST_CANDIDATE_ITERS` iterations, kept where it converges within the stage tolerances (inside the limits:
+    the kernels clamp). The null space is a continuum and the guess lands on one stretch of it; moving along it from
+    there ends near that guess (xarm7, 200 targets: 1.42x the distance of the nearest solution ``solve_all`` finds;
+    with the candidates 1.015x, ``benchmarks/goals.py --rest``). A 6-joint arm has no null space: its answers stay
+    (the closed form's branch is the plan's choice, ``q_near`` picks among them)."""
     model, n = job.model, job.model.dof
     ok = np.asarray(answers.ok(job))
     if n <= 6 or not ok.any():
