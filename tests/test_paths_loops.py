@@ -62,8 +62,9 @@ def test_a_kinova_loop_from_q_start_starts_without_a_jump_and_closes(seed, radiu
     detection the first waypoint is within ``max_step`` of ``q_start`` (main: 136, 229, 175 deg), every pose is
     reached by FK, and no step above ``max_step`` joins two successful waypoints. These loops cannot be followed from
     ``q_start``'s posture without a reconfiguration (main: steps of 140 and 104, 107 and 33, 176 and 174 deg, the
-    second closing the loop, every waypoint flagged reached): since issue 49 item 3 the waypoint a jump leads into counts as not reached, and a loop that closes only
-    by a larger jump than the open path takes is left open (said in the warning); one that closes, closes exactly."""
+    second closing the loop, every waypoint flagged reached): since issue 49 item 3 the waypoint a jump leads into
+    counts as not reached, and a loop that closes only by a larger jump than the open path takes is left open (said
+    in the warning); one that closes, closes exactly."""
     robot = _kinova()
     T, q0 = _circle(robot, seed, radius)
     res = _solve(nik.IKSolver(robot), T, q0)
