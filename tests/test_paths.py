@@ -41,6 +41,15 @@ def _reached(robot, T, q) -> torch.Tensor:
     return (pe <= DEFAULT_TOL_POS) & (re <= DEFAULT_TOL_ROT) & inside
 
 
+def _reached_without_a_jump(robot, T, q, max_step: float = math.radians(10.0)) -> torch.Tensor:
+    """The independent check of ``res.success`` (issue 49 item 3): :func:`_reached`, except a waypoint whose step from
+    a reached waypoint before it (largest joint motion) is above ``max_step``: it is reached only by a jump."""
+    fk = _reached(robot, T, q)
+    jump = torch.zeros_like(fk)
+    jump[1:] = fk[1:] & fk[:-1] & ((q[1:] - q[:-1]).abs().amax(dim=-1) > max_step)
+    return fk & ~jump
+
+
 def _largest_step(q: torch.Tensor) -> float:
     return float((q[1:] - q[:-1]).abs().max())
 
@@ -97,14 +106,20 @@ def test_q_start_makes_the_trajectory_start_nearest_it(ur5):
 
 def test_q_start_on_a_trapped_branch_is_not_followed_into_the_limit(ur5):
     """From the trapped branch's own configuration the LM chain would turn joint 0 by a full turn at the limit;
-    solve_path falls back to the closed form's branches and reports the one unavoidable large step, nothing more."""
+    solve_path falls back to the closed form's branches and reports the one unavoidable large step, nothing more.
+    Every pose is reached by FK; the waypoint the jump leads into counts as not reached (issue 49 item 3: a waypoint
+    reached only by a step above ``max_step`` is no success), the others are."""
     T = _branch_trap(ur5)
     q_start = ur5.solve(T[0]).q[0]
-    with pytest.warns(UserWarning, match="forces a reconfiguration"):
+    with pytest.warns(UserWarning, match="forces a reconfiguration") as caught:
         res = ur5.solve_path(T, q_start=q_start)
     assert res.source == "analytic"
-    assert bool(res.success.all())
+    assert bool(_reached(ur5.robot, T, res.q).all())
     assert int(res.path.reconfigurations.sum()) == 1
+    jump = int(res.path.reconfigurations.nonzero()[0])
+    assert (~res.success).nonzero().flatten().tolist() == ([jump] if jump > 0 else [])
+    assert res.path.reasons[jump] == ("reached only by a step above max_step from the waypoint before" if jump else "")
+    assert f"waypoint {jump} of" in str(caught[0].message)
 
 
 def test_a_joint_with_more_than_a_full_turn_crosses_180_degrees_continuously():
@@ -162,7 +177,7 @@ def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
     res, margin = run()
     assert margin > 0.1
     assert res.path.largest_step < math.radians(10.0)
-    assert torch.equal(res.success, _reached(panda.robot, T, res.q))
+    assert torch.equal(res.success, _reached_without_a_jump(panda.robot, T, res.q))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert int(res.success.sum()) == int(panda.solve(T).success.sum())  # every waypoint any solve reaches
@@ -181,7 +196,7 @@ def test_flags_are_honest_when_the_path_leaves_the_reach(ur5):
     T = _line(robot, q0, outward, reach_radius(robot), 40)  # ends far beyond the reach
     with pytest.warns(UserWarning) as caught:
         res = ur5.solve_path(T)
-    truth = _reached(robot, T, res.q)
+    truth = _reached_without_a_jump(robot, T, res.q)
     assert bool(truth[0]) and not bool(truth[-1])
     assert torch.equal(res.success, truth)
     steps = (res.q[1:] - res.q[:-1]).abs().amax(dim=-1)
@@ -367,7 +382,7 @@ def test_the_solvers_lm_settings_drive_the_paths_lm(panda):
     plain = _quiet_path(panda, T, q_start=q0)
     short = _quiet_path(nik.IKSolver(panda.robot, swarm_cfg=LMCfg(max_step=0.05)), T, q_start=q0)
     assert int(short.iterations.sum()) > int(plain.iterations.sum())  # shorter LM steps: more of them
-    assert torch.equal(short.success, _reached(panda.robot, T, short.q))
+    assert torch.equal(short.success, _reached_without_a_jump(panda.robot, T, short.q))
 
 
 def test_fallback_none_draws_no_uniform_restarts_along_the_path(panda):
@@ -378,7 +393,7 @@ def test_fallback_none_draws_no_uniform_restarts_along_the_path(panda):
     bare = _quiet_path(nik.IKSolver(panda.robot, fallback="none"), T, q_start=q0)
     per_try = LMCfg().iters  # a waypoint: LM from the pulled seed, then from the previous answer, nothing more
     assert int(bare.iterations.max()) <= 2 * per_try < int(plain.iterations.max())
-    assert torch.equal(bare.success, _reached(panda.robot, T, bare.q))
+    assert torch.equal(bare.success, _reached_without_a_jump(panda.robot, T, bare.q))
 
 
 def test_refine_none_keeps_the_closed_forms_branches_as_they_are(ur5):
@@ -386,7 +401,7 @@ def test_refine_none_keeps_the_closed_forms_branches_as_they_are(ur5):
     plain = _quiet_path(ur5, T)
     raw = _quiet_path(nik.IKSolver(ur5.robot, refine="none"), T)
     assert int(plain.iterations.sum()) > 0 and int(raw.iterations.sum()) == 0  # no LM at the unreached waypoints
-    assert torch.equal(raw.success, _reached(ur5.robot, T, raw.q))
+    assert torch.equal(raw.success, _reached_without_a_jump(ur5.robot, T, raw.q))
     assert torch.equal(raw.success, plain.success)
     with pytest.raises(ValueError, match="refine='none'"):
         nik.IKSolver("panda", refine="none").solve_path(T[:5])
@@ -397,7 +412,7 @@ def test_fallback_multistart_restarts_the_closed_form_arms_gaps(ur5):
     plain = _quiet_path(ur5, T)
     more = _quiet_path(nik.IKSolver(ur5.robot, fallback="multistart"), T)
     assert int(more.iterations.sum()) > int(plain.iterations.sum())
-    assert torch.equal(more.success, _reached(ur5.robot, T, more.q))
+    assert torch.equal(more.success, _reached_without_a_jump(ur5.robot, T, more.q))
 
 
 def test_a_solver_forced_onto_torch_is_refused_in_one_line(ur5):
@@ -517,6 +532,52 @@ def test_timing_without_speed_limits_is_a_one_line_error():
     assert "\n" not in str(err.value)
     res = solver.solve_path(T, timing=True, vel_limits=[1.0] * 6)  # given per call
     assert res.path.timing.duration > 0
+
+
+def test_a_path_with_missed_waypoints_gets_no_schedule_and_a_warning_that_says_why(ur5):
+    """Issue 49 item 4: a ur5 line that leaves the reach (main: timed all the same, without a word)."""
+    pytest.importorskip("toppra")
+    T = _ur5_line_out_of_reach(ur5.robot)
+    with pytest.warns(UserWarning) as caught:
+        res = ur5.solve_path(T, timing=True)
+    missed = int((~_reached(ur5.robot, T, res.q)).sum())
+    assert missed > 0
+    assert res.path.t is None and res.path.qd is None and res.path.qdd is None and res.path.timing is None
+    said = [str(w.message) for w in caught if "not timed" in str(w.message)]
+    assert len(said) == 1 and "\n" not in said[0]
+    assert f"{int((~res.success).sum())} waypoint(s) not reached" in said[0].split("not timed")[1]
+
+
+def test_a_path_with_a_step_above_max_step_gets_no_schedule(ur5):
+    """The branch trap from ``q_start`` on its trapped branch has one unavoidable jump: no schedule either; the same
+    path with a ``max_step`` above that jump is timed."""
+    pytest.importorskip("toppra")
+    T = _branch_trap(ur5)
+    q_start = ur5.solve(T[0]).q[0]
+    with pytest.warns(UserWarning, match="not timed"):
+        res = ur5.solve_path(T, q_start=q_start, timing=True)
+    assert res.path.t is None and res.path.qd is None
+    steps = (res.q[1:] - res.q[:-1]).abs().amax(dim=-1)
+    assert float(steps.max()) > res.path.max_step
+    loose = ur5.solve_path(T, q_start=q_start, timing=True, max_step=float(steps.max()) + 0.1)
+    assert bool(loose.success.all()) and loose.path.t is not None and loose.path.t.shape == (T.shape[0],)
+
+
+def test_nik_path_timing_on_a_broken_path_warns_and_writes_no_time_column(ur5, tmp_path, capsys):
+    """The CLI's choice (``nik path --help``, ``--timing``): the path is written without its ``t_s`` column, the warning
+    says why on stderr, exit status 1 (some waypoint not reached), as without ``--timing``."""
+    pytest.importorskip("toppra")
+    T = _ur5_line_out_of_reach(ur5.robot)
+    poses = tmp_path / "line.csv"
+    rows = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
+    poses.write_text("x,y,z,qw,qx,qy,qz\n" + "".join(",".join(map(repr, r)) + "\n" for r in rows.tolist()))
+    out = tmp_path / "traj.csv"
+    assert main(["path", "--robot", "ur5", "--poses", str(poses), "--out", str(out), "--timing"]) == 1
+    err = capsys.readouterr().err
+    assert "not timed" in err and "Traceback" not in err
+    with out.open() as fh:
+        header = next(csv.reader(fh))
+    assert header[0] == "index" and "t_s" not in header
 
 
 @pytest.mark.parametrize(

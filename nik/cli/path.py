@@ -58,7 +58,8 @@ def register(sub) -> None:
         "--timing",
         action="store_true",
         help="time the trajectory within the robot's joint speed and acceleration limits (toppra, the 'timing' "
-        "extra): writes a t_s column (seconds); with --plot, positions and velocities against time",
+        "extra): writes a t_s column (seconds); with --plot, positions and velocities against time. A broken path (a "
+        "waypoint not reached, a step above --max-step-deg) is not timed: the warning says why, no t_s column, exit 1",
     )
     p.add_argument("--vel-scale", type=float, default=1.0, metavar="S", help="with --timing: fraction (0, 1] of the "
                    "speed limits (default 1)")  # fmt: skip

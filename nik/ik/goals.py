@@ -21,8 +21,14 @@ and for the targets still outside, LM from uniform starts with the restart budge
 reach, a free position axis lifting the reach test; none at all where the plan has neither restarts nor a
 fallback). Float32 targets are refined to the plan's float32 margin of the bounds and measured again after rounding.
 
-**Preferred postures** (``q_rest``, ``rest_weight``; the plan's). After the answer is found, each target that
-succeeded moves towards ``q_rest`` in the null space of its task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
+**Preferred postures** (``q_rest``, ``rest_weight``; the plan's). After the answer is found, on a redundant arm (more
+joints than the task's 6 rows) each target that succeeded first takes the candidate nearest ``q_rest`` that meets the
+goal: the answer, LM from ``q_rest`` and LM from the network's :data:`REST_HYPOTHESES` hypotheses nearest it (without
+a network, :data:`REST_UNIFORM` uniform starts), a short refinement each (:func:`nearest_candidates`; torch:
+:func:`nearest_candidates_torch`); its cost is those LM runs (xarm7 and panda, one thread: 0.36-0.38 ms a target,
+1.6-1.8x ``q_rest`` without them; the mean distance to the middle 1.01x that of the nearest solution ``solve_all``
+finds, was 1.25-1.42x: ``benchmarks/results/goals_rest.md``). Then it moves towards ``q_rest`` in the null space of its
+task: steps ``dq = z + J^T (J J^T + mu I)^-1 (e - J z)``,
 ``z = s * rest_weight * (q_rest - q)`` (``e, J``: the task's residual and Jacobian, classic or bounded, the rows of
 free axes zero, so a free axis adds a direction of the null space), kept only where FK of the result is still within
 tolerance (the stages' tolerance: nothing is lost) and nearer ``q_rest``; a refused step halves ``s``,
@@ -48,13 +54,21 @@ import torch
 
 from nik.ik.result import IKResult
 
-__all__ = ["REST_DAMPING", "REST_ITERS", "all_solutions_bounded", "most_manipulable", "preference", "prefers",
-           "rest_target", "rest_torch", "solve_compiled", "solve_torch"]  # fmt: skip
+__all__ = ["REST_CANDIDATE_ITERS", "REST_DAMPING", "REST_HYPOTHESES", "REST_ITERS", "REST_UNIFORM",
+           "all_solutions_bounded", "most_manipulable", "nearest_candidates", "nearest_candidates_torch", "preference",
+           "prefers", "rest_target", "rest_torch", "solve_compiled", "solve_torch"]  # fmt: skip
 
 #: Most null-space steps towards ``q_rest`` per target.
 REST_ITERS = 50
 #: Damping of ``J J^T`` in the null-space step (m^2): keeps the step finite at singular configurations.
 REST_DAMPING = 1e-8
+#: Most LM iterations of each candidate start of :func:`nearest_candidates` (a short refinement: a start that needs
+#: more is no near candidate).
+REST_CANDIDATE_ITERS = 30
+#: Uniform starts of :func:`nearest_candidates` where the plan has no network.
+REST_UNIFORM = 8
+#: The network's hypotheses that :func:`nearest_candidates` refines: those nearest ``q_rest`` before refinement.
+REST_HYPOTHESES = 4
 
 
 def rest_target(robot, q_rest, batch: int) -> np.ndarray:
@@ -222,8 +236,9 @@ def solve_compiled(backend, robot, plan, T_target, q_near, representation) -> IK
 
 
 def rest_compiled(plan, job, answers) -> None:
-    """In place: the successful answers (classic tolerances) moved towards ``plan.q_rest`` and a higher
-    manipulability (module docstring; compiled)."""
+    """In place: the successful answers (classic tolerances) replaced by the candidate nearest ``plan.q_rest``
+    (:func:`nearest_candidates`), then moved towards it and a higher manipulability in the null space (module
+    docstring; compiled)."""
     from nik.kernels import driver, lm
 
     model, B = job.model, job.size
@@ -240,6 +255,9 @@ def rest_compiled(plan, job, answers) -> None:
         if most_manipulable(job.robot, model, job.T, answers.q, ok, within).any():
             lm.pose_errors(model.G, model.joints, job.T, answers.q, answers.pos_err, answers.rot_err)
     qr, weight, popts = preference(job.robot, plan, B, opts)
+    if plan.q_rest is not None:
+        nearest_candidates(plan, job, answers, qr)
+        ok = answers.ok(job)
     driver.rest_posture(model.G, model.joints, job.T, answers.q, half, modes, popts, qr, weight, REST_ITERS,
                         REST_DAMPING, ok, answers.pos_err, answers.rot_err, np.empty((B, 6)))  # fmt: skip
 
@@ -251,6 +269,55 @@ def _inside(model, T: np.ndarray, rows: np.ndarray, q: np.ndarray, modes: np.nda
     d = np.empty((len(q), 6))
     lm.bounded_errors(model.G, model.joints, np.ascontiguousarray(T[rows]), q, np.ascontiguousarray(modes[rows]), d)
     return (np.abs(d) <= half[rows]).all(1)
+
+
+def nearest_candidates(plan, job, answers, qr: np.ndarray) -> None:
+    """In place (compiled): each successful answer of a redundant arm (more joints than the task's 6 rows: the null
+    space that :func:`nik.kernels.driver.rest_posture` moves in) replaced by the candidate nearest ``qr: (B, dof)``
+    (Euclidean joint distance) among those that meet the goal. The candidates: the answer, LM from ``qr`` itself, and
+    LM from the network's :data:`REST_HYPOTHESES` hypotheses nearest ``qr`` (``answers.hypotheses``, else the
+    backend's guess stage anew; without a network, :data:`REST_UNIFORM` uniform starts): LM without restarts, at most
+    :data:`REST_CANDIDATE_ITERS` iterations, kept where it converges within the stage tolerances (inside the limits:
+    the kernels clamp). The null space is a continuum and the guess lands on one stretch of it; moving along it from
+    there ends near that guess (xarm7, 200 targets: 1.42x the distance of the nearest solution ``solve_all`` finds;
+    with the candidates 1.015x, ``benchmarks/goals.py --rest``). A 6-joint arm has no null space: its answers stay
+    (the closed form's branch is the plan's choice, ``q_near`` picks among them)."""
+    model, n = job.model, job.model.dof
+    ok = np.asarray(answers.ok(job))
+    if n <= 6 or not ok.any():
+        return
+    idx = np.flatnonzero(ok)
+    starts = [qr[idx, None]]
+    if plan.net is not None:
+        hyp = answers.hypotheses
+        if hyp is None:
+            hyp = job.backend.network(plan, job)[0]
+        hyp = np.asarray(hyp, dtype=np.float64)[idx]
+        near = np.argsort(np.linalg.norm(hyp - qr[idx, None], axis=-1), axis=1, kind="stable")[:, :REST_HYPOTHESES]
+        starts.append(np.take_along_axis(hyp, near[..., None], axis=1))
+    else:
+        g = np.random.default_rng(int(plan.seed))
+        starts.append(g.uniform(model.lo, model.hi, (idx.size, REST_UNIFORM, n)))
+    S = np.clip(np.concatenate(starts, 1), model.lo, model.hi)
+    m, K = S.shape[:2]
+    T = np.ascontiguousarray(np.repeat(job.T[idx], K, axis=0))
+    run = model.lm.solve(T, S.reshape(m * K, n), tol_pos=job.tol_pos, tol_rot=job.tol_rot, seed=plan.seed,
+                         max_iters=REST_CANDIDATE_ITERS, restarts=False)  # fmt: skip
+    q = run.q.reshape(m, K, n)
+    good = run.converged.reshape(m, K) & (run.pos_err.reshape(m, K) <= job.tol_pos)
+    good &= run.rot_err.reshape(m, K) <= job.tol_rot
+    dist = np.where(good, np.linalg.norm(q - qr[idx, None], axis=-1), np.inf)
+    best = dist.argmin(1)
+    rows = np.arange(m)
+    now = np.linalg.norm(np.asarray(answers.q)[idx] - qr[idx], axis=-1)
+    take = dist[rows, best] < now
+    at = idx[take]
+    pick = (rows[take], best[take])
+    answers.q[at] = q[pick]
+    answers.pos_err[at] = run.pos_err.reshape(m, K)[pick]
+    answers.rot_err[at] = run.rot_err.reshape(m, K)[pick]
+    answers.iterations[idx] += run.iterations.reshape(m, K).sum(1)
+    answers._ok = None
 
 
 # -- torch ---------------------------------------------------------------------------------------------------------
@@ -387,11 +454,60 @@ def rest_stage(plan, job, answers):
     (and a higher manipulability)."""
     from nik.poses import pose_error
 
+    if plan.q_rest is not None:
+        nearest_candidates_torch(plan, job, answers)
     ok = answers.ok(job)
     q = rest_torch(job.robot, job.T, answers.q, ok, plan, None, job.tol_pos, job.tol_rot)
     pos, rot = pose_error(job.T, job.robot.fk(q))
     answers.q, answers.pos_err, answers.rot_err, answers._ok = q, pos, rot, None
     return answers
+
+
+def nearest_candidates_torch(plan, job, answers) -> None:
+    """In place (torch): :func:`nearest_candidates` on the torch backend: the successful answers of a redundant arm
+    replaced by the candidate nearest ``plan.q_rest`` that meets the goal, among the answer, LM from ``q_rest`` and
+    LM from the :data:`REST_HYPOTHESES` network hypotheses nearest it (``answers.hypotheses``; without them
+    :data:`REST_UNIFORM` uniform starts), batched (:func:`nik.lm.lm_solve`, no restarts, at most
+    :data:`REST_CANDIDATE_ITERS` iterations)."""
+    from nik.lm import lm_solve
+    from nik.poses import pose_error
+
+    robot, T = job.robot, job.T
+    n = robot.dof
+    ok = answers.ok(job)
+    if n <= 6 or not bool(ok.any()):
+        return
+    idx = torch.nonzero(ok).flatten()
+    qr = torch.from_numpy(rest_target(robot, plan.q_rest, T.shape[0])).to(answers.q)[idx]
+    starts = [qr[:, None]]
+    if answers.hypotheses is not None:
+        hyp = answers.hypotheses[idx].to(answers.q)
+        near = (hyp - qr[:, None]).norm(dim=-1).argsort(dim=1, stable=True)[:, :REST_HYPOTHESES]
+        starts.append(torch.gather(hyp, 1, near[..., None].expand(-1, -1, n)))
+    else:
+        g = torch.Generator(device=T.device).manual_seed(int(plan.seed))
+        starts.append(robot.sample(idx.numel() * REST_UNIFORM, generator=g, dtype=T.dtype, device=T.device)
+                      .reshape(idx.numel(), REST_UNIFORM, n))  # fmt: skip
+    S = robot.clamp(torch.cat(starts, 1))
+    m, K = S.shape[:2]
+    Tk = T[idx].repeat_interleave(K, dim=0)
+    q, it = lm_solve(robot, Tk, S.reshape(m * K, n), cfg=plan.lm_cfg, tol_pos=job.tol_pos, tol_rot=job.tol_rot,
+                     max_iters=REST_CANDIDATE_ITERS, restarts=0)  # fmt: skip
+    q = robot.clamp(q).to(T.dtype)
+    pos, rot = pose_error(Tk, robot.fk(q))
+    good = ((pos <= job.tol_pos) & (rot <= job.tol_rot)).reshape(m, K)
+    q, pos, rot = q.reshape(m, K, n), pos.reshape(m, K), rot.reshape(m, K)
+    dist = torch.where(good, (q - qr[:, None]).norm(dim=-1), torch.full_like(pos, float("inf")))
+    best = dist.argmin(1)
+    rows = torch.arange(m, device=T.device)
+    take = dist[rows, best] < (answers.q[idx] - qr).norm(dim=-1)
+    at, pick = idx[take], (rows[take], best[take])
+    answers.q, answers.pos_err, answers.rot_err = answers.q.clone(), answers.pos_err.clone(), answers.rot_err.clone()
+    answers.q[at] = q[pick].to(answers.q.dtype)
+    answers.pos_err[at] = pos[pick].to(answers.pos_err.dtype)
+    answers.rot_err[at] = rot[pick].to(answers.rot_err.dtype)
+    answers.iterations[idx] += it.reshape(m, K).sum(1).to(answers.iterations.dtype)
+    answers._ok = None
 
 
 # -- solve_all -----------------------------------------------------------------------------------------------------

@@ -134,13 +134,19 @@ class PathReport:
         max_step: the threshold of a reconfiguration, radians (:data:`nik.paths.solve.PATH_MAX_STEP` unless given).
         reconfigurations: (N,) bool, ``steps > max_step``.
         reasons: per waypoint, ``""`` when reached, else why not (``"out of reach"``, ``"beyond a joint limit on
-            every branch"``, ``"not reached"``).
+            every branch"``, ``"not reached"``, ``"reached only by a step above max_step from the waypoint before"``:
+            FK reaches it, but only by a reconfiguration from a reached neighbour, so it counts as not reached).
         warning: one line naming the first waypoint that failed or forced a reconfiguration (None when none did).
-        closed: the path was taken as closed (its last pose equals its first; ``solve_path(closed=)``).
-        closure: on a closed path, the largest joint difference between the last row and the first (radians; metres
-            on prismatic joints; modulo whole turns on joints whose range exceeds a full turn); None otherwise.
-        t: (N,) seconds at each waypoint, with ``timing=True`` (None otherwise); qd, qdd: (N, dof) the joint
-            velocities and accelerations there; timing: the whole :class:`nik.paths.timing.Timing` (sample it at 1 ms).
+        closed: the path was taken as closed (its last pose equals its first; ``solve_path(closed=)``) and closes
+            continuously: a loop that closes only by a step above ``max_step`` is left open (False; the warning says
+            it, ``closure`` is its gap).
+        closure: on a path taken as closed (closed or left open), the largest joint difference between the last row
+            and the first (radians; metres on prismatic joints; modulo whole turns on joints whose range exceeds a
+            full turn); None on an open path.
+        t: (N,) seconds at each waypoint, with ``timing=True`` on a whole path (None otherwise: a waypoint not
+            reached or a step between waypoints above ``max_step`` gets no schedule, the warning says why); qd, qdd:
+            (N, dof) the joint velocities and accelerations there; timing: the whole
+            :class:`nik.paths.timing.Timing` (sample it at 1 ms).
     """
 
     steps: torch.Tensor

@@ -165,7 +165,7 @@ def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, a
     from nik.ik.plan import with_goal
     from nik.ik.result import IKResult
     from nik.lm.problem import PathProblem, solve_problem
-    from nik.paths.solve import _closure, _poses, _report, _time
+    from nik.paths.solve import JUMP_REASON, _closure, _poses, _report, _time, jumps, open_note
     from nik.paths.trajopt import path_collisions
     from nik.poses import pose_error
 
@@ -201,12 +201,19 @@ def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, a
     ok = torch.stack(list(checks.values())).all(0).numpy() & reachable
     reasons = ["" if ok[i] else "out of reach" if not reachable[i] else "; ".join(unmet[i] or ["not reached"])
                for i in range(N)]  # fmt: skip
+    jump = jumps(qn, ok, max_step)  # reached only by a step above max_step: not reached (nik.paths.solve.jumps)
+    for i in np.nonzero(jump)[0]:
+        reasons[i] = JUMP_REASON
+    ok &= ~jump
     reach_note = None if reachable.all() else model.unreachable_message(Tn, reachable)
     report = _report(robot, qn, None if q0 is None else q0.numpy(), ok, reasons, max_step, reach_note)
     report.closed = bool(res.path.closed)
-    report.closure = _closure(qn, model.wraps) if report.closed else None
+    report.closure = None if res.path.closure is None else _closure(qn, model.wraps)
+    if report.closure is not None and not report.closed:  # a loop left open (nik.paths.solve.open_note)
+        note = open_note(report.closure, max_step)
+        report.warning = f"{report.warning}; {note}" if report.warning else f"solve_path on {robot.name}: {note}"
     if timing is not False:
-        _time(report, robot, qn, timing, vel_limits, acc_limits)
+        _time(report, robot, qn, timing, vel_limits, acc_limits, ok)
     if report.warning is not None:
         warnings.warn(report.warning, UserWarning, stacklevel=4)
     else:

@@ -53,7 +53,10 @@ stages are those of :meth:`nik.IKSolver.solve` (:mod:`nik.ik.stages`) on the rob
    :data:`SEARCH_TRIGGER` (:func:`_flatten`, kept only where nothing gets worse).
 7. **the report** (:class:`PathReport`): success per waypoint re-checked by FK (and the limits), every step,
    the largest one and where, and a warning naming the first waypoint that is out of reach, beyond a joint limit
-   on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration).
+   on every branch, not reached, or reached only by a step above ``max_step`` (a reconfiguration). A waypoint that FK
+   reaches but only by a step above ``max_step`` from a reached neighbour counts as not reached (:func:`jumps`,
+   reason :data:`JUMP_REASON`): a path is never continued by a jump between two successes. The step from
+   ``q_start`` into the first waypoint is warned about, not flagged (the arm gets there before the path).
 
 **Closed loops** (``closed=None``: detected when the last pose equals the first within the tolerances; True /
 False force it): the last row of joints equals the first, so the cycle repeats without a jump. Closed-form arms:
@@ -63,7 +66,11 @@ LM chain's drift in the null space), :func:`_close_loop` solves the last waypoin
 difference back over the path, kept only when no waypoint is lost and no step grows beyond ``max_step`` (or the
 largest step before). On joints that turn past a full turn (``wraps``) the rows are equal modulo whole turns: a
 path that takes such a joint once around ends one turn further (turning back would be a jump); ``res.path.closure``
-reports the gap.
+reports the gap. A loop is never closed by a jump: where the closed answer has a step above ``max_step`` between two
+reached waypoints, the path is solved again as open and that answer kept where it reaches more waypoints (as many:
+where its largest step between reached waypoints is smaller by :data:`SEARCH_GAIN`); such a loop, and one whose last
+row stays more than ``max_step`` from its first, is left open: ``res.path.closed`` False, ``closure`` the gap, the
+warning says it (:func:`open_note`). The second solve costs as much as the first, on loops with a jump only.
 
 **Tolerant paths** (``bounds=``, :mod:`nik.ik.bounds`): with one free tool axis on a closed-form arm the candidates
 are the closed form's branches at sampled angles about it (:func:`_branches`) and the dynamic programming picks the
@@ -79,7 +86,9 @@ waypoint missed or a step above ``max_step``) has posture rows towards it (:clas
 
 **Timing** (``timing=True`` or a dict of :func:`nik.paths.timing.time_path` keywords): the answer is timed after the
 path (TOPP-RA, rest to rest) within ``vel_limits`` / ``acc_limits`` (the robot's unless given; none known is a
-one-line ValueError before any work): ``res.path.t``, ``qd``, ``qdd``, ``timing``.
+one-line ValueError before any work): ``res.path.t``, ``qd``, ``qdd``, ``timing``. A broken path (a waypoint not
+reached, a step between waypoints above ``max_step``) gets no schedule: those stay None and the warning says why
+(:func:`_time`); ``nik path --timing`` then writes no ``t_s`` column and exits 1.
 
 **Settings**: the solver's, as :meth:`~nik.IKSolver.solve` reads them. The LM config (``swarm_cfg`` an
 :class:`nik.lm.LMCfg`) is the chains' and polishes' LM; ``fallback="multistart"`` (the default without a closed
@@ -115,7 +124,17 @@ from nik.ik.targets import check_tolerances, pose_array, q_near_array
 from nik.paths.trajopt import polish_path
 from nik.tolerances import score
 
-__all__ = ["PATH_MAX_STEP", "PATH_PULL", "PATH_PULL_CAP", "PATH_RESTARTS", "solve_path"]
+__all__ = [
+    "JUMP_REASON",
+    "PATH_MAX_STEP",
+    "PATH_PULL",
+    "PATH_PULL_CAP",
+    "PATH_RESTARTS",
+    "jumps",
+    "open_note",
+    "solve_path",
+    "untimed_reason",
+]
 
 #: Default threshold of a reconfiguration: a step (largest joint motion between two waypoints) above it is
 #: reported and warned about, radians (10 degrees).
@@ -214,10 +233,11 @@ def solve_path(
             is infeasible, reason ``"colliding"`` (the waypoint) or ``"colliding on the way from the waypoint before"``
             (the motion).
         closed: None: the path is closed when its last pose equals its first within the tolerances (position and
-            rotation); True / False force it. A closed path returns joints whose last row equals its first (module
-            docstring, "closed loops").
+            rotation); True / False force it. A closed path returns joints whose last row equals its first, unless it
+            closes only by a step above ``max_step``: then it is left open (module docstring, "closed loops").
         timing: True (or a dict of :func:`nik.paths.timing.time_path` keywords: ``tool_speed``, ``vel_scale``,
-            ``acc_scale``) times the trajectory: ``res.path.t``, ``qd``, ``qdd`` and ``timing``.
+            ``acc_scale``) times the trajectory: ``res.path.t``, ``qd``, ``qdd`` and ``timing``; a broken path (a
+            waypoint not reached, a step above ``max_step``) is not timed (None, and the warning says why).
         vel_limits, acc_limits: ``(dof,)`` joint speed / acceleration limits of the timing (default the robot's).
         bounds: a tolerant goal for every waypoint (:func:`nik.ik.bounds.parse_bounds`: ``"axis_z"``, 6 numbers,
             ``(N, 6)``); None: ``tol_pos`` / ``tol_rot``. Module docstring, "tolerant paths".
@@ -268,55 +288,77 @@ def solve_path(
     run = _Run(plan, model, Tn, q0, reachable, half, modes, rest)
     check = collide.setup(robot, solver.world if world is None else world, solver.self_collision)
     col = None if check is None else check.arguments(robot)[1]
-    follows = chain = None
-    free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
-    closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
-    if closed_form and q0 is not None and run.refine:  # the quick answer: LM from q_start, if it follows
-        chain = _chain_from_start(run)
-        follows = _follows(run, chain, max_step)
-    if follows is not None:
-        q, its, found, source = *follows, None, "q_start"
-    elif closed_form:
-        q, its, found, source = _closed_form_path(run, is_closed, chain, max_step)
-    else:
-        q, its, source = _chain_path(run)
-        if run.refine and not _smooth(run, q, max_step, is_closed, col):
-            q, its, source = _search_path(run, max_step, is_closed, (q, its, source), run.rest, col)
-        found = None
-    if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
-        # large (the classic tolerances only), kept if no worse
-        q, _, _ = polish_path(
-            model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable, q_rest=rest,
-            closed=is_closed, collision=col,
-        )  # fmt: skip
-        if not closed_form and check is None:  # among obstacles the search's free candidates stay as they are
-            q = _flatten(run, q, its, max_step, is_closed)
-    if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
-        q = _avoid(solver, run, q, check, max_step)
-    if is_closed:
-        q, its = _close_loop(run, q, its, max_step, col)
-    if run.refine and run.half is None:
-        q = _inside_margin(run, q, max_step, check, is_closed)
-    pos, rot, within = _final_check(run, q)
-    inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
-    success = within & inside
-    success, free, colliding = collide.path_waypoints(solver, q, world, success)
-    if check is not None:  # the motion between waypoints: samples inside each step (the sphere check)
-        from nik.paths.trajopt import TrajCfg, path_collisions
 
-        _, between = path_collisions(model, q, q0, check.arguments(robot)[1], TrajCfg.col_sub)
-        for i in np.nonzero(between & free)[0]:
-            colliding[i] = "colliding on the way from the waypoint before"
-        success = success & ~between
-    reasons = [""] * len(success)
-    for i in np.nonzero(~success)[0]:
-        why = "" if found is None else found[i]
-        reasons[i] = why or colliding[i] or ("out of reach" if not reachable[i] else "not reached")
+    def attempt(closed_loop: bool):
+        """The stages of the module docstring for the loop taken as closed or open: ``(q, its, source, pos, rot,
+        success, free, reasons, largest step between two reached waypoints)``."""
+        follows = chain = None
+        free_axis = goal is not None and set(modes.tolist()) <= {0, 1, 2}  # one free tool axis: closed form's samples
+        closed_form = solver.closed_form and (goal is None or free_axis or not np.isinf(half).any())
+        if closed_form and q0 is not None and run.refine:  # the quick answer: LM from q_start, if it follows
+            chain = _chain_from_start(run)
+            follows = _follows(run, chain, max_step)
+        if follows is not None:
+            q, its, found, source = *follows, None, "q_start"
+        elif closed_form:
+            q, its, found, source = _closed_form_path(run, closed_loop, chain, max_step)
+        else:
+            q, its, source = _chain_path(run)
+            if run.refine and not _smooth(run, q, max_step, closed_loop, col):
+                q, its, source = _search_path(run, max_step, closed_loop, (q, its, source), run.rest, col)
+            found = None
+        if run.refine and run.half is None:  # whole-trajectory optimisation where a waypoint is missed or a step too
+            # large (the classic tolerances only), kept if no worse
+            q, _, _ = polish_path(
+                model, Tn, q, q0, tol_pos=tol_pos, tol_rot=tol_rot, max_step=max_step, reachable=reachable,
+                q_rest=rest, closed=closed_loop, collision=col,
+            )  # fmt: skip
+            if not closed_form and check is None:  # among obstacles the search's free candidates stay as they are
+                q = _flatten(run, q, its, max_step, closed_loop)
+        if check is not None and run.refine and run.half is None:  # obstacles: the colliding stretches re-planned
+            q = _avoid(solver, run, q, check, max_step)
+        if closed_loop:
+            q, its = _close_loop(run, q, its, max_step, col)
+        if run.refine and run.half is None:
+            q = _inside_margin(run, q, max_step, check, closed_loop)
+        pos, rot, within = _final_check(run, q)
+        inside = ((q >= model.lo - 1e-9) & (q <= model.hi + 1e-9)).all(axis=1)
+        success = within & inside
+        success, free, colliding = collide.path_waypoints(solver, q, world, success)
+        if check is not None:  # the motion between waypoints: samples inside each step (the sphere check)
+            from nik.paths.trajopt import TrajCfg, path_collisions
+
+            _, between = path_collisions(model, q, q0, check.arguments(robot)[1], TrajCfg.col_sub)
+            for i in np.nonzero(between & free)[0]:
+                colliding[i] = "colliding on the way from the waypoint before"
+            success = success & ~between
+        reasons = [""] * len(success)
+        for i in np.nonzero(~success)[0]:
+            why = "" if found is None else found[i]
+            reasons[i] = why or colliding[i] or ("out of reach" if not reachable[i] else "not reached")
+        jump = jumps(q, success, max_step)
+        for i in np.nonzero(jump)[0]:
+            reasons[i] = JUMP_REASON
+        pairs = np.abs(np.diff(q, axis=0)).max(axis=1)[success[1:] & success[:-1]]  # steps between reached waypoints
+        return q, its, source, pos, rot, success & ~jump, free, reasons, float(pairs.max(initial=0.0))
+
+    q, its, source, pos, rot, success, free, reasons, big = attempt(is_closed)
+    left_open = False
+    if is_closed and JUMP_REASON in reasons:  # a loop closed by a jump: open, kept where it reaches more waypoints
+        opened = attempt(False)  # (as many: where its largest step between reached waypoints is smaller)
+        if (opened[5].sum(), -opened[8]) > (success.sum(), -big + SEARCH_GAIN):
+            q, its, source, pos, rot, success, free, reasons, big = opened
+            left_open = True
+    gap = _closure(q, model.wraps) if is_closed else None
     report = _report(robot, q, q0, success, reasons, max_step, reach_note)
-    report.closed = bool(is_closed)
-    report.closure = _closure(q, model.wraps) if is_closed else None
+    report.closed = bool(is_closed and not left_open and gap <= max_step)
+    report.closure = gap
+    if is_closed and not report.closed:
+        report.warning = (report.warning + "; " if report.warning else f"solve_path on {robot.name}: ") + open_note(
+            gap, max_step
+        )
     if timing is not False:
-        _time(report, robot, q, timing, vel_limits, acc_limits)
+        _time(report, robot, q, timing, vel_limits, acc_limits, success)
     if report.warning is not None:
         warnings.warn(report.warning, UserWarning, stacklevel=3)
     like = dict(dtype=dtype, device=device)
@@ -699,11 +741,20 @@ def _avoid(solver, run: _Run, q: np.ndarray, check, max_step: float) -> np.ndarr
     return avoid_path(run.model, run.T, q, run.q0, seeds=seeds, **kw)
 
 
-def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limits) -> None:
+def _time(report: PathReport, robot, q: np.ndarray, timing, vel_limits, acc_limits, success: np.ndarray) -> None:
     """Fills ``report.t``, ``qd``, ``qdd`` and ``timing`` with :func:`nik.paths.timing.time_path` of ``q`` (the robot's
-    limits unless given; ``timing`` a dict: its keywords)."""
+    limits unless given; ``timing`` a dict: its keywords), where the path is whole: every waypoint reached
+    (``success: (N,)``) and no step between two waypoints above ``report.max_step`` (the step from ``q_start`` is not
+    timed and does not count). A broken path gets no schedule (``t``, ``qd``, ``qdd``, ``timing`` stay None): a
+    schedule of a trajectory that misses its poses or jumps is no plan a controller should run; the reason is added
+    to ``report.warning``."""
     from nik.paths.timing import time_path
 
+    why = untimed_reason(success, report.reconfigurations.numpy()[1:])
+    if why is not None:
+        note = f"not timed (res.path.t is None): {why}"
+        report.warning = f"{report.warning}; {note}" if report.warning else f"solve_path on {robot.name}: {note}"
+        return
     kw = timing if isinstance(timing, dict) else {}
     tm = time_path(q, vel_limits, acc_limits, robot=robot, **kw)
     report.timing = tm
@@ -1161,8 +1212,11 @@ def _search_path(run: _Run, max_step: float, closed: bool, chain, rest: np.ndarr
     c_ok = _final_check(run, chain[0])[2] & ((chain[0] >= model.lo - 1e-9) & (chain[0] <= model.hi + 1e-9)).all(axis=1)
     if col is not None:
         c_ok &= ~_colliding(model, chain[0], col)
+    c_ok &= ~jumps(chain[0], c_ok, max_step)  # a waypoint reached only by a jump is missed (the report's rule)
+    s_ok = ok.T[rows, choice]
+    s_ok &= ~jumps(found, s_ok, max_step)
     c_cost = _path_cost(chain[0], c_ok, run.q0, wraps, max_step)
-    s_cost = _path_cost(found, ok.T[rows, choice], run.q0, wraps, max_step)
+    s_cost = _path_cost(found, s_ok, run.q0, wraps, max_step)
     if c_cost[:2] < s_cost[:2] or (c_cost[:2] == s_cost[:2] and s_cost[2] > c_cost[2] - SEARCH_GAIN):
         return chain
     return found, found_its, sources[int(of[choice[0]])] if of[choice[0]] >= 0 else "search"
@@ -1275,6 +1329,41 @@ def _hypotheses(run: _Run, rows=None) -> np.ndarray | None:
 # ---------------------------------------------------------------------------
 # the report
 # ---------------------------------------------------------------------------
+#: ``res.path.reasons`` of a waypoint reached (by FK) only by a step above ``max_step`` from a reached waypoint.
+JUMP_REASON = "reached only by a step above max_step from the waypoint before"
+
+
+def jumps(q: np.ndarray, reached: np.ndarray, max_step: float) -> np.ndarray:
+    """``(N,)`` bool: waypoint ``i`` of ``q: (N, dof)`` is reached (``reached[i]``, by FK) and so is waypoint ``i - 1``,
+    but the step between them (largest joint motion, joints' own values) is above ``max_step``: the arm gets there only
+    by a reconfiguration, so ``i`` counts as not reached (its reason :data:`JUMP_REASON`). Judged on the flags as given
+    (no cascade): the waypoint after a jump, reached by a small step from it, stays reached. The step from ``q_start``
+    into waypoint 0 is no step between waypoints (warned about, not flagged)."""
+    out = np.zeros(q.shape[0], dtype=bool)
+    if q.shape[0] > 1:
+        out[1:] = reached[1:] & reached[:-1] & (np.abs(np.diff(q, axis=0)).max(axis=1) > max_step)
+    return out
+
+
+def untimed_reason(success: np.ndarray, reconf: np.ndarray) -> str | None:
+    """Why a path is not timed (``success: (N,)`` per waypoint, ``reconf``: steps between waypoints above
+    ``max_step``), in a few words, or None where it is whole."""
+    miss, big = int((~success).sum()), int(reconf.sum())
+    if not miss and not big:
+        return None
+    parts = [f"{miss} waypoint(s) not reached (first: {int(np.argmin(success))})"] if miss else []
+    parts += [f"{big} step(s) between waypoints above max_step"] if big else []
+    return " and ".join(parts)
+
+
+def open_note(gap: float, max_step: float) -> str:
+    """The warning's words for a loop left open: its last row is ``gap`` (radians) from its first."""
+    return (
+        f"the loop is left open (res.path.closed False): its last row is {math.degrees(gap):.1f} deg from its first "
+        f"and it closes only by a step above max_step ({math.degrees(max_step):.1f} deg)"
+    )
+
+
 def _report(robot, q, q0, success, reasons, max_step, reach_note=None) -> PathReport:
     """Steps, the largest one and where, reconfigurations, and the warning about the first problem (with the reach
     bound's line, ``reach_note``, where waypoints lie provably out of reach)."""
@@ -1291,7 +1380,7 @@ def _report(robot, q, q0, success, reasons, max_step, reach_note=None) -> PathRe
         n_fail = int(failed.sum())
         unit = 1e3 if bool(robot.prismatic[joints[i]]) else 180.0 / math.pi
         shown = "mm" if unit == 1e3 else "deg"
-        if reasons[i]:
+        if reasons[i] and reasons[i] != JUMP_REASON:
             what = (
                 f"waypoint {i} of {len(reasons)} is {reasons[i]}"
                 if reasons[i] != "not reached"
@@ -1303,6 +1392,7 @@ def _report(robot, q, q0, success, reasons, max_step, reach_note=None) -> PathRe
                 f"waypoint {i} of {len(reasons)} forces a reconfiguration: joint {int(joints[i])} "
                 f"({robot.joint_names[int(joints[i])]}) moves {steps[i] * unit:.1f} {shown} from {src} "
                 f"(more than max_step, {math.degrees(max_step):.1f} deg)"
+                + (" and counts as not reached" if reasons[i] == JUMP_REASON else "")
             )
         warning = (
             f"solve_path on {robot.name}: {what}; {n_fail} waypoint(s) not reached, {int(reconf.sum())} step(s) above "
