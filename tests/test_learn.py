@@ -331,7 +331,7 @@ def test_de_bp_stopped_by_max_time_during_de_says_that_bp_never_ran(dataset, tmp
     lines = _de_lines(capsys.readouterr().err)
     g = cli.model.de_state.generation
     assert 0 < g < 1_000_000 and cli.model.first_bp_loss is None
-    assert lines == [lines[-1]], lines  # progress lines off with the progress bar (QUIET); the closing line always
+    assert len(lines) == 1, lines  # progress lines off with the progress bar (QUIET); the closing line always
     assert lines[-1].startswith(f"phases run: DE {g} of 1000000 generations (")
     assert "BP did not run" in lines[-1] and lines[-1].endswith("stopped by max_time (1.0 s)")
     from nik.learn.callbacks import DEProgress
