@@ -208,3 +208,39 @@ def test_end_link_on_an_arm_without_links_is_a_one_line_error(tmp_path, capsys):
     )
     assert code == 2
     assert err.strip().count("\n") == 0 and "--end-link" in err and "URDF" in err
+
+
+@pytest.mark.parametrize("robot", ["panda", "ur5", "kuka_kr"])
+def test_generate_and_info_name_the_arms_end_alike(robot, tmp_path, capsys):
+    out = tmp_path / robot
+    code, stdout, err = run(capsys, "generate", "--robot", robot, "--n", "100", "--out", str(out), "--no-progress")
+    assert code == 0, err
+    said = stdout.split(f"samples of {robot}", 1)[1].split(" to ", 1)[0]  # " (flange panda_link8 on panda_link7)"
+    code, info, err = run(capsys, "data", "info", str(out))
+    assert code == 0, err
+    (line,) = [ln for ln in info.splitlines() if ln.startswith("robot ")]
+    if said:
+        assert line.endswith(f"joints, {said.strip()[1:-1]})"), (said, line)
+    else:  # an arm without links: nothing named by either
+        assert line.endswith("joints)") and "tool link" not in line
+    if robot == "panda":
+        assert "flange panda_link8 on panda_link7" in line
+
+
+def test_a_long_generation_prints_progress_lines_when_stderr_is_not_a_terminal(tmp_path, capsys, monkeypatch):
+    import nik.data.generate as gen
+
+    monkeypatch.setattr(gen, "PROGRESS_EVERY_S", 0.0)  # a line at every block of 65,536 (a long run: every 10 s)
+    out = tmp_path / "kuka"
+    n = 3 * gen.BLOCK_SIZE
+    code, stdout, err = run(capsys, "generate", "--robot", "kuka_kr", "--n", str(n), "--out", str(out))
+    assert code == 0, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("nik generate kuka_kr: ")]
+    assert len(lines) == 2, err  # a line per block but the last
+    assert all(f" / {n:,} samples (" in ln and " s left" in ln for ln in lines), lines
+    done = [int(ln.split(": ")[1].split(" / ")[0].replace(",", "")) for ln in lines]
+    assert done == [gen.BLOCK_SIZE, 2 * gen.BLOCK_SIZE]
+    assert "\r" not in err and "it/s" not in err and "sample/s" not in err  # no redrawn tqdm bar
+    monkeypatch.setattr(gen, "PROGRESS_EVERY_S", 10.0)  # a short run prints none
+    code, stdout, err = run(capsys, "generate", "--robot", "kuka_kr", "--n", "1000", "--out", str(tmp_path / "short"))
+    assert code == 0 and "nik generate kuka_kr:" not in err

@@ -291,3 +291,66 @@ def test_threads_callback_sets_torch_threads_for_the_fit_and_shares_cores_among_
     assert Threads().chosen(two) == max(1, (os.cpu_count() or 1) // 2)
     with pytest.raises(ValueError, match="positive integer"):
         Threads(0)
+
+
+# -- DE says what it does (issue 50): progress lines during DE, a closing line of the phases that ran ---------------
+def _de_lines(text: str) -> list[str]:
+    return [ln[len("train.py: ") :] for ln in text.splitlines() if ln.startswith("train.py: ")]
+
+
+def test_de_bp_prints_progress_and_the_phases_it_ran(dataset, tmp_path, capsys):
+    progress = ["--trainer.enable_model_summary", "false", "--trainer.logger", "false"]  # the progress bar stays on
+    cli = _train_cli()(
+        [
+            *("fit", "--config", str(ROOT / "configs/train/de_bp.yaml"), "--data.path", str(dataset)),
+            *("--trainer.default_root_dir", str(tmp_path), *progress),
+            *("--model.pop_size", "8", "--model.generations", "3"),
+            *("--trainer.max_epochs", "6", "--trainer.check_val_every_n_epoch", "3"),
+        ]
+    )
+    lines = _de_lines(capsys.readouterr().err)
+    n_train = cli.datamodule.train_data[0].shape[0]
+    first = [ln for ln in lines if ln.startswith("DE generation 1/3: ")]
+    assert len(first) == 1, lines
+    assert "s a generation" in first[0] and f"8 networks x {n_train:,} samples" in first[0] and "then BP" in first[0]
+    assert any(ln.startswith("DE done: 3 generations") for ln in lines), lines
+    # 6 steps: the initial population and 3 generations, then 2 BP steps
+    assert cli.trainer.global_step == 6 and cli.model.de_state.generation == 3
+    assert lines[-1].startswith("phases run: DE 3 of 3 generations (")
+    assert "then BP 2 steps" in lines[-1] and lines[-1].endswith("stopped by max_epochs (6)")
+
+
+def test_de_bp_stopped_by_max_time_during_de_says_that_bp_never_ran(dataset, tmp_path, capsys):
+    cli = _run(
+        "de_bp",
+        dataset,
+        tmp_path,
+        *("--model.pop_size", "8", "--model.generations", "1000000"),
+        *("--trainer.max_time", "00:00:00:01", "--trainer.max_epochs", "-1"),
+    )
+    lines = _de_lines(capsys.readouterr().err)
+    g = cli.model.de_state.generation
+    assert 0 < g < 1_000_000 and cli.model.first_bp_loss is None
+    assert len(lines) == 1, lines  # progress lines off with the progress bar (QUIET); the closing line always
+    assert lines[-1].startswith(f"phases run: DE {g} of 1000000 generations (")
+    assert "BP did not run" in lines[-1] and lines[-1].endswith("stopped by max_time (1.0 s)")
+    from nik.learn.callbacks import DEProgress
+
+    (cb,) = [c for c in cli.trainer.callbacks if isinstance(c, DEProgress)]
+    assert cb.summary == lines[-1]
+
+
+def test_de_progress_warns_when_max_time_ends_before_bp(dataset, tmp_path, capsys):
+    _train_cli()(
+        [
+            *("fit", "--config", str(ROOT / "configs/train/de_bp.yaml"), "--data.path", str(dataset)),
+            *("--trainer.default_root_dir", str(tmp_path), "--trainer.logger", "false"),
+            *("--trainer.enable_model_summary", "false"),
+            *("--model.pop_size", "8", "--model.generations", "1000000"),
+            *("--trainer.max_time", "00:00:00:01", "--trainer.max_epochs", "-1"),
+        ]
+    )
+    lines = _de_lines(capsys.readouterr().err)
+    assert lines[0].startswith("DE generation 1/1000000: ") and lines[0].endswith(
+        "max_time (1.0 s) ends before BP starts"
+    )

@@ -146,6 +146,26 @@ def _cmd_generate(args) -> int:
     return 0
 
 
+def _end_text(rob: dict) -> str:
+    """The arm's end as ``nik generate`` names it (:func:`nik.cli.common.tool_link_text`: ``, flange panda_link8 on
+    panda_link7`` or ``, tool link NAME, tool frame at ...``), from a dataset's ``meta["robot"]``: its definition and
+    the flange recorded beside it (datasets made before that record the end link only)."""
+    import torch
+
+    from nik.robots import Robot
+
+    try:
+        robot = Robot.from_definition(rob["definition"])
+    except Exception:  # noqa: BLE001 - only the words of one line: the stored end link
+        end = (rob.get("definition") or {}).get("end_link")
+        return f", tool link {end}" if end else ""
+    flange = rob.get("flange")
+    if isinstance(flange, dict) and flange.get("link"):
+        robot.flange_link, robot.flange = flange["link"], torch.tensor(flange["frame"], dtype=torch.float64)
+    text = tool_link_text(robot)
+    return f", {text[2:-1]}" if text else ""
+
+
 def format_info(ds) -> str:
     """The text ``nik data info`` prints for a loaded dataset."""
     import numpy as np
@@ -156,8 +176,7 @@ def format_info(ds) -> str:
     rob = m["robot"]
     lines = [
         f"dataset    {ds.path}",
-        f"robot      {rob['name']} (definition {rob['definition_hash']}, {m['dof']} joints"
-        + (f", tool link {rob['definition']['end_link']})" if rob["definition"].get("end_link") else ")"),
+        f"robot      {rob['name']} (definition {rob['definition_hash']}, {m['dof']} joints{_end_text(rob)})",
         f"samples    {m['n']:,}  (train {m['split_sizes']['train']:,}, val {m['split_sizes']['val']:,}, "
         f"test {m['split_sizes']['test']:,}; contiguous ranges {m['splits']})",
         f"sampler    {m['sampler']}, seed {m['seed']}, ranges: {m['ranges']['source']}",

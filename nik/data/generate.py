@@ -207,6 +207,52 @@ def _to_joints(u: torch.Tensor, ranges: torch.Tensor, dtype: torch.dtype) -> tor
     return torch.minimum(torch.maximum(q, lo), hi)
 
 
+def _flange_meta(robot) -> dict:
+    """``{"flange": {"link": NAME, "frame": 4x4}}`` where the robot file names the vendor's flange (panda's
+    ``panda_link8``, ur5's ``tool0``; the definition folds it into its tool frame), so that ``nik data info`` names
+    the arm's end as ``nik generate`` does; ``{}`` otherwise."""
+    flange = getattr(robot, "flange", None)
+    if flange is None or getattr(robot, "flange_link", None) is None:
+        return {}
+    return {"flange": {"link": robot.flange_link, "frame": flange.double().tolist()}}
+
+
+#: Seconds between the progress lines of a generation whose stderr is not a terminal (a log: no redrawn bar).
+PROGRESS_EVERY_S = 10.0
+
+
+class _ProgressLines:
+    """The progress of a generation as lines on stderr (``nik generate panda: 2,000,000 / 10,000,000 samples (20 %),
+    12.3 s, about 49 s left``), one every :data:`PROGRESS_EVERY_S` seconds: what ``nik train`` does for a log, in
+    place of a tqdm bar, which a file receives as one ever longer line of redraws. A run shorter than that prints
+    none. Same ``update`` / ``close`` as the bar."""
+
+    def __init__(self, total: int, desc: str):
+        import time
+
+        self.total, self.desc, self.done = int(total), desc, 0
+        self._clock = time.perf_counter
+        self._t0 = self._last = self._clock()
+
+    def update(self, m: int) -> None:
+        self.done += int(m)
+        now = self._clock()
+        if now - self._last < PROGRESS_EVERY_S or self.done >= self.total:
+            return
+        self._last = now
+        spent = now - self._t0
+        left = spent * (self.total - self.done) / max(self.done, 1)
+        print(
+            f"{self.desc}: {self.done:,} / {self.total:,} samples ({100 * self.done / max(self.total, 1):.0f} %), "
+            f"{spent:.1f} s, about {left:.0f} s left",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    def close(self) -> None:
+        pass
+
+
 def _progress(total: int, enabled: bool | None, desc: str):
     try:
         from tqdm.auto import tqdm
@@ -214,6 +260,8 @@ def _progress(total: int, enabled: bool | None, desc: str):
         return None
     if enabled is None:
         enabled = sys.stderr.isatty()
+        if not enabled:
+            return _ProgressLines(total, desc)
     try:
         size = os.get_terminal_size(sys.stderr.fileno())
         ncols, nrows = size.columns or 100, size.lines or 24  # 0 x 0 on a pty without a size: tqdm would hide
@@ -362,7 +410,8 @@ def generate_dataset(
             ``n >= COMPILE_THRESHOLD`` (10,000,000), where the compile time pays off. Compiled
             and eager FK may differ in the last bit (both are FK to ~1e-16 m), so the choice is
             recorded in ``meta["fk"]``; either way the result is deterministic.
-        progress: show a tqdm progress bar (default: when stderr is a terminal).
+        progress: show a tqdm progress bar; None (default): a bar when stderr is a terminal, else a progress line
+            every :data:`PROGRESS_EVERY_S` seconds; False: nothing.
         fsync: flush files to disk before the final rename.
         block_size: samples per randomness block (changes the numbers drawn; keep the default).
         threads: torch threads for sampling, labels and FK while generating (restored afterwards;
@@ -584,6 +633,7 @@ def _generate(
                 "definition_hash": robot.definition_hash,
                 "source": getattr(robot, "source", None),
                 "definition": robot.to_definition(),
+                **_flange_meta(robot),
             },
             "sampler": sampler,
             "ranges": {"source": ranges_desc, "radians": rng.tolist()},

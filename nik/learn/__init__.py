@@ -24,6 +24,7 @@ _LAZY = {
     "GradientIK": "nik.learn.modules",
     "DEIK": "nik.learn.modules",
     "IKDataModule": "nik.learn.datamodule",
+    "DEProgress": "nik.learn.callbacks",
     "History": "nik.learn.callbacks",
     "StableLastCheckpoint": "nik.learn.callbacks",
     "Threads": "nik.learn.callbacks",

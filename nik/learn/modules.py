@@ -55,6 +55,11 @@ def _all_gather(t: torch.Tensor) -> torch.Tensor:
     return torch.stack(parts)
 
 
+def _plain(value):
+    """A config value comparable across a checkpoint and a module: sequences as lists."""
+    return list(value) if isinstance(value, (list, tuple)) else value
+
+
 class IKModule(L.LightningModule):
     """Shared part: the network, the objective, metrics, counters and the checkpoint block.
 
@@ -240,7 +245,37 @@ class IKModule(L.LightningModule):
         extra["run"] = run
         checkpoint["nik"] = extra
 
+    def check_resumable(self, checkpoint: dict) -> None:
+        """Refuse a checkpoint of another robot or another network than this run's, in one line
+        (:class:`nik.CheckpointError`), before Lightning loads its weights: robots are matched by definition hash,
+        not by name (a 6-joint arm's run resumed on another 6-joint arm's data would otherwise train on silently),
+        and the architecture by the checkpoint's recorded ``net`` block against this module's."""
+        from nik.errors import CheckpointError
+
+        extra = checkpoint.get("nik")
+        if self.net is None or not isinstance(extra, dict):
+            return
+        robot = self.net.robot
+        stored = extra.get("robot_hash")
+        if stored is not None and stored != robot.definition_hash:
+            name = (extra.get("robot") or {}).get("name", "?") if isinstance(extra.get("robot"), dict) else "?"
+            raise CheckpointError(
+                f"the checkpoint is a run of robot {name!r} (definition hash {stored}), this run's data is of robot "
+                f"{robot.name!r} (hash {robot.definition_hash}): resume a run of the same robot, or start a new one"
+            )
+        cfg = extra.get("net")
+        if isinstance(cfg, dict) and "kind" not in cfg:
+            mine = self.net.config()
+            differ = [k for k in mine if k in cfg and _plain(cfg[k]) != _plain(mine[k])]
+            if differ:
+                k = differ[0]
+                raise CheckpointError(
+                    f"the checkpoint's network has {k} {_plain(cfg[k])!r}, this run's model {_plain(mine[k])!r}: "
+                    f"resume with the checkpoint's --model.{k}, or start a new run"
+                )
+
     def on_load_checkpoint(self, checkpoint: dict) -> None:
+        self.check_resumable(checkpoint)
         run = checkpoint.get("nik", {}).get("run", {})
         earlier = run.get("resumed_from_commands", [])
         self._earlier_commands = [*earlier, run["command"]] if "command" in run else list(earlier)

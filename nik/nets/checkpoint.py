@@ -47,12 +47,14 @@ def save_checkpoint(net: IKNet, path: str | Path) -> Path:
 def load_checkpoint(
     path: str | Path, *, robot: Robot | str | Path | None = None, map_location: str | torch.device = "cpu"
 ) -> IKNet:
-    """Load an :class:`IKNet` from a Lightning ``.ckpt`` (or :func:`save_checkpoint` file), safely.
+    """Load an :class:`IKNet` (or a multi-solution network) from a Lightning ``.ckpt`` (or :func:`save_checkpoint`
+    file), safely; an exported pair (``NAME.safetensors`` / ``NAME.json``) is read too (:func:`load_network`), so a
+    network loads by path however it was trained and whether or not it was exported.
 
     The file is read with ``torch.load(..., weights_only=True)``: no code from it is run.
 
     Args:
-        path: the checkpoint.
+        path: the checkpoint (or either file of an exported pair: float32, CPU, ``map_location`` applied after).
         robot: optional robot (object, built-in name or file) the network must belong to, matched by
             definition hash (not name); a checkpoint made for a different robot definition is refused.
             The network's ``robot`` is then this one.
@@ -66,6 +68,8 @@ def load_checkpoint(
         CheckpointNotFoundError: no such file (a CheckpointError and a FileNotFoundError).
     """
     path = Path(path)
+    if path.suffix in (".safetensors", ".json"):
+        return load_pair(path, robot=robot).to(map_location)
     if path.is_dir():
         raise CheckpointError(f"{path} is a folder, not a checkpoint file")
     if not path.is_file():

@@ -1,11 +1,18 @@
-"""Export a trained multi-solution network: ``python -m nik.nets.export CKPT [--robot NAME] [--out FILE]``.
+"""Export a trained network: ``python -m nik.nets.export CKPT [--robot NAME] [--out FILE]``.
 
-Reads the Lightning checkpoint of :class:`nik.learn.multi.MultiSolutionIK` safely
-(``torch.load(weights_only=True)``), rebuilds the network from its ``checkpoint["nik"]`` block and writes
-the pair ``NAME.safetensors`` + ``NAME.json`` (:func:`nik.nets.pretrained.save`) where ``--out`` says
-(default ``runs/<robot>/<robot>.safetensors``; the package's folder only when named, ``--out nik/nets/weights``),
-recording the training command and data the checkpoint carries (what really ran), this export's command,
-the config file's text when ``--config`` names one, the SHA-256 of the weights and the validation error.
+Reads a Lightning checkpoint safely (``torch.load(weights_only=True)``): a multi-solution network
+(:class:`nik.learn.multi.MultiSolutionIK`, ``nik train`` or ``configs/train/<robot>.yaml``) or a plain one
+(:class:`nik.nets.IKNet`: ``train.py`` with ``bp``, ``adam``, ``lbfgs``, ``de``, ``de_bp``; recorded ``kind: plain``).
+It rebuilds the network from the ``checkpoint["nik"]`` block and writes the pair ``NAME.safetensors`` + ``NAME.json``
+(:func:`nik.nets.pretrained.save`) where ``--out`` says, recording the training command and data the checkpoint
+carries (what really ran), this export's command, the config file's text when ``--config`` names one, the SHA-256
+of the weights and the validation error. The pair then installs (``nik networks install``) and loads by path
+(:func:`nik.nets.load_checkpoint`, ``IKSolver(robot, checkpoint=PATH)``) the same way whatever trained it.
+
+Default ``--out``: a multi-solution network goes to ``runs/<robot>/<robot>.safetensors`` (``nik train``'s place); a
+plain one beside its checkpoint, ``<checkpoint folder>/<robot>.safetensors`` (``runs/adam/kuka_kr.safetensors``), so
+that exporting a baseline never replaces the arm's multi-solution network. The package's folder only when named,
+``--out nik/nets/weights``.
 """
 
 from __future__ import annotations
@@ -25,19 +32,23 @@ __all__ = ["cli", "command_line", "default_out", "load_training_checkpoint", "ma
 
 
 def load_training_checkpoint(path: str | Path, robot=None):
-    """The network in a ``MultiSolutionIK`` checkpoint, eval mode, and its ``checkpoint["nik"]`` block;
-    ``robot`` (optional) must match its definition hash. Raises ``CheckpointError`` (one line)."""
+    """The network in a training checkpoint (multi-solution or plain), eval mode, float32, and its
+    ``checkpoint["nik"]`` block; ``robot`` (optional) must match its definition hash. Raises ``CheckpointError``
+    (one line), also for an exported pair (already exported: install or load it as it is)."""
     from nik.nets.checkpoint import load_checkpoint
 
+    if Path(path).suffix in (".safetensors", ".json"):
+        raise CheckpointError(f"{path} is an exported network already; export reads a training checkpoint (.ckpt)")
     net = load_checkpoint(path, robot=robot)
-    if not hasattr(net, "hypotheses"):
-        raise CheckpointError(f"{path} is not a checkpoint of a multi-solution network (nik.learn.multi)")
     ckpt = torch.load(Path(path), map_location="cpu", weights_only=True)
-    return net, ckpt["nik"]
+    return net.to(torch.float32).eval(), ckpt["nik"]
 
 
-def default_out(name: str) -> Path:
-    """Where an export goes unless ``--out`` says otherwise: ``runs/<name>/<name>.safetensors``."""
+def default_out(name: str, checkpoint: str | Path | None = None) -> Path:
+    """Where an export goes unless ``--out`` says otherwise: ``runs/<name>/<name>.safetensors``; for a plain network
+    (``checkpoint`` given: its training checkpoint), ``<checkpoint folder>/<name>.safetensors``."""
+    if checkpoint is not None:
+        return Path(checkpoint).parent / f"{name}.safetensors"
     return Path("runs") / name / f"{name}.safetensors"
 
 
@@ -50,7 +61,11 @@ def command_line(argv: list[str] | None, prog: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m nik.nets.export", description=__doc__.splitlines()[0])
-    ap.add_argument("checkpoint", help="runs/<robot>/last.ckpt of train.py with configs/train/<robot>.yaml")
+    ap.add_argument(
+        "checkpoint",
+        help="a train.py checkpoint: runs/<robot>/last.ckpt (configs/train/<robot>.yaml) or runs/<method>/last.ckpt "
+        "(bp, adam, lbfgs, de, de_bp)",
+    )
     ap.add_argument("--robot", default=None, help="robot the checkpoint must belong to (default: its own)")
     ap.add_argument("--config", default=None, help="training config file to record with the network (its text)")
     ap.add_argument("--wall-min", type=float, default=None, help="training wall-clock minutes to record")
@@ -58,7 +73,8 @@ def main(argv: list[str] | None = None) -> int:
         "--out",
         default=None,
         help="NAME.safetensors to write (+ NAME.json beside it), or a folder for <robot>.safetensors; default "
-        "runs/<robot>/<robot>.safetensors. The package's folder only when named: --out nik/nets/weights",
+        "runs/<robot>/<robot>.safetensors (a plain network: beside its checkpoint). The package's folder only when "
+        "named: --out nik/nets/weights",
     )
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -80,12 +96,13 @@ def main(argv: list[str] | None = None) -> int:
         training["config"] = cfg.read_text()
     if args.wall_min is not None:
         training["wall_min"] = args.wall_min
-    out = Path(args.out) if args.out is not None else default_out(name)
+    plain = not hasattr(net, "hypotheses")
+    out = Path(args.out) if args.out is not None else default_out(name, args.checkpoint if plain else None)
     path = save(net, out, training=training)
     print(f"wrote {path.with_suffix('.safetensors')} and {path}")
     val = json.loads(path.read_text())["validation"]
     print(
-        f"validation ({val['n']} poses, seed {val['seed']}), best hypothesis: median "
+        f"validation ({val['n']} poses, seed {val['seed']}), {'the guess' if plain else 'best hypothesis'}: median "
         f"{val['best_pos_mm_median']:.2f} mm / {val['best_rot_deg_median']:.3f} deg, p95 "
         f"{val['best_pos_mm_p95']:.2f} mm / {val['best_rot_deg_p95']:.3f} deg"
     )

@@ -44,7 +44,7 @@ OUTPUTS = ("angles", "sincos")
 
 #: Paper C's network: 6-8-6, tanh, xyz + roll-pitch-yaw in, joint angles out.
 PAPER_C = {"hidden": [8], "activation": "tanh", "representation": "rpy", "output": "angles"}
-#: The realistic default, chosen by measurement (README, Training): 3 x 256 SiLU, xyz + 6D rotation in.
+#: The realistic default, chosen by measurement (docs/training.md, Network): 3 x 256 SiLU, xyz + 6D rotation in.
 DEFAULT = {"hidden": [256, 256, 256], "activation": "silu", "representation": "rot6d", "output": "angles"}
 
 

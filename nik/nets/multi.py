@@ -39,7 +39,7 @@ from nik.poses import POSE_DIMS, pose_error, pose_to_vector
 from nik.robots import Robot
 from nik.tolerances import score as pos_rot_score
 
-__all__ = ["KINDS", "BranchHeadsIKNet", "BranchIKNet", "MultiHypIKNet", "build_net", "hypothesis_pose_error"]
+__all__ = ["KINDS", "PLAIN", "BranchHeadsIKNet", "BranchIKNet", "MultiHypIKNet", "build_net", "hypothesis_pose_error"]
 
 
 def hypothesis_pose_error(robot: Robot, T: torch.Tensor, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -358,11 +358,20 @@ class MultiHypIKNet(_HypothesisNet):
 KINDS = {"branch_heads": BranchHeadsIKNet, "multihead": MultiHypIKNet, "branch": BranchIKNet}
 
 
-def build_net(robot: Robot, config: dict) -> _HypothesisNet:
+#: The ``kind`` an exported plain network (:class:`nik.nets.IKNet`, one guess a pose: ``train.py``'s bp, adam, lbfgs,
+#: de, de_bp) records in its pair's JSON; its checkpoints record no kind.
+PLAIN = "plain"
+
+
+def build_net(robot: Robot, config: dict):
     """Rebuild a network from its :meth:`config` (plain data): ``{"kind": "branch_heads" | "multihead" | "branch",
-    ...}``."""
+    ...}``, or ``{"kind": "plain", ...}`` (:data:`PLAIN`): a :class:`nik.nets.IKNet` from ``train.py``."""
     cfg = dict(config)
     kind = cfg.pop("kind", None)
+    if kind == PLAIN:
+        from nik.nets.mlp import IKNet
+
+        return IKNet(robot, **cfg)
     if kind not in KINDS:
-        raise ValueError(f"unknown network kind {kind!r}; expected one of {sorted(KINDS)}")
+        raise ValueError(f"unknown network kind {kind!r}; expected one of {sorted([*KINDS, PLAIN])}")
     return KINDS[kind](robot, **cfg)

@@ -4,7 +4,8 @@ The JSON holds what rebuilds and checks the network:
 
 - ``robot``, ``robot_hash``, ``robot_definition``: the arm it was trained for (matched by the hash of
   the definition, never by the name: :attr:`nik.Robot.definition_hash`);
-- ``net``: the architecture (:meth:`config` of :mod:`nik.nets.multi`, ``kind`` included);
+- ``net``: the architecture (:meth:`config` of :mod:`nik.nets.multi`, ``kind`` included; a plain
+  :class:`nik.nets.IKNet` of ``train.py`` records ``kind: plain``);
 - ``weights_sha256``, ``weights_bytes``: the SHA-256 and size of the ``.safetensors`` file beside it;
 - ``training``: the command that really ran (``sys.argv``), the data it used, counters;
 - ``validation``: its recorded error on a seeded validation set (:func:`nik.nets.pretrained.validation_error`);
@@ -46,6 +47,7 @@ __all__ = [
     "PAIR_FORMAT",
     "architecture_mismatch",
     "load_pair",
+    "pair_config",
     "pair_paths",
     "read_pair_meta",
     "recover_pairs",
@@ -61,6 +63,15 @@ _REQUIRED = ("robot_hash", "net", "weights_sha256")
 def _one_line(err: BaseException | str) -> str:
     text = str(err).strip()
     return text.splitlines()[0] if text else type(err).__name__
+
+
+def pair_config(net) -> dict:
+    """The ``net`` field of a pair's JSON: ``net.config()``, with ``kind: plain`` for a plain :class:`nik.nets.IKNet`
+    (whose own config, as its checkpoints store it, has no kind)."""
+    from nik.nets.multi import PLAIN
+
+    cfg = net.config()
+    return cfg if "kind" in cfg else {"kind": PLAIN, **cfg}
 
 
 def pair_paths(path: str | Path) -> tuple[Path, Path]:
@@ -344,7 +355,7 @@ def save_pair(
         "robot": net.robot.name,
         "robot_hash": net.robot.definition_hash,
         "robot_definition": net.robot.to_definition(),
-        "net": net.config(),
+        "net": pair_config(net),
         "n_params": int(net.n_params),
         "weights_sha256": hashlib.sha256(data).hexdigest(),
         "weights_bytes": len(data),

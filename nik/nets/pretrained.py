@@ -59,12 +59,13 @@ def validation_error(net, *, seed: int, n: int) -> dict:
     """Errors of ``net`` on ``n`` poses from uniform joints inside the limits (``torch.Generator`` seeded
     with ``seed``, float64 FK): medians and p95 of the position (mm) and rotation (deg) error of the best
     hypothesis by FK (``best_*``) and of the first hypothesis (``single_*``: branch 0 of a branch net, head 0
-    of a multi-head net), as plain floats."""
+    of a multi-head net), as plain floats. A plain network (:class:`nik.nets.IKNet`) has one guess a pose: both are
+    its guess, clamped to the limits."""
     robot = net.robot
     g = torch.Generator().manual_seed(int(seed))
     q = robot.sample(int(n), generator=g, dtype=torch.float64)
     T = robot.fk(q)
-    hyp = net.hypotheses(T)
+    hyp = net.hypotheses(T) if hasattr(net, "hypotheses") else net.predict(T)[:, None]
     pos, rot = hypothesis_pose_error(robot, T, hyp)
     best = score(pos, rot).argmin(-1, keepdim=True)
     out = {"seed": int(seed), "n": int(n)}
