@@ -179,3 +179,25 @@ def test_readme_one_pose_figures_are_those_of_the_stored_run_it_cites():
     assert (float(m.group(3)), float(m.group(4))) == (min(vs_lm), max(vs_lm))
     assert (float(m.group(5)), float(m.group(6))) == (round(min(vs_trac), 1), round(max(vs_trac), 1))
     assert (float(m.group(7)), float(m.group(8))) == (min(tight), max(tight))
+
+
+def _distribution_name() -> str:
+    text = (ROOT / "pyproject.toml").read_text()
+    return re.search(r'^\[project\]\n(?:.*\n)*?name = "([^"]+)"', text, re.M).group(1)
+
+
+def test_the_distribution_is_not_the_package_index_s_nik_and_every_install_hint_names_it():
+    # the package index's `nik` is an unrelated project: a hint `pip install 'nik[...]'` would fetch it
+    dist = _distribution_name()
+    assert dist != "nik" and dist.startswith("nik"), dist
+    files = [*sorted((ROOT / "nik").rglob("*.py")), *sorted((ROOT / "benchmarks").glob("*.py")), *PAGES]
+    hints, wrong = 0, []
+    for path in files:
+        text = path.read_text()
+        for m in re.finditer(r"pip install\s+['\"]?(nik[\w-]*)(?=[\[\s'\"`)]|$)", text, re.M):
+            if text.startswith("` does not install this one", m.end()):
+                continue  # README's warning about the index's `nik`
+            hints += 1
+            if m.group(1) != dist:
+                wrong.append(f"{path.relative_to(ROOT)}: {m.group(0)}")
+    assert hints >= 5 and not wrong, (hints, wrong)

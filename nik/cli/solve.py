@@ -125,7 +125,7 @@ def register(sub) -> None:
         choices=["auto", "on", "off"],
         default="auto",
         help="with --scene, who judges collision_free: auto (default) the robot's collision meshes where coal "
-        "(pip install 'nik[collision-check]') and a URDF with meshes are there, else the spheres; on: the meshes "
+        "(pip install 'nik-ik[collision-check]') and a URDF with meshes are there, else the spheres; on: the meshes "
         "(an error without them); off: the conservative spheres",
     )
     s.set_defaults(func=_cmd_solve)
