@@ -76,6 +76,7 @@ from nik.robots.frames import as_frame, with_frames
 from nik.robots.model import Robot, dh_chain, mdh_chain, poe_chain
 from nik.robots.names import did_you_mean
 from nik.robots.rates import check_rates
+from nik.robots.yamlfile import load_yaml
 
 __all__ = ["BUILTIN_DIR", "builtin_robots", "load_robot", "robot_from_config"]
 
@@ -222,10 +223,7 @@ def robot_from_file(
 ) -> Robot:
     """Load a YAML robot file; see the module docstring for the schema."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
-        raise RobotDefinitionError(f"{path}: not valid YAML ({err})") from err
+    data = load_yaml(path.read_text(), str(path), RobotDefinitionError)
     return robot_from_config(
         data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool, root_link=root_link
     )
