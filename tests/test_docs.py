@@ -57,6 +57,30 @@ def test_every_nik_name_the_docs_use_is_an_attribute_after_a_plain_import_nik():
     assert nik.tolerances.DEFAULT_TOL_POS == 1e-4
 
 
+def test_every_dotted_nik_name_the_docs_use_resolves_after_a_plain_import_nik():
+    # docs write nik.collision.meshcheck.mesh_check, nik.ik.backends.one_pose, ...: each works as written after
+    # `import nik` (a module of a package is imported on first read), while `import nik` itself stays light
+    names = sorted({m for p in PAGES for m in re.findall(r"\bnik(?:\.[A-Za-z_]\w*){2,}", p.read_text())})
+    assert "nik.collision.meshcheck.mesh_check" in names and len(names) >= 50, names
+    code = (
+        "import sys\nimport nik\n"
+        "heavy = sorted(m for m in ('lightning', 'matplotlib', 'coal', 'torch', 'numba') if m in sys.modules)\n"
+        f"missing = []\nfor name in {names!r}:\n"
+        "    obj = nik\n"
+        "    try:\n"
+        "        for part in name.split('.')[1:]:\n"
+        "            obj = getattr(obj, part)\n"
+        "    except AttributeError as err:\n"
+        "        missing.append(f'{name}: {err}')\n"
+        "print(heavy)\nprint(missing)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    heavy, missing = done.stdout.strip().splitlines()[-2:]
+    assert heavy == "[]", f"import nik loaded {heavy}"
+    assert missing == "[]", missing
+
+
 #: The four source papers (the reference list of the project's methods specification): what identifies each.
 PAPERS = {
     "A": ("Rui Ting", "simulated annealing particle swarm optimization", "Computer Engineering and Applications",
