@@ -32,7 +32,8 @@ def test_a_scene_file_with_a_syntax_error_names_line_and_column(tmp_path):
         nik.World.from_file(path)
     message = str(err.value)
     line, column = _place(BAD_SCENE, "}")
-    assert message.startswith(f"scene file {path}: not valid YAML: line {line}, column {column}: expected ',' or ']'")
+    assert message.startswith(f"scene file {path}: not valid YAML: line {line}, column {column}: ")
+    assert "expected ',' or ']'" in message  # the parser's words (libyaml: "did not find expected ...")
     began = _place(BAD_SCENE, "[1.2")
     assert f"while parsing a flow sequence begun at line {began[0]}, column {began[1]}" in message
     assert "\n" not in message
@@ -72,3 +73,18 @@ def test_a_ranges_file_with_a_syntax_error_names_line_and_column(tmp_path):
 def test_an_error_without_a_place_gives_its_first_line_and_valid_text_loads():
     assert yaml_problem(yaml.YAMLError("something odd\nmore")) == "something odd"
     assert load_yaml("a: [1, 2]\n", "x.yaml") == {"a": [1, 2]}
+
+
+def test_a_file_is_parsed_again_only_when_it_changes_and_each_caller_gets_its_own_copy(tmp_path):
+    from nik.robots.yamlfile import load_yaml_file
+
+    path = tmp_path / "a.yaml"
+    path.write_text("joints: [1, 2]\n")
+    first = load_yaml_file(path)
+    first["joints"].append(3)  # a caller's change stays its own
+    assert load_yaml_file(path) == {"joints": [1, 2]}
+    path.write_text("joints: [1, 2, 3, 4]\n")  # another size: read again
+    assert load_yaml_file(path) == {"joints": [1, 2, 3, 4]}
+    path.write_text("joints: [\n")
+    with pytest.raises(ValueError, match=r"not valid YAML: line 2, column 1: "):
+        load_yaml_file(path)

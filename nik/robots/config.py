@@ -68,7 +68,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
 from nik.errors import RobotDefinitionError
 from nik.poses import rpy_to_matrix
@@ -76,7 +75,7 @@ from nik.robots.frames import as_frame, with_frames
 from nik.robots.model import Robot, dh_chain, mdh_chain, poe_chain
 from nik.robots.names import did_you_mean
 from nik.robots.rates import check_rates
-from nik.robots.yamlfile import load_yaml
+from nik.robots.yamlfile import load_yaml_file
 
 __all__ = ["BUILTIN_DIR", "builtin_robots", "load_robot", "robot_from_config"]
 
@@ -143,8 +142,8 @@ def _warn_shadowed(name: str) -> None:
 
 def _is_robot_file(path: Path) -> bool:
     try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError):
+        data = load_yaml_file(path)
+    except (OSError, ValueError):
         return False
     return isinstance(data, dict) and ("joints" in data or "urdf" in data)
 
@@ -223,7 +222,7 @@ def robot_from_file(
 ) -> Robot:
     """Load a YAML robot file; see the module docstring for the schema."""
     path = Path(path)
-    data = load_yaml(path.read_text(), str(path), RobotDefinitionError)
+    data = load_yaml_file(path, RobotDefinitionError)
     return robot_from_config(
         data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool, root_link=root_link
     )
