@@ -53,7 +53,7 @@ def _missing() -> str | None:
     try:
         import coal  # noqa: F401
     except ImportError:
-        return "coal is not installed (pip install 'nik[collision-check]')"
+        return "coal is not installed (pip install 'nik-ik[collision-check]')"
     return None
 
 

@@ -11,8 +11,13 @@ kernels and the parsed URDF from an earlier run: the first round after a change 
 bytecode: the processes run without ``PYTHONDONTWRITEBYTECODE`` (with it, each one compiles nik's sources again,
 0.1-0.2 s, which no installed copy does).
 
+With ``--baseline PATH`` (another checkout of nik, e.g. ``git archive`` of an earlier commit, its kernel cache warm)
+each round also runs the same first solve with that checkout's code, interleaved with this one's, so that the two are
+compared in the same machine state (a shared machine's load drifts between runs made apart).
+
     python benchmarks/startup.py                 # panda, 7 rounds
     python benchmarks/startup.py --robot ur5 --rounds 11
+    python benchmarks/startup.py --rounds 5 --baseline /tmp/nik_main
 """
 
 from __future__ import annotations
@@ -60,13 +65,14 @@ print(json.dumps({{"import torch": t1 - t0, "import nik": t2 - t1, "load_robot":
 """
 
 
-def run(code: str) -> tuple[float, str]:
+def run(code: str, root: Path = ROOT) -> tuple[float, str]:
     """Seconds from starting the process to the moment it reports (its last line: a wall-clock time, or JSON
     with ``done``), so that the process's exit is not counted; and its output (whose line before a wall-clock time,
     or whose JSON's ``cpu``, is the CPU time the process had used by then)."""
     start = time.time()
     env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
+    env["PYTHONPATH"] = str(root)  # the checkout whose nik is timed
+    done = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, check=True)
     last = done.stdout.strip().splitlines()[-1]
     end = json.loads(last)["done"] if last.startswith("{") else float(last)
     return end - start, done.stdout
@@ -76,6 +82,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="panda")
     parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--baseline", type=Path, default=None, help="another checkout of nik, timed in the same rounds")
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT))
     import torch
@@ -86,7 +93,9 @@ def main() -> None:
     pose = robot.fk(robot.sample(1, generator=torch.Generator().manual_seed(5), dtype=torch.float64))[0].tolist()
     code = _SOLVE.format(robot=args.robot, pose=pose)
     run(code)  # warms the caches (kernels, URDF) if a change left them cold
-    base, full, parts, base_cpu = [], [], [], []
+    if args.baseline is not None:
+        run(code, args.baseline)
+    base, full, parts, base_cpu, old, old_parts = [], [], [], [], [], []
     for _ in range(args.rounds):
         dt, out = run(_TORCH)
         base.append(dt)
@@ -94,12 +103,20 @@ def main() -> None:
         dt, out = run(code)
         full.append(dt)
         parts.append(json.loads(out.strip().splitlines()[-1]))
+        if args.baseline is not None:
+            dt, out = run(code, args.baseline)
+            old.append(dt)
+            old_parts.append(json.loads(out.strip().splitlines()[-1]))
     b, f = statistics.median(base), statistics.median(full)
     bc, fc = statistics.median(base_cpu), statistics.median(p["cpu"] for p in parts)
     print(f"{args.robot}, {args.rounds} rounds, medians (s):      wall    CPU")
     print(f"  start to torch imported             {b:.3f}  {bc:.3f}")
     print(f"  fresh process to first solve        {f:.3f}  {fc:.3f}")
     print(f"  difference                          {f - b:.3f}  {fc - bc:.3f}")
+    if args.baseline is not None:
+        o, oc = statistics.median(old), statistics.median(p["cpu"] for p in old_parts)
+        print(f"  baseline {args.baseline}: fresh process to first solve {o:.3f}  {oc:.3f}")
+        print(f"  baseline difference                 {o - b:.3f}  {oc - bc:.3f}")
     print("  inside the solve process:")
     keys = ("import torch", "import nik", "load_robot", "IKSolver", "import numba", "kernel modules", "first solve")
     for key in keys + ("second solve", "second IKSolver"):

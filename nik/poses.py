@@ -4,7 +4,9 @@ Every function is batched over leading dimensions and keeps the dtype and device
 of its input. Conventions:
 
 - a pose is a homogeneous 4x4 matrix ``T: (..., 4, 4)``, metres;
-- a quaternion is ``(w, x, y, z)`` with ``w >= 0`` on output (unit norm);
+- a quaternion is ``(w, x, y, z)`` with ``w >= 0`` on output (unit norm); the representation ``quat_xyzw`` takes
+  and gives it as ``(x, y, z, w)`` instead, the order of ROS messages (``geometry_msgs/Quaternion``), scipy and
+  Eigen's coefficients (:func:`xyzw_to_wxyz`);
 - roll-pitch-yaw follows paper C eq. (3): ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``,
   ``roll = atan2(o_z, a_z)``, ``pitch = atan2(-n_z, sqrt(n_x^2 + n_y^2))``, ``yaw = atan2(n_y, n_x)``
   (``n, o, a`` the columns of ``R``);
@@ -44,6 +46,7 @@ __all__ = [
     "validate_joints",
     "validate_quaternion",
     "warn_degrees",
+    "xyzw_to_wxyz",
     "POSE_DIMS",
 ]
 
@@ -53,7 +56,13 @@ __all__ = [
 ORTHONORMAL_TOL = 1e-4
 
 #: Length of the vector form of a pose for each representation.
-POSE_DIMS = {"quat": 7, "rpy": 6, "rot6d": 9, "matrix": 12}
+POSE_DIMS = {"quat": 7, "quat_xyzw": 7, "rpy": 6, "rot6d": 9, "matrix": 12}
+
+
+def xyzw_to_wxyz(v):
+    """A ``quat_xyzw`` pose vector ``(..., 7)`` (x, y, z, qx, qy, qz, qw: ROS order) as a ``quat`` one (x, y, z, qw,
+    qx, qy, qz); a tensor or a numpy array, a copy in the same type."""
+    return v[..., [0, 1, 2, 6, 3, 4, 5]]
 
 
 def make_pose(R: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
@@ -152,12 +161,15 @@ def rot6d_to_matrix(r6: torch.Tensor) -> torch.Tensor:
 def pose_to_vector(T: torch.Tensor, representation: str = "quat") -> torch.Tensor:
     """``T: (..., 4, 4)`` -> xyz followed by the rotation in ``representation``.
 
-    ``quat``: (..., 7) xyz + (w, x, y, z); ``rpy``: (..., 6) xyz + roll-pitch-yaw;
+    ``quat``: (..., 7) xyz + (w, x, y, z); ``quat_xyzw``: (..., 7) xyz + (x, y, z, w); ``rpy``: (..., 6) xyz +
+    roll-pitch-yaw;
     ``rot6d``: (..., 9) xyz + 6D; ``matrix``: (..., 12) xyz + the 9 rotation entries row by row.
     """
     p, R = T[..., :3, 3], T[..., :3, :3]
     if representation == "quat":
         rot = matrix_to_quaternion(R)
+    elif representation == "quat_xyzw":
+        rot = matrix_to_quaternion(R)[..., [1, 2, 3, 0]]
     elif representation == "rpy":
         rot = matrix_to_rpy(R)
     elif representation == "rot6d":
@@ -180,6 +192,8 @@ def vector_to_pose(v: torch.Tensor, representation: str = "quat") -> torch.Tenso
     p, rot = v[..., :3], v[..., 3:]
     if representation == "quat":
         R = quaternion_to_matrix(rot)
+    elif representation == "quat_xyzw":
+        R = quaternion_to_matrix(rot[..., [3, 0, 1, 2]])
     elif representation == "rpy":
         R = rpy_to_matrix(rot)
     elif representation == "rot6d":

@@ -263,7 +263,8 @@ class IKSolver:
                 Closed-form arms pick among the 8 closed-form solutions; otherwise the refinement is
                 also run from ``q_near`` itself and the successful answer nearest ``q_near`` is kept.
             max_iters: iteration limit of the refinement (default: the method's config).
-            representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
+            representation: ``"matrix"`` | ``"quat"`` (w first) | ``"quat_xyzw"`` (ROS order) | ``"rpy"``; inferred from
+                the shape when None (7 numbers: ``"quat"``).
             plan: a plan of :meth:`plan` (changed with ``dataclasses.replace``) to run instead of the solver's
                 own; its tolerances, seed and iteration cap then replace the arguments.
             world: a :class:`nik.World` for this call instead of the solver's (:mod:`nik.ik.collide`).
@@ -377,7 +378,8 @@ class IKSolver:
                 the start (IK branch, posture) that keeps the whole path continuous with the least joint motion.
             tol_pos, tol_rot: success tolerances, metres and radians (as :meth:`solve`).
             seed: seeds every random choice.
-            representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
+            representation: ``"matrix"`` | ``"quat"`` (w first) | ``"quat_xyzw"`` (ROS order) | ``"rpy"``; inferred from
+                the shape when None (7 numbers: ``"quat"``).
             max_step: a step (largest joint motion between waypoints) above it is a reconfiguration, reported and
                 warned about; radians, default :data:`nik.paths.solve.PATH_MAX_STEP` (10 degrees).
             world: a :class:`nik.World` for this call (else the solver's): a waypoint whose answer collides is

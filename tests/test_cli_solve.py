@@ -466,3 +466,28 @@ def test_solve_asks_about_a_scene_written_in_millimetres(tmp_path, capsys):
         main(["solve", "--robot", "ur5", "--pose", "0.4", "0.1", "0.3", "0", "1", "0", "0", "--scene", str(scene)]) == 0
     )
     assert "millimetres" not in capsys.readouterr().err
+
+
+def test_solve_quat_order_xyzw_reads_the_pose_and_the_tool_w_last(capsys):
+    robot = nik.load_robot("kuka_kr")
+    T, rows = _pose_rows(robot, 1, 2)
+    wxyz = rows[0].tolist()
+    tool = [0.0, 0.0, 0.1, math.cos(0.3), 0.0, 0.0, math.sin(0.3)]  # 10 cm along z, turned 0.6 rad about z
+    T_tcp = T[0] @ nik.load_robot("kuka_kr", tool=tool).tool.to(T.dtype)
+    tcp = [*T_tcp[:3, 3].tolist(), *matrix_to_quaternion(T_tcp[:3, :3]).tolist()]
+    answers = []
+    for order, pose, frame in (
+        ("wxyz", tcp, tool),
+        ("xyzw", tcp[:3] + tcp[4:] + tcp[3:4], tool[:3] + tool[4:] + tool[3:4]),
+    ):
+        args = ["solve", "--robot", "kuka_kr", "--json", "--quat-order", order, "--tool", *map(repr, frame)]
+        assert main([*args, "--pose", *map(repr, pose)]) == 0
+        (r,) = json.loads(capsys.readouterr().out)["results"]
+        assert r["success"] is True
+        answers.append(torch.tensor(r["q_rad"], dtype=torch.float64))
+    torch.testing.assert_close(answers[1], answers[0], atol=1e-9, rtol=0)
+    pos, rot = nik.pose_error(T[0], robot.fk(answers[1]))  # the flange where the TCP pose puts it
+    assert float(pos) <= 1e-4 and float(rot) <= 1e-3
+    with pytest.raises(SystemExit) as stop:  # argparse refuses another order: exit 2, usage and one error line
+        main(["solve", "--robot", "kuka_kr", "--quat-order", "zyxw", "--pose", *map(repr, wxyz)])
+    assert stop.value.code == 2 and "argument --quat-order: invalid choice" in capsys.readouterr().err

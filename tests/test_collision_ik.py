@@ -142,7 +142,7 @@ def test_a_pose_that_overlaps_a_ball_by_less_than_the_tolerance_moves_the_hand_i
 
 
 def test_answers_called_free_never_collide_with_the_meshes():
-    pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik[collision-check]')")
+    pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik-ik[collision-check]')")
     import sys
     from pathlib import Path
 
@@ -187,7 +187,7 @@ def test_solve_path_calls_a_colliding_waypoint_infeasible():
 
 
 def test_viewer_draws_obstacles_and_colours_the_colliding_links():
-    pytest.importorskip("viser", reason="the viewer needs viser (pip install 'nik[view]')")
+    pytest.importorskip("viser", reason="the viewer needs viser (pip install 'nik-ik[view]')")
     from nik.view import Viewer, ViewerCfg
 
     robot = nik.load_robot("ur5")

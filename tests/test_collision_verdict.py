@@ -71,7 +71,7 @@ def test_bad_mesh_verdict_is_one_line():
 # -- the meshes judge (coal, example-robot-data's panda) ---------------------------------------------------------
 @pytest.fixture(scope="module")
 def panda_meshes():
-    pytest.importorskip("coal", reason="the mesh verdict needs coal (pip install 'nik[collision-check]')")
+    pytest.importorskip("coal", reason="the mesh verdict needs coal (pip install 'nik-ik[collision-check]')")
     bench = _bench_collisions()
     try:
         urdf = bench.panda_urdf()
@@ -170,7 +170,7 @@ def _with_never(model):
 @pytest.fixture(scope="module")
 def builtin_panda():
     """The built-in panda, its shipped model (fitted to example-robot-data's meshes) and the verdict's mesh check."""
-    pytest.importorskip("coal", reason="the mesh verdict needs coal (pip install 'nik[collision-check]')")
+    pytest.importorskip("coal", reason="the mesh verdict needs coal (pip install 'nik-ik[collision-check]')")
     from nik.collision.meshcheck import fitted_urdf, mesh_check
 
     robot = nik.load_robot("panda")

@@ -57,6 +57,30 @@ def test_every_nik_name_the_docs_use_is_an_attribute_after_a_plain_import_nik():
     assert nik.tolerances.DEFAULT_TOL_POS == 1e-4
 
 
+def test_every_dotted_nik_name_the_docs_use_resolves_after_a_plain_import_nik():
+    # docs write nik.collision.meshcheck.mesh_check, nik.ik.backends.one_pose, ...: each works as written after
+    # `import nik` (a module of a package is imported on first read), while `import nik` itself stays light
+    names = sorted({m for p in PAGES for m in re.findall(r"\bnik(?:\.[A-Za-z_]\w*){2,}", p.read_text())})
+    assert "nik.collision.meshcheck.mesh_check" in names and len(names) >= 50, names
+    code = (
+        "import sys\nimport nik\n"
+        "heavy = sorted(m for m in ('lightning', 'matplotlib', 'coal', 'torch', 'numba') if m in sys.modules)\n"
+        f"missing = []\nfor name in {names!r}:\n"
+        "    obj = nik\n"
+        "    try:\n"
+        "        for part in name.split('.')[1:]:\n"
+        "            obj = getattr(obj, part)\n"
+        "    except AttributeError as err:\n"
+        "        missing.append(f'{name}: {err}')\n"
+        "print(heavy)\nprint(missing)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    heavy, missing = done.stdout.strip().splitlines()[-2:]
+    assert heavy == "[]", f"import nik loaded {heavy}"
+    assert missing == "[]", missing
+
+
 #: The four source papers (the reference list of the project's methods specification): what identifies each.
 PAPERS = {
     "A": ("Rui Ting", "simulated annealing particle swarm optimization", "Computer Engineering and Applications",
@@ -179,3 +203,25 @@ def test_readme_one_pose_figures_are_those_of_the_stored_run_it_cites():
     assert (float(m.group(3)), float(m.group(4))) == (min(vs_lm), max(vs_lm))
     assert (float(m.group(5)), float(m.group(6))) == (round(min(vs_trac), 1), round(max(vs_trac), 1))
     assert (float(m.group(7)), float(m.group(8))) == (min(tight), max(tight))
+
+
+def _distribution_name() -> str:
+    text = (ROOT / "pyproject.toml").read_text()
+    return re.search(r'^\[project\]\n(?:.*\n)*?name = "([^"]+)"', text, re.M).group(1)
+
+
+def test_the_distribution_is_not_the_package_index_s_nik_and_every_install_hint_names_it():
+    # the package index's `nik` is an unrelated project: a hint `pip install 'nik[...]'` would fetch it
+    dist = _distribution_name()
+    assert dist != "nik" and dist.startswith("nik"), dist
+    files = [*sorted((ROOT / "nik").rglob("*.py")), *sorted((ROOT / "benchmarks").glob("*.py")), *PAGES]
+    hints, wrong = 0, []
+    for path in files:
+        text = path.read_text()
+        for m in re.finditer(r"pip install\s+['\"]?(nik[\w-]*)(?=[\[\s'\"`)]|$)", text, re.M):
+            if text.startswith("` does not install this one", m.end()):
+                continue  # README's warning about the index's `nik`
+            hints += 1
+            if m.group(1) != dist:
+                wrong.append(f"{path.relative_to(ROOT)}: {m.group(0)}")
+    assert hints >= 5 and not wrong, (hints, wrong)

@@ -75,7 +75,7 @@ def test_the_worst_error_of_a_path_is_below_half_the_tolerance():
 def test_a_path_past_a_box_is_free_on_the_meshes():
     """The same problem on example-robot-data's panda (its sphere model fitted to its meshes): the plain answer hits
     the box by the meshes (coal), the answer among obstacles does not, at any waypoint."""
-    pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik[collision-check]')")
+    pytest.importorskip("coal", reason="the mesh check needs coal (pip install 'nik-ik[collision-check]')")
     import sys
     from pathlib import Path
 

@@ -2,6 +2,7 @@
 
 import math
 
+import numpy as np
 import pytest
 import torch
 from torch.testing import assert_close
@@ -27,7 +28,7 @@ def axis_angle(axis, angle, dtype=torch.float64):
     return torch.eye(3, dtype=dtype) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
-@pytest.mark.parametrize("representation", ["quat", "rpy", "rot6d", "matrix"])
+@pytest.mark.parametrize("representation", ["quat", "quat_xyzw", "rpy", "rot6d", "matrix"])
 def test_pose_vector_round_trip(representation):
     T = random_poses(500)
     v = poses.pose_to_vector(T, representation)
@@ -127,3 +128,13 @@ def test_validate_quaternion_normalises_near_unit_and_rejects_zero():
     assert_close(poses.validate_quaternion(q), torch.tensor([[1.0, 0, 0, 0]], dtype=torch.float64))
     with pytest.raises(ValueError, match="row 0 has norm 0"):
         poses.validate_quaternion(torch.zeros(1, 4))
+
+
+def test_quat_xyzw_is_the_quaternion_w_last_as_ros_gives_it():
+    # a quarter turn about z: w = cos 45 deg, z = sin 45 deg; ROS order puts w last
+    T = poses.make_pose(axis_angle([0, 0, 1], math.pi / 2), torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64))
+    c = math.cos(math.pi / 4)
+    assert_close(poses.pose_to_vector(T, "quat_xyzw"), torch.tensor([0.1, 0.2, 0.3, 0, 0, c, c], dtype=torch.float64))
+    assert_close(poses.vector_to_pose(torch.tensor([0.1, 0.2, 0.3, 0, 0, c, c], dtype=torch.float64), "quat_xyzw"), T)
+    xyzw = np.array([[1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.9]])
+    assert poses.xyzw_to_wxyz(xyzw).tolist() == [[1.0, 2.0, 3.0, 0.9, 0.1, 0.2, 0.3]]

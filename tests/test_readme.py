@@ -72,8 +72,8 @@ SHRINK = [
     ("--steps 100 --de-generations 60 --seeds 0 1 2", "--steps 2 --de-generations 1 --seeds 0"),
     ("paper_d.py --out runs/paper_d", "paper_d.py --runs 1 --out runs/paper_d"),
     (
-        "nik train stanford --minutes 20 ",
-        "nik train stanford --minutes 20 --max-steps 3 --hidden 32 --val-n 100 --eval-batch 20 --eval-one 2 ",
+        "nik train stanford --minutes 1 ",
+        "nik train stanford --minutes 1 --max-steps 3 --hidden 32 --val-n 100 --eval-batch 20 --eval-one 2 ",
     ),
     ("paper_a.py --n 100", "paper_a.py --n 2 --iters 20"),
     ("refine.py --n 1000 --swarm-n 100 --boundary", "refine.py --n 4 --swarm-n 1 --skip-uniform"),
@@ -243,3 +243,14 @@ def test_shell_then_python_blocks_of_readme_and_docs_run_in_a_fresh_copy(tmp_pat
 def test_shrink_table_entries_still_match_a_page(old):
     shell = "\n".join(body for _page, lang, body in all_blocks() if lang == "shell")
     assert old in shell
+
+
+def test_the_five_minute_tour_trains_for_at_most_two_minutes():
+    # the tour's title is a promise: its commands' declared budgets (`--minutes`) leave time for the rest
+    text = README.read_text()
+    tour = re.search(r"^## A five-minute tour\n(.*?)^## ", text, re.M | re.S)
+    assert tour, "README lost its five-minute tour"
+    shell = "\n".join(body for lang, body in fenced_blocks(tour.group(1)) if lang == "shell")
+    assert "nik train" in shell
+    budgets = [float(m) for m in re.findall(r"--minutes\s+([\d.]+)", shell)]
+    assert budgets and all(b > 0 for b in budgets) and sum(budgets) <= 2, budgets

@@ -471,3 +471,43 @@ def test_solve_all_returns_one_solution_per_branch_without_the_closed_form(name,
         match = _wrapped_max_diff(sols, closed)
         assert float(match.min(1).values.max()) < 1e-8  # each solution is one of the closed form's
         assert sols.shape[0] == closed.shape[0]  # ... and every closed-form solution was found
+
+
+def test_a_pose_given_x_y_z_w_gives_the_answer_of_the_same_pose_given_w_first():
+    # ROS order (qx, qy, qz, qw) with representation="quat_xyzw": the same targets, the same answers, in solve,
+    # solve_all and on both backends' input checks (a tensor, numpy, a single pose); read as "quat" it is another pose
+    robot = nik.load_robot("puma560")
+    _, T = _targets(robot, 4, 11)
+    solver = nik.IKSolver(robot)
+    wxyz = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
+    xyzw = wxyz[:, [0, 1, 2, 4, 5, 6, 3]]
+    ref = solver.solve(wxyz, representation="quat", seed=0)
+    for value in (xyzw, xyzw.numpy(), xyzw.tolist()):
+        res = solver.solve(value, representation="quat_xyzw", seed=0)
+        torch.testing.assert_close(torch.as_tensor(res.q), ref.q, atol=1e-9, rtol=0)
+        assert bool(res.success.all())
+        pos, rot = nik.pose_error(robot.fk(torch.as_tensor(res.q)), T)
+        assert bool((pos <= 1e-4).all()) and bool((rot <= 1e-3).all())
+    single = solver.solve(xyzw[0], representation="quat_xyzw", seed=0)
+    torch.testing.assert_close(single.q[0], ref.q[0], atol=1e-9, rtol=0)
+    torch.testing.assert_close(solver.solve_all(xyzw[0], representation="quat_xyzw"), solver.solve_all(T[0]))
+    misread = solver.solve(xyzw, representation="quat", seed=0)
+    assert float(nik.pose_error(robot.fk(misread.q), T)[1].max()) > 0.1  # w last read as w first: another rotation
+    bad = xyzw.clone()
+    bad[1, 3:] *= 2
+    with pytest.raises(ValueError, match=r"row 1: quaternion \(x, y, z, w\) has norm 2;"):
+        solver.solve(bad, representation="quat_xyzw")
+
+
+def test_a_path_given_x_y_z_w_gives_the_trajectory_of_the_same_path_given_w_first():
+    robot = nik.load_robot("ur5")
+    q = robot.sample(1, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    steps = torch.linspace(0, 0.05, 6, dtype=torch.float64)[:, None]
+    T = robot.fk(q).repeat(6, 1, 1)
+    T[:, :3, 3] += steps * torch.tensor([1.0, 0.5, 0.0], dtype=torch.float64)  # a 5.6 cm line, fixed orientation
+    wxyz = torch.cat([T[:, :3, 3], matrix_to_quaternion(T[:, :3, :3])], dim=-1)
+    solver = nik.IKSolver(robot)
+    ref = solver.solve_path(wxyz, q[0], representation="quat")
+    res = solver.solve_path(wxyz[:, [0, 1, 2, 4, 5, 6, 3]], q[0], representation="quat_xyzw")
+    assert bool(ref.success.all()) and bool(res.success.all())
+    torch.testing.assert_close(res.q, ref.q, atol=1e-9, rtol=0)

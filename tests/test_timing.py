@@ -17,7 +17,7 @@ from nik.paths import timing as T
 from nik.robots.config import robot_from_config
 
 needs_toppra = pytest.mark.skipif(
-    importlib.util.find_spec("toppra") is None, reason="needs toppra: pip install 'nik[timing]'"
+    importlib.util.find_spec("toppra") is None, reason="needs toppra: pip install 'nik-ik[timing]'"
 )
 RTOL = T.RATE_RTOL  # float rounding of toppra's solver; nothing looser
 
@@ -229,7 +229,7 @@ def test_timing_without_speed_limits_or_with_bad_options_says_what_is_missing():
 
 def test_missing_toppra_is_a_one_line_error_naming_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "toppra", None)
-    with pytest.raises(ValueError, match=r"pip install 'nik\[timing\]'"):
+    with pytest.raises(ValueError, match=r"pip install 'nik-ik\[timing\]'"):
         T.time_path(np.zeros((3, 2)) + [[0, 0], [1, 1], [2, 2]], [1.0, 1.0])
 
 

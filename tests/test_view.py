@@ -142,7 +142,7 @@ def test_nik_view_without_viser_says_how_to_install_it(monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "viser", None)  # import viser now raises ImportError
     assert main(["view", "puma560", "--port", "0"]) == 2
     captured = capsys.readouterr()
-    assert captured.err.strip() == "nik view needs the optional extra: pip install 'nik[view]'"
+    assert captured.err.strip() == "nik view needs the optional extra: pip install 'nik-ik[view]'"
     assert "Traceback" not in captured.err + captured.out
 
 

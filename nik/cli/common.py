@@ -1,5 +1,5 @@
 """Arguments shared by the ``nik`` commands that take an arm: ``--robot``, for URDF arms ``--end-link``, and the
-``--base`` / ``--tool`` frames."""
+``--base`` / ``--tool`` frames, and ``--quat-order``: the order of the quaternions given on the command line."""
 
 from __future__ import annotations
 
@@ -8,7 +8,14 @@ import sys
 import warnings
 from pathlib import Path
 
-__all__ = ["add_robot_arguments", "add_root_link_argument", "notes_as_lines", "robot_from_args", "tool_link_text"]
+__all__ = [
+    "add_robot_arguments",
+    "add_root_link_argument",
+    "notes_as_lines",
+    "quat_wxyz",
+    "robot_from_args",
+    "tool_link_text",
+]
 
 _NIK_DIR = str(Path(__file__).resolve().parents[1])
 
@@ -16,7 +23,8 @@ _FRAME = ("X", "Y", "Z", "QW", "QX", "QY", "QZ")
 
 
 def add_robot_arguments(parser) -> None:
-    """``--robot`` (required), ``--end-link`` (the tool link of a URDF arm), ``--base`` and ``--tool``."""
+    """``--robot`` (required), ``--end-link`` (the tool link of a URDF arm), ``--base``, ``--tool`` and
+    ``--quat-order``."""
     parser.add_argument("--robot", required=True, help="built-in robot name or robot file (YAML/URDF)")
     parser.add_argument(
         "--end-link",
@@ -46,6 +54,22 @@ def add_robot_arguments(parser) -> None:
         "panda's panda_link8): position (the unit of --unit where the command has one, else metres) and unit "
         "quaternion; poses are then the TCP's",
     )
+    parser.add_argument(
+        "--quat-order",
+        choices=["wxyz", "xyzw"],
+        default="wxyz",
+        help="order of the quaternions given as numbers (--pose, --base, --tool): wxyz (default: QW QX QY QZ) or "
+        "xyzw (QX QY QZ QW, the order of ROS messages); a CSV's columns are read by their names (qw,qx,qy,qz)",
+    )
+
+
+def quat_wxyz(frame, args):
+    """``X Y Z`` and a quaternion given on the command line, with the quaternion brought to w, x, y, z (nik's order)
+    from ``--quat-order`` (``args.quat_order``; absent: wxyz); None stays None."""
+    if frame is None or getattr(args, "quat_order", "wxyz") == "wxyz":
+        return frame
+    x, y, z, qx, qy, qz, qw = frame
+    return [x, y, z, qw, qx, qy, qz]
 
 
 def add_root_link_argument(parser) -> None:
@@ -70,7 +94,7 @@ def robot_from_args(args):
     from nik.robots import load_robot
 
     scale = 1e-3 if getattr(args, "unit", "m") == "mm" else 1.0  # --base / --tool positions follow --unit
-    base, tool = (_frame_si(getattr(args, key, None), scale) for key in ("base", "tool"))
+    base, tool = (_frame_si(quat_wxyz(getattr(args, key, None), args), scale) for key in ("base", "tool"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RobotDefinitionWarning)
         robot = load_robot(

@@ -11,7 +11,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from nik.cli.common import add_robot_arguments, robot_from_args, tool_link_text
+from nik.cli.common import add_robot_arguments, quat_wxyz, robot_from_args, tool_link_text
 from nik.cli.scene import add_scene_argument, world_from_args
 from nik.tolerances import DEFAULT_TOL_POS_MM, DEFAULT_TOL_ROT_DEG, describe
 
@@ -57,7 +57,8 @@ def register(sub) -> None:
         nargs=7,
         type=float,
         metavar=("X", "Y", "Z", "QW", "QX", "QY", "QZ"),
-        help="one pose: position (metres, or --unit mm) and unit quaternion (w, x, y, z)",
+        help="one pose: position (metres, or --unit mm) and unit quaternion (w, x, y, z; with --quat-order xyzw: "
+        "x, y, z, w)",
     )
     src.add_argument("--poses", metavar="FILE.csv", help="CSV with header x,y,z,qw,qx,qy,qz (one pose per row)")
     s.add_argument(
@@ -125,7 +126,7 @@ def register(sub) -> None:
         choices=["auto", "on", "off"],
         default="auto",
         help="with --scene, who judges collision_free: auto (default) the robot's collision meshes where coal "
-        "(pip install 'nik[collision-check]') and a URDF with meshes are there, else the spheres; on: the meshes "
+        "(pip install 'nik-ik[collision-check]') and a URDF with meshes are there, else the spheres; on: the meshes "
         "(an error without them); off: the conservative spheres",
     )
     s.set_defaults(func=_cmd_solve)
@@ -361,7 +362,7 @@ def _cmd_solve(args) -> int:
 
     robot = robot_from_args(args)
     if args.pose is not None:
-        poses = torch.tensor([args.pose], dtype=torch.float64)
+        poses = torch.tensor([quat_wxyz(args.pose, args)], dtype=torch.float64)
     else:
         poses = read_poses_csv(args.poses)
     if args.unit == "mm":

@@ -20,7 +20,7 @@ def register(sub) -> None:
         "follows (one solve per move, from the current joints) and the panel shows success, the errors (mm, deg) "
         "and the joint angles (deg); every solution of the pose is drawn faint. --poses: a slider over the poses of "
         "a CSV; --path: the waypoints of a CSV solved in order and played back. Runs until Ctrl-C. Needs the "
-        "optional extra: pip install 'nik[view]'.",
+        "optional extra: pip install 'nik-ik[view]'.",
     )
     v.add_argument("robot", metavar="ROBOT", help="built-in robot name, YAML robot file or URDF")
     v.add_argument("--end-link", default=None, metavar="LINK", help="URDF: the tool link")

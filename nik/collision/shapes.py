@@ -113,7 +113,7 @@ def mesh_triangles(path: str | Path, scale=(1.0, 1.0, 1.0)) -> np.ndarray:
         import trimesh
     except ImportError as err:
         raise ValueError(
-            f"cannot read mesh {path}: trimesh is not installed (pip install 'nik[collision-check]')"
+            f"cannot read mesh {path}: trimesh is not installed (pip install 'nik-ik[collision-check]')"
         ) from err
     try:
         mesh = trimesh.load(str(path), force="mesh")

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from nik.collision.urdf import rpy_matrix
+from nik.robots.yamlfile import load_yaml
 
 __all__ = ["MM_HINT", "World"]
 
@@ -261,16 +262,12 @@ class World:
             raise ValueError(f"scene file {path}: cannot be read ({err.strerror or err})") from None
         if not text.strip():
             raise ValueError(f"scene file {path}: is empty")
-        try:
-            if path.suffix.lower() == ".json":
+        if path.suffix.lower() != ".json":
+            data = load_yaml(text, f"scene file {path}")  # the error names the line and column
+        else:
+            try:
                 data = json.loads(text)
-            else:
-                import yaml
-
-                data = yaml.safe_load(text)
-        except Exception as err:  # noqa: BLE001 - YAML and JSON parsers raise their own kinds
-            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-            raise ValueError(
-                f"scene file {path}: not valid {path.suffix.lstrip('.').upper() or 'YAML'} ({first})"
-            ) from None
+            except json.JSONDecodeError as err:
+                place = f"line {err.lineno}, column {err.colno}"
+                raise ValueError(f"scene file {path}: not valid JSON: {place}: {err.msg}") from None
         return cls.from_dict(data, source=f"scene file {path}")

@@ -32,12 +32,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
 import nik
 from nik.data.branches import branch_classifier, branch_name
 from nik.data.storage import FORMAT_VERSION, AtomicDirectory, NpyStreamWriter, write_meta
 from nik.errors import DatasetError
+from nik.robots.yamlfile import load_yaml
 
 __all__ = [
     "BLOCK_SIZE",
@@ -82,10 +82,7 @@ def resolve_ranges(robot, ranges=None) -> tuple[torch.Tensor, str]:
         path = Path(ranges)
         if not path.is_file():
             raise FileNotFoundError(f"ranges file not found: {path} (give a YAML file or 'limits')")
-        try:
-            data = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as err:
-            raise ValueError(f"{path}: not valid YAML ({str(err).splitlines()[0]})") from err
+        data = load_yaml(path.read_text(), str(path))
         if not isinstance(data, dict) or "ranges" not in data:
             raise ValueError(f"{path}: expected a mapping with 'ranges: [[lo, hi], ...]' and 'angles: deg|rad'")
         unknown = set(data) - {"angles", "ranges", "description", "name", "robot"}

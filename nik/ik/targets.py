@@ -29,6 +29,7 @@ from nik.poses import (
     validate_joints,
     validate_pose,
     warn_degrees,
+    xyzw_to_wxyz,
 )
 
 __all__ = ["QUAT_NORM_TOL", "as_poses", "as_q_near", "check_tolerances", "pose_array", "q_near_array"]
@@ -45,7 +46,8 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
             xyz + roll-pitch-yaw (paper C: ``R = Rz(yaw) Ry(pitch) Rx(roll)``), metres and radians;
             a tensor, a numpy array or nested lists. A single pose ``(4, 4)``, ``(7,)`` or ``(6,)``
             is taken as B = 1. Non-tensor input and integer tensors become float64.
-        representation: ``"matrix"``, ``"quat"`` or ``"rpy"``; None infers it from the shape.
+        representation: ``"matrix"``, ``"quat"``, ``"quat_xyzw"`` (xyz + quaternion (x, y, z, w), the order of ROS
+            messages) or ``"rpy"``; None infers it from the shape (a row of 7 is ``"quat"``: w first).
 
     Returns:
         ``(B, 4, 4)`` floating-point poses (dtype and device of a floating tensor input).
@@ -77,8 +79,10 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
         if T.ndim != 3 or T.shape[-2:] != (4, 4):
             raise ValueError(f"{name}: expected shape (B, 4, 4) for 4x4 poses, got {tuple(T.shape)}")
         return validate_pose(T, name=name)
-    if representation not in ("quat", "rpy"):
-        raise ValueError(f"{name}: representation must be 'matrix', 'quat' or 'rpy', got {representation!r}")
+    if representation not in ("quat", "quat_xyzw", "rpy"):
+        raise ValueError(
+            f"{name}: representation must be 'matrix', 'quat', 'quat_xyzw' or 'rpy', got {representation!r}"
+        )
     width = POSE_DIMS[representation]
     if T.ndim == 1:
         T = T.unsqueeze(0)
@@ -87,7 +91,10 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
             f"{name}: a {representation!r} pose has {width} numbers per row; expected shape (B, {width}), "
             f"got {tuple(T.shape)}"
         )
-    fields = ("x, y, z", "quaternion (w, x, y, z)" if representation == "quat" else "roll, pitch, yaw")
+    order = "(x, y, z, w)" if representation == "quat_xyzw" else "(w, x, y, z)"
+    if representation == "quat_xyzw":
+        T, representation = xyzw_to_wxyz(T), "quat"
+    fields = ("x, y, z", f"quaternion {order}" if representation == "quat" else "roll, pitch, yaw")
     for label, part in zip(fields, (T[:, :3], T[:, 3:]), strict=True):
         bad = ~torch.isfinite(part).all(dim=-1)
         if bool(bad.any()):
@@ -99,7 +106,7 @@ def as_poses(T_target, representation: str | None = None, *, name: str = "T_targ
         if bool(bad.any()):
             i = int(bad.nonzero()[0])
             raise ValueError(
-                f"{name}: row {i}: quaternion (w, x, y, z) has norm {float(norm[i]):.6g}; "
+                f"{name}: row {i}: quaternion {order} has norm {float(norm[i]):.6g}; "
                 f"a unit quaternion is expected (norm within {QUAT_NORM_TOL:g} of 1 is normalised)"
             )
         R = quaternion_to_matrix(rot / norm[:, None])
@@ -170,10 +177,12 @@ def _checked_poses(a: np.ndarray, representation: str | None) -> np.ndarray | No
         a = a[None] if a.ndim == 2 else a
         if a.ndim != 3 or a.shape[1:] != (4, 4) or a.shape[0] == 0:
             return None
-    elif rep in ("quat", "rpy"):
+    elif rep in ("quat", "quat_xyzw", "rpy"):
         a = a[None] if a.ndim == 1 else a
         if a.ndim != 2 or a.shape[1] != POSE_DIMS[rep] or a.shape[0] == 0:
             return None
+        if rep == "quat_xyzw":
+            a, rep = xyzw_to_wxyz(a), "quat"
         if rep == "rpy" and np.abs(a[:, 3:]).max() > DEGREES_SUSPECT:
             return None
     else:

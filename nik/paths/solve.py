@@ -224,7 +224,8 @@ def solve_path(
         q_start: ``(dof,)`` the joints before the path (radians, inside the limits) or None.
         tol_pos, tol_rot: success tolerances, metres and radians.
         seed: seeds the uniform starts and restarts.
-        representation: ``"matrix"`` | ``"quat"`` | ``"rpy"``; inferred from the shape when None.
+        representation: ``"matrix"`` | ``"quat"`` (w first) | ``"quat_xyzw"`` (ROS order) | ``"rpy"``; inferred from the
+            shape when None (7 numbers: ``"quat"``).
         max_step: steps above it are reconfigurations (reported, warned about), radians.
         world: a :class:`nik.World` (else the solver's; with self-collision by :func:`nik.ik.collide.setup`'s rule):
             on an arm without a closed form a chain that collides is searched again with colliding answers left out

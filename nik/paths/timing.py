@@ -87,7 +87,7 @@ RATE_RTOL = 1e-9
 #: Name of the time column of the path CSV (seconds).
 TIME_COLUMN = "t_s"
 
-_INSTALL = "timing needs toppra: pip install 'nik[timing]' (or pip install toppra)"
+_INSTALL = "timing needs toppra: pip install 'nik-ik[timing]' (or pip install toppra)"
 
 
 @dataclass

@@ -68,13 +68,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
 from nik.errors import RobotDefinitionError
 from nik.poses import rpy_to_matrix
 from nik.robots.frames import as_frame, with_frames
 from nik.robots.model import Robot, dh_chain, mdh_chain, poe_chain
+from nik.robots.names import did_you_mean
 from nik.robots.rates import check_rates
+from nik.robots.yamlfile import load_yaml_file
 
 __all__ = ["BUILTIN_DIR", "builtin_robots", "load_robot", "robot_from_config"]
 
@@ -141,8 +142,8 @@ def _warn_shadowed(name: str) -> None:
 
 def _is_robot_file(path: Path) -> bool:
     try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError):
+        data = load_yaml_file(path)
+    except (OSError, ValueError):
         return False
     return isinstance(data, dict) and ("joints" in data or "urdf" in data)
 
@@ -209,8 +210,10 @@ def load_robot(
     builtin = BUILTIN_DIR / f"{text}.yaml"
     if builtin.is_file() and _is_robot_file(builtin):
         return robot_from_file(builtin, end_link=end_link, base=base, tool=tool, root_link=root_link)
+    hint = did_you_mean(text, builtin_robots())
     raise RobotDefinitionError(
-        f"unknown robot {text!r}: not a built-in ({', '.join(builtin_robots())}) and not a robot file"
+        f"unknown robot {text!r}: {hint + ' It is ' if hint else ''}not a built-in ({', '.join(builtin_robots())}) "
+        "and not a robot file"
     )
 
 
@@ -219,10 +222,7 @@ def robot_from_file(
 ) -> Robot:
     """Load a YAML robot file; see the module docstring for the schema."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
-        raise RobotDefinitionError(f"{path}: not valid YAML ({err})") from err
+    data = load_yaml_file(path, RobotDefinitionError)
     return robot_from_config(
         data, source=str(path), base_dir=path.parent, end_link=end_link, base=base, tool=tool, root_link=root_link
     )
@@ -401,7 +401,9 @@ def _chain_from_config(data: dict, source: str, length: float, angle: float) -> 
 def _no_unknown(mapping: dict, allowed: set[str], where: str) -> None:
     unknown = set(map(str, mapping)) - allowed
     if unknown:
-        raise RobotDefinitionError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+        hints = [h for h in (did_you_mean(u, allowed) for u in sorted(unknown)) if h]
+        hint = f" ({'; '.join(hints)})" if hints else ""
+        raise RobotDefinitionError(f"{where}: unknown field(s) {sorted(unknown)}{hint}; allowed: {sorted(allowed)}")
 
 
 def _required(mapping: dict, key: str, where: str):

@@ -31,6 +31,7 @@ from nik.errors import RobotDefinitionError, RobotDefinitionWarning
 from nik.poses import rpy_to_matrix
 from nik.robots.frames import with_frames
 from nik.robots.model import NormalFormBuilder, Robot
+from nik.robots.names import did_you_mean
 
 __all__ = [
     "GRIPPER_WORDS",
@@ -366,7 +367,9 @@ def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) ->
     links = {f.link.name for f in _frames(chain._root)}
     for role, link in (("end_link", end_link), ("root_link", root_link)):
         if link is not None and link not in links:
-            raise RobotDefinitionError(f"{path}: {role} {link!r} is not a link of this URDF (links: {sorted(links)})")
+            hint = f"; {did_you_mean(link, links)}" if did_you_mean(link, links) else ""
+            listed = f"(links: {sorted(links)})"
+            raise RobotDefinitionError(f"{path}: {role} {link!r} is not a link of this URDF{hint} {listed}")
     try:
         serial = build_pk_chain(text, end_link, root_link or "")
     except Exception as err:

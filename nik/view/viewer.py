@@ -40,7 +40,7 @@ from nik.view.arm import arm_points
 
 __all__ = ["VIEW_EXTRA_MESSAGE", "MissingExtraError", "ViewState", "Viewer", "ViewerCfg", "viser_available"]
 
-VIEW_EXTRA_MESSAGE = "nik view needs the optional extra: pip install 'nik[view]'"
+VIEW_EXTRA_MESSAGE = "nik view needs the optional extra: pip install 'nik-ik[view]'"
 
 _ARM_RGB = (40, 100, 180)
 _JOINT_RGB = (30, 30, 30)
