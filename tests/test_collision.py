@@ -18,6 +18,7 @@ from nik.collision import (
     collides,
     colliding_links,
     collision_model,
+    collision_names,
     set_collision_model,
     signed_distances,
 )
@@ -143,6 +144,118 @@ def test_pairs_an_srdf_disables_are_left_out(prims):
     model = collision_model(fresh)
     assert ("base", "l3") not in model.pair_names() and model.left_out["base|l3"] == "srdf: Never"
     assert ("base", "l3") in collision_model(fresh, srdf=False).pair_names()
+
+
+def test_an_srdf_given_by_path_disables_its_pairs(prims, tmp_path):
+    robot, path = prims
+    srdf = tmp_path / "elsewhere" / "moveit_config.srdf"  # neither beside the URDF nor named as it
+    srdf.parent.mkdir()
+    srdf.write_text('<robot name="prims"><disable_collisions link1="l3" link2="base" reason="Never"/></robot>')
+    assert ("base", "l3") in collision_model(robot).pair_names()  # the search does not find it
+    given = nik.load_robot(path, end_link="l3", srdf=srdf)
+    model = collision_model(given)
+    assert ("base", "l3") not in model.pair_names() and model.left_out["base|l3"] == "srdf: Never"
+    assert model.options["srdf_file"] == str(srdf)
+    assert ("base", "l3") not in collision_model(robot, srdf=srdf).pair_names()  # or to collision_model
+    assert ("base", "l3") in collision_model(given, srdf=False).pair_names()
+    with pytest.raises(ValueError, match="SRDF file not found") as err:
+        nik.load_robot(path, end_link="l3", srdf=tmp_path / "missing.srdf")
+    assert "\n" not in str(err.value)
+
+
+def test_the_srdf_search_takes_the_single_srdf_of_a_sibling_folder_and_says_so(tmp_path, caplog):
+    pkg = tmp_path / "prims_description"
+    (pkg / "urdf").mkdir(parents=True)
+    (pkg / "srdf").mkdir()
+    path = pkg / "urdf" / "prims.urdf"
+    path.write_text(URDF)
+    srdf = pkg / "srdf" / "prims_manipulation.srdf"  # Baxter's layout: not named as the URDF
+    srdf.write_text('<robot name="prims"><disable_collisions link1="l3" link2="base" reason="Never"/></robot>')
+    with caplog.at_level("INFO", logger="nik.collision"):
+        model = collision_model(nik.load_robot(path, end_link="l3"))
+    assert model.left_out["base|l3"] == "srdf: Never" and model.options["srdf_file"] == str(srdf)
+    assert str(srdf) in caplog.text
+    (pkg / "srdf" / "prims_other.srdf").write_text("<robot/>")  # two: none guessed, a warning names them
+    with pytest.warns(nik.CollisionModelWarning, match="prims_manipulation.srdf, prims_other.srdf"):
+        model = collision_model(nik.load_robot(path, end_link="l3"))
+    assert ("base", "l3") in model.pair_names() and model.options["srdf_file"] is None
+
+
+# two arms on a torso: the right arm is the robot's chain, the left one the rest of the robot
+ARMS = (
+    """<?xml version="1.0"?>
+<robot name="twoarm">
+  <link name="torso"><collision><origin xyz="0 0 0.25"/><geometry><box size="0.1 0.1 0.5"/></geometry></collision>
+  </link>
+"""
+    + "".join(
+        f'''  <link name="{s}_{part}"><collision><origin xyz="0.2 0 0"/><geometry><box size="0.4 0.05 0.05"/></geometry>
+  </collision></link>
+'''
+        for s in "rl"
+        for part in ("upper", "fore")
+    )
+    + "".join(
+        f'''  <joint name="{s}_s0" type="revolute"><parent link="torso"/><child link="{s}_upper"/>
+    <origin xyz="0 {y} 0.6"/><axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="{s}_e0" type="revolute"><parent link="{s}_upper"/><child link="{s}_fore"/><origin xyz="0.4 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+'''
+        for s, y in (("r", -0.3), ("l", 0.3))
+    )
+    + """  <link name="r_hand"/>
+  <joint name="r_hand_joint" type="fixed"><parent link="r_fore"/><child link="r_hand"/><origin xyz="0.4 0 0"/></joint>
+</robot>
+"""
+)
+
+
+def test_joint_values_bring_the_rest_of_the_robot_in(tmp_path):
+    path = tmp_path / "twoarm.urdf"
+    path.write_text(ARMS)
+    away = nik.load_robot(path, end_link="r_hand")  # the left arm along x at y = +0.3, 0.6 m from the right one
+    brought = nik.load_robot(path, end_link="r_hand", joint_values={"l_s0": -1.0})  # its forearm over the right's
+    assert away.joint_names == ["r_s0", "r_e0"] and brought.joint_values == {"l_s0": -1.0}
+    q = np.zeros((1, 2))  # the right arm straight along x at y = -0.3
+    assert not collides(away, q)[0]
+    assert collides(brought, q)[0]
+    assert any(name.endswith("|l_fore") for name in collision_names(brought, q)[0])
+    left = collision_model(brought).spheres("l_fore")[0]  # the left forearm's spheres where it stands
+    c, s = math.cos(-1.0), math.sin(-1.0)
+    elbow = np.array([0.4 * c, 0.3 + 0.4 * s, 0.6])
+    hand = elbow + 0.4 * np.array([c, s, 0.0])
+    t = np.clip((left - elbow) @ (hand - elbow) / 0.16, 0, 1)
+    assert np.linalg.norm(left - (elbow + t[:, None] * (hand - elbow)), axis=1).max() < 0.05
+    pytest.importorskip("coal", reason="the mesh check needs coal (extra collision-check)")
+    from nik.collision.meshcheck import MeshCheck
+
+    assert not MeshCheck(away, path).collides(q)[0] and MeshCheck(brought, path).collides(q)[0]
+
+
+def test_baxters_left_arm_brought_in_meets_the_right_arm_on_the_meshes():
+    pytest.importorskip("coal", reason="the mesh check needs coal (extra collision-check)")
+    from nik.collision.builtin import erd_path
+    from nik.collision.meshcheck import MeshCheck
+    from nik.collision.model import find_srdf, srdf_disabled
+
+    urdf = erd_path("baxter_description/urdf/baxter.urdf")
+    if urdf is None:
+        pytest.skip("Baxter's URDF comes with example-robot-data (extra urdf-tests)")
+    srdf, _ = find_srdf(urdf)
+    assert srdf is not None and srdf.name == "baxter_manipulation.srdf"  # the only one of ../srdf/
+    skip = list(srdf_disabled(srdf))
+    arm = {"root_link": "torso", "end_link": "right_hand_link"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", nik.RobotDefinitionWarning)
+        away = nik.load_robot(urdf, **arm)
+        brought = nik.load_robot(urdf, **arm, joint_values={"left_s0": -0.8})  # the left arm swung in front
+    q = _q(away, 100, 0).numpy()
+    free_away = ~MeshCheck(away, urdf, skip=skip).collides(q)
+    check = MeshCheck(brought, urdf, skip=skip)
+    hit = check.collides(q)
+    assert free_away.sum() >= 50 and (free_away & hit).sum() >= 2
+    for names in check.collision_names(q[free_away & hit]):
+        assert any("left_" in name for name in names)
 
 
 def test_always_and_never_pairs_hold_on_fresh_samples():

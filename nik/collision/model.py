@@ -322,14 +322,65 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
     return bodies, spheres, gaps, [float("nan")] * len(bodies), "capsules"
 
 
-def srdf_of(urdf: Path | None) -> Path | None:
-    """MoveIt's SRDF for a URDF: ``NAME.srdf`` beside it or in a sibling ``srdf`` folder; None where absent."""
+def find_srdf(urdf: Path | None) -> tuple[Path | None, str]:
+    """MoveIt's SRDF for a URDF, searched, and how it was found (one line; empty where there is no URDF).
+
+    Looked at, in order: ``NAME.srdf`` beside the URDF; ``NAME.srdf`` in a ``srdf/`` folder beside it or beside
+    the URDF's folder (a ROS description package: ``urdf/NAME.urdf``, ``srdf/NAME.srdf``); else the single
+    ``*.srdf`` of such a folder (Baxter's ``srdf/baxter_manipulation.srdf``). A folder holding several others
+    is not guessed from: None, and the line names them (pass ``srdf=PATH``)."""
     if urdf is None:
-        return None
-    for cand in (urdf.with_suffix(".srdf"), urdf.parent.parent / "srdf" / f"{urdf.stem}.srdf"):
+        return None, ""
+    folders = [urdf.parent / "srdf", urdf.parent.parent / "srdf"]
+    for cand in (urdf.with_suffix(".srdf"), *(f / f"{urdf.stem}.srdf" for f in folders)):
         if cand.is_file():
-            return cand
-    return None
+            return cand, f"SRDF {cand} (named as the URDF)"
+    for folder in dict.fromkeys(folders):
+        found = sorted(folder.glob("*.srdf")) if folder.is_dir() else []
+        if len(found) == 1:
+            return found[0], f"SRDF {found[0]} (the only one in {folder})"
+        if found:
+            names = ", ".join(p.name for p in found)
+            return None, f"no SRDF used: {folder} holds several ({names}); pass srdf=PATH to choose one"
+    return None, f"no SRDF found beside {urdf}"
+
+
+def srdf_of(urdf: Path | None) -> Path | None:
+    """MoveIt's SRDF for a URDF as :func:`find_srdf` searches for it; None where there is none."""
+    return find_srdf(urdf)[0]
+
+
+def resolve_srdf(robot, srdf, urdf: Path | None) -> Path | None:
+    """The SRDF file :func:`collision_model` reads for ``srdf`` (None: the robot's own choice, ``robot.srdf`` as
+    :func:`nik.load_robot` set it, default True): a path is that file (missing: a one-line ``ValueError``), True
+    the one :func:`find_srdf` finds (logged at INFO on the ``nik.collision`` logger, once per robot and file;
+    several candidates and none chosen: a :class:`nik.errors.CollisionModelWarning`), False none."""
+    if srdf is None:
+        srdf = getattr(robot, "srdf", True)
+    if srdf is False or urdf is None:
+        if isinstance(srdf, (str, Path)) and urdf is None:
+            raise ValueError(f"robot {robot.name!r}: srdf={str(srdf)!r} applies to URDF robots (this one has none)")
+        return None
+    if srdf is not True:
+        path = Path(srdf)
+        if not path.is_file():
+            raise ValueError(f"SRDF file not found: {path}")
+        return path
+    path, how = find_srdf(urdf)
+    said = robot.__dict__.setdefault("_srdf_said", set())
+    if how not in said:
+        said.add(how)
+        if path is None and "several" in how:
+            import warnings
+
+            from nik.errors import CollisionModelWarning
+
+            warnings.warn(f"robot {robot.name!r}: {how}", CollisionModelWarning, stacklevel=3)
+        else:
+            import logging
+
+            logging.getLogger("nik.collision").info("robot %r: %s", robot.name, how)
+    return path
 
 
 def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
@@ -478,7 +529,7 @@ def collision_model(
     max_spheres: int = 16,
     samples: int = 1000,
     never_clearance: float | None = 0.02,
-    srdf: bool = True,
+    srdf: bool | str | Path | None = None,
     seed: int = 0,
     cache: bool = True,
 ) -> CollisionModel:
@@ -496,8 +547,14 @@ def collision_model(
         samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
             but the same-frame and adjacent ones).
         never_clearance: a pair never closer than this (metres) in every sample is left out; None keeps them.
-        srdf: honour MoveIt's SRDF of a URDF robot (``NAME.srdf`` beside the URDF or in ``../srdf/``): the link
-            pairs it disables are left out (reason ``"srdf: Default"``, ...), as MoveIt would.
+        srdf: MoveIt's SRDF of a URDF robot, whose disabled link pairs are left out (reason ``"srdf: Default"``,
+            ...), as MoveIt would: a path (that file), True (search beside the URDF, :func:`find_srdf`; the file
+            used is logged at INFO on the ``nik.collision`` logger), False (none), or None (default: the robot's
+            own, ``load_robot(..., srdf=)``, True unless given). The file used is ``model.options["srdf_file"]``.
+
+    The joints outside the robot's chain stand where ``load_robot(..., joint_values=)`` put them (default 0, or
+    the middle of their range where 0 is outside it): the links they carry are fitted there, and the model's
+    cache key holds those values.
         seed: seed of the fitting and the sampling.
         cache: read and write nik's cache folder.
     """
@@ -508,12 +565,22 @@ def collision_model(
         "max_spheres": int(max_spheres),
         "samples": int(samples),
         "never_clearance": never_clearance,
-        "srdf": bool(srdf),
+        "srdf": _srdf_choice(robot, srdf),
         "seed": int(seed),
     }
+    from nik.collision.urdf import placed_values
+
+    placed = placed_values(robot)
+    if placed:
+        options["joint_values"] = placed
     memo = robot.__dict__.setdefault("_collision_models", {})
     memo_key = json.dumps(options, sort_keys=True)
-    if memo_key == _DEFAULT_KEY and robot.__dict__.get("_collision_model") is not None:
+    plain = {k: v for k, v in options.items() if k != "joint_values"}
+    if (
+        srdf in (None, True)
+        and json.dumps({**plain, "srdf": True}, sort_keys=True) == _DEFAULT_KEY
+        and robot.__dict__.get("_collision_model") is not None
+    ):
         return robot.__dict__["_collision_model"]
     if memo_key in memo:
         return memo[memo_key]
@@ -524,12 +591,17 @@ def collision_model(
         return model
     radii_given = options["radius"] != 0.05  # capsules of the radii given, where the robot has no URDF geometry
     if (source == "builtin" or (source is None and not radii_given)) and not model_source_is_urdf(robot, None):
-        shipped = _builtin(robot, source, samples, never_clearance, srdf, seed)
+        if not isinstance(options["srdf"], bool):
+            raise ValueError(
+                f"robot {robot.name!r}: srdf={options['srdf']!r} applies to URDF robots (this one has none)"
+            )
+        shipped = _builtin(robot, source, samples, never_clearance, options["srdf"], seed)
         if shipped is not None:
             memo[memo_key] = shipped
             return shipped
     urdf = _urdf_of(robot)
-    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed")}
+    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed", "joint_values")
+                   if k in options}  # fmt: skip
     h = hashlib.sha256(f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}".encode())
     if urdf is not None:
         h.update(urdf.read_bytes())
@@ -539,7 +611,8 @@ def collision_model(
             for mesh in collision_mesh_files(urdf):
                 h.update(f"|{mesh.resolve()}:{mesh.stat().st_size}".encode())
     fit_path = _cache_path("spheres-" + h.hexdigest())
-    srdf_path = srdf_of(urdf) if srdf and model_source_is_urdf(robot, source) else None
+    srdf_path = resolve_srdf(robot, options["srdf"], urdf) if model_source_is_urdf(robot, source) else None
+    options["srdf_file"] = None if srdf_path is None else str(srdf_path)
     h.update(memo_key.encode())
     if srdf_path is not None:
         h.update(srdf_path.read_bytes())
@@ -560,6 +633,17 @@ def collision_model(
         _warn_capsules(robot, radius)
     memo[memo_key] = model
     return model
+
+
+def _srdf_choice(robot, srdf) -> bool | str:
+    """``srdf`` (None: the robot's own, ``robot.srdf``) as the model's options record it: a bool or a path."""
+    if srdf is None:
+        srdf = getattr(robot, "srdf", True)
+    if isinstance(srdf, bool):
+        return srdf
+    if isinstance(srdf, (str, Path)):
+        return str(srdf)
+    raise ValueError(f"srdf must be True, False or a path, got {type(srdf).__name__}")
 
 
 def _builtin(robot, source, samples, never_clearance, srdf, seed) -> CollisionModel | None:
