@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import warnings
 
 import numpy as np
@@ -444,6 +445,41 @@ def test_a_mesh_that_cannot_be_read_is_one_line(tmp_path):
     robot = nik.load_robot(path, end_link="l3")
     with pytest.raises(ValueError, match="mesh file not found: missing.stl"):
         collision_model(robot)
+
+
+def test_a_robot_with_collada_meshes_loads_with_the_extra(tmp_path):
+    trimesh = pytest.importorskip("trimesh", reason="fitting spheres to meshes needs trimesh (extra collision-check)")
+    pytest.importorskip("collada", reason="COLLADA meshes need pycollada (extra collision-check)")
+    box = trimesh.creation.box(extents=[0.08, 0.06, 0.1])
+    (tmp_path / "box.dae").write_bytes(trimesh.exchange.dae.export_collada(box))
+    path = tmp_path / "dae.urdf"
+    path.write_text(URDF.replace('<sphere radius="0.05"/>', '<mesh filename="box.dae"/>'))
+    from nik.collision.shapes import mesh_triangles
+    from nik.collision.urdf import urdf_bodies
+
+    read = np.unique(mesh_triangles(tmp_path / "box.dae").reshape(-1, 3).round(9), axis=0)
+    np.testing.assert_allclose(read, np.unique(np.asarray(box.vertices).round(9), axis=0), atol=1e-9)
+    robot = nik.load_robot(path, end_link="l3")
+    model = collision_model(robot, cache=False)
+    centres, radii = model.spheres("l3")
+    (body,) = [b for b in urdf_bodies(robot, path) if b.name == "l3"]
+    corners = body.triangles.reshape(-1, 3)  # the box's corners (and the capsule's) in l3's frame
+    held = (np.linalg.norm(corners[:, None] - centres[None], axis=2) <= radii[None] + 1e-9).any(axis=1)
+    assert held.all()
+
+
+def test_a_mesh_format_without_its_reader_is_one_line_naming_the_package(tmp_path, monkeypatch):
+    trimesh = pytest.importorskip("trimesh", reason="reading meshes needs trimesh (extra collision-check)")
+    pytest.importorskip("collada", reason="writing the COLLADA file needs pycollada (extra collision-check)")
+    from nik.collision.shapes import mesh_triangles
+
+    dae = tmp_path / "box.dae"
+    dae.write_bytes(trimesh.exchange.dae.export_collada(trimesh.creation.box()))
+    monkeypatch.setitem(sys.modules, "collada", None)  # as without pycollada
+    with pytest.raises(ValueError, match="needs pycollada") as err:
+        mesh_triangles(dae)
+    msg = str(err.value)
+    assert "\n" not in msg and str(dae) in msg and "pip install 'nik-ik[collision-check]'" in msg
 
 
 # -- the independent check ---------------------------------------------------------

@@ -4,7 +4,7 @@
 they are, curved primitives by the polyhedra around them) with nik's frames and asks coal, pair by pair and
 against the world's spheres, boxes and capsules, whether anything overlaps. It shares no distance code with
 the sphere model, so tests and ``benchmarks/collisions.py`` compare the two verdicts. ``pip install
-'nik[collision-check]'`` (coal); without it, constructing one is a one-line ``ImportError``.
+'nik-ik[collision-check]'`` (coal); without it, constructing one is a one-line ``ImportError``.
 
 :func:`mesh_check` is the one the solver's mesh verdict uses (``IKSolver(mesh_verdict=)``, :mod:`nik.ik.collide`):
 the meshes of the URDF named, else of the URDF the sphere model was fitted to (its ``source``, ``"urdf:PATH"``:
@@ -42,7 +42,7 @@ class MeshCheck:
         try:
             import coal
         except ImportError as err:
-            raise ImportError("the mesh check needs coal: pip install 'nik[collision-check]'") from err
+            raise ImportError("the mesh check needs coal: pip install 'nik-ik[collision-check]'") from err
         from nik.collision.urdf import urdf_bodies
 
         skip = {tuple(sorted(p)) for p in skip}
