@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -257,6 +259,34 @@ def test_baxters_left_arm_brought_in_meets_the_right_arm_on_the_meshes():
     assert free_away.sum() >= 50 and (free_away & hit).sum() >= 2
     for names in check.collision_names(q[free_away & hit]):
         assert any("left_" in name for name in names)
+
+
+_LARGE_FIT = """
+import resource, sys
+import nik
+import nik.collision.model as cm
+from nik.collision import collision_model
+cm.PROGRESS_AFTER = 0.0  # a progress line from the start (a real fit says so after 2 s)
+robot = nik.load_robot("panda")
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+model = collision_model(robot, source="capsules", radius=0.002, samples=1000, cache=False)
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+n = {name: len(model.spheres(name)[1]) for name in model.links}
+sampled = [k.split("|") for k, why in model.left_out.items() if why in ("always", "never")] + model.pair_names()
+print(before, after, sum(n[a] * n[b] for a, b in sampled))
+"""
+
+
+def test_a_large_fit_samples_its_pairs_in_bounded_memory(tmp_path):
+    import subprocess
+
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(Path(nik.__file__).parents[1])}
+    run = subprocess.run([sys.executable, "-c", _LARGE_FIT], capture_output=True, text=True, env=env, timeout=600)
+    assert run.returncode == 0, run.stderr
+    before, after, sphere_pairs = (int(x) for x in run.stdout.split())
+    assert sphere_pairs * 1000 * 24 > 3e9  # one (samples, sphere pairs, 3) float64 array: what sampling at once took
+    assert (after - before) * 1024 < 200e6  # ru_maxrss is in KiB on Linux
+    assert "nik: collision model of 'panda': sampling 1000 configurations for the link pairs" in run.stderr
 
 
 def test_always_and_never_pairs_hold_on_fresh_samples():

@@ -302,7 +302,7 @@ def _has_collision(path: Path) -> bool:
     return b"<collision" in path.read_bytes()
 
 
-def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
+def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress=None):
     urdf = _urdf_of(robot) if source in (None, "urdf") else None
     if source == "urdf" and (urdf is None or not _has_collision(urdf)):
         raise ValueError(f"robot {robot.name!r}: no URDF with <collision> geometry to fit spheres to")
@@ -311,7 +311,11 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
         from nik.collision.urdf import urdf_bodies
 
         bodies = urdf_bodies(robot, urdf)
-        fits = [fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed) for b in bodies]
+        fits = []
+        for i, b in enumerate(bodies):
+            if progress is not None:
+                progress.say(f"fitting spheres to link {i + 1} of {len(bodies)} ({b.name})")
+            fits.append(fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed))
         spheres = [(f.centers, f.radii) for f in fits]
         return bodies, spheres, [f.gap for f in fits], [f.volume_ratio for f in fits], f"urdf:{urdf}"
     if source not in (None, "capsules"):
@@ -399,10 +403,70 @@ def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
     return out
 
 
-def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None, disabled=None):
+#: configurations per chunk of the pair sampling (:func:`_pair_rows`)
+PAIR_CHUNK = 128
+
+
+def _pair_rows(robot, model: CollisionModel, Q: np.ndarray, never_clearance, progress=None):
+    """The self-collision rows ``(b, P)`` of ``model``'s pairs at ``Q: (B, dof)``, yielded in chunks of
+    :data:`PAIR_CHUNK` configurations: exact wherever at most ``max(never_clearance, 0)`` metres, else a lower bound
+    above it (the compiled broad phase, :func:`nik.kernels.collision.collision_rows_batch`), which is all the
+    "always" (below 0) and "never" (above the clearance) tests read. Memory ``O(PAIR_CHUNK * (P + L))`` whatever
+    the spheres' count (no sphere-pair arrays)."""
+    from nik.collision.compiled import kernel_arguments
+    from nik.kernels.collision import collision_rows_batch
+
+    (G, joints), rest = kernel_arguments(robot, model, None, self_collision=True)
+    cutoff = max(0.0, float(never_clearance)) if never_clearance is not None else 0.0
+    P = len(model.pairs)
+    for s in range(0, len(Q), PAIR_CHUNK):
+        chunk = np.ascontiguousarray(Q[s : s + PAIR_CHUNK], dtype=np.float64)
+        D = np.empty((len(chunk), P + len(model.links)))
+        collision_rows_batch(G, joints, chunk, *rest, cutoff, D)
+        if progress is not None:
+            progress.say(f"sampling {len(Q)} configurations for the link pairs: {s + len(chunk)} done")
+        yield D[:, :P]
+
+
+class Progress:
+    """One line on stderr now and then for a long build: the first after ``after`` seconds (default
+    :data:`PROGRESS_AFTER`), then at most one every ``every`` seconds, and a last one saying the time taken where
+    any was printed. ``what`` names the build (``"collision model of 'baxter'"``)."""
+
+    def __init__(self, what: str, after: float | None = None, every: float = 5.0):
+        import time
+
+        self._time = time.perf_counter
+        self.what, self.after, self.every = what, PROGRESS_AFTER if after is None else after, every
+        self.start, self.last, self.said = self._time(), None, False
+
+    def say(self, doing: str) -> None:
+        now = self._time()
+        if now - self.start < self.after or (self.last is not None and now - self.last < self.every):
+            return
+        import sys
+
+        self.last, self.said = now, True
+        print(f"nik: {self.what}: {doing} ({now - self.start:.0f} s)", file=sys.stderr, flush=True)
+
+    def done(self) -> None:
+        if self.said:
+            import sys
+
+            print(f"nik: {self.what}: done in {self._time() - self.start:.0f} s", file=sys.stderr, flush=True)
+
+
+#: seconds a build runs before :class:`Progress` prints its first line
+PROGRESS_AFTER = 2.0
+
+
+def _find_pairs(
+    robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None, disabled=None, progress=None
+):
     """Active pairs and the reasons of the others (module docstring); ``disabled``: ``{(a, b): reason}`` pairs
-    an SRDF disables, given instead of its file ``srdf``."""
-    from nik.collision.distance import self_distances, sphere_centers
+    an SRDF disables, given instead of its file ``srdf``. The sampled configurations are streamed in chunks
+    through the compiled rows (:func:`_pair_rows`), so the memory is bounded whatever the spheres' count;
+    ``progress``: a :class:`Progress` told how far it is."""
 
     L = len(model.links)
     names = list(model.links)
@@ -428,10 +492,12 @@ def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, see
     if len(candidates) and samples > 0:
         g = torch.Generator().manual_seed(seed)
         q = robot.sample(int(samples), generator=g, dtype=torch.float64)
-        with torch.no_grad():
-            d = self_distances(model, sphere_centers(model, robot, q))
-        always = (d < 0).all(dim=0).numpy()
-        never = (d > never_clearance).all(dim=0).numpy() if never_clearance is not None else np.zeros(len(d[0]), bool)
+        always = np.ones(len(candidates), bool)
+        never = np.full(len(candidates), never_clearance is not None)
+        for d in _pair_rows(robot, model, q.numpy(), never_clearance, progress):
+            always &= (d < 0).all(axis=0)
+            if never_clearance is not None:
+                never &= (d > never_clearance).all(axis=0)
         keep = []
         for p, (a, b) in enumerate(candidates):
             key = f"{names[a]}|{names[b]}"
@@ -476,9 +542,10 @@ def _store(model: CollisionModel, path: Path) -> None:
         model.save(path)
 
 
-def _fitted(robot, source, radius, tolerance, max_spheres, seed) -> CollisionModel:
+def _fitted(robot, source, radius, tolerance, max_spheres, seed, progress=None) -> CollisionModel:
     """The spheres of every link (no pairs yet)."""
-    bodies, spheres, gaps, ratios, src = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed)
+    found = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress)
+    bodies, spheres, gaps, ratios, src = found
     counts = [len(r) for _, r in spheres]
     return CollisionModel(
         robot_hash=robot.definition_hash,
@@ -619,16 +686,18 @@ def collision_model(
     path = _cache_path(h.hexdigest())
     model = _cached(path, robot) if cache else None
     if model is None:
+        progress = Progress(f"collision model of {robot.name!r}")
         spheres = _cached(fit_path, robot) if cache else None
         if spheres is None:
-            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed)
+            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed, progress)
             if cache:
                 _store(spheres, fit_path)
         model = CollisionModel(**{**spheres.__dict__, "options": options})
         model.__dict__.pop("_sphere_pairs", None)
-        _find_pairs(robot, model, samples, never_clearance, seed, srdf_path)
+        _find_pairs(robot, model, samples, never_clearance, seed, srdf_path, progress=progress)
         if cache:
             _store(model, path)
+        progress.done()
     if model.source == "capsules" and source is None and not radii_given:
         _warn_capsules(robot, radius)
     memo[memo_key] = model
