@@ -289,6 +289,22 @@ def test_a_large_fit_samples_its_pairs_in_bounded_memory(tmp_path):
     assert "nik: collision model of 'panda': sampling 1000 configurations for the link pairs" in run.stderr
 
 
+def test_links_whose_spheres_overreach_their_geometry_are_named_with_the_figure(prims, monkeypatch):
+    import nik.collision.model as cm
+
+    robot, _ = prims
+    monkeypatch.setattr(cm, "OVERREACH_WARNING", 0.0)  # every link then counts (the prims' gaps are millimetres)
+    with pytest.warns(nik.CollisionModelWarning, match="reach more than 0 mm past their meshes") as got:
+        model = collision_model(robot)
+    (msg,) = [str(w.message) for w in got if "past their meshes" in str(w.message)]
+    assert "\n" not in msg
+    for name, gap in zip(model.links, model.gaps, strict=True):
+        assert f"{name} {1000 * gap:.0f} mm" in msg
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        collision_model(robot)  # said once per robot and model
+
+
 def test_always_and_never_pairs_hold_on_fresh_samples():
     robot = nik.load_robot("ur5")
     model = collision_model(robot, source="capsules", samples=400, seed=0)  # the capsules' pairs: some always touch

@@ -700,8 +700,44 @@ def collision_model(
         progress.done()
     if model.source == "capsules" and source is None and not radii_given:
         _warn_capsules(robot, radius)
+    _warn_overreach(robot, model)
     memo[memo_key] = model
     return model
+
+
+#: a fitted link whose spheres reach farther than this past its geometry (metres) is named in a warning: sphere
+#: models reach 2-3 cm past flat faces and sharp edges at the default tolerance (the panda's links 16-34 mm), so
+#: this flags the links fitted badly (a torso or pedestal of a few large faces), not the usual overreach
+OVERREACH_WARNING = 0.05
+
+
+def _warn_overreach(robot, model: CollisionModel) -> None:
+    """Say once per robot and model which fitted links overreach their geometry by more than
+    :data:`OVERREACH_WARNING`, with the figures (a :class:`nik.errors.CollisionModelWarning`)."""
+    if model.gaps is None or not model.source.startswith("urdf:"):
+        return
+    over = sorted(
+        ((float(g), name) for name, g in zip(model.links, model.gaps, strict=True) if g > OVERREACH_WARNING),
+        reverse=True,
+    )
+    said = robot.__dict__.setdefault("_overreach_said", set())
+    key = (model.source, tuple(over))
+    if not over or key in said:
+        return
+    said.add(key)
+    import warnings
+
+    from nik.errors import CollisionModelWarning
+
+    figures = ", ".join(f"{name} {1000 * g:.0f} mm" for g, name in over)
+    warnings.warn(
+        f"robot {robot.name!r}: the collision spheres of {len(over)} link(s) reach more than "
+        f"{1000 * OVERREACH_WARNING:.0f} mm past their meshes ({figures}): configurations near them are called "
+        "colliding when the meshes are free; the mesh verdict (IKSolver's default with coal) judges answers on the "
+        "meshes, and collision_model(robot, max_spheres=..., tolerance=...) or a model file tightens them",
+        CollisionModelWarning,
+        stacklevel=3,
+    )
 
 
 def _srdf_choice(robot, srdf) -> bool | str:
