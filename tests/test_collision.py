@@ -112,6 +112,15 @@ def test_refined_spheres_still_hold_every_surface_point_and_reach_out_less():
     assert refined.volume_ratio < greedy.volume_ratio
 
 
+def test_a_non_convex_body_is_not_held_by_balls_centred_outside_it():
+    pytest.importorskip("scipy", reason="telling the inside of a body needs scipy")
+    legs = [box_triangles([0.08, 0.08, 0.4]) + [x, 0.0, 0.0] for x in (-0.25, 0.25)]  # a table: two legs, a top
+    table = np.concatenate([*legs, box_triangles([0.58, 0.08, 0.04]) + [0.0, 0.0, 0.22]])
+    fit = fit_spheres(table, seed=0)
+    assert _inside(table.reshape(-1, 3), fit).all()  # conservative: every corner held
+    assert fit.gap < 0.1  # a ball centred between the legs, holding both, reaches 0.3 m past them
+
+
 def test_capsule_model_holds_the_capsules(prims):
     robot = nik.load_robot("ur5")
     model = collision_model(robot, radius=0.04)

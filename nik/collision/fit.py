@@ -169,6 +169,37 @@ def _volume(tri: np.ndarray) -> float:
     return v if 0.3 * hull <= v <= hull * (1 + 1e-9) else hull  # an open or inconsistently oriented surface
 
 
+def _inside_only(candidates, n_in, tri, flat, edge, volume, seed) -> np.ndarray:
+    """``candidates`` with the first ``n_in`` (drawn in the convex hull) that lie outside a closed, non-convex body
+    replaced by points inside it (drawn from a generator of its own, ``seed + 1``); the others as they are.
+
+    A centre outside the body at distance ``e`` from it, with a radius reaching the surface, leaves the body by
+    about ``2 e``: such centres made the greedy cover hold a pedestal's legs with one ball between them (470 mm
+    past the mesh). The inside is told by the nearest surface probe's outward normal (:func:`_signed_depth`), so
+    only where the surface looks closed and consistently oriented (its enclosed volume between 0.1 and 1 times its
+    convex hull's) and scipy is there; a convex body keeps every candidate (and its
+    fit). The cover's guarantee does not depend on where candidates are."""
+    if n_in <= 0 or volume <= 0:
+        return candidates
+    try:
+        from scipy.spatial import ConvexHull
+
+        hull = float(ConvexHull(flat).volume)
+    except Exception:  # noqa: BLE001 - flat geometry or no scipy
+        return candidates
+    enclosed = abs(float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0))
+    if not 0.1 * hull <= enclosed <= hull * (1 - 1e-3):  # open, inconsistent, or convex: nothing to do
+        return candidates
+    probes = _probes(tri, edge / 2.0)
+    drawn = candidates[:n_in]
+    out = _signed_depth(drawn, probes) < 0
+    if not out.any():
+        return candidates
+    more = _inside_points(flat, 4 * n_in, np.random.default_rng(seed + 1))
+    more = more[_signed_depth(more, probes) > 0][: int(out.sum())]
+    return np.concatenate([drawn[~out], more, candidates[n_in:]])
+
+
 def _face_reach(corners, faces, inside) -> np.ndarray | None:
     """``(C, T)`` float32: the distance from each candidate centre ``inside`` to the farthest corner of each triangle
     (the radius a candidate needs to hold it), computed once for every reach the cover tries; None where it would
@@ -447,6 +478,7 @@ def fit_spheres(
     if medial:
         med = _medial_candidates(corners, faces)
         inside = np.concatenate([inside, med[rng.choice(len(med), min(len(med), 3 * n_in), replace=False)]])
+    inside = _inside_only(inside, n_in, tri, flat, edge, volume, seed)
     sq = (corners**2).sum(-1)
     depth = np.empty(len(inside))
     for s in range(0, len(inside), 256):  # chunked: (256, V) at a time

@@ -41,8 +41,11 @@ import torch
 
 __all__ = ["COLLISION_FORMAT", "CollisionModel", "collision_model", "link_capsule_bodies", "set_collision_model"]
 
-#: version of the saved model (bump when the fitting or the pair rules change)
+#: version of the saved model's file format (the shipped models' files carry it)
 COLLISION_FORMAT = 1
+
+#: version of the fitting and the pair rules, part of the cache key (bump when they change: a cached fit is redone)
+FIT_VERSION = 2
 
 
 @dataclass
@@ -669,7 +672,8 @@ def collision_model(
     urdf = _urdf_of(robot)
     fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed", "joint_values")
                    if k in options}  # fmt: skip
-    h = hashlib.sha256(f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}".encode())
+    key = f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}|fit {FIT_VERSION}"
+    h = hashlib.sha256(key.encode())
     if urdf is not None:
         h.update(urdf.read_bytes())
         if model_source_is_urdf(robot, source):  # the meshes found (or not) the same way, cache warm or cold
