@@ -15,8 +15,9 @@ Where the spheres come from (choices):
 
 Which pairs are checked, as MoveIt's setup assistant decides (each left-out pair keeps its reason in
 :attr:`CollisionModel.left_out`): links on the same frame (they never move relative to each other), adjacent
-links (parent and child: a joint between them), the pairs a MoveIt SRDF beside the URDF disables (``srdf=True``),
-then on ``samples`` seeded configurations within the limits,
+links (parent and child: a joint between them), the pairs MoveIt's SRDF disables (``srdf=``: a path, or found
+beside the URDF, :func:`find_srdf`), then on ``samples`` seeded configurations within the limits (streamed through
+the compiled rows, :func:`_pair_rows`: memory bounded whatever the spheres' count),
 pairs whose spheres touch in every one ("always") and pairs never closer than ``never_clearance`` metres
 ("never"; ``never_clearance=None`` keeps them). :meth:`CollisionModel.with_pairs` adds or removes pairs.
 
