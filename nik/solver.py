@@ -110,9 +110,11 @@ class IKSolver:
             the model built (fitted, cached) if needed; False: never (a world is then checked alone). Where a check
             is active, colliding answers are solved again, ``res.collision_free`` and ``res.collisions`` are set
             (:mod:`nik.ik.collide`).
-        mesh_verdict: who judges ``collision_free``: False (default) the spheres; ``"auto"`` the robot's collision
-            meshes (coal) where coal and the meshes are there, else the spheres; True the meshes (a one-line error
-            without them); a URDF path: that URDF's meshes (:func:`nik.collision.meshcheck.mesh_check`). Where the
+        mesh_verdict: who judges ``collision_free``: ``"auto"`` (default, as ``nik solve --scene``) the robot's
+            collision meshes (coal) where coal (``pip install 'nik-ik[collision-check]'``) and the robot's meshes
+            are there, else the spheres; False the spheres always (the conservative model alone: faster where
+            coal is installed, and refuses more); True the meshes (a one-line error without them); a URDF path:
+            that URDF's meshes (:func:`nik.collision.meshcheck.mesh_check`). Where the
             sphere model was fitted to those very meshes (:func:`nik.collision.meshcheck.spheres_cover`), coal judges
             only the answers the spheres call colliding; else every answer (:mod:`nik.ik.collide`).
     """
@@ -131,7 +133,7 @@ class IKSolver:
         backend: str = "auto",
         world=None,
         self_collision: bool | None = None,
-        mesh_verdict: bool | str | Path = False,
+        mesh_verdict: bool | str | Path = "auto",
     ):
         from nik.device import resolve_device
 

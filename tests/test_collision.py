@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +21,7 @@ from nik.collision import (
     collides,
     colliding_links,
     collision_model,
+    collision_names,
     set_collision_model,
     signed_distances,
 )
@@ -108,6 +112,15 @@ def test_refined_spheres_still_hold_every_surface_point_and_reach_out_less():
     assert refined.volume_ratio < greedy.volume_ratio
 
 
+def test_a_non_convex_body_is_not_held_by_balls_centred_outside_it():
+    pytest.importorskip("scipy", reason="telling the inside of a body needs scipy")
+    legs = [box_triangles([0.08, 0.08, 0.4]) + [x, 0.0, 0.0] for x in (-0.25, 0.25)]  # a table: two legs, a top
+    table = np.concatenate([*legs, box_triangles([0.58, 0.08, 0.04]) + [0.0, 0.0, 0.22]])
+    fit = fit_spheres(table, seed=0)
+    assert _inside(table.reshape(-1, 3), fit).all()  # conservative: every corner held
+    assert fit.gap < 0.1  # a ball centred between the legs, holding both, reaches 0.3 m past them
+
+
 def test_capsule_model_holds_the_capsules(prims):
     robot = nik.load_robot("ur5")
     model = collision_model(robot, radius=0.04)
@@ -143,6 +156,162 @@ def test_pairs_an_srdf_disables_are_left_out(prims):
     model = collision_model(fresh)
     assert ("base", "l3") not in model.pair_names() and model.left_out["base|l3"] == "srdf: Never"
     assert ("base", "l3") in collision_model(fresh, srdf=False).pair_names()
+
+
+def test_an_srdf_given_by_path_disables_its_pairs(prims, tmp_path):
+    robot, path = prims
+    srdf = tmp_path / "elsewhere" / "moveit_config.srdf"  # neither beside the URDF nor named as it
+    srdf.parent.mkdir()
+    srdf.write_text('<robot name="prims"><disable_collisions link1="l3" link2="base" reason="Never"/></robot>')
+    assert ("base", "l3") in collision_model(robot).pair_names()  # the search does not find it
+    given = nik.load_robot(path, end_link="l3", srdf=srdf)
+    model = collision_model(given)
+    assert ("base", "l3") not in model.pair_names() and model.left_out["base|l3"] == "srdf: Never"
+    assert model.options["srdf_file"] == str(srdf)
+    assert ("base", "l3") not in collision_model(robot, srdf=srdf).pair_names()  # or to collision_model
+    assert ("base", "l3") in collision_model(given, srdf=False).pair_names()
+    with pytest.raises(ValueError, match="SRDF file not found") as err:
+        nik.load_robot(path, end_link="l3", srdf=tmp_path / "missing.srdf")
+    assert "\n" not in str(err.value)
+
+
+def test_the_srdf_search_takes_the_single_srdf_of_a_sibling_folder_and_says_so(tmp_path, caplog):
+    pkg = tmp_path / "prims_description"
+    (pkg / "urdf").mkdir(parents=True)
+    (pkg / "srdf").mkdir()
+    path = pkg / "urdf" / "prims.urdf"
+    path.write_text(URDF)
+    srdf = pkg / "srdf" / "prims_manipulation.srdf"  # Baxter's layout: not named as the URDF
+    srdf.write_text('<robot name="prims"><disable_collisions link1="l3" link2="base" reason="Never"/></robot>')
+    with caplog.at_level("INFO", logger="nik.collision"):
+        model = collision_model(nik.load_robot(path, end_link="l3"))
+    assert model.left_out["base|l3"] == "srdf: Never" and model.options["srdf_file"] == str(srdf)
+    assert str(srdf) in caplog.text
+    (pkg / "srdf" / "prims_other.srdf").write_text("<robot/>")  # two: none guessed, a warning names them
+    with pytest.warns(nik.CollisionModelWarning, match="prims_manipulation.srdf, prims_other.srdf"):
+        model = collision_model(nik.load_robot(path, end_link="l3"))
+    assert ("base", "l3") in model.pair_names() and model.options["srdf_file"] is None
+
+
+# two arms on a torso: the right arm is the robot's chain, the left one the rest of the robot
+ARMS = (
+    """<?xml version="1.0"?>
+<robot name="twoarm">
+  <link name="torso"><collision><origin xyz="0 0 0.25"/><geometry><box size="0.1 0.1 0.5"/></geometry></collision>
+  </link>
+"""
+    + "".join(
+        f'''  <link name="{s}_{part}"><collision><origin xyz="0.2 0 0"/><geometry><box size="0.4 0.05 0.05"/></geometry>
+  </collision></link>
+'''
+        for s in "rl"
+        for part in ("upper", "fore")
+    )
+    + "".join(
+        f'''  <joint name="{s}_s0" type="revolute"><parent link="torso"/><child link="{s}_upper"/>
+    <origin xyz="0 {y} 0.6"/><axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="{s}_e0" type="revolute"><parent link="{s}_upper"/><child link="{s}_fore"/><origin xyz="0.4 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+'''
+        for s, y in (("r", -0.3), ("l", 0.3))
+    )
+    + """  <link name="r_hand"/>
+  <joint name="r_hand_joint" type="fixed"><parent link="r_fore"/><child link="r_hand"/><origin xyz="0.4 0 0"/></joint>
+</robot>
+"""
+)
+
+
+def test_joint_values_bring_the_rest_of_the_robot_in(tmp_path):
+    path = tmp_path / "twoarm.urdf"
+    path.write_text(ARMS)
+    away = nik.load_robot(path, end_link="r_hand")  # the left arm along x at y = +0.3, 0.6 m from the right one
+    brought = nik.load_robot(path, end_link="r_hand", joint_values={"l_s0": -1.0})  # its forearm over the right's
+    assert away.joint_names == ["r_s0", "r_e0"] and brought.joint_values == {"l_s0": -1.0}
+    q = np.zeros((1, 2))  # the right arm straight along x at y = -0.3
+    assert not collides(away, q)[0]
+    assert collides(brought, q)[0]
+    assert any(name.endswith("|l_fore") for name in collision_names(brought, q)[0])
+    left = collision_model(brought).spheres("l_fore")[0]  # the left forearm's spheres where it stands
+    c, s = math.cos(-1.0), math.sin(-1.0)
+    elbow = np.array([0.4 * c, 0.3 + 0.4 * s, 0.6])
+    hand = elbow + 0.4 * np.array([c, s, 0.0])
+    t = np.clip((left - elbow) @ (hand - elbow) / 0.16, 0, 1)
+    assert np.linalg.norm(left - (elbow + t[:, None] * (hand - elbow)), axis=1).max() < 0.05
+    pytest.importorskip("coal", reason="the mesh check needs coal (extra collision-check)")
+    from nik.collision.meshcheck import MeshCheck
+
+    assert not MeshCheck(away, path).collides(q)[0] and MeshCheck(brought, path).collides(q)[0]
+
+
+def test_baxters_left_arm_brought_in_meets_the_right_arm_on_the_meshes():
+    pytest.importorskip("coal", reason="the mesh check needs coal (extra collision-check)")
+    from nik.collision.builtin import erd_path
+    from nik.collision.meshcheck import MeshCheck
+    from nik.collision.model import find_srdf, srdf_disabled
+
+    urdf = erd_path("baxter_description/urdf/baxter.urdf")
+    if urdf is None:
+        pytest.skip("Baxter's URDF comes with example-robot-data (extra urdf-tests)")
+    srdf, _ = find_srdf(urdf)
+    assert srdf is not None and srdf.name == "baxter_manipulation.srdf"  # the only one of ../srdf/
+    skip = list(srdf_disabled(srdf))
+    arm = {"root_link": "torso", "end_link": "right_hand_link"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", nik.RobotDefinitionWarning)
+        away = nik.load_robot(urdf, **arm)
+        brought = nik.load_robot(urdf, **arm, joint_values={"left_s0": -0.8})  # the left arm swung in front
+    q = _q(away, 100, 0).numpy()
+    free_away = ~MeshCheck(away, urdf, skip=skip).collides(q)
+    check = MeshCheck(brought, urdf, skip=skip)
+    hit = check.collides(q)
+    assert free_away.sum() >= 50 and (free_away & hit).sum() >= 2
+    for names in check.collision_names(q[free_away & hit]):
+        assert any("left_" in name for name in names)
+
+
+_LARGE_FIT = """
+import resource, sys
+import nik
+import nik.collision.model as cm
+from nik.collision import collision_model
+cm.PROGRESS_AFTER = 0.0  # a progress line from the start (a real fit says so after 2 s)
+robot = nik.load_robot("panda")
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+model = collision_model(robot, source="capsules", radius=0.002, samples=1000, cache=False)
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+n = {name: len(model.spheres(name)[1]) for name in model.links}
+sampled = [k.split("|") for k, why in model.left_out.items() if why in ("always", "never")] + model.pair_names()
+print(before, after, sum(n[a] * n[b] for a, b in sampled))
+"""
+
+
+def test_a_large_fit_samples_its_pairs_in_bounded_memory(tmp_path):
+    import subprocess
+
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(Path(nik.__file__).parents[1])}
+    run = subprocess.run([sys.executable, "-c", _LARGE_FIT], capture_output=True, text=True, env=env, timeout=600)
+    assert run.returncode == 0, run.stderr
+    before, after, sphere_pairs = (int(x) for x in run.stdout.split())
+    assert sphere_pairs * 1000 * 24 > 3e9  # one (samples, sphere pairs, 3) float64 array: what sampling at once took
+    assert (after - before) * 1024 < 200e6  # ru_maxrss is in KiB on Linux
+    assert "nik: collision model of 'panda': sampling 1000 configurations for the link pairs" in run.stderr
+
+
+def test_links_whose_spheres_overreach_their_geometry_are_named_with_the_figure(prims, monkeypatch):
+    import nik.collision.model as cm
+
+    robot, _ = prims
+    monkeypatch.setattr(cm, "OVERREACH_WARNING", 0.0)  # every link then counts (the prims' gaps are millimetres)
+    with pytest.warns(nik.CollisionModelWarning, match="reach more than 0 mm past their meshes") as got:
+        model = collision_model(robot)
+    (msg,) = [str(w.message) for w in got if "past their meshes" in str(w.message)]
+    assert "\n" not in msg
+    for name, gap in zip(model.links, model.gaps, strict=True):
+        assert f"{name} {1000 * gap:.0f} mm" in msg
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        collision_model(robot)  # said once per robot and model
 
 
 def test_always_and_never_pairs_hold_on_fresh_samples():
@@ -331,6 +500,41 @@ def test_a_mesh_that_cannot_be_read_is_one_line(tmp_path):
     robot = nik.load_robot(path, end_link="l3")
     with pytest.raises(ValueError, match="mesh file not found: missing.stl"):
         collision_model(robot)
+
+
+def test_a_robot_with_collada_meshes_loads_with_the_extra(tmp_path):
+    trimesh = pytest.importorskip("trimesh", reason="fitting spheres to meshes needs trimesh (extra collision-check)")
+    pytest.importorskip("collada", reason="COLLADA meshes need pycollada (extra collision-check)")
+    box = trimesh.creation.box(extents=[0.08, 0.06, 0.1])
+    (tmp_path / "box.dae").write_bytes(trimesh.exchange.dae.export_collada(box))
+    path = tmp_path / "dae.urdf"
+    path.write_text(URDF.replace('<sphere radius="0.05"/>', '<mesh filename="box.dae"/>'))
+    from nik.collision.shapes import mesh_triangles
+    from nik.collision.urdf import urdf_bodies
+
+    read = np.unique(mesh_triangles(tmp_path / "box.dae").reshape(-1, 3).round(9), axis=0)
+    np.testing.assert_allclose(read, np.unique(np.asarray(box.vertices).round(9), axis=0), atol=1e-9)
+    robot = nik.load_robot(path, end_link="l3")
+    model = collision_model(robot, cache=False)
+    centres, radii = model.spheres("l3")
+    (body,) = [b for b in urdf_bodies(robot, path) if b.name == "l3"]
+    corners = body.triangles.reshape(-1, 3)  # the box's corners (and the capsule's) in l3's frame
+    held = (np.linalg.norm(corners[:, None] - centres[None], axis=2) <= radii[None] + 1e-9).any(axis=1)
+    assert held.all()
+
+
+def test_a_mesh_format_without_its_reader_is_one_line_naming_the_package(tmp_path, monkeypatch):
+    trimesh = pytest.importorskip("trimesh", reason="reading meshes needs trimesh (extra collision-check)")
+    pytest.importorskip("collada", reason="writing the COLLADA file needs pycollada (extra collision-check)")
+    from nik.collision.shapes import mesh_triangles
+
+    dae = tmp_path / "box.dae"
+    dae.write_bytes(trimesh.exchange.dae.export_collada(trimesh.creation.box()))
+    monkeypatch.setitem(sys.modules, "collada", None)  # as without pycollada
+    with pytest.raises(ValueError, match="needs pycollada") as err:
+        mesh_triangles(dae)
+    msg = str(err.value)
+    assert "\n" not in msg and str(dae) in msg and "pip install 'nik-ik[collision-check]'" in msg
 
 
 # -- the independent check ---------------------------------------------------------

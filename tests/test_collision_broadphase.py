@@ -146,7 +146,7 @@ def test_skipping_blocked_targets_and_ranking_starts_keep_the_verdicts(monkeypat
     world = _scene(6)
     Q = _q(robot, 400, seed=17)
     T = np.ascontiguousarray(np.asarray(robot.fk(Q))[:120])
-    solver = nik.IKSolver(robot, world=world)
+    solver = nik.IKSolver(robot, world=world, mesh_verdict=False)
     res = solver.solve(T)
     model = collision_model(robot)
     (G, joints), rest = kernel_arguments(robot, model, world)
@@ -157,7 +157,7 @@ def test_skipping_blocked_targets_and_ranking_starts_keep_the_verdicts(monkeypat
     blocked = blocked_targets(robot, model, world, T, plan.tol_pos, plan.tol_rot)
     assert blocked.sum() >= 3  # the scene blocks some poses: the comparison covers the shortcut
     monkeypatch.setattr(compiled, "blocked_targets", lambda robot, model, world, T, *a, **k: np.zeros(len(T), bool))
-    ref = nik.IKSolver(robot, world=world).solve(T)
+    ref = nik.IKSolver(robot, world=world, mesh_verdict=False).solve(T)
     assert not res.success[blocked].any() and not ref.success[blocked].any()
     assert abs(int(res.success.sum()) - int(ref.success.sum())) <= 2  # the rest: other random streams, same rate
 
@@ -232,7 +232,7 @@ def test_patience_ends_the_restarts_early_and_keeps_the_verdicts():
     robot = nik.load_robot("panda")
     world = _scene(6)
     T = np.ascontiguousarray(np.asarray(robot.fk(_q(robot, 400, seed=17)))[:120])
-    solver = nik.IKSolver(robot, world=world)
+    solver = nik.IKSolver(robot, world=world, mesh_verdict=False)
     full = solver.solve(T)
     solver.collide_cfg = CollideCfg(patience=2)
     short = solver.solve(T)
@@ -263,7 +263,7 @@ def test_uniform_starts_end_free_and_within_the_tolerance_after_the_pose_leg():
     hit = np.empty(len(Q), dtype=bool)
     collides_batch(G, joints, Q, *rest, 0.0, hit)
     T = np.ascontiguousarray(np.asarray(robot.fk(Q[~hit][:200])))
-    solver = nik.IKSolver(robot, world=world)
+    solver = nik.IKSolver(robot, world=world, mesh_verdict=False)
     plan = solver.plan()
     k = len(T)
     goal = _goal(robot, plan, k, False)

@@ -39,7 +39,7 @@ def test_attached_model_turns_the_default_on():
     robot = nik.load_robot("ur5")
     set_collision_model(robot, collision_model(robot))
     try:
-        res = nik.IKSolver(robot).solve(_poses(robot, 8, seed=2))
+        res = nik.IKSolver(robot, mesh_verdict=False).solve(_poses(robot, 8, seed=2))
     finally:
         set_collision_model(robot, None)
     assert res.collision_free is not None and res.collision_free.shape == (8,)
@@ -51,7 +51,7 @@ def test_answers_are_collision_free_and_reach_the_pose():
     world = _table_and_box()
     T = _poses(robot, 40, seed=3, world=world)
     plain = nik.IKSolver(robot, self_collision=False).solve(T)
-    res = nik.IKSolver(robot, world=world, self_collision=True).solve(T)
+    res = nik.IKSolver(robot, world=world, self_collision=True, mesh_verdict=False).solve(T)
     assert collides(robot, plain.q, world).any()  # the scene bites: some plain answers collide
     assert res.success.mean() >= 0.9
     assert not collides(robot, res.q[res.collision_free], world).any()
@@ -64,7 +64,7 @@ def test_answers_are_collision_free_and_reach_the_pose():
 def test_obstacles_changed_between_calls_change_the_answer():
     robot = nik.load_robot("ur5")
     world = nik.World()
-    solver = nik.IKSolver(robot, world=world)
+    solver = nik.IKSolver(robot, world=world, mesh_verdict=False)
     T = _poses(robot, 1, seed=4)
     first = solver.solve(T)
     assert first.collision_free[0]  # a world, even an empty one, checks the arm itself (issue 35; was: None)
@@ -74,7 +74,7 @@ def test_obstacles_changed_between_calls_change_the_answer():
     second = solver.solve(T)
     assert second.collision_free[0] and second.success[0]
     assert np.abs(second.q - first.q).max() > 0.1
-    per_call = nik.IKSolver(robot).solve(T, world=world)  # the same world given per call
+    per_call = nik.IKSolver(robot, mesh_verdict=False).solve(T, world=world)  # the same world given per call
     np.testing.assert_allclose(per_call.q, second.q)
 
 
@@ -84,7 +84,7 @@ def test_solve_all_returns_collision_free_solutions_only():
     every = nik.IKSolver(robot).solve_all(T)
     elbow = link_frames(robot, every[:1].double())[0, 3, :3, 3].numpy()
     world = nik.World().add_sphere(elbow, 0.02)  # on the elbow of the first solution
-    kept = nik.IKSolver(robot, world=world, self_collision=False).solve_all(T)
+    kept = nik.IKSolver(robot, world=world, self_collision=False, mesh_verdict=False).solve_all(T)
     assert 0 < kept.shape[0] < every.shape[0]
     assert not collides(robot, kept.numpy(), world, self_collision=False).any()
 
@@ -93,7 +93,7 @@ def test_torch_input_gets_tensors_and_the_same_check():
     robot = nik.load_robot("panda")
     world = _table_and_box()
     T = torch.from_numpy(_poses(robot, 8, seed=6, world=world))
-    res = nik.IKSolver(robot, world=world, backend="torch").solve(T)
+    res = nik.IKSolver(robot, world=world, backend="torch", mesh_verdict=False).solve(T)
     assert isinstance(res.collision_free, torch.Tensor) and res.collision_free.dtype == torch.bool
     assert not collides(robot, res.q[res.collision_free].numpy(), world, self_collision=False).any()
 
@@ -131,7 +131,7 @@ def test_a_pose_that_overlaps_a_ball_by_less_than_the_tolerance_moves_the_hand_i
             p = p - u * (signed_distances_compiled(robot, q0[None], world)[0, len(model.pairs) :].min() + overlap)
         world = nik.World().add_sphere(p, ro)
         assert signed_distances_compiled(robot, q0[None], world)[0].min() == pytest.approx(-overlap, abs=1e-8)
-        res = nik.IKSolver(robot, world=world).solve(T0[None])
+        res = nik.IKSolver(robot, world=world, mesh_verdict=False).solve(T0[None])
         assert res.success[0] and res.collision_free[0]
         assert not collides(robot, res.q, world)[0]  # the exact check: every sphere pair and sphere-ball distance
         T1 = robot.fk(res.q)[0]  # FK round trip: within the tolerances
@@ -179,7 +179,7 @@ def test_solve_path_calls_a_colliding_waypoint_infeasible():
     tool = T[5, :3, 3]
     world = nik.World().add_sphere(tool, 0.02)  # on the tool at waypoint 5
     with pytest.warns(UserWarning, match="colliding"):
-        res = nik.IKSolver(robot).solve_path(T, world=world)
+        res = nik.IKSolver(robot, mesh_verdict=False).solve_path(T, world=world)
     hit = collides(robot, np.asarray(res.q), world, self_collision=False)
     assert hit[5] and not res.success[5] and res.path.reasons[5] == "colliding"
     assert [r == "colliding" for r in res.path.reasons] == hit.tolist()
@@ -195,7 +195,7 @@ def test_viewer_draws_obstacles_and_colours_the_colliding_links():
     T = torch.from_numpy(robot.fk(q))
     elbow = link_frames(robot, torch.as_tensor(q[None]))[0, 3, :3, 3].numpy()
     world = nik.World().add_box([0, 0, -0.05], [1, 1, 0.1]).add_capsule([0.6, 0, 0], [0.6, 0, 0.5], 0.02)
-    solver = nik.IKSolver(robot, world=world, self_collision=False)
+    solver = nik.IKSolver(robot, world=world, self_collision=False, mesh_verdict=False)
     with Viewer(solver, cfg=ViewerCfg(port=0, ghosts=False, meshes=False)) as viewer:
         shown = viewer.set_target(T)
         assert shown.collision_free and "collisions: collision-free" in viewer._status.content
@@ -318,7 +318,7 @@ def test_a_start_that_stops_making_progress_ends_after_four_stalled_iterations()
     T = _poses(robot, 3, seed=3)
     for Ti in T:  # a ball engulfs the hand: blocked at every configuration
         world = nik.World().add_sphere(Ti[:3, 3], 0.08)
-        default, five = (nik.IKSolver(robot, world=world) for _ in range(2))
+        default, five = (nik.IKSolver(robot, world=world, mesh_verdict=False) for _ in range(2))
         default.collide_cfg = CollideCfg(converged=0.0)
         five.collide_cfg = CollideCfg(stall_iters=5, converged=0.0)
         a, b = default.solve(Ti[None]), five.solve(Ti[None])
@@ -326,7 +326,10 @@ def test_a_start_that_stops_making_progress_ends_after_four_stalled_iterations()
         assert a.iterations[0] < b.iterations[0]
     world = _table_and_box()
     T = _poses(robot, 48, seed=5, world=world)
-    default, five = nik.IKSolver(robot, world=world), nik.IKSolver(robot, world=world)
+    default, five = (
+        nik.IKSolver(robot, world=world, mesh_verdict=False),
+        nik.IKSolver(robot, world=world, mesh_verdict=False),
+    )
     five.collide_cfg = CollideCfg(stall_iters=5)
     a, b = default.solve(T), five.solve(T)
     assert np.array_equal(a.success, b.success) and a.success.mean() > 0.9
@@ -346,7 +349,7 @@ def test_a_descent_that_has_converged_ends_at_its_first_step_without_progress():
     its, its_off = [], []
     for Ti in T:  # a ball engulfs the hand: blocked at every configuration
         world = nik.World().add_sphere(Ti[:3, 3], 0.08)
-        default, off = (nik.IKSolver(robot, world=world) for _ in range(2))
+        default, off = (nik.IKSolver(robot, world=world, mesh_verdict=False) for _ in range(2))
         off.collide_cfg = CollideCfg(converged=0.0)
         a, b = default.solve(Ti[None]), off.solve(Ti[None])
         assert not a.success[0] and not b.success[0] and not a.collision_free[0]
@@ -355,7 +358,10 @@ def test_a_descent_that_has_converged_ends_at_its_first_step_without_progress():
     assert (np.array(its) <= np.array(its_off)).all() and sum(its) < sum(its_off)
     world = _table_and_box()
     T = _poses(robot, 48, seed=5, world=world)
-    default, off = nik.IKSolver(robot, world=world), nik.IKSolver(robot, world=world)
+    default, off = (
+        nik.IKSolver(robot, world=world, mesh_verdict=False),
+        nik.IKSolver(robot, world=world, mesh_verdict=False),
+    )
     off.collide_cfg = CollideCfg(converged=0.0)
     a, b = default.solve(T), off.solve(T)
     assert np.array_equal(a.success, b.success) and a.success.mean() > 0.9

@@ -27,9 +27,9 @@ def test_a_world_checks_the_arm_itself_too():
     world = nik.World().add_sphere([3.0, 3.0, 3.0], 0.1)  # far from the arm: only the arm itself can collide
     q = _self_colliding(robot, 12, seed=1)
     T = np.ascontiguousarray(robot.fk(q))
-    world_only = nik.IKSolver(robot, world=world, self_collision=False).solve(T, q_near=q)
+    world_only = nik.IKSolver(robot, world=world, self_collision=False, mesh_verdict=False).solve(T, q_near=q)
     assert (world_only.collision_free & collides(robot, world_only.q)).any()  # called free, yet self-colliding
-    res = nik.IKSolver(robot, world=world).solve(T, q_near=q)
+    res = nik.IKSolver(robot, world=world, mesh_verdict=False).solve(T, q_near=q)
     np.testing.assert_array_equal(res.collision_free, ~collides(robot, res.q, world))
     assert (res.success <= res.collision_free).all()
 
@@ -132,7 +132,7 @@ def test_meshes_free_what_the_spheres_call_colliding(panda_meshes):
     judged = nik.IKSolver(robot, world=world, mesh_verdict=True).solve(T, q_near=q)
     assert judged.collision_free.all() and judged.success.all()
     np.testing.assert_array_equal(judged.collision_free, ~coal.collides(judged.q, world))
-    spheres = nik.IKSolver(robot, world=world).solve(T, q_near=q)
+    spheres = nik.IKSolver(robot, world=world, mesh_verdict=False).solve(T, q_near=q)
     np.testing.assert_array_equal(spheres.collision_free, ~collides(robot, spheres.q, world))
 
 
@@ -226,7 +226,7 @@ def test_coal_judges_only_what_the_spheres_call_colliding(builtin_panda, monkeyp
     assert len(Q) < 0.1 * len(T)  # (not one check per answer)
     np.testing.assert_array_equal(judged.collision_free, ~mesh.collides(judged.q, world))  # coal on every answer
     assert (judged.success <= judged.collision_free).all()
-    spheres = nik.IKSolver(robot, world=world).solve(T)
+    spheres = nik.IKSolver(robot, world=world, mesh_verdict=False).solve(T)
     assert (judged.success >= spheres.success).all()  # target by target: the meshes never turn success to failure
     np.testing.assert_array_equal(judged.q[spheres.success], spheres.q[spheres.success])  # the spheres steered
 
@@ -270,7 +270,7 @@ def test_an_answer_only_the_spheres_call_colliding_succeeds(builtin_panda, terms
     q, world = _hand_over_a_block(robot, mesh, gap=0.001)
     assert not mesh.collides(q[None], world)[0] and collides(robot, q[None], world)[0]
     T = np.ascontiguousarray(robot.fk(q[None]))
-    spheres = nik.IKSolver(robot, world=world).solve(T, **terms)
+    spheres = nik.IKSolver(robot, world=world, mesh_verdict=False).solve(T, **terms)
     assert not spheres.success[0]  # the spheres free no answer at the pose
     judged = nik.IKSolver(robot, world=world, mesh_verdict="auto").solve(T, **terms)
     assert judged.success[0] and judged.collision_free[0] and judged.collisions[0] is None

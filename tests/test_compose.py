@@ -77,7 +77,7 @@ def _near(q: np.ndarray, q_rest: np.ndarray) -> np.ndarray:
 def test_solve_composes_every_mix(panda, backend, bounds, rest, use_world, self_on):
     robot, world, T = panda
     world = world if use_world else None
-    solver = nik.IKSolver(robot, backend=backend, self_collision=self_on)
+    solver = nik.IKSolver(robot, backend=backend, self_collision=self_on, mesh_verdict=False)
     Tin = T if backend == "compiled" else torch.from_numpy(T)
     res = solver.solve(Tin, bounds=bounds, q_rest=rest, world=world)
     q, success = np.asarray(res.q), np.asarray(res.success)
@@ -120,7 +120,7 @@ def test_the_world_bites(panda, ur5):
 def test_solve_all_composes_every_mix(ur5, backend, bounds, rest, use_world, self_on):
     robot, world, T = ur5
     world = world if use_world else None
-    solver = nik.IKSolver(robot, backend=backend, self_collision=self_on)
+    solver = nik.IKSolver(robot, backend=backend, self_collision=self_on, mesh_verdict=False)
     Tin = torch.from_numpy(T[:1]) if backend == "torch" else T[:1]
     Q = solver.solve_all(Tin, bounds=bounds, q_rest=rest, world=world, n_starts=32)
     q = Q.numpy()

@@ -326,7 +326,7 @@ def test_a_user_term_and_a_world_together(panda):
     q_own = _configs(panda, 64, 18)
     q_own = q_own[~torch.as_tensor(collides(panda, q_own, world))]
     T = panda.fk(q_own)
-    solver = nik.IKSolver(panda, world=world)
+    solver = nik.IKSolver(panda, world=world, mesh_verdict=False)
     plain = solver.solve(T)
     z_own, z_plain = _elbow_z(panda, q_own), _elbow_z(panda, plain.q)
     keep = (z_own > z_plain + 0.01).nonzero()[:, 0][:3]
@@ -340,7 +340,7 @@ def test_a_user_term_and_a_world_together(panda):
 
 def test_solve_path_with_a_user_term_bounds_a_world_and_timing(panda):
     world = nik.World().add_box([0.0, 0.0, -0.05], [2.0, 2.0, 0.1])
-    solver = nik.IKSolver(panda, world=world)
+    solver = nik.IKSolver(panda, world=world, mesh_verdict=False)
     line = torch.linspace(0, 1, 10, dtype=torch.float64)[:, None] * 0.3
     for q0 in _configs(panda, 32, 1):
         # the path of a straight joint motion free of the table; the plane at its lowest elbow, so that the motion

@@ -18,7 +18,7 @@ def _line_past_a_box(seed: int = 0, N: int = 200, robot=None):
     """A 25 cm tool line on the panda whose plain answer (from ``q_start``) sweeps the elbow through a small box
     placed 10 cm off the elbow, away from the shoulder-wrist axis, at least 20 cm from the tool's line."""
     robot = nik.load_robot("panda") if robot is None else robot
-    solver = nik.IKSolver(robot)
+    solver = nik.IKSolver(robot, mesh_verdict=False)
     rng = np.random.default_rng(seed)
     lim = robot.limits.numpy()
     mid = lim.mean(1)

@@ -232,3 +232,47 @@ def test_every_arm_of_example_robot_data_loads_and_matches_pytorch_kinematics():
         except Exception as err:  # collect all, report all
             failed.append(f"{path.name}: {type(err).__name__}: {str(err)[:200]}")
     assert not failed, "\n".join(failed)
+
+
+TWO_BRANCHES = """<robot name="two">
+  <link name="torso"/><link name="r1"/><link name="r2"/><link name="l1"/><link name="head"/>
+  <joint name="r_s0" type="revolute"><parent link="torso"/><child link="r1"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="r_e0" type="revolute"><parent link="r1"/><child link="r2"/><origin xyz="0.3 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="left_s0" type="revolute"><parent link="torso"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="0.5" upper="1.5" effort="1" velocity="1"/></joint>
+  <joint name="head_fixed" type="fixed"><parent link="torso"/><child link="head"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize(
+    "values, message",
+    [
+        ({"left_so": 0.7}, r"no joint 'left_so' in this URDF \(closest: left_s0\)"),
+        ({"r_s0": 0.1}, "'r_s0' is a joint of the arm"),
+        ({"head_fixed": 0.1}, "joint 'head_fixed' is fixed"),
+        ({"left_s0": 2.0}, r"'left_s0' = 2 is outside its limits \[0.5, 1.5\]"),
+        ({"left_s0": float("nan")}, "must be a finite number"),
+    ],
+)
+def test_joint_values_outside_the_urdf_are_one_line_errors(tmp_path, values, message):
+    path = tmp_path / "two.urdf"
+    path.write_text(TWO_BRANCHES)
+    with pytest.raises(RobotDefinitionError, match=message) as err:
+        nik.load_robot(path, end_link="r2", joint_values=values)
+    assert "\n" not in str(err.value)
+
+
+def test_joint_values_are_kept_on_the_robot_through_its_frames(tmp_path):
+    from nik.collision.urdf import rest_value
+
+    path = tmp_path / "two.urdf"
+    path.write_text(TWO_BRANCHES)
+    robot = nik.load_robot(path, end_link="r2", joint_values={"left_s0": 0.7}, base=[0, 0, 1, 1, 0, 0, 0])
+    assert robot.joint_values == {"left_s0": 0.7} and robot.srdf is True
+    assert nik.load_robot(robot, tool=[0, 0, 0.1, 1, 0, 0, 0]).joint_values == {"left_s0": 0.7}
+    assert rest_value(0.5, 1.5) == 1.0 and rest_value(-1.0, 1.0) == 0.0  # the default: 0, or the middle
+    with pytest.raises(RobotDefinitionError, match="applies to URDF robots"):
+        nik.load_robot("puma560", joint_values={"left_s0": 0.7})

@@ -322,6 +322,44 @@ def test_urdf_meshes_sit_where_pytorch_kinematics_puts_each_link():
             np.testing.assert_allclose(poses[link], ref[link].get_matrix()[0].numpy(), atol=1e-6)
 
 
+def test_urdf_meshes_of_the_joints_outside_the_chain_stand_at_the_robots_joint_values(tmp_path):
+    pytest.importorskip("trimesh")
+    import pytorch_kinematics as pk
+
+    from nik.robots.urdf import kinematic_urdf
+    from nik.view.urdf_meshes import load_urdf_visuals
+
+    box = '<visual><origin xyz="0.2 0 0"/><geometry><box size="0.4 0.05 0.05"/></geometry></visual>'
+    joint = (
+        '<joint name="{0}" type="revolute"><parent link="{1}"/><child link="{2}"/><origin xyz="{3}"/>'
+        '<axis xyz="0 0 1"/><limit lower="{4}" upper="2" effort="1" velocity="1"/></joint>'
+    )
+    text = (
+        f'<robot name="two"><link name="torso">{box}</link>'
+        + "".join(f'<link name="{n}">{box}</link>' for n in ("r1", "r2", "l1", "l2"))
+        + joint.format("r_s0", "torso", "r1", "0 -0.3 0.6", -2)
+        + joint.format("r_e0", "r1", "r2", "0.4 0 0", -2)
+        + joint.format("l_s0", "torso", "l1", "0 0.3 0.6", -2)
+        + joint.format("l_e0", "l1", "l2", "0.4 0 0", 0.5)  # 0 outside its range: it stands at the middle, 1.25
+        + "</robot>"
+    )
+    path = tmp_path / "two.urdf"
+    path.write_text(text)
+    robot = nik.load_robot(path, end_link="r2", joint_values={"l_s0": -1.0})
+    scene, note = load_urdf_visuals(robot)
+    assert scene is not None, note
+    chain = pk.build_chain_from_urdf(kinematic_urdf(text)).to(dtype=torch.float64)  # every link, independently
+    names = chain.get_joint_parameter_names()
+    q = torch.tensor([0.4, -0.7], dtype=torch.float64)
+    th = torch.zeros(len(names), dtype=torch.float64)
+    for name, v in (("r_s0", 0.4), ("r_e0", -0.7), ("l_s0", -1.0), ("l_e0", 1.25)):
+        th[names.index(name)] = v
+    ref = chain.forward_kinematics(th[None])
+    poses = scene.link_poses(q)
+    for link in ("r2", "l1", "l2"):
+        np.testing.assert_allclose(poses[link], ref[link].get_matrix()[0].numpy(), atol=1e-6)
+
+
 def test_a_robot_without_a_urdf_is_drawn_as_capsules():
     pytest.importorskip("trimesh")
     from nik.view.urdf_meshes import load_urdf_visuals

@@ -132,9 +132,15 @@ def _gap(centers, radii, surface: np.ndarray) -> float:
     pts = pts[~inside]
     if not len(pts):
         return 0.0
+    try:
+        from scipy.spatial import cKDTree
+
+        return float(cKDTree(surface).query(pts)[0].max())
+    except ImportError:
+        pass
     best = np.full(len(pts), np.inf)
-    for s in range(0, len(surface), 2048):
-        chunk = surface[s : s + 2048]
+    for s in range(0, len(surface), 256):  # (P, 256, 3) at a time
+        chunk = surface[s : s + 256]
         best = np.minimum(best, np.sqrt(((pts[:, None] - chunk[None]) ** 2).sum(-1)).min(axis=1))
     return float(best.max())
 
@@ -163,42 +169,96 @@ def _volume(tri: np.ndarray) -> float:
     return v if 0.3 * hull <= v <= hull * (1 + 1e-9) else hull  # an open or inconsistently oriented surface
 
 
-def _greedy_cover(corners, faces, inside, depth, reach, max_spheres):
+def _inside_only(candidates, n_in, tri, flat, edge, volume, seed) -> np.ndarray:
+    """``candidates`` with the first ``n_in`` (drawn in the convex hull) that lie outside a closed, non-convex body
+    replaced by points inside it (drawn from a generator of its own, ``seed + 1``); the others as they are.
+
+    A centre outside the body at distance ``e`` from it, with a radius reaching the surface, leaves the body by
+    about ``2 e``: such centres made the greedy cover hold a pedestal's legs with one ball between them (470 mm
+    past the mesh). The inside is told by the nearest surface probe's outward normal (:func:`_signed_depth`), so
+    only where the surface looks closed and consistently oriented (its enclosed volume between 0.1 and 1 times its
+    convex hull's) and scipy is there; a convex body keeps every candidate (and its
+    fit). The cover's guarantee does not depend on where candidates are."""
+    if n_in <= 0 or volume <= 0:
+        return candidates
+    try:
+        from scipy.spatial import ConvexHull
+
+        hull = float(ConvexHull(flat).volume)
+    except Exception:  # noqa: BLE001 - flat geometry or no scipy
+        return candidates
+    enclosed = abs(float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0))
+    if not 0.1 * hull <= enclosed <= hull * (1 - 1e-3):  # open, inconsistent, or convex: nothing to do
+        return candidates
+    probes = _probes(tri, edge / 2.0)
+    drawn = candidates[:n_in]
+    out = _signed_depth(drawn, probes) < 0
+    if not out.any():
+        return candidates
+    more = _inside_points(flat, 4 * n_in, np.random.default_rng(seed + 1))
+    more = more[_signed_depth(more, probes) > 0][: int(out.sum())]
+    return np.concatenate([drawn[~out], more, candidates[n_in:]])
+
+
+def _face_reach(corners, faces, inside) -> np.ndarray | None:
+    """``(C, T)`` float32: the distance from each candidate centre ``inside`` to the farthest corner of each triangle
+    (the radius a candidate needs to hold it), computed once for every reach the cover tries; None where it would
+    take more than :data:`FACE_REACH_ENTRIES` entries (the cover then compares corner by corner each time). float32
+    only steers the greedy choice: the radii are recomputed in float64 from the triangles each sphere is given."""
+    if len(inside) * len(faces) > FACE_REACH_ENTRIES:
+        return None
+    out = np.empty((len(inside), len(faces)), dtype=np.float32)
+    sq = (corners**2).sum(-1)
+    for s in range(0, len(inside), 128):
+        c = inside[s : s + 128]
+        d = np.sqrt(np.maximum((c**2).sum(-1)[:, None] - 2.0 * c @ corners.T + sq[None], 0.0)).astype(np.float32)
+        out[s : s + 128] = np.maximum(np.maximum(d[:, faces[:, 0]], d[:, faces[:, 1]]), d[:, faces[:, 2]])
+    return out
+
+
+#: the most entries (candidates x triangles, float32) :func:`_face_reach` keeps: 64 M, 256 MB
+FACE_REACH_ENTRIES = 64 * 2**20
+
+
+def _greedy_cover(corners, faces, inside, depth, reach, max_spheres, face_reach=None):
     """Spheres ``(centres, radii)`` holding every triangle ``corners[faces]``: candidates ``inside`` with radius
     ``depth + reach``; greedily the one holding the most triangles not yet held; triangles no candidate holds go
     to the chosen sphere that grows least for them; then each radius shrinks to its own triangles' farthest
-    corner. None when more than ``max_spheres`` are needed."""
+    corner. None when more than ``max_spheres`` are needed. ``face_reach``: :func:`_face_reach`, when computed."""
     radii = depth + reach
-    held_v = np.empty((len(inside), len(corners)), dtype=bool)
-    sq = (corners**2).sum(-1)
-    for s in range(0, len(inside), 256):
-        c = inside[s : s + 256]
-        d2 = (c**2).sum(-1)[:, None] - 2.0 * c @ corners.T + sq[None]  # float64: well below the sizes here
-        held_v[s : s + 256] = d2 <= (radii[s : s + 256, None] ** 2) * (1 - 1e-9)
-    held = held_v[:, faces].all(axis=2)  # (C, T)
-    counts = held.astype(np.float32)
+    if face_reach is not None:
+        held = face_reach <= (radii[:, None] * (1 - 1e-6)).astype(np.float32)  # (C, T)
+    else:
+        held_v = np.empty((len(inside), len(corners)), dtype=bool)
+        sq = (corners**2).sum(-1)
+        for s in range(0, len(inside), 256):
+            c = inside[s : s + 256]
+            d2 = (c**2).sum(-1)[:, None] - 2.0 * c @ corners.T + sq[None]  # float64: well below the sizes here
+            held_v[s : s + 256] = d2 <= (radii[s : s + 256, None] ** 2) * (1 - 1e-9)
+        held = held_v[:, faces[:, 0]] & held_v[:, faces[:, 1]] & held_v[:, faces[:, 2]]  # (C, T)
+    gain = held.sum(axis=1)  # triangles each candidate would newly hold, kept up to date as triangles are held
     open_ = np.ones(faces.shape[0], dtype=bool)
     chosen = []
     while open_.any():
-        gain = counts @ open_.astype(np.float32)  # triangles each candidate would newly hold (exact below 2^24)
         best = int(np.argmax(gain))
         if gain[best] == 0:
             break
         chosen.append(best)
-        open_ &= ~held[best]
+        newly = held[best] & open_
+        open_ &= ~newly
+        gain -= held[:, newly].sum(axis=1)  # each triangle leaves the gains once: C x T in all
         if len(chosen) > max_spheres:
             return None
     if not chosen:
         chosen = [int(np.argmax(depth))]
     centers = inside[chosen].copy()
-    tri = corners[faces]
-    need = np.linalg.norm(tri[:, :, None, :] - centers[None, None], axis=3).max(axis=1)  # (T, K)
+    need = _need(corners, faces, centers)  # (T, K), float64
     # each triangle to a chosen sphere that holds it (the one that holds it with most room), else the one
     # needing the least radius for it
     room = need - radii[chosen][None]
     lab = np.argmin(room, axis=1)
     out = np.zeros(len(chosen))
-    np.maximum.at(out, lab, need[np.arange(len(tri)), lab])
+    np.maximum.at(out, lab, need[np.arange(len(faces)), lab])
     keep = out > 0
     remap = np.cumsum(keep) - 1
     return centers[keep], out[keep], remap[lab]
@@ -418,13 +478,17 @@ def fit_spheres(
     if medial:
         med = _medial_candidates(corners, faces)
         inside = np.concatenate([inside, med[rng.choice(len(med), min(len(med), 3 * n_in), replace=False)]])
+    inside = _inside_only(inside, n_in, tri, flat, edge, volume, seed)
     sq = (corners**2).sum(-1)
-    d2 = (inside**2).sum(-1)[:, None] - 2.0 * inside @ corners.T + sq[None]
-    depth = np.sqrt(np.maximum(d2.min(axis=1), 0.0))
+    depth = np.empty(len(inside))
+    for s in range(0, len(inside), 256):  # chunked: (256, V) at a time
+        c = inside[s : s + 256]
+        depth[s : s + 256] = np.sqrt(np.maximum(((c**2).sum(-1)[:, None] - 2.0 * c @ corners.T + sq[None]).min(1), 0))
     reach = max(float(tolerance), 1e-4)
     found = None
+    face_reach = _face_reach(corners, faces, inside)
     while found is None:
-        found = _greedy_cover(corners, faces, inside, depth, reach, int(max_spheres))
+        found = _greedy_cover(corners, faces, inside, depth, reach, int(max_spheres), face_reach)
         reach *= 1.5
     c, r, _ = found
     if refine > 0:

@@ -15,8 +15,9 @@ Where the spheres come from (choices):
 
 Which pairs are checked, as MoveIt's setup assistant decides (each left-out pair keeps its reason in
 :attr:`CollisionModel.left_out`): links on the same frame (they never move relative to each other), adjacent
-links (parent and child: a joint between them), the pairs a MoveIt SRDF beside the URDF disables (``srdf=True``),
-then on ``samples`` seeded configurations within the limits,
+links (parent and child: a joint between them), the pairs MoveIt's SRDF disables (``srdf=``: a path, or found
+beside the URDF, :func:`find_srdf`), then on ``samples`` seeded configurations within the limits (streamed through
+the compiled rows, :func:`_pair_rows`: memory bounded whatever the spheres' count),
 pairs whose spheres touch in every one ("always") and pairs never closer than ``never_clearance`` metres
 ("never"; ``never_clearance=None`` keeps them). :meth:`CollisionModel.with_pairs` adds or removes pairs.
 
@@ -41,8 +42,11 @@ import torch
 
 __all__ = ["COLLISION_FORMAT", "CollisionModel", "collision_model", "link_capsule_bodies", "set_collision_model"]
 
-#: version of the saved model (bump when the fitting or the pair rules change)
+#: version of the saved model's file format (the shipped models' files carry it)
 COLLISION_FORMAT = 1
+
+#: version of the fitting and the pair rules, part of the cache key (bump when they change: a cached fit is redone)
+FIT_VERSION = 2
 
 
 @dataclass
@@ -302,7 +306,7 @@ def _has_collision(path: Path) -> bool:
     return b"<collision" in path.read_bytes()
 
 
-def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
+def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress=None):
     urdf = _urdf_of(robot) if source in (None, "urdf") else None
     if source == "urdf" and (urdf is None or not _has_collision(urdf)):
         raise ValueError(f"robot {robot.name!r}: no URDF with <collision> geometry to fit spheres to")
@@ -311,7 +315,11 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
         from nik.collision.urdf import urdf_bodies
 
         bodies = urdf_bodies(robot, urdf)
-        fits = [fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed) for b in bodies]
+        fits = []
+        for i, b in enumerate(bodies):
+            if progress is not None:
+                progress.say(f"fitting spheres to link {i + 1} of {len(bodies)} ({b.name})")
+            fits.append(fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed))
         spheres = [(f.centers, f.radii) for f in fits]
         return bodies, spheres, [f.gap for f in fits], [f.volume_ratio for f in fits], f"urdf:{urdf}"
     if source not in (None, "capsules"):
@@ -322,14 +330,65 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed):
     return bodies, spheres, gaps, [float("nan")] * len(bodies), "capsules"
 
 
-def srdf_of(urdf: Path | None) -> Path | None:
-    """MoveIt's SRDF for a URDF: ``NAME.srdf`` beside it or in a sibling ``srdf`` folder; None where absent."""
+def find_srdf(urdf: Path | None) -> tuple[Path | None, str]:
+    """MoveIt's SRDF for a URDF, searched, and how it was found (one line; empty where there is no URDF).
+
+    Looked at, in order: ``NAME.srdf`` beside the URDF; ``NAME.srdf`` in a ``srdf/`` folder beside it or beside
+    the URDF's folder (a ROS description package: ``urdf/NAME.urdf``, ``srdf/NAME.srdf``); else the single
+    ``*.srdf`` of such a folder (Baxter's ``srdf/baxter_manipulation.srdf``). A folder holding several others
+    is not guessed from: None, and the line names them (pass ``srdf=PATH``)."""
     if urdf is None:
-        return None
-    for cand in (urdf.with_suffix(".srdf"), urdf.parent.parent / "srdf" / f"{urdf.stem}.srdf"):
+        return None, ""
+    folders = [urdf.parent / "srdf", urdf.parent.parent / "srdf"]
+    for cand in (urdf.with_suffix(".srdf"), *(f / f"{urdf.stem}.srdf" for f in folders)):
         if cand.is_file():
-            return cand
-    return None
+            return cand, f"SRDF {cand} (named as the URDF)"
+    for folder in dict.fromkeys(folders):
+        found = sorted(folder.glob("*.srdf")) if folder.is_dir() else []
+        if len(found) == 1:
+            return found[0], f"SRDF {found[0]} (the only one in {folder})"
+        if found:
+            names = ", ".join(p.name for p in found)
+            return None, f"no SRDF used: {folder} holds several ({names}); pass srdf=PATH to choose one"
+    return None, f"no SRDF found beside {urdf}"
+
+
+def srdf_of(urdf: Path | None) -> Path | None:
+    """MoveIt's SRDF for a URDF as :func:`find_srdf` searches for it; None where there is none."""
+    return find_srdf(urdf)[0]
+
+
+def resolve_srdf(robot, srdf, urdf: Path | None) -> Path | None:
+    """The SRDF file :func:`collision_model` reads for ``srdf`` (None: the robot's own choice, ``robot.srdf`` as
+    :func:`nik.load_robot` set it, default True): a path is that file (missing: a one-line ``ValueError``), True
+    the one :func:`find_srdf` finds (logged at INFO on the ``nik.collision`` logger, once per robot and file;
+    several candidates and none chosen: a :class:`nik.errors.CollisionModelWarning`), False none."""
+    if srdf is None:
+        srdf = getattr(robot, "srdf", True)
+    if srdf is False or urdf is None:
+        if isinstance(srdf, (str, Path)) and urdf is None:
+            raise ValueError(f"robot {robot.name!r}: srdf={str(srdf)!r} applies to URDF robots (this one has none)")
+        return None
+    if srdf is not True:
+        path = Path(srdf)
+        if not path.is_file():
+            raise ValueError(f"SRDF file not found: {path}")
+        return path
+    path, how = find_srdf(urdf)
+    said = robot.__dict__.setdefault("_srdf_said", set())
+    if how not in said:
+        said.add(how)
+        if path is None and "several" in how:
+            import warnings
+
+            from nik.errors import CollisionModelWarning
+
+            warnings.warn(f"robot {robot.name!r}: {how}", CollisionModelWarning, stacklevel=3)
+        else:
+            import logging
+
+            logging.getLogger("nik.collision").info("robot %r: %s", robot.name, how)
+    return path
 
 
 def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
@@ -348,10 +407,71 @@ def srdf_disabled(path: Path) -> dict[tuple[str, str], str]:
     return out
 
 
-def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None, disabled=None):
+#: configurations per chunk of the pair sampling (:func:`_pair_rows`)
+PAIR_CHUNK = 128
+
+
+def _pair_rows(robot, model: CollisionModel, Q: np.ndarray, never_clearance, progress=None):
+    """The self-collision rows ``(b, P)`` of ``model``'s pairs at ``Q: (B, dof)``, yielded in chunks of
+    :data:`PAIR_CHUNK` configurations: exact wherever at most ``max(never_clearance, 0)`` metres, else a lower bound
+    above it (the compiled broad phase, :func:`nik.kernels.collision.collision_rows_batch`), which is all the
+    "always" (below 0) and "never" (above the clearance) tests read. Memory ``O(PAIR_CHUNK * (P + L))`` whatever
+    the spheres' count (no sphere-pair arrays)."""
+    from nik.kernels.collision import collision_rows_batch
+
+    G, joints = robot.chain_arrays()  # the arguments of nik.collision.compiled.kernel_arguments, no world
+    no_world = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
+    rest = (*model.arrays(), *no_world, True)
+    cutoff = max(0.0, float(never_clearance)) if never_clearance is not None else 0.0
+    P = len(model.pairs)
+    for s in range(0, len(Q), PAIR_CHUNK):
+        chunk = np.ascontiguousarray(Q[s : s + PAIR_CHUNK], dtype=np.float64)
+        D = np.empty((len(chunk), P + len(model.links)))
+        collision_rows_batch(G, joints, chunk, *rest, cutoff, D)
+        if progress is not None:
+            progress.say(f"sampling {len(Q)} configurations for the link pairs: {s + len(chunk)} done")
+        yield D[:, :P]
+
+
+class Progress:
+    """One line on stderr now and then for a long build: the first after ``after`` seconds (default
+    :data:`PROGRESS_AFTER`), then at most one every ``every`` seconds, and a last one saying the time taken where
+    any was printed. ``what`` names the build (``"collision model of 'baxter'"``)."""
+
+    def __init__(self, what: str, after: float | None = None, every: float = 5.0):
+        import time
+
+        self._time = time.perf_counter
+        self.what, self.after, self.every = what, PROGRESS_AFTER if after is None else after, every
+        self.start, self.last, self.said = self._time(), None, False
+
+    def say(self, doing: str) -> None:
+        now = self._time()
+        if now - self.start < self.after or (self.last is not None and now - self.last < self.every):
+            return
+        import sys
+
+        self.last, self.said = now, True
+        print(f"nik: {self.what}: {doing} ({now - self.start:.0f} s)", file=sys.stderr, flush=True)
+
+    def done(self) -> None:
+        if self.said:
+            import sys
+
+            print(f"nik: {self.what}: done in {self._time() - self.start:.0f} s", file=sys.stderr, flush=True)
+
+
+#: seconds a build runs before :class:`Progress` prints its first line
+PROGRESS_AFTER = 2.0
+
+
+def _find_pairs(
+    robot, model: CollisionModel, samples: int, never_clearance, seed: int, srdf=None, disabled=None, progress=None
+):
     """Active pairs and the reasons of the others (module docstring); ``disabled``: ``{(a, b): reason}`` pairs
-    an SRDF disables, given instead of its file ``srdf``."""
-    from nik.collision.distance import self_distances, sphere_centers
+    an SRDF disables, given instead of its file ``srdf``. The sampled configurations are streamed in chunks
+    through the compiled rows (:func:`_pair_rows`), so the memory is bounded whatever the spheres' count;
+    ``progress``: a :class:`Progress` told how far it is."""
 
     L = len(model.links)
     names = list(model.links)
@@ -377,10 +497,12 @@ def _find_pairs(robot, model: CollisionModel, samples: int, never_clearance, see
     if len(candidates) and samples > 0:
         g = torch.Generator().manual_seed(seed)
         q = robot.sample(int(samples), generator=g, dtype=torch.float64)
-        with torch.no_grad():
-            d = self_distances(model, sphere_centers(model, robot, q))
-        always = (d < 0).all(dim=0).numpy()
-        never = (d > never_clearance).all(dim=0).numpy() if never_clearance is not None else np.zeros(len(d[0]), bool)
+        always = np.ones(len(candidates), bool)
+        never = np.full(len(candidates), never_clearance is not None)
+        for d in _pair_rows(robot, model, q.numpy(), never_clearance, progress):
+            always &= (d < 0).all(axis=0)
+            if never_clearance is not None:
+                never &= (d > never_clearance).all(axis=0)
         keep = []
         for p, (a, b) in enumerate(candidates):
             key = f"{names[a]}|{names[b]}"
@@ -425,9 +547,10 @@ def _store(model: CollisionModel, path: Path) -> None:
         model.save(path)
 
 
-def _fitted(robot, source, radius, tolerance, max_spheres, seed) -> CollisionModel:
+def _fitted(robot, source, radius, tolerance, max_spheres, seed, progress=None) -> CollisionModel:
     """The spheres of every link (no pairs yet)."""
-    bodies, spheres, gaps, ratios, src = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed)
+    found = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress)
+    bodies, spheres, gaps, ratios, src = found
     counts = [len(r) for _, r in spheres]
     return CollisionModel(
         robot_hash=robot.definition_hash,
@@ -478,7 +601,7 @@ def collision_model(
     max_spheres: int = 16,
     samples: int = 1000,
     never_clearance: float | None = 0.02,
-    srdf: bool = True,
+    srdf: bool | str | Path | None = None,
     seed: int = 0,
     cache: bool = True,
 ) -> CollisionModel:
@@ -496,8 +619,14 @@ def collision_model(
         samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
             but the same-frame and adjacent ones).
         never_clearance: a pair never closer than this (metres) in every sample is left out; None keeps them.
-        srdf: honour MoveIt's SRDF of a URDF robot (``NAME.srdf`` beside the URDF or in ``../srdf/``): the link
-            pairs it disables are left out (reason ``"srdf: Default"``, ...), as MoveIt would.
+        srdf: MoveIt's SRDF of a URDF robot, whose disabled link pairs are left out (reason ``"srdf: Default"``,
+            ...), as MoveIt would: a path (that file), True (search beside the URDF, :func:`find_srdf`; the file
+            used is logged at INFO on the ``nik.collision`` logger), False (none), or None (default: the robot's
+            own, ``load_robot(..., srdf=)``, True unless given). The file used is ``model.options["srdf_file"]``.
+
+    The joints outside the robot's chain stand where ``load_robot(..., joint_values=)`` put them (default 0, or
+    the middle of their range where 0 is outside it): the links they carry are fitted there, and the model's
+    cache key holds those values.
         seed: seed of the fitting and the sampling.
         cache: read and write nik's cache folder.
     """
@@ -508,12 +637,22 @@ def collision_model(
         "max_spheres": int(max_spheres),
         "samples": int(samples),
         "never_clearance": never_clearance,
-        "srdf": bool(srdf),
+        "srdf": _srdf_choice(robot, srdf),
         "seed": int(seed),
     }
+    from nik.collision.urdf import placed_values
+
+    placed = placed_values(robot)
+    if placed:
+        options["joint_values"] = placed
     memo = robot.__dict__.setdefault("_collision_models", {})
     memo_key = json.dumps(options, sort_keys=True)
-    if memo_key == _DEFAULT_KEY and robot.__dict__.get("_collision_model") is not None:
+    plain = {k: v for k, v in options.items() if k != "joint_values"}
+    if (
+        srdf in (None, True)
+        and json.dumps({**plain, "srdf": True}, sort_keys=True) == _DEFAULT_KEY
+        and robot.__dict__.get("_collision_model") is not None
+    ):
         return robot.__dict__["_collision_model"]
     if memo_key in memo:
         return memo[memo_key]
@@ -524,13 +663,19 @@ def collision_model(
         return model
     radii_given = options["radius"] != 0.05  # capsules of the radii given, where the robot has no URDF geometry
     if (source == "builtin" or (source is None and not radii_given)) and not model_source_is_urdf(robot, None):
-        shipped = _builtin(robot, source, samples, never_clearance, srdf, seed)
+        if not isinstance(options["srdf"], bool):
+            raise ValueError(
+                f"robot {robot.name!r}: srdf={options['srdf']!r} applies to URDF robots (this one has none)"
+            )
+        shipped = _builtin(robot, source, samples, never_clearance, options["srdf"], seed)
         if shipped is not None:
             memo[memo_key] = shipped
             return shipped
     urdf = _urdf_of(robot)
-    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed")}
-    h = hashlib.sha256(f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}".encode())
+    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed", "joint_values")
+                   if k in options}  # fmt: skip
+    key = f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}|fit {FIT_VERSION}"
+    h = hashlib.sha256(key.encode())
     if urdf is not None:
         h.update(urdf.read_bytes())
         if model_source_is_urdf(robot, source):  # the meshes found (or not) the same way, cache warm or cold
@@ -539,27 +684,77 @@ def collision_model(
             for mesh in collision_mesh_files(urdf):
                 h.update(f"|{mesh.resolve()}:{mesh.stat().st_size}".encode())
     fit_path = _cache_path("spheres-" + h.hexdigest())
-    srdf_path = srdf_of(urdf) if srdf and model_source_is_urdf(robot, source) else None
+    srdf_path = resolve_srdf(robot, options["srdf"], urdf) if model_source_is_urdf(robot, source) else None
+    options["srdf_file"] = None if srdf_path is None else str(srdf_path)
     h.update(memo_key.encode())
     if srdf_path is not None:
         h.update(srdf_path.read_bytes())
     path = _cache_path(h.hexdigest())
     model = _cached(path, robot) if cache else None
     if model is None:
+        progress = Progress(f"collision model of {robot.name!r}")
         spheres = _cached(fit_path, robot) if cache else None
         if spheres is None:
-            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed)
+            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed, progress)
             if cache:
                 _store(spheres, fit_path)
         model = CollisionModel(**{**spheres.__dict__, "options": options})
         model.__dict__.pop("_sphere_pairs", None)
-        _find_pairs(robot, model, samples, never_clearance, seed, srdf_path)
+        _find_pairs(robot, model, samples, never_clearance, seed, srdf_path, progress=progress)
         if cache:
             _store(model, path)
+        progress.done()
     if model.source == "capsules" and source is None and not radii_given:
         _warn_capsules(robot, radius)
+    _warn_overreach(robot, model)
     memo[memo_key] = model
     return model
+
+
+#: a fitted link whose spheres reach farther than this past its geometry (metres) is named in a warning: sphere
+#: models reach 2-3 cm past flat faces and sharp edges at the default tolerance (the panda's links 16-34 mm), so
+#: this flags the links fitted badly (a torso or pedestal of a few large faces), not the usual overreach
+OVERREACH_WARNING = 0.05
+
+
+def _warn_overreach(robot, model: CollisionModel) -> None:
+    """Say once per robot and model which fitted links overreach their geometry by more than
+    :data:`OVERREACH_WARNING`, with the figures (a :class:`nik.errors.CollisionModelWarning`)."""
+    if model.gaps is None or not model.source.startswith("urdf:"):
+        return
+    over = sorted(
+        ((float(g), name) for name, g in zip(model.links, model.gaps, strict=True) if g > OVERREACH_WARNING),
+        reverse=True,
+    )
+    said = robot.__dict__.setdefault("_overreach_said", set())
+    key = (model.source, tuple(over))
+    if not over or key in said:
+        return
+    said.add(key)
+    import warnings
+
+    from nik.errors import CollisionModelWarning
+
+    figures = ", ".join(f"{name} {1000 * g:.0f} mm" for g, name in over)
+    warnings.warn(
+        f"robot {robot.name!r}: the collision spheres of {len(over)} link(s) reach more than "
+        f"{1000 * OVERREACH_WARNING:.0f} mm past their meshes ({figures}): configurations near them are called "
+        "colliding when the meshes are free; the mesh verdict (IKSolver's default with coal) judges answers on the "
+        "meshes, and collision_model(robot, max_spheres=..., tolerance=...) or a model file tightens them",
+        CollisionModelWarning,
+        stacklevel=3,
+    )
+
+
+def _srdf_choice(robot, srdf) -> bool | str:
+    """``srdf`` (None: the robot's own, ``robot.srdf``) as the model's options record it: a bool or a path."""
+    if srdf is None:
+        srdf = getattr(robot, "srdf", True)
+    if isinstance(srdf, bool):
+        return srdf
+    if isinstance(srdf, (str, Path)):
+        return str(srdf)
+    raise ValueError(f"srdf must be True, False or a path, got {type(srdf).__name__}")
 
 
 def _builtin(robot, source, samples, never_clearance, srdf, seed) -> CollisionModel | None:

@@ -3,8 +3,8 @@
 :func:`box_triangles`, :func:`cylinder_triangles`, :func:`sphere_triangles`, :func:`capsule_triangles` give
 ``(T, 3, 3)`` triangles (metres) of a closed surface that holds the primitive (a polygon *around* the circle:
 its inradius is the radius), so spheres that hold these triangles hold the primitive (:mod:`nik.collision.fit`).
-:func:`mesh_triangles` reads a mesh file through trimesh (the ``view`` or ``collision-check`` extra); a file it
-cannot read is a one-line :class:`ValueError`.
+:func:`mesh_triangles` reads a mesh file through trimesh (the ``collision-check`` extra, with pycollada for
+COLLADA ``.dae``); a file it cannot read is a one-line :class:`ValueError` naming the file and what to install.
 """
 
 from __future__ import annotations
@@ -107,19 +107,35 @@ def capsule_triangles(radius: float, length: float) -> np.ndarray:
     return _outward(np.concatenate(parts), np.zeros(3))
 
 
+#: the package trimesh needs for a mesh format (by file suffix) beyond STL, OBJ, PLY and OFF, which it reads alone
+MESH_READERS = {".dae": "pycollada", ".zae": "pycollada", ".3mf": "networkx and lxml", ".glb": "", ".gltf": ""}
+
+#: what to install for the collision extra (trimesh, pycollada, coal)
+INSTALL_HINT = "pip install 'nik-ik[collision-check]'"
+
+
 def mesh_triangles(path: str | Path, scale=(1.0, 1.0, 1.0)) -> np.ndarray:
-    """The triangles ``(T, 3, 3)`` of a mesh file (STL, OBJ, PLY, DAE with pycollada, ...), scaled per axis."""
+    """The triangles ``(T, 3, 3)`` of a mesh file (STL, OBJ, PLY, DAE with pycollada, ...), scaled per axis.
+
+    Read by trimesh (the ``collision-check`` extra, which installs pycollada for COLLADA ``.dae``); a file that
+    cannot be read is a one-line :class:`ValueError` naming it, and, where a reader package is missing, the
+    package and :data:`INSTALL_HINT`."""
     try:
         import trimesh
     except ImportError as err:
-        raise ValueError(
-            f"cannot read mesh {path}: trimesh is not installed (pip install 'nik-ik[collision-check]')"
-        ) from err
+        raise ValueError(f"cannot read mesh {path}: trimesh is not installed ({INSTALL_HINT})") from err
     try:
         mesh = trimesh.load(str(path), force="mesh")
         tri = np.asarray(mesh.triangles, dtype=np.float64)
+    except ImportError as err:  # a reader's package (pycollada for .dae) is missing
+        package = MESH_READERS.get(Path(path).suffix.lower()) or getattr(err, "name", None) or "its reader"
+        raise ValueError(
+            f"cannot read mesh {path}: its format needs {package}, which is not installed ({INSTALL_HINT})"
+        ) from None
     except Exception as err:  # noqa: BLE001 - trimesh raises many kinds
-        raise ValueError(f"cannot read mesh {path}: {type(err).__name__}: {err}") from None
+        text = " ".join(str(err).split())
+        raise ValueError(f"cannot read mesh {path}: {type(err).__name__}: {text} ({INSTALL_HINT} reads "
+                         "STL, OBJ, PLY and COLLADA .dae)") from None  # fmt: skip
     if tri.size == 0 or not np.isfinite(tri).all():
         raise ValueError(f"cannot read mesh {path}: no finite triangles")
     return tri * np.asarray(scale, dtype=np.float64).reshape(1, 1, 3)

@@ -2,8 +2,10 @@
 
 nik's FK knows frames, not links: frame ``k`` (``k = 1..dof``) is ``G_0 J_1 G_1 ... G_{k-1} J_k`` of the normal form
 (:mod:`nik.kinematics`), frame 0 the robot's base frame. A URDF link rides on the frame of the last arm joint
-above it in the tree (links above the first arm joint ride on frame 0; joints that are not the arm's, a gripper's,
-stay at 0 or their nearest limit, as ``nik view`` draws them). Its geometry in that frame is fixed, and found by
+above it in the tree (links above the first arm joint ride on frame 0). Joints that are not the arm's (a gripper's,
+the other arm of a two-armed robot, a head) are placed at the robot's :attr:`joint_values` (``load_robot(...,
+joint_values=)``), else at :func:`rest_value` (0, or the middle of the range where 0 is outside it), as ``nik
+view`` draws them. Its geometry in that frame is fixed, and found by
 one walk of the tree at q = 0: for the child link ``C_k`` of arm joint ``k`` (axis frame ``P_k``, see
 :func:`nik.robots.model.axis_frame`), frame ``k`` is ``B @ U_{C_k}(q) @ P_k`` with ``U`` the URDF walk and ``B``
 a constant (the robot's base frame, a ``root_link`` other than the URDF's root); the walk is checked against
@@ -28,7 +30,16 @@ from nik.collision.shapes import (
     sphere_triangles,
 )
 
-__all__ = ["Body", "collision_mesh_files", "frames_at", "mesh_places", "resolve_mesh_path", "rpy_matrix", "urdf_bodies"]
+__all__ = [
+    "Body",
+    "collision_mesh_files",
+    "frames_at",
+    "mesh_places",
+    "resolve_mesh_path",
+    "rest_value",
+    "rpy_matrix",
+    "urdf_bodies",
+]
 
 #: agreement needed between the URDF walk and nik's frames (metres and rotation-matrix entries)
 MATCH_TOL = 1e-5
@@ -191,6 +202,19 @@ def _geometry_triangles(geom, urdf_dir: Path, where: str) -> np.ndarray:
     raise ValueError(f"{where}: unknown geometry <{tag}> (expected mesh, box, cylinder, sphere, capsule)")
 
 
+def rest_value(lower: float, upper: float) -> float:
+    """Where a joint the robot does not drive stands by default: 0, or the middle of its range ``[lower, upper]``
+    where 0 is outside it (a joint without a range, ``lower >= upper``: 0)."""
+    if lower >= upper or lower <= 0.0 <= upper:
+        return 0.0
+    return 0.5 * (lower + upper)
+
+
+def placed_values(robot) -> dict[str, float]:
+    """``{joint: value}`` given for the joints outside ``robot``'s chain (``load_robot(..., joint_values=)``)."""
+    return dict(getattr(robot, "joint_values", None) or {})
+
+
 @dataclass
 class _Joint:
     name: str
@@ -221,7 +245,7 @@ def _read(path: Path):
         lim = j.find("limit")
         lo = float(lim.get("lower", 0.0)) if lim is not None else 0.0
         hi = float(lim.get("upper", 0.0)) if lim is not None else 0.0
-        rest = min(max(0.0, lo), hi) if lo < hi else 0.0
+        rest = rest_value(lo, hi)
         joints.append(
             _Joint(name, j.get("type", "fixed"), parent.get("link"), child.get("link"), _origin(j, name), axis, rest)
         )
@@ -266,6 +290,7 @@ def urdf_bodies(robot, path: str | Path) -> list[Body]:
     if len(roots) != 1:
         raise ValueError(f"{path}: expected one root link, found {roots}")
     index = {name: k + 1 for k, name in enumerate(robot.joint_names)}
+    placed = placed_values(robot)
     missing = [n for n in robot.joint_names if n not in {j.name for j in joints}]
     if missing:
         raise ValueError(f"{path}: is not this robot's URDF (no joint {missing[0]!r})")
@@ -279,7 +304,7 @@ def urdf_bodies(robot, path: str | Path) -> list[Body]:
             for j in children.get(link, []):
                 T = pose[link] @ j.origin
                 if j.kind in ("revolute", "continuous", "prismatic"):
-                    v = q[index[j.name] - 1] if j.name in index else j.rest
+                    v = q[index[j.name] - 1] if j.name in index else placed.get(j.name, j.rest)
                     if j.kind == "prismatic":
                         M = np.eye(4)
                         M[:3, 3] = j.axis * v

@@ -46,10 +46,10 @@ each mix within 1 point of the same mix without the world (benchmarks/results/co
 
 **The verdict** ``res.collision_free``: the sphere check of the returned ``q`` (margin 0): conservative, so an
 answer called free is free on the meshes (docs/collisions.md measures it); ``success`` requires it. With a mesh
-verdict (``IKSolver(mesh_verdict=)``: ``"auto"`` where coal is installed and the robot has collision meshes,
-True (required), a URDF path, False: the default) the meshes judge instead (:func:`nik.collision.meshcheck.mesh_check`,
-coal), in one of two ways, chosen once per call by :func:`nik.collision.meshcheck.spheres_cover`
-(:attr:`Setup.covered`):
+verdict (``IKSolver(mesh_verdict=)``: ``"auto"``, the default, where coal is installed and the robot has collision
+meshes; True (required); a URDF path; False: the spheres always) the meshes judge instead
+(:func:`nik.collision.meshcheck.mesh_check`, coal), in one of two ways, chosen once per call by
+:func:`nik.collision.meshcheck.spheres_cover` (:attr:`Setup.covered`):
 
 - **the spheres cover the meshes**: the model was fitted to the very URDF whose meshes judge (its ``source``) and
   checks every pair they check (no pair left out by sampling, ``"never"``): the built-in panda, ur5 and xarm7 with

@@ -149,7 +149,14 @@ def _is_robot_file(path: Path) -> bool:
 
 
 def load_robot(
-    name_or_path, *, end_link: str | None = None, base=None, tool=None, root_link: str | None = None
+    name_or_path,
+    *,
+    end_link: str | None = None,
+    base=None,
+    tool=None,
+    root_link: str | None = None,
+    srdf=True,
+    joint_values=None,
 ) -> Robot:
     """Load a robot by built-in name, YAML file or URDF file.
 
@@ -182,6 +189,15 @@ def load_robot(
             FK is then ``base @ T(q) @ tool`` for every solver (:mod:`nik.robots.frames`), replacing a robot
             file's own ``base:`` / ``tool:``. The definition hash changes with a frame other than the identity, so a
             network trained without it is not used for it.
+        srdf: for URDF arms, MoveIt's SRDF whose disabled link pairs the collision model leaves out: a path (that
+            file), True (default: search beside the URDF, ``NAME.srdf``, or in a sibling ``srdf/`` folder,
+            ``NAME.srdf`` or its single ``*.srdf``; the one used is logged on ``nik.collision`` and kept in the
+            model's ``options["srdf_file"]``) or False (none). Kept as ``robot.srdf``.
+        joint_values: for URDF arms, ``{joint name: value}`` (radians, metres) of joints outside the arm's chain
+            (the other arm, a head, a torso lift, fingers): the rest of the robot stands there for self-collision,
+            the mesh check and the viewer; joints not named stand at 0, or the middle of their range where 0 is
+            outside it. Kept as ``robot.joint_values``. A name that is not a moving joint of the URDF outside the
+            chain is a one-line error naming the closest names.
 
     Raises:
         RobotDefinitionError (a ValueError) naming the robot or file and what is wrong (a frame that is not a
@@ -205,16 +221,32 @@ def load_robot(
         if path.suffix.lower() == ".urdf":
             from nik.robots.urdf import load_urdf
 
-            return load_urdf(path, end_link=end_link, root_link=root_link, base=base, tool=tool)
-        return robot_from_file(path, end_link=end_link, base=base, tool=tool, root_link=root_link)
+            return load_urdf(
+                path, end_link=end_link, root_link=root_link, base=base, tool=tool, srdf=srdf, joint_values=joint_values
+            )
+        robot = robot_from_file(path, end_link=end_link, base=base, tool=tool, root_link=root_link)
+        return _surroundings(robot, srdf, joint_values)
     builtin = BUILTIN_DIR / f"{text}.yaml"
     if builtin.is_file() and _is_robot_file(builtin):
-        return robot_from_file(builtin, end_link=end_link, base=base, tool=tool, root_link=root_link)
+        robot = robot_from_file(builtin, end_link=end_link, base=base, tool=tool, root_link=root_link)
+        return _surroundings(robot, srdf, joint_values)
     hint = did_you_mean(text, builtin_robots())
     raise RobotDefinitionError(
         f"unknown robot {text!r}: {hint + ' It is ' if hint else ''}not a built-in ({', '.join(builtin_robots())}) "
         "and not a robot file"
     )
+
+
+def _surroundings(robot: Robot, srdf, joint_values) -> Robot:
+    """``robot`` (from a robot file) with ``srdf`` / ``joint_values`` (:func:`nik.robots.urdf.set_surroundings`),
+    checked against the URDF the file points at (none: only the defaults are accepted)."""
+    if srdf is True and not joint_values:
+        return robot
+    from nik.robots.urdf import set_surroundings
+
+    urdf = Path(robot.source) if robot.source and Path(robot.source).suffix.lower() == ".urdf" else None
+    data = urdf.read_bytes() if urdf is not None and urdf.is_file() else None
+    return set_surroundings(robot, data, srdf=srdf, joint_values=joint_values)
 
 
 def robot_from_file(

@@ -115,6 +115,9 @@ def with_frames(robot, *, base=None, tool=None):
     out.base = _compose(B, robot.base, left=True)
     out.tool = _compose(X, robot.tool, left=False)
     out._arm = robot.arm  # the exact bare arm (its hash matches its networks: Robot.arm_hash)
+    for key in ("srdf", "joint_values"):  # the rest of the robot (nik.robots.urdf.set_surroundings)
+        if key in robot.__dict__:
+            setattr(out, key, robot.__dict__[key])
     return out
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import difflib
 import hashlib
 import io
 import json
@@ -21,6 +22,7 @@ import os
 import re
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,6 +45,7 @@ __all__ = [
     "default_end_link",
     "kinematic_urdf",
     "load_urdf",
+    "set_surroundings",
 ]
 
 #: Version of the cached parse results (bump when the conversion to the normal form changes).
@@ -299,6 +302,8 @@ def load_urdf(
     origins: str = "pk",
     base=None,
     tool=None,
+    srdf: bool | str | Path = True,
+    joint_values: Mapping[str, float] | None = None,
 ) -> Robot:
     """Load a serial arm of revolute and prismatic joints from a URDF file.
 
@@ -319,6 +324,8 @@ def load_urdf(
             carry errors up to about 1e-7 (0.1 micrometre, 1e-7 rad) for angles such as pi/2;
             ``"float64"`` recomputes every ``<origin>`` from the file in float64 (exact FK, which then
             differs from pytorch-kinematics' by that much).
+        srdf, joint_values: the rest of the robot, for its collision model, the mesh check and the viewer
+            (:func:`set_surroundings`: kept as :attr:`Robot.srdf` and :attr:`Robot.joint_values`).
 
     Continuous joints get limits [-pi, pi]. A prismatic joint between base and tool becomes a
     prismatic joint of the robot (its value in metres along its axis, limits from the file, which
@@ -351,7 +358,82 @@ def load_urdf(
     note = choice.note() if choice is not None else None
     if note:
         warnings.warn(f"{path.name}: {note}", RobotDefinitionWarning, stacklevel=2)
-    return with_frames(robot, base=base, tool=tool)
+    return set_surroundings(with_frames(robot, base=base, tool=tool), data, srdf=srdf, joint_values=joint_values)
+
+
+def set_surroundings(robot: Robot, data: bytes | None, *, srdf=True, joint_values=None) -> Robot:
+    """``robot`` with its SRDF choice and the values of the joints outside its chain, checked against the URDF's
+    bytes ``data`` (None: a robot without a URDF, which takes neither), set as attributes:
+
+    - :attr:`Robot.srdf`: ``True`` (search for MoveIt's SRDF beside the URDF: ``NAME.srdf`` there, or in a
+      sibling ``srdf/`` folder, or that folder's single ``*.srdf``; :func:`nik.collision.model.find_srdf`),
+      ``False`` (none) or the :class:`~pathlib.Path` of the SRDF to read (it must exist);
+    - :attr:`Robot.joint_values`: ``{joint: value}`` (radians, metres) of joints of the URDF outside the arm's
+      chain (the other arm of a two-armed robot, a head, a torso lift, fingers), placed there for self-collision,
+      the mesh check and the viewer; the joints not named stand at 0, or the middle of their range where 0 is
+      outside it (:func:`nik.collision.urdf.rest_value`). Each name must be a moving joint of the URDF outside
+      the chain and its value finite and within the joint's limits: otherwise a one-line
+      :class:`RobotDefinitionError` (an unknown name lists the closest names).
+    """
+    where = robot.source or robot.name
+    if srdf is True or srdf is False:
+        choice = srdf
+    elif isinstance(srdf, (str, Path)):
+        choice = Path(srdf)
+        if data is None:
+            raise RobotDefinitionError(f"{where}: srdf applies to URDF robots (this one has no URDF)")
+        if not choice.is_file():
+            raise RobotDefinitionError(f"SRDF file not found: {choice}")
+    else:
+        raise RobotDefinitionError(f"srdf must be True, False or a path, got {type(srdf).__name__}")
+    values = {}
+    if joint_values:
+        if not isinstance(joint_values, Mapping):
+            raise RobotDefinitionError(
+                f"joint_values must be a mapping {{joint name: value}}, got {type(joint_values).__name__}"
+            )
+        if data is None:
+            raise RobotDefinitionError(f"{where}: joint_values applies to URDF robots (this one has no URDF)")
+        values = _joint_values(data, robot, joint_values, where)
+    robot.srdf = choice
+    robot.joint_values = values
+    return robot
+
+
+def _joint_values(data: bytes, robot: Robot, given: Mapping, where: str) -> dict[str, float]:
+    """``given`` checked against the URDF's joints (:func:`set_surroundings`), as ``{name: float}``."""
+    tree, _ = _kinematic_tree(data, where)
+    joints = {el.get("name"): el for el in tree.iter("joint")}
+    out = {}
+    for name, value in given.items():
+        if name not in joints:
+            close = difflib.get_close_matches(str(name), list(joints), n=3, cutoff=0.6)
+            hint = (
+                f"closest: {', '.join(close)}" if close else f"{len(joints)} joints, e.g. {', '.join(list(joints)[:4])}"
+            )
+            raise RobotDefinitionError(f"{where}: joint_values: no joint {name!r} in this URDF ({hint})")
+        if name in robot.joint_names:
+            raise RobotDefinitionError(
+                f"{where}: joint_values: {name!r} is a joint of the arm (its value is the configuration q)"
+            )
+        el = joints[name]
+        if el.get("type") == "fixed":
+            raise RobotDefinitionError(f"{where}: joint_values: joint {name!r} is fixed (it has no value)")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            v = math.nan
+        if not math.isfinite(v):
+            raise RobotDefinitionError(f"{where}: joint_values: {name!r} must be a finite number, got {value!r}")
+        limit = el.find("limit")
+        if el.get("type") != "continuous" and limit is not None and "lower" in limit.attrib and "upper" in limit.attrib:
+            lo, hi = float(limit.get("lower")), float(limit.get("upper"))
+            if lo < hi and not lo - 1e-9 <= v <= hi + 1e-9:
+                raise RobotDefinitionError(
+                    f"{where}: joint_values: {name!r} = {v:g} is outside its limits [{lo:g}, {hi:g}]"
+                )
+        out[str(name)] = v
+    return out
 
 
 def _parse_robot(path: Path, data: bytes, end_link, root_link, name, origins) -> tuple[Robot, EndLinkChoice | None]:

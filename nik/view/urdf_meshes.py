@@ -4,7 +4,8 @@ A robot loaded from a URDF keeps only its kinematics (:mod:`nik.robots.urdf`); t
 module reads the file again for each link's ``<visual>`` (a mesh file, box, cylinder or sphere, with its
 ``<origin>`` and scale; a mesh that cannot be read, e.g. COLLADA without pycollada, falls back to the link's
 ``<collision>`` geometry) and walks the URDF's joint tree to pose every link: the arm's joints take the
-robot's values by name, every other joint (a gripper's fingers) stays at 0 (or the nearest limit).
+robot's values by name, every other joint (a gripper's fingers, another arm) stands at the robot's
+``joint_values`` (``load_robot(..., joint_values=)``), else at 0 (the middle of its range where 0 is outside it).
 
 That walk is checked against :meth:`nik.Robot.fk` at two seeded configurations: nik's tool pose must be the
 URDF's ``end_link`` pose, up to one constant base transform or one constant tool transform (a robot loaded
@@ -26,7 +27,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from nik.collision.urdf import resolve_mesh_path  # one reading of <mesh filename>, the collision model's
+from nik.collision.urdf import (  # one reading of <mesh filename> and of the other joints, the collision model's
+    placed_values,
+    resolve_mesh_path,
+    rest_value,
+)
 from nik.poses import rpy_to_matrix
 
 __all__ = ["LinkVisual", "UrdfVisuals", "load_urdf_visuals", "resolve_mesh_path"]
@@ -74,6 +79,7 @@ class UrdfVisuals:
         self.base = np.eye(4)
         self._joints = joints  # parents before children
         self._index = {name: i for i, name in enumerate(robot.joint_names)}
+        self._placed = placed_values(robot)
 
     @property
     def links(self) -> list[str]:
@@ -88,7 +94,7 @@ class UrdfVisuals:
             parent = poses.get(j.parent)
             if parent is None:
                 parent = poses[j.parent] = self.base.copy()
-            value = q[self._index[j.name]] if j.name in self._index else j.rest
+            value = q[self._index[j.name]] if j.name in self._index else self._placed.get(j.name, j.rest)
             poses[j.child] = parent @ j.origin @ _motion(j, float(value))
         return poses
 
@@ -186,7 +192,7 @@ def _read(path: Path):
         lim = el.find("limit")
         lo = float(lim.get("lower", 0)) if lim is not None else 0.0
         hi = float(lim.get("upper", 0)) if lim is not None else 0.0
-        rest = min(max(0.0, lo), hi) if lo < hi else 0.0
+        rest = rest_value(lo, hi)
         joints.append(
             _Joint(
                 el.get("name"),
