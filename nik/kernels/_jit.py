@@ -20,8 +20,9 @@ the environment of a numba module not yet imported keeps the module's name in pl
 (:func:`_rebuild_env_without_import`); a module already imported gives its globals as numba's own rebuild does.
 
 The first compile of a nik kernel in a process (a cache miss: nothing is compiled on a warm cache) writes one line on
-stderr, ``nik: compiling kernels for this machine (once, ~30-70 s)`` (:func:`nik.kernels.background.announce`; numba's
-``numba:compile`` event, :class:`_Announce`), so that tens of silent seconds say what they are.
+stderr, ``nik: compiling kernels for this machine (...)``, at most once per process
+(:func:`nik.kernels.background.announce`; numba's ``numba:compile`` event, :class:`_Announce`), so that tens of silent
+seconds say what they are.
 
 Building blocks (functions whose name starts with ``_``) are compiled into the kernels that call them, whose
 cached code holds them, so they are not cached on their own: each cached function costs numba a probe of

@@ -29,12 +29,13 @@ release the GIL).
 
 A process that ends while the compile runs does not wait for the rest of it: at interpreter exit (before Python joins
 its threads) the compile stops at the end of the kernel in progress, which is saved first, so the next process loads
-every kernel finished and compiles only the rest (:func:`_stop_at_exit`, :class:`_StopListener`). The wait is the
-rest of one kernel's own compile, its callees already done: 0.1-3 s of CPU for most, about 8 s for the driver's own
-machine code, the last and largest step. The thread is not a daemon: a daemon thread would be cut off inside an LLVM
-pass (GIL released) while the interpreter tears down, which can crash the exit. Each cache entry is complete or
-absent, never half-written (:func:`nik.kernels._jit._stamped`: the data file is written under a temporary name and
-renamed before the index that names it; an entry that fails to load is compiled again).
+every cached kernel finished and compiles only the rest (:func:`_stop_at_exit`, :class:`_StopListener`). The wait is
+the rest of one kernel's own compile, its callees done: 0.3-2.7 s (wall, panda, a shared two-core machine at load 9)
+after one pose or 20 s of answers; the longest step, the driver's own machine code after all its callees, took 23 s
+wall at load 3 (about 8 s of CPU), the most a process can wait. The thread is not a daemon: a daemon thread would be
+cut off inside an LLVM pass (GIL released) while the interpreter tears down, which can crash the exit. Each cache
+entry is complete or absent, never half-written (:func:`nik.kernels._jit._saves_whole`: the data file is written
+under a temporary name and renamed before the index that names it; an entry that fails to load is compiled again).
 
 ``NIK_COMPILE=wait`` (or ``backend="compiled"``) compiles on the caller's thread as before (benchmarks and tests that
 need the compiled answers from the first call); the line (without the torch part) is then written on the first
@@ -134,9 +135,9 @@ def announce(background: bool) -> None:
     if background:
         how = "in the background; answers meanwhile come from the torch backend, later calls are faster"
     else:
-        how = "each as first used, so the first calls are slow; later calls and processes are fast"
+        how = "in all, as each is first used; later calls and processes are faster"
     print(
-        f"nik: compiling kernels for this machine (the solvers' numba code, once: ~{ESTIMATE} s {how})",
+        f"nik: compiling kernels for this machine (the solvers' numba code, once per machine: ~{ESTIMATE} s {how})",
         file=sys.stderr,
         flush=True,
     )
