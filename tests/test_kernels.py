@@ -352,6 +352,7 @@ print("numba" in sys.modules)
 """
 
 
+@pytest.mark.long
 def test_import_nik_does_not_import_numba_until_a_compiled_path_runs():
     done = subprocess.run([sys.executable, "-c", _LIGHT], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
@@ -368,6 +369,7 @@ print(json.dumps(["scipy.linalg" in sys.modules, T.tolist()]))
 """
 
 
+@pytest.mark.long
 def test_a_cached_kernel_loads_without_numbas_whole_compiler_context():
     from nik.kernels import CACHE
 
@@ -434,6 +436,7 @@ print(json.dumps([calls["numba"], T.tolist()]))
 """
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("private_api", ["missing", "raising"])
 def test_kernels_load_through_numbas_own_load_when_its_private_cache_api_differs(private_api):
     done = subprocess.run(
@@ -490,6 +493,7 @@ def _poses_ok_index(cache):
     return index
 
 
+@pytest.mark.long
 def test_a_process_killed_between_the_two_files_of_a_cache_entry_leaves_a_cache_the_next_one_uses(tmp_path):
     # numba writes an entry's index before its data: killed between the two, the index would name a data file that
     # the entry did not write, here one left by an older source for another memory layout (numba numbers its files
@@ -514,6 +518,7 @@ def test_a_process_killed_between_the_two_files_of_a_cache_entry_leaves_a_cache_
     assert after.stdout.split() == ["True"]  # both poses are identities, read with their strides
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("damage", ["data truncated", "index garbled"])
 def test_a_damaged_cache_entry_is_compiled_again_instead_of_failing_the_call(tmp_path, damage):
     first = _entry(tmp_path, "contiguous")
@@ -561,6 +566,7 @@ print(json.dumps([refreshed, position_norm(G, joints, q.numpy())]))
 """
 
 
+@pytest.mark.long
 def test_a_new_signature_compiles_after_kernels_were_loaded_without_the_refresh():
     from nik.kernels import CACHE
 
