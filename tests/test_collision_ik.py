@@ -403,6 +403,7 @@ def test_the_other_given_starts_stop_at_their_own_converged_fraction():
         assert np.linalg.norm(robot.fk(q[done])[:, :3, 3] - T[done, :3, 3], axis=1).max() <= 1e-4
 
 
+@pytest.mark.long
 def test_a_uniform_start_is_the_free_draw_nearest_the_pose_with_fewer_collision_checks():
     """A uniform start's ``tries`` draws are checked for collisions nearest the pose first, up to the first free one:
     the start is the one the rule before picked (in the order drawn, each draw nearer than the nearest free one so
