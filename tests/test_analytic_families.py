@@ -464,6 +464,7 @@ def _multistart_solutions(robot, T: torch.Tensor, starts: int, seed: int) -> tor
     return torch.stack(distinct) if distinct else q[:0]
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("name", ["puma560", "kuka_kr", "ur5", "ur5_redefined"])
 def test_closed_form_finds_every_solution_a_multistart_lm_finds(name):
     robot = _redefined(nik.load_robot("ur5"), seed=21) if name == "ur5_redefined" else nik.load_robot(name)

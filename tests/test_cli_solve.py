@@ -127,6 +127,7 @@ def test_solve_prints_prismatic_joints_in_mm(tmp_path, capsys):
         assert math.isclose(float(table_row["boom_mm"]), float(table_row["boom_m"]) * 1e3, rel_tol=1e-9)
 
 
+@pytest.mark.long
 @needs_training
 def test_solve_csv_in_csv_out_with_a_trained_checkpoint(checkpoint, tmp_path, capsys):
     robot = nik.load_robot("puma560")
@@ -235,6 +236,7 @@ def test_a_five_joint_arm_says_what_to_ask_for_and_never_calls_an_orientation_ou
     assert rc == 1 and "beyond the reach of five_joints" in err
 
 
+@pytest.mark.long
 def test_checkpoint_for_another_robot_is_one_line_error(checkpoint, capsys):
     pose = ["1", "0", "1", "1", "0", "0", "0"]
     rc = main(["solve", "--robot", "kuka_kr", "--checkpoint", str(checkpoint), "--pose", *pose])
@@ -327,6 +329,7 @@ def test_unreachable_pose_exits_1_and_says_no(capsys):
     assert "NO" in capsys.readouterr().out
 
 
+@pytest.mark.long
 @needs_training
 def test_evaluate_writes_table_json_and_histogram(checkpoint, dataset, tmp_path, capsys):
     out = tmp_path / "eval"
@@ -423,6 +426,7 @@ def test_evaluate_end_link_names_the_tool_link(tmp_path, capsys):
     capsys.readouterr()
 
 
+@pytest.mark.long
 def test_solve_with_a_scene_reports_collision_free_per_pose_and_why_poses_failed(tmp_path, capsys):
     scene = tmp_path / "scene.yaml"
     scene.write_text(

@@ -137,6 +137,7 @@ def test_capsule_model_holds_the_capsules(prims):
 
 
 # -- pairs --------------------------------------------------------------------
+@pytest.mark.long
 def test_adjacent_and_same_frame_pairs_are_left_out(prims):
     robot, _ = prims
     model = collision_model(robot)
@@ -146,6 +147,7 @@ def test_adjacent_and_same_frame_pairs_are_left_out(prims):
     assert all(b not in ("l1",) or a != "base" for a, b in names)
 
 
+@pytest.mark.long
 def test_pairs_an_srdf_disables_are_left_out(prims):
     robot, path = prims
     assert ("base", "l3") in collision_model(robot).pair_names()
@@ -344,6 +346,7 @@ def test_pairs_can_be_added_and_removed():
 
 
 # -- distances ------------------------------------------------------------------
+@pytest.mark.long
 def test_compiled_rows_match_torch_and_collides_agrees():
     robot = nik.load_robot("ur5")
     q = _q(robot, 200, 0)
@@ -367,6 +370,7 @@ def test_compiled_rows_match_torch_and_collides_agrees():
     )
 
 
+@pytest.mark.long
 def test_compiled_jacobian_matches_finite_differences():
     from nik.kernels.collision import collision_distances, collision_residual
 
@@ -553,6 +557,7 @@ def test_spheres_never_call_free_what_the_meshes_call_colliding(prims):
         assert not (theirs & ~ours).any()
 
 
+@pytest.mark.long
 def test_mesh_paths_resolve_the_same_with_a_cold_or_warm_cache(tmp_path, monkeypatch):
     trimesh = pytest.importorskip("trimesh", reason="fitting spheres to meshes needs trimesh (extra collision-check)")
 

@@ -170,6 +170,7 @@ def test_answers_called_free_never_collide_with_the_meshes():
     assert not mesh.collides(res.q[res.collision_free], world).any()
 
 
+@pytest.mark.long
 def test_solve_path_calls_a_colliding_waypoint_infeasible():
     robot = nik.load_robot("ur5")
     q = np.linspace([0.1, -1.2, 1.2, -1.5, -1.5, 0.2], [0.5, -1.0, 1.0, -1.4, -1.5, 0.4], 8)
@@ -186,6 +187,7 @@ def test_solve_path_calls_a_colliding_waypoint_infeasible():
     np.testing.assert_array_equal(res.collision_free.numpy(), ~hit)
 
 
+@pytest.mark.long
 def test_viewer_draws_obstacles_and_colours_the_colliding_links():
     pytest.importorskip("viser", reason="the viewer needs viser (pip install 'nik-ik[view]')")
     from nik.view import Viewer, ViewerCfg
@@ -260,6 +262,7 @@ def _uniform_only(robot, world, T, descents):
     return q, free, done, its
 
 
+@pytest.mark.long
 def test_a_blocked_target_runs_the_collision_lm_from_the_best_few_uniform_starts_only():
     """Each target's tool point lies inside a 4 cm ball, so every configuration at its pose collides: the uniform
     starts are all drawn and taken to the pose, but the collision LM runs from the best ``descents`` of them by the
@@ -406,6 +409,7 @@ def test_the_other_given_starts_stop_at_their_own_converged_fraction():
         assert np.linalg.norm(robot.fk(q[done])[:, :3, 3] - T[done, :3, 3], axis=1).max() <= 1e-4
 
 
+@pytest.mark.long
 def test_a_uniform_start_is_the_free_draw_nearest_the_pose_with_fewer_collision_checks():
     """A uniform start's ``tries`` draws are checked for collisions nearest the pose first, up to the first free one:
     the start is the one the rule before picked (in the order drawn, each draw nearer than the nearest free one so

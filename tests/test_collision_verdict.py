@@ -34,6 +34,7 @@ def test_a_world_checks_the_arm_itself_too():
     assert (res.success <= res.collision_free).all()
 
 
+@pytest.mark.long
 def test_collisions_name_the_pairs_and_the_obstacles():
     robot = nik.load_robot("panda")
     world = nik.World().add_box([0.4, 0.0, -0.05], [1.2, 1.2, 0.1]).add_sphere([0.45, 0.25, 0.45], 0.08)

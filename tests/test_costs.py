@@ -290,6 +290,7 @@ def test_solve_all_keeps_only_solutions_that_meet_the_term(panda):
     assert (pos <= 1e-4).all() and (rot <= 1.745e-3).all()
 
 
+@pytest.mark.long
 def test_solve_path_with_a_user_term(panda):
     q0 = _configs(panda, 1, 1)[0]
     qs = panda.clamp(q0 + torch.linspace(0, 1, 10, dtype=torch.float64)[:, None] * 0.3)
@@ -338,6 +339,7 @@ def test_a_user_term_and_a_world_together(panda):
     assert (_elbow_z(panda, res.q) >= h - 1e-6).all() and (res.pos_err <= 1e-4).all()
 
 
+@pytest.mark.long
 def test_solve_path_with_a_user_term_bounds_a_world_and_timing(panda):
     world = nik.World().add_box([0.0, 0.0, -0.05], [2.0, 2.0, 0.1])
     solver = nik.IKSolver(panda, world=world, mesh_verdict=False)

@@ -533,6 +533,7 @@ def test_fast_label_components_match_the_geometric_definition(name):
     assert torch.equal(clf(q), bits)
 
 
+@pytest.mark.long
 def test_compiled_fk_is_reproducible_across_chunks_and_threads(tmp_path, kuka):
     """FK runs on fixed output blocks, so even the compiled kernel sees identical batches."""
     arrays = []
@@ -654,6 +655,7 @@ def test_a_kill_at_any_instant_leaves_the_old_or_the_new_dataset_whole(tmp_path,
     assert k > 5 and not counter.killed  # every instant up to a whole run was tried
 
 
+@pytest.mark.long
 def test_a_generate_whose_process_dies_between_its_renames_leaves_the_old_dataset_for_the_next_process(tmp_path):
     # a real death (os._exit in a subprocess): the old dataset moved aside, the new one not yet in its place
     out = generate_dataset("kuka_kr", 100, tmp_path / "d", seed=1, progress=False, fsync=False)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -351,6 +352,7 @@ print("numba" in sys.modules)
 """
 
 
+@pytest.mark.long
 def test_import_nik_does_not_import_numba_until_a_compiled_path_runs():
     done = subprocess.run([sys.executable, "-c", _LIGHT], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
@@ -367,6 +369,7 @@ print(json.dumps(["scipy.linalg" in sys.modules, T.tolist()]))
 """
 
 
+@pytest.mark.long
 def test_a_cached_kernel_loads_without_numbas_whole_compiler_context():
     from nik.kernels import CACHE
 
@@ -433,6 +436,7 @@ print(json.dumps([calls["numba"], T.tolist()]))
 """
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("private_api", ["missing", "raising"])
 def test_kernels_load_through_numbas_own_load_when_its_private_cache_api_differs(private_api):
     done = subprocess.run(
@@ -452,6 +456,86 @@ def test_a_dispatcher_numba_does_not_know_is_left_as_it_is():
 
     unknown = SimpleNamespace(_cache=SimpleNamespace(load_overload=print))  # no private load, no guard
     assert _cached_loads_without_refresh(unknown) is unknown and unknown._cache.load_overload is print
+
+
+# a cache entry of nik.kernels.poses.poses_ok (a small kernel: under a second to compile) in a process of its own, on
+# poses laid out in memory as the argument says: "contiguous" two identity poses, "strided" the same two read every
+# other slot of an array whose slots between hold 7.0 everywhere (a pose that fails), "kill" as "strided" but the
+# process dies (os._exit) right after the first file of the new cache entry is complete
+_ENTRY = """
+import os, sys
+import numpy as np
+from nik.kernels import poses
+big = np.full((4, 4, 4), 7.0)
+big[::2] = np.eye(4)
+T = np.ascontiguousarray(big[::2]) if sys.argv[1] == "contiguous" else big[::2]
+if sys.argv[1] == "kill":
+    replace = os.replace
+
+    def replace_then_die(src, dst):
+        replace(src, dst)
+        os._exit(9)
+
+    os.replace = replace_then_die
+print(bool(poses.poses_ok(T, 1e-9)))
+"""
+
+
+def _entry(cache, layout):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, "-c", _ENTRY, layout], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
+    )
+
+
+def _poses_ok_index(cache):
+    (index,) = Path(cache).rglob("poses.poses_ok-*.nbi")
+    return index
+
+
+@pytest.mark.long
+def test_a_process_killed_between_the_two_files_of_a_cache_entry_leaves_a_cache_the_next_one_uses(tmp_path):
+    # numba writes an entry's index before its data: killed between the two, the index would name a data file that
+    # the entry did not write, here one left by an older source for another memory layout (numba numbers its files
+    # from 1 again when the index is stale)
+    import pickle
+
+    from numba.core.serialize import dumps
+
+    first = _entry(tmp_path, "contiguous")
+    assert first.returncode == 0 and first.stdout.split() == ["True"], first.stderr[-2000:]
+    index = _poses_ok_index(tmp_path)
+    with open(index, "rb") as f:  # the cache as an older source of the kernels left it: its stamp differs
+        version = pickle.load(f)
+        _, overloads = pickle.loads(f.read())
+    with open(index, "wb") as f:
+        pickle.dump(version, f, protocol=-1)
+        f.write(dumps((("an older source",), overloads)))
+    killed = _entry(tmp_path, "kill")
+    assert killed.returncode == 9, killed.stderr[-2000:]
+    after = _entry(tmp_path, "strided")
+    assert after.returncode == 0, after.stderr[-2000:]
+    assert after.stdout.split() == ["True"]  # both poses are identities, read with their strides
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("damage", ["data truncated", "index garbled"])
+def test_a_damaged_cache_entry_is_compiled_again_instead_of_failing_the_call(tmp_path, damage):
+    first = _entry(tmp_path, "contiguous")
+    assert first.returncode == 0 and first.stdout.split() == ["True"], first.stderr[-2000:]
+    index = _poses_ok_index(tmp_path)
+    if damage == "data truncated":
+        for data in index.parent.glob("poses.poses_ok-*.nbc"):
+            data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    else:
+        index.write_bytes(index.read_bytes()[:12] + b"not a pickle")
+    again = _entry(tmp_path, "contiguous")
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert again.stdout.split() == ["True"]
+    assert "nik: compiling kernels" in again.stderr  # compiled again, and said so
+    third = _entry(tmp_path, "contiguous")  # and saved anew: the next process loads it
+    assert third.returncode == 0 and third.stdout.split() == ["True"], third.stderr[-2000:]
+    assert "nik: compiling kernels" not in third.stderr
 
 
 # a new compile (a function numba has never seen, typing np.linalg, calling a kernel loaded without the refresh)
@@ -482,6 +566,7 @@ print(json.dumps([refreshed, position_norm(G, joints, q.numpy())]))
 """
 
 
+@pytest.mark.long
 def test_a_new_signature_compiles_after_kernels_were_loaded_without_the_refresh():
     from nik.kernels import CACHE
 

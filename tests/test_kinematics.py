@@ -224,6 +224,7 @@ def test_float32_follows_float64_and_keeps_dtype():
     assert_close(T32.double(), robot.fk(q64), atol=2e-6, rtol=0)
 
 
+@pytest.mark.long
 def test_compiled_fk_equals_eager():
     robot = nik.load_robot("ur5")
     q = random_q(robot, 64)

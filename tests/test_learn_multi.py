@@ -45,6 +45,7 @@ def _config(robot: str, tmp_path: Path, data: Path) -> Path:
     return path
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("robot,cls", [("kuka_kr", BranchHeadsIKNet), ("panda", MultiHypIKNet)])
 def test_shipped_config_trains_in_two_phases_and_exports(robot, cls, tmp_path):
     from nik.data import generate_dataset

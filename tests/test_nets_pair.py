@@ -251,6 +251,7 @@ def test_a_damaged_shipped_network_stops_the_solver_in_one_line(tmp_path, monkey
     assert nik.IKSolver("panda", checkpoint=None).initial_source == "multistart"
 
 
+@pytest.mark.long
 def test_cli_refuses_a_damaged_network_with_exit_2_and_no_traceback(pair, tmp_path):
     path, _ = pair
     data = bytearray(path.read_bytes())

@@ -172,6 +172,7 @@ def test_shipped_jsons_record_no_path_of_the_machine_that_made_them_but_the_comm
         assert training["data_sha256"] == data_sha256(training["data"], meta["robot_hash"]), js.name
 
 
+@pytest.mark.long
 def test_an_install_whose_process_dies_after_its_commit_point_is_finished_by_the_next_process(tiny_panda, tmp_path):
     # a real death (os._exit in a subprocess, its pid then gone), between the weights' and the JSON's renames
     import os

@@ -143,6 +143,7 @@ def test_an_unreachable_pose_warns_as_the_general_path():
     assert not bool(fast.reachable[0]) and not bool(fast.success[0])
 
 
+@pytest.mark.long
 def test_odd_tensors_and_arrays_answer_as_the_general_path():
     robot = nik.load_robot("ur5")
     solver = nik.IKSolver(robot)

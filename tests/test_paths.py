@@ -157,6 +157,7 @@ def test_redundant_arm_without_q_start_keeps_one_posture(panda):
     assert res.source in ("network", "multistart")
 
 
+@pytest.mark.long
 def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
     """Back and forth six times along a line whose far end the arm cannot reach in that orientation: without the
     secondary objective (joint-limit centring) the posture drifts into a limit and then jumps; with it, neither."""

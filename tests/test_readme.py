@@ -202,6 +202,7 @@ for path in blocks:
 """
 
 
+@pytest.mark.long
 def test_shell_then_python_blocks_of_readme_and_docs_run_in_a_fresh_copy(tmp_path):
     blocks = all_blocks()
     shell = [(page, body) for page, lang, body in blocks if lang == "shell"]

@@ -283,6 +283,7 @@ def test_lm_same_generator_seed_same_answer():
     assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
 
 
+@pytest.mark.long
 def test_lm_compiled_kernel_gives_the_eager_answers():
     import dataclasses
 

@@ -17,6 +17,8 @@ import torch
 import nik
 from nik.models import load_checkpoint
 
+pytestmark = pytest.mark.long  # every test trains with train.py in a fresh process
+
 ROOT = Path(__file__).resolve().parents[1]
 NOISE = [
     "args parameter is intended",  # LightningCLI: args and command line both given

@@ -215,6 +215,7 @@ def _is_arm(path: Path) -> bool:
     return any(j.get("type") in MOVING for j in ET.parse(path).getroot().iter("joint"))
 
 
+@pytest.mark.long
 @pytest.mark.skipif(
     not _example_robot_data(), reason='example-robot-data is not installed (pip install -e ".[urdf-tests]")'
 )

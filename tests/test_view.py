@@ -453,6 +453,7 @@ def _wait_for(check, *, timeout: float, every: float = 0.2):
         time.sleep(every)
 
 
+@pytest.mark.long
 @needs_viser
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium-headless-shell (apt-get install chromium-headless-shell)")
 def test_page_in_a_headless_browser_draws_the_arm_and_shows_the_joints_of_a_moved_target(tmp_path):

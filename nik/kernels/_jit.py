@@ -20,8 +20,9 @@ the environment of a numba module not yet imported keeps the module's name in pl
 (:func:`_rebuild_env_without_import`); a module already imported gives its globals as numba's own rebuild does.
 
 The first compile of a nik kernel in a process (a cache miss: nothing is compiled on a warm cache) writes one line on
-stderr, ``nik: compiling kernels for this machine (once, ~30-70 s)`` (:func:`nik.kernels.background.announce`; numba's
-``numba:compile`` event, :class:`_Announce`), so that tens of silent seconds say what they are.
+stderr, ``nik: compiling kernels for this machine (...)``, at most once per process
+(:func:`nik.kernels.background.announce`; numba's ``numba:compile`` event, :class:`_Announce`), so that tens of silent
+seconds say what they are.
 
 Building blocks (functions whose name starts with ``_``) are compiled into the kernels that call them, whose
 cached code holds them, so they are not cached on their own: each cached function costs numba a probe of
@@ -31,6 +32,7 @@ its cache folder when it is decorated (a temporary file) and an index to read wh
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import importlib
 import sys
 import threading
@@ -95,7 +97,8 @@ def _cache_folder():
 
 def _cached_loads_without_refresh(dispatcher):
     """``dispatcher`` (a cached numba function) loads its cached machine code without refreshing the target
-    (see the module docstring); numba's own load where that fails. Returns ``dispatcher``."""
+    (see the module docstring); numba's own load where that fails; a miss (compiled again, and saved anew) where
+    that fails too: an entry that cannot be read never stops a call. Returns ``dispatcher``."""
     cache = getattr(dispatcher, "_cache", None)
     if not all(
         hasattr(cache, name) for name in ("load_overload", "_load_overload", "_guard_against_spurious_io_errors")
@@ -119,7 +122,12 @@ def _cached_loads_without_refresh(dispatcher):
                 environment._rebuild_env = rebuild
         except Exception:  # noqa: BLE001 - numba's own load below decides
             found = None
-        return found if found is not None else numba_load(sig, target_context)
+        if found is not None:
+            return found
+        try:
+            return numba_load(sig, target_context)
+        except Exception:  # noqa: BLE001 - an entry that cannot be read (truncated, corrupt): compiled again
+            return None
 
     cache.load_overload = load_overload
     return dispatcher
@@ -174,11 +182,43 @@ ROOM_STAMP = _room_stamp()
 
 def _stamped(dispatcher):
     """``dispatcher`` with its cache index checked against :data:`ROOM_STAMP` (numba's private ``_cache_file``;
-    left alone where this numba has none). Returns ``dispatcher``."""
+    left alone where this numba has none) and its entries saved whole (:func:`_saves_whole`). Returns
+    ``dispatcher``."""
     index = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
     if index is not None and hasattr(index, "_source_stamp"):
         index._source_stamp = ROOM_STAMP
+        _saves_whole(index)
     return dispatcher
+
+
+def _saves_whole(index) -> None:
+    """numba's cache ``index`` (an ``IndexDataCacheFile``) saves an entry data first, index last, under a data file
+    name of its own key. numba writes each file under a temporary name and renames it, but the index first: a
+    process killed between the two writes (an exit, a kill) would leave an index that names a data file not written,
+    or one left by an older source or by another signature (numba numbers the files from 1 again when the index is
+    stale), whose machine code would then be loaded for this one. Here the index names only a data file already
+    complete, and one written for its key (a name from a hash of the key, so two processes that save two signatures
+    at once cannot swap each other's files). Left alone where numba's private API differs."""
+    if not all(hasattr(index, name) for name in ("save", "_load_index", "_save_index", "_save_data", "_data_name")):
+        return
+
+    numba_save = index.save
+
+    def save(key, data):
+        try:
+            overloads = index._load_index()
+        except Exception:  # noqa: BLE001 - an unreadable index: started again
+            overloads = {}
+        try:
+            name = index._data_name(int(hashlib.sha256(repr(key).encode()).hexdigest()[:12], 16))
+        except Exception:  # noqa: BLE001 - another numba's file names: its own save
+            return numba_save(key, data)
+        index._save_data(name, data)  # complete (temporary name, renamed) before an index names it
+        if overloads.get(key) != name:
+            overloads[key] = name
+            index._save_index(overloads)
+
+    index.save = save
 
 
 def entry_point(dispatcher, *args):

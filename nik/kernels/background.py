@@ -10,8 +10,9 @@ What nik does instead (the compiled backend, ``backend="auto"``; :mod:`nik.ik.ba
 
 1. :func:`ready` tells, without compiling, whether a kernel's machine code for the argument types of a call is loaded
    or in the cache (numba's cache index, read as numba reads it);
-2. where it is not, :func:`announce` writes one line on stderr, once per process: ``nik: compiling kernels for this
-   machine (once, ~30-70 s; answers meanwhile come from the torch backend)``; the call is answered by the torch backend
+2. where it is not, :func:`announce` writes one line on stderr, at most once per process (the first compile of a nik
+   kernel, here or on the caller's thread): ``nik: compiling kernels for this machine (...; answers meanwhile come from
+   the torch backend, ...)``; the call is answered by the torch backend
    (the same stages in torch: same tolerances, same success contract) while :data:`BUSY` is set, which keeps the torch
    path off every kernel not yet loaded (one-pose LM, compiled FK): numba compiles under one process-wide lock, so a
    kernel compiled on the caller's thread would wait for the background compile;
@@ -24,12 +25,21 @@ multi-start variant, about 40 %), so compiling only what a call needs saves at m
 process start to panda's first answer, ``import torch`` included, against 72.7 s). numba's compiler is mostly Python,
 so it shares the GIL with the caller's thread: the answers given while it runs took 2.9x as long (median 288 ms
 against 99 ms a pose, wall, on that busy machine), but they come, and the compile goes on meanwhile (its LLVM passes
-release the GIL). The thread is not a daemon: a process that ends before the compile is done waits for it (the cache
-is then written, so the next process starts warm) instead of compiling again next time.
+release the GIL).
+
+A process that ends while the compile runs does not wait for the rest of it: at interpreter exit (before Python joins
+its threads) the compile stops at the end of the kernel in progress, which is saved first, so the next process loads
+every cached kernel finished and compiles only the rest (:func:`_stop_at_exit`, :class:`_StopListener`). The wait is
+the rest of one kernel's own compile, its callees done: 0.3-2.7 s (wall, panda, a shared two-core machine at load 9)
+after one pose or 20 s of answers; the longest step, the driver's own machine code after all its callees, took 23 s
+wall at load 3 (about 8 s of CPU), the most a process can wait. The thread is not a daemon: a daemon thread would be
+cut off inside an LLVM pass (GIL released) while the interpreter tears down, which can crash the exit. Each cache
+entry is complete or absent, never half-written (:func:`nik.kernels._jit._saves_whole`: the data file is written
+under a temporary name and renamed before the index that names it; an entry that fails to load is compiled again).
 
 ``NIK_COMPILE=wait`` (or ``backend="compiled"``) compiles on the caller's thread as before (benchmarks and tests that
-need the compiled answers from the first call); the same line is written (without the torch part) on the first
-compile of a nik kernel in a process (:func:`nik.kernels._jit.kernel` listens for numba's compile events).
+need the compiled answers from the first call); the line (without the torch part) is then written on the first
+compile of a nik kernel in the process (:func:`nik.kernels._jit.kernel` listens for numba's compile events).
 This module imports numba only inside its functions (``busy``-style checks on the torch path stay light).
 """
 
@@ -43,6 +53,7 @@ import time
 __all__ = [
     "BUSY",
     "ESTIMATE",
+    "Stopped",
     "THREAD_NAME",
     "announce",
     "announced",
@@ -70,7 +81,9 @@ _LOCK = threading.Lock()
 _THREADS: dict = {}  # signature key -> running Thread
 _FAILED: dict = {}  # signature key -> the exception of a failed background compile
 _ANNOUNCED = False
-_ANNOUNCED_BACKGROUND = False
+_STOP = threading.Event()  # set at interpreter exit: the background compile stops after the kernel in progress
+_LOCAL = threading.local()  # .compiling: True on nik's compile threads
+_HOOKED = False  # the exit hook and the numba listener are installed (once, with the first thread)
 
 
 def defer_allowed() -> bool:
@@ -111,16 +124,23 @@ def cold(dispatcher) -> bool:
 
 
 def announce(background: bool) -> None:
-    """Write the line that kernels are being compiled (see the module docstring): at most once per process, and once
-    more with its torch part (``background``) where a compile on the caller's thread (e.g. the FK kernel of
-    :meth:`nik.Robot.fk`) was announced first."""
-    global _ANNOUNCED, _ANNOUNCED_BACKGROUND
-    if _ANNOUNCED_BACKGROUND or (_ANNOUNCED and not background):
+    """Write the line that kernels are being compiled, at most once per process (the first compile of a nik kernel):
+    what is compiled, that it happens once per machine, and that later calls are faster; with ``background`` (the
+    compile runs on nik's thread) that the torch backend answers meanwhile. Kernels that compile later in the same
+    process (another arm, a bounded goal, obstacles, a path) are covered by this one line."""
+    global _ANNOUNCED
+    if _ANNOUNCED:
         return
     _ANNOUNCED = True
-    _ANNOUNCED_BACKGROUND = background
-    more = "; answers meanwhile come from the torch backend" if background else ""
-    print(f"nik: compiling kernels for this machine (once, ~{ESTIMATE} s{more})", file=sys.stderr, flush=True)
+    if background:
+        how = "in the background; answers meanwhile come from the torch backend, later calls are faster"
+    else:
+        how = "in all, as each is first used; later calls and processes are faster"
+    print(
+        f"nik: compiling kernels for this machine (the solvers' numba code, once per machine: ~{ESTIMATE} s {how})",
+        file=sys.stderr,
+        flush=True,
+    )
 
 
 def begin() -> None:
@@ -159,18 +179,82 @@ def compile_later(dispatcher, args, also=()) -> threading.Thread | None:
         if running is not None:
             return running
         BUSY = True
+        _hook()
         thread = threading.Thread(target=_compile, args=(jobs, key), name=THREAD_NAME, daemon=False)
         _THREADS[key] = thread
     thread.start()
     return thread
 
 
+class Stopped(BaseException):
+    """Raised on a background compile thread at interpreter exit, after the kernel in progress was saved (a
+    ``BaseException``: numba's typing catches ``Exception`` subclasses and would go on compiling)."""
+
+
+def _stop_at_exit() -> None:
+    """Run by Python at exit before it joins the threads: the background compiles stop (module docstring)."""
+    _STOP.set()
+
+
+def _hook() -> None:
+    """Install, once, :func:`_stop_at_exit` (``threading._register_atexit``: run before non-daemon threads are joined;
+    where this Python has none, the process waits for the compile as it did) and :class:`_StopListener`."""
+    global _HOOKED
+    if _HOOKED:
+        return
+    _HOOKED = True
+    register = getattr(threading, "_register_atexit", None)
+    if register is None:
+        return
+    try:
+        register(_stop_at_exit)
+    except RuntimeError:  # the interpreter is already shutting down
+        _STOP.set()
+    from numba.core import event
+
+    event.register("numba:compile", _listener())
+
+
+def _listener():
+    """The :class:`_StopListener` (defined here: numba is imported only once a compile is started)."""
+    from numba.core import event
+
+    class _StopListener(event.Listener):
+        """On nik's compile threads, once :data:`_STOP` is set: at the start of a kernel's compile, stop; at its end,
+        save the kernel to the cache (numba would save it right after this event) and stop. Elsewhere: nothing."""
+
+        def on_start(self, ev):
+            if _STOP.is_set() and getattr(_LOCAL, "compiling", False):
+                raise Stopped
+
+        def on_end(self, ev):
+            if not (_STOP.is_set() and getattr(_LOCAL, "compiling", False)):
+                return
+            data = ev.data or {}
+            dispatcher, args, ret = data.get("dispatcher"), data.get("args"), data.get("return_type")
+            try:
+                cres = dispatcher.overloads.get(tuple(args))  # None where this compile failed or was stopped
+                if cres is not None:
+                    dispatcher._cache.save_overload(tuple(args) if ret is None else ret(*args), cres)
+            except Exception:  # noqa: BLE001 - not saved: compiled again by the next process
+                pass
+            raise Stopped
+
+    return _StopListener()
+
+
 def _compile(jobs, key) -> None:
     global BUSY
     start = time.perf_counter()
+    _LOCAL.compiling = True
+    stopped = False
     try:
         for dispatcher, sig in jobs:
+            if _STOP.is_set():
+                raise Stopped
             dispatcher.compile(sig)
+    except Stopped:
+        stopped = True  # at exit: what was compiled is cached, the next process compiles the rest
     except Exception as err:  # noqa: BLE001 - recorded: the foreground call raises it again, with its context
         _FAILED[key] = err
         print(f"nik: compiling kernels failed ({type(err).__name__}); the next call compiles again", file=sys.stderr)
@@ -179,7 +263,8 @@ def _compile(jobs, key) -> None:
             _THREADS.pop(key, None)
             BUSY = bool(_THREADS)
         if os.environ.get("NIK_COMPILE_VERBOSE"):
-            print(f"nik: kernels compiled in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+            what = "stopped at exit after" if stopped else "compiled in"
+            print(f"nik: kernels {what} {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
 def failed() -> dict:
