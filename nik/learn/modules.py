@@ -40,6 +40,14 @@ from nik.nets import IKNet, checkpoint_extra
 
 __all__ = ["IKModule", "GradientIK", "DEIK", "OutOfTime"]
 
+#: Under a kept wall-clock budget a DE fitness evaluation runs in at least this many sample chunks, the clock checked
+#: before each: an evaluation then overruns the budget by at most about one chunk's time.
+CLOCK_CHUNKS = 8
+#: Before the first generation's ask (the trial vectors: partners gathered, two (NP, D) uniform draws, the
+#: crossover and the bounds, about ten passes over the population) is timed, its cost is estimated as the first
+#: population's draw (one pass) times this; afterwards the last ask's time is used.
+ASK_PASSES = 8.0
+
 
 class OutOfTime(Exception):
     """Raised inside a step when the wall-clock budget ends before the step can finish (``keep_budget``)."""
@@ -465,6 +473,8 @@ class DEIK(IKModule):
         self.generator: torch.Generator | None = None
         self.history: list[float] = []  # best fitness after each generation
         self.first_bp_loss: float | None = None
+        self._ask_s = 0.0  # seconds the next generation's ask needs (it cannot be abandoned part-way)
+        self._fitness_s = 0.0  # seconds spent in fitness evaluations
 
     @property
     def in_de_phase(self) -> bool:
@@ -490,6 +500,10 @@ class DEIK(IKModule):
         rank = self.trainer.global_rank if world > 1 else 0
 
         def local(W: torch.Tensor, chunk: int) -> torch.Tensor:
+            clock = self._chunk_clock() if self.time_left() is not None else None
+            if clock is not None:  # keep_budget: at least CLOCK_CHUNKS checks per evaluation, so one can stop it
+                chunk = min(chunk, max(1, -(-x.shape[0] // CLOCK_CHUNKS)))
+            t_fit = time.perf_counter()
             value = population_fitness(
                 net,
                 W,
@@ -500,8 +514,9 @@ class DEIK(IKModule):
                 rot_weight=h.rot_weight,
                 pose_weight=h.pose_weight,
                 chunk=chunk,
-                between_chunks=self._chunk_clock() if self.time_left() is not None else None,
+                between_chunks=clock,
             )
+            self._fitness_s += time.perf_counter() - t_fit
             self.loss_evals += W.shape[0]  # counted when the evaluation completed
             self.sample_evals += W.shape[0] * T.shape[0]
             return value
@@ -522,8 +537,8 @@ class DEIK(IKModule):
         return fitness
 
     def step_cost_s(self) -> float:
-        # a DE generation can be abandoned between sample chunks; a BP step cannot
-        return self._step_s if not self.in_de_phase else 0.0
+        # a DE generation can be abandoned between sample chunks, not inside its ask; a BP step not at all
+        return self._step_s if not self.in_de_phase else self._ask_s
 
     def _chunk_clock(self):
         """A check run before each sample chunk of a fitness evaluation: raises :class:`OutOfTime` when the time
@@ -585,16 +600,20 @@ class DEIK(IKModule):
         try:
             if self.de_state is None:
                 clock = self._chunk_clock() if self.time_left() is not None else None
+                t_draw = time.perf_counter()
                 x0 = init_population(self.net, self.cfg.pop_size, generator=self.generator, between_chunks=clock)
+                self._ask_s = ASK_PASSES * (time.perf_counter() - t_draw)
                 x0[0] = flat_params(self.net)  # the net's own initial weights are one of the individuals
                 lo, hi = self._bounds(x0)
                 if lo is not None:
                     x0 = x0.clamp(float(lo), float(hi))
                 self.de_state = de_init(x0, fitness(x0), self.cfg, lower=lo, upper=hi)
             else:
+                t_step, fit_before = time.perf_counter(), self._fitness_s
                 self.de_state = de_step(
                     self.de_state, fitness, self.cfg, generator=self.generator, reevaluate=subsample
                 )
+                self._ask_s = time.perf_counter() - t_step - (self._fitness_s - fit_before)
         except OutOfTime:  # keep_budget: the generation is abandoned, the population is the last whole one
             self.stopped_for_time = True
             self.trainer.should_stop = True
