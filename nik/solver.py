@@ -211,16 +211,8 @@ class IKSolver:
         ``source``; each result's ``source`` says which served)."""
         return self.plan().source
 
-    def plan(
-        self,
-        *,
-        backend: str = "compiled",
-        tol_pos: float = DEFAULT_TOL_POS,
-        tol_rot: float = DEFAULT_TOL_ROT,
-        seed: int = 0,
-        max_iters: int | None = None,
-        poses: int | None = None,
-    ) -> Plan:
+    def plan(self, *, backend: str = "compiled", tol_pos: float = DEFAULT_TOL_POS, tol_rot: float = DEFAULT_TOL_ROT,
+             seed: int = 0, max_iters: int | None = None, poses: int | None = None) -> Plan:  # fmt: skip
         """The :class:`~nik.ik.plan.Plan` of a call on ``backend`` (``"compiled"`` | ``"torch"``) with these
         tolerances, seed and iteration cap, for a call of ``poses`` targets (1: a single pose; None: a batch; the
         network serves each on its own terms: :attr:`network_use`): resolved here, once, from the solver's settings
