@@ -133,6 +133,15 @@ def counts() -> dict:
     return dict(_COUNTS)
 
 
+def _per_net(store, net) -> dict:
+    """``net``'s entry of the weak-keyed cache ``store``; a fresh dict where ``net`` cannot be weakly referenced (it is
+    then judged on every call)."""
+    try:
+        return store.setdefault(net, {})
+    except TypeError:
+        return {}
+
+
 def _weights_version(net) -> tuple:
     params = net.parameters() if isinstance(net, torch.nn.Module) else ()
     return tuple(p._version for p in params)
@@ -162,10 +171,7 @@ def verdict(net, robot) -> Verdict:
     from nik.tolerances import SCORE_ROT_WEIGHT
 
     key = (robot.definition_hash, _weights_version(net))
-    try:
-        per_net = _VERDICTS.setdefault(net, {})
-    except TypeError:  # not weak-referenceable: judge each time
-        per_net = {}
+    per_net = _per_net(_VERDICTS, net)
     found = per_net.get(key)
     if found is not None:
         return found
@@ -378,10 +384,7 @@ def use(net, robot, solver_type, arm_frame: bool = False, baseline: str = "multi
     judged = robot.arm if arm_frame else robot
     version = _weights_version(net)
     key = (robot.definition_hash, version, baseline)
-    try:
-        per_net = _USES.setdefault(net, {})
-    except TypeError:  # not weak-referenceable: decide each time
-        per_net = {}
+    per_net = _per_net(_USES, net)
     found = per_net.get(key)
     if found is not None:
         return found
