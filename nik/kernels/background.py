@@ -37,7 +37,7 @@ cut off inside an LLVM pass (GIL released) while the interpreter tears down, whi
 entry is complete or absent, never half-written (:func:`nik.kernels._jit._saves_whole`: the data file is written
 under a temporary name and renamed before the index that names it; an entry that fails to load is compiled again).
 
-``NIK_COMPILE=wait`` (or ``backend="compiled"``) compiles on the caller's thread as before (benchmarks and tests that
+``NIK_COMPILE=wait`` (or ``backend="compiled"``) compiles on the caller's thread (benchmarks and tests that
 need the compiled answers from the first call); the line (without the torch part) is then written on the first
 compile of a nik kernel in the process (:func:`nik.kernels._jit.kernel` listens for numba's compile events).
 This module imports numba only inside its functions (``busy``-style checks on the torch path stay light).
@@ -108,7 +108,7 @@ def ready(dispatcher, args) -> bool:
             return True
         index = cache._cache_file._load_index()
         key = cache._index_key(sig, dispatcher.targetctx.codegen())
-    except Exception:  # noqa: BLE001 - not numba's cache as nik knows it: compile as before
+    except Exception:  # noqa: BLE001 - not numba's cache as nik knows it: compile it here
         return True
     return key in index
 
