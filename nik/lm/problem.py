@@ -33,23 +33,13 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["PathProblem", "Problem", "ProblemCfg", "ProblemResult", "lm_minimise", "solve_problem"]
+from nik.lm.loop import Box, Eval, LMCfg, lm_loop
+
+__all__ = ["PathProblem", "Problem", "ProblemCfg", "ProblemResult", "lm_minimise", "problem_evaluator", "solve_problem"]
 
 
-@dataclass(frozen=True)
-class ProblemCfg:
-    """Settings of :func:`lm_minimise` (module docstring)."""
-
-    iters: int = 50  # iteration limit of each pass
-    lambda0: float = 1e-3  # initial damping (relative to diag(J^T J))
-    lambda_up: float = 5.0
-    lambda_down: float = 0.3
-    lambda_max: float = 1e8  # a row whose damping grows past this has stalled
-    eps: float = 1e-9  # added to diag(J^T J) (residual units^2)
-    max_step: float = 0.5  # rad, largest change of any joint in one step
-    stall_iters: int = 4  # a row stops after this many steps in a row...
-    stall_rel: float = 1e-4  # ...that lower its cost by less than this fraction
-    cost_tol: float = 1e-24  # a row whose cost |r|^2 is at most this is done
+#: The settings of :func:`solve_problem`: :class:`nik.lm.LMCfg`, the one set of LM defaults (the name is kept).
+ProblemCfg = LMCfg
 
 
 @dataclass
@@ -150,51 +140,32 @@ class PathProblem(Problem):
         return torch.stack(list(checks.values())).all().reshape(1)
 
 
+def problem_evaluator(problem: Problem, hard_only: bool = False):
+    """``evaluate(x (B, 1, n), rows) -> Eval`` of :func:`nik.lm.loop.lm_loop` for ``problem`` (its weighted rows
+    stacked; ``hard_only``: the constraint terms alone); no row is done before its cost reaches ``cost_tol``."""
+
+    def evaluate(x, rows):
+        r, J = problem.evaluate(x[:, 0], hard_only)
+        E = (r * r).sum(-1)
+        return Eval(-r[:, None], J[:, None], E[:, None], torch.zeros_like(E, dtype=torch.bool)[:, None])
+
+    return evaluate
+
+
 def lm_minimise(problem: Problem, x0: torch.Tensor, active: torch.Tensor, *, hard_only: bool = False,
-                cfg: ProblemCfg = ProblemCfg()) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
-    """``(x, iterations (B,))``: LM (module docstring) on the rows ``active: (B,) bool`` of ``x0: (B, n)``, the others
-    returned as they are; ``hard_only``: the constraint terms alone."""
-    x = problem.project(x0.clone())
-    B, n = x.shape
-    lo, hi, wrap = problem.box(x)
-    r, J = problem.evaluate(x, hard_only)
-    E = (r * r).sum(-1)
-    lam = torch.full((B,), cfg.lambda0, dtype=x.dtype, device=x.device)
-    stall = torch.zeros(B, dtype=torch.long, device=x.device)
-    its = torch.zeros(B, dtype=torch.long, device=x.device)
-    live = active.clone() & (E > cfg.cost_tol)
-    eye = torch.eye(n, dtype=x.dtype, device=x.device)
-    for _ in range(cfg.iters):
-        if not bool(live.any()):
-            break
-        g = (J.transpose(1, 2) @ r[..., None])[..., 0]  # gradient / 2; the descent is -g
-        held = ~wrap & (((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
-        Jh = J * (~held).to(x.dtype)[:, None, :]
-        A = Jh.transpose(1, 2) @ Jh
-        d = A.diagonal(dim1=1, dim2=2)
-        A = A + torch.diag_embed(lam[:, None] * (d + cfg.eps)) + cfg.eps * eye
-        L, info = torch.linalg.cholesky_ex(A)
-        dq = -torch.cholesky_solve((Jh.transpose(1, 2) @ r[..., None]), L)[..., 0]
-        big = dq.abs().amax(-1, keepdim=True)
-        dq = dq * torch.where(big > cfg.max_step, cfg.max_step / big.clamp_min(1e-300), torch.ones_like(big))
-        xn = problem.project(x + torch.where(live[:, None], dq, torch.zeros_like(dq)))
-        rn, Jn = problem.evaluate(xn, hard_only)
-        En = (rn * rn).sum(-1)
-        good = live & (info == 0) & torch.isfinite(En) & (En < E) & torch.isfinite(dq).all(-1)
-        rel = (E - En) / E.clamp_min(1e-300)
-        x = torch.where(good[:, None], xn, x)
-        r = torch.where(good[:, None], rn, r)
-        J = torch.where(good[:, None, None], Jn, J)
-        its = its + live.long()
-        stall = torch.where(live & (~good | (rel < cfg.stall_rel)), stall + 1, torch.zeros_like(stall))
-        E = torch.where(good, En, E)
-        lam = torch.where(good, lam * cfg.lambda_down, lam * cfg.lambda_up).clamp(1e-12, cfg.lambda_max * 10)
-        live = live & (stall < cfg.stall_iters) & (E > cfg.cost_tol) & (lam <= cfg.lambda_max)
-    return x, its
+                cfg: LMCfg | None = None) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """``(x, iterations (B,))``: the one LM (:func:`nik.lm.loop.lm_loop`, module docstring) on the rows
+    ``active: (B,) bool`` of ``x0: (B, n)``, the others returned inside the box as they are; ``hard_only``: the
+    constraint terms alone. Every row stays in the batch (masked), in its order."""
+    cfg = cfg or LMCfg()
+    lo, hi, wrap = problem.box(x0)
+    box = Box(lo, hi, wrap, problem.project)
+    run = lm_loop(problem_evaluator(problem, hard_only), x0[:, None], box, cfg, active=active, compact=False)
+    return run.q, run.iterations
 
 
 def solve_problem(problem: Problem, x0: torch.Tensor, *, active: torch.Tensor | None = None,
-                  cfg: ProblemCfg = ProblemCfg()) -> ProblemResult:  # fmt: skip
+                  cfg: LMCfg | None = None) -> ProblemResult:  # fmt: skip
     """The two passes of the module docstring from ``x0: (B, n)`` on the rows ``active`` (default all), with the
     thread count of :func:`nik.threads.threads_for` (one thread for small batches: the ops are small)."""
     from nik.threads import threads_for
@@ -204,7 +175,7 @@ def solve_problem(problem: Problem, x0: torch.Tensor, *, active: torch.Tensor | 
         return _solve(problem, x0, active, cfg)
 
 
-def _solve(problem: Problem, x0: torch.Tensor, active: torch.Tensor, cfg: ProblemCfg) -> ProblemResult:
+def _solve(problem: Problem, x0: torch.Tensor, active: torch.Tensor, cfg: LMCfg | None) -> ProblemResult:
     if all(t.hard for t in problem.terms):  # no preference: rows that already meet every constraint stay as they are
         active = active & ~problem.row_ok(problem.checks(x0))
     x, its = lm_minimise(problem, x0, active, cfg=cfg)
