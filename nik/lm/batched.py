@@ -59,7 +59,7 @@ from nik.robots.model import Robot
 from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
-__all__ = ["DEAD_ZONE", "Chain", "LMCfg", "LMRun", "bounded_residual", "lm_run", "lm_solve", "pose_evaluator", "so3_log"]
+__all__ = ["DEAD_ZONE", "Chain", "LMCfg", "LMRun", "bounded_residual", "chain_of", "lm_run", "lm_solve", "pose_evaluator", "so3_log"]
 
 
 def so3_log(R: torch.Tensor) -> torch.Tensor:
@@ -148,6 +148,14 @@ class Chain(NamedTuple):
     hi: torch.Tensor
     wrap: torch.Tensor
     prismatic: torch.Tensor | None = None
+
+
+def chain_of(robot: Robot, like: torch.Tensor, wrap: bool = True) -> Chain:
+    """:class:`Chain` of ``robot`` in the dtype/device of ``like``; ``wrap=False``: no joint wraps (all clamped)."""
+    G, off = robot._params(like)
+    lo, hi = robot.limits_as(like)
+    wraps = wrap_mask(robot.limits, prismatic=robot.prismatic).to(like.device) & wrap
+    return Chain(G, off, lo, hi, wraps, robot.prismatic.to(like.device))
 
 
 def pose_evaluator(T_target: torch.Tensor, chain: Chain, cfg: LMCfg, tol: tuple[float, float], bounds=None):
@@ -260,10 +268,7 @@ def lm_solve(
     dtype, device = T_target.dtype, T_target.device
     if generator is None:
         generator = torch.Generator(device=device).manual_seed(0)
-    G, off = robot._params(T_target)
-    lo, hi = robot.limits_as(T_target)
-    wraps = wrap_mask(robot.limits, prismatic=robot.prismatic).to(device) & wrap
-    prismatic = robot.prismatic.to(device)
+    chain = chain_of(robot, T_target, wrap)
     if bounds is not None:
         bounds = torch.as_tensor(bounds, dtype=dtype, device=device).expand(T_target.shape[0], 6)
     if q0 is None:
@@ -275,7 +280,7 @@ def lm_solve(
             reachable = reachable | torch.isinf(bounds[:, :3]).any(-1)
     run_from = partial(
         lm_run,
-        chain=Chain(G, off, lo, hi, wraps, prismatic),
+        chain=chain,
         cfg=cfg,
         tol_pos=tol_pos,
         tol_rot=tol_rot,

@@ -15,8 +15,8 @@ the rows that are done) and takes the damped step::
   :func:`nik.ik.goals.rest_torch`) scaled by ``1 / lambda``, zero without one;
 - the linear solver (``cfg.linear_solver``): ``"cholesky"`` (``cholesky_ex``; a failed factorisation refuses the
   step) or ``"lu"`` (``solve_ex``);
-- the joints on a limit that the descent (or the first solve's step) pushes further out are held (the active set
-  of the compiled LM), the step scaled so that no joint moves more than ``max_step``, then brought inside the box;
+- the joints on a limit that the descent (``cfg.hold="twice"``: or the first solve's step, solved once more) pushes
+  further out are held (the active set of the compiled LM), the step scaled so that no joint moves more than ``max_step``, then brought inside the box;
 - the acceptance (``cfg.accept``): ``"decrease"``: a step that lowers ``E``; ``"decrease_or_done"``: or that lands
   done (tolerant goals); ``"feasible"``: a step that lowers ``E`` and lands on a feasible row (``Eval.feasible``:
   a posture that must not leave its goal); ``"always"``: every finite step (Gauss-Newton: the polish, the prior walk).
@@ -42,11 +42,12 @@ import torch
 
 from nik.robots.joints import wrap_into
 
-__all__ = ["Box", "Eval", "LMCfg", "LMRun", "Restarts", "lm_loop"]
+__all__ = ["Box", "Eval", "LMCfg", "LMRun", "Restarts", "lm_loop", "with_prior"]
 
 DAMPINGS = ("marquardt", "fixed")
 LINEAR_SOLVERS = ("cholesky", "lu")
 ACCEPTS = ("decrease", "decrease_or_done", "feasible", "always")
+HOLDS = ("twice", "once")
 
 
 @dataclass
@@ -80,11 +81,12 @@ class LMCfg:
     damping: str = "marquardt"  # "marquardt" | "fixed" (module docstring)
     linear_solver: str = "cholesky"  # "cholesky" | "lu"
     accept: str = "decrease"  # "decrease" | "decrease_or_done" | "feasible" | "always"
+    hold: str = "twice"  # the active set: "twice" (the compiled LM's), or "once" (the descent's joints only)
 
     def __post_init__(self):
         for name, value, allowed in (("damping", self.damping, DAMPINGS),
                                      ("linear_solver", self.linear_solver, LINEAR_SOLVERS),
-                                     ("accept", self.accept, ACCEPTS)):  # fmt: skip
+                                     ("accept", self.accept, ACCEPTS), ("hold", self.hold, HOLDS)):  # fmt: skip
             if value not in allowed:
                 raise ValueError(f"LMCfg.{name}: expected one of {list(allowed)}, got {value!r}")
 
@@ -141,6 +143,20 @@ class LMRun:
     iterations: torch.Tensor
 
 
+def with_prior(evaluate: Callable, q_prior: torch.Tensor, weight: float) -> Callable:
+    """``evaluate`` with the prior rows ``weight * (q - q_prior)`` appended (``q_prior: (B, n)``, one per target):
+    a pull towards ``q_prior`` as rows of the problem, traded against its other rows by the normal equations."""
+
+    def evaluate_with_prior(q, rows):
+        base = evaluate(q, rows)
+        r = weight * (q - q_prior.index_select(0, rows)[:, None])
+        eye = torch.eye(q.shape[-1], dtype=q.dtype, device=q.device) * weight
+        J = torch.cat([base.J, eye.expand(*q.shape[:-1], -1, -1)], -2)
+        return base._replace(e=torch.cat([base.e, -r], -1), J=J, E=base.E + (r * r).sum(-1))
+
+    return evaluate_with_prior
+
+
 def _project(box: Box, q: torch.Tensor) -> torch.Tensor:
     if box.project is not None:
         return box.project(q)
@@ -183,7 +199,7 @@ def _step(ev: Eval, q: torch.Tensor, box: Box, lam: torch.Tensor, cfg: LMCfg):
     if z is not None:
         dq = dq + z
     out = ((q <= box.lo) & (dq < 0)) | ((q >= box.hi) & (dq > 0))
-    if bool((out & ~box.wrap).any()):
+    if cfg.hold == "twice" and bool((out & ~box.wrap).any()):
         dq2, info = _held_step(A, g, q, box, dq, lam, cfg)
         dq = dq2 if z is None else dq2 + z
     big = dq.abs().amax(dim=-1, keepdim=True)
@@ -277,7 +293,7 @@ def lm_loop(evaluate: Callable, q0: torch.Tensor, box: Box, cfg: LMCfg, *, resta
         want = spent & ~done.any(1, keepdim=True)  # rows to restart: spent, target not done, restarts left
         if n_restarts:
             rank = torch.cumsum(want.to(torch.int32), dim=1)
-            restart = want & (rank <= left[:, None])
+            restart = want & (rank <= left[:, None]) & live[:, None]
         else:
             restart = torch.zeros_like(want)
         stop = live & (done.any(1) | (spent & ~restart).all(1))
