@@ -229,8 +229,10 @@ def _max_abs(x):
 
 
 def _near_prior(plan: Plan, job: Job, idx, q_near):
-    """``(b, n)`` starts: :func:`nik.kernels.driver.near_prior` on the targets ``idx`` (compiled), or the same steps
-    batched in torch (the torch backend)."""
+    """``(b, n)`` starts: :func:`nik.kernels.driver.near_prior` on the targets ``idx`` (compiled), or the same walk
+    batched in torch (the torch backend): the one torch LM (:func:`nik.lm.loop.lm_loop`) on the pose rows and the
+    prior rows ``w (q - q_near)`` (:func:`nik.lm.loop.with_prior`), Gauss-Newton steps (no damping beyond the prior,
+    every step taken), ``NEAR_PRIOR_STEPS`` for each weight ``w`` of ``NEAR_PRIOR``."""
     if job.model is not None:
         from nik.kernels import driver
         from nik.kernels.chain import WRAPS

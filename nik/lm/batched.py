@@ -54,12 +54,13 @@ from nik.costs.pose import dead_zone as _dead_zone
 from nik.kinematics import chain_jacobian
 from nik.lm.loop import Box, Eval, LMCfg, LMRun, Restarts, lm_loop
 from nik.poses import matrix_to_quaternion, rotation_modes, tool_error
-from nik.robots.joints import wrap_into, wrap_mask
+from nik.robots.joints import wrap_mask
 from nik.robots.model import Robot
 from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
-__all__ = ["DEAD_ZONE", "Chain", "LMCfg", "LMRun", "bounded_residual", "chain_of", "lm_run", "lm_solve", "pose_evaluator", "so3_log"]
+__all__ = ["DEAD_ZONE", "Chain", "LMCfg", "LMRun", "bounded_residual", "chain_of", "lm_run", "lm_solve",
+           "pose_evaluator", "so3_log"]  # fmt: skip
 
 
 def so3_log(R: torch.Tensor) -> torch.Tensor:

@@ -16,7 +16,8 @@ the rows that are done) and takes the damped step::
 - the linear solver (``cfg.linear_solver``): ``"cholesky"`` (``cholesky_ex``; a failed factorisation refuses the
   step) or ``"lu"`` (``solve_ex``);
 - the joints on a limit that the descent (``cfg.hold="twice"``: or the first solve's step, solved once more) pushes
-  further out are held (the active set of the compiled LM), the step scaled so that no joint moves more than ``max_step``, then brought inside the box;
+  further out are held (the active set of the compiled LM), the step scaled so that no joint moves more than
+  ``max_step``, then brought inside the box;
 - the acceptance (``cfg.accept``): ``"decrease"``: a step that lowers ``E``; ``"decrease_or_done"``: or that lands
   done (tolerant goals); ``"feasible"``: a step that lowers ``E`` and lands on a feasible row (``Eval.feasible``:
   a posture that must not leave its goal); ``"always"``: every finite step (Gauss-Newton: the polish, the prior walk).
@@ -35,8 +36,9 @@ The settings are one dataclass, :class:`LMCfg` (the defaults of every caller); a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import torch
 
@@ -225,7 +227,7 @@ def _select(ev: Eval, keep) -> Eval:
 
 def _where(acc, a: Eval, b: Eval) -> Eval:
     out = []
-    for x, y in zip(a, b):
+    for x, y in zip(a, b, strict=True):
         if x is None or y is None:
             out.append(x)
             continue

@@ -19,8 +19,9 @@ then, for the rows whose checks fail, the constraints alone (``hard`` terms) fro
 costs the goal: the second pass lands on the constraints nearest the first pass's answer (damped steps are the
 least-norm ones); where that fails too, from the start itself (a start that met the constraints before the
 preferences pulled it keeps meeting them). A start that met every constraint is returned as it was where the answer's
-preference cost is no lower than the start's (a preference never makes an answer worse). Every row of the batch stays in the batch (rows that stopped are
-masked, not dropped), so a user's term sees the rows in their order every time and may hold per-target data.
+preference cost is no lower than the start's (a preference never makes an answer worse). Every row of the batch
+stays in the batch (rows that stopped are masked, not dropped), so a user's term sees the rows in their order every
+time and may hold per-target data.
 
 :class:`Problem` has one configuration per row (``x: (B, dof)``); :class:`PathProblem` one path per problem
 (``x: (1, N * dof)``, the waypoints side by side): its per-waypoint terms give a block-diagonal Jacobian, the path

@@ -218,7 +218,8 @@ def refine(
     generator = torch.Generator(device=device)
     generator.manual_seed(int(seed))
     if polish is not False and not isinstance(polish, bool | Polish):
-        raise ValueError(f"polish: expected True, False or nik.swarm.driver.Polish(cfg, starts), got {type(polish).__name__}")
+        got = type(polish).__name__
+        raise ValueError(f"polish: expected True, False or nik.swarm.driver.Polish(cfg, starts), got {got}")
     polish_cfg, polish_starts = polish if isinstance(polish, Polish) else Polish()
     polish_it = torch.zeros(B, dtype=torch.long, device=device)
     hist = None
