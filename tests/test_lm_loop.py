@@ -129,8 +129,6 @@ def test_the_one_loop_is_the_only_torch_loop_that_solves_normal_equations():
         for fn in ast.walk(ast.parse(path.read_text())):
             if not isinstance(fn, ast.FunctionDef) or fn.name in ("canonical_dh", "path_dp"):
                 continue  # (a DH fit and the path's dynamic programme are no solver loops)
-            if any(
-                isinstance(loop, ast.For | ast.While) and solves & set(called(loop)) for loop in ast.walk(fn)
-            ):
+            if any(isinstance(loop, ast.For | ast.While) and solves & set(called(loop)) for loop in ast.walk(fn)):
                 found.append(f"{path.relative_to(root)}:{fn.name}")
     assert found == ["lm/loop.py:lm_loop"]
