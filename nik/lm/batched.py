@@ -172,12 +172,14 @@ def pose_evaluator(T_target: torch.Tensor, chain: Chain, cfg: LMCfg, tol: tuple[
     Tt = T_target[:, None, :3, :]
     bnd = None if bounds is None else bounds.to(dtype=dtype, device=device)[:, None, :]
     G, off = chain.G, chain.offsets
+    last = [None, Tt, bnd]  # the rows of the last call and their targets (the loop changes rows when it compacts)
 
     def evaluate(q, rows):
-        full = rows.shape[0] == Tt.shape[0]
-        T = Tt if full else Tt.index_select(0, rows)
-        if bnd is not None:
-            b = bnd if full else bnd.index_select(0, rows)
+        if rows is not last[0]:
+            full = rows.shape[0] == Tt.shape[0]
+            last[:] = rows, (Tt if full else Tt[rows]), (bnd if full or bnd is None else bnd[rows])
+        T, b = last[1], last[2]
+        if b is not None:
             e, J, E, _, _, inside = _evaluate_bounded(q, T, b, G, off, rw, **kw)
             return Eval(e, J, E, inside)
         if kw:

@@ -159,15 +159,17 @@ def with_prior(evaluate: Callable, q_prior: torch.Tensor, weight: float) -> Call
     return evaluate_with_prior
 
 
-def _project(box: Box, q: torch.Tensor) -> torch.Tensor:
+def _projection(box: Box) -> Callable:
+    """``q -> q`` inside ``box``: its own ``project``, or wrapping joints by whole turns and the others clamped."""
     if box.project is not None:
-        return box.project(q)
+        return box.project
     if bool(box.wrap.any()):
-        q = torch.where(box.wrap, wrap_into(q, box.lo, box.hi), q)
-    return torch.minimum(torch.maximum(q, box.lo), box.hi)
+        return lambda q: torch.minimum(torch.maximum(torch.where(box.wrap, wrap_into(q, box.lo, box.hi), q), box.lo),
+                                       box.hi)  # fmt: skip
+    return lambda q: torch.minimum(torch.maximum(q, box.lo), box.hi)
 
 
-def _held_step(A, g, q, box: Box, prev, lam, cfg: LMCfg):
+def _held_step(A, g, q, box: Box, prev, lam, cfg: LMCfg, eye_eps):
     """``(dq (..., n), info)``: the damped step of ``A (..., n, n) dq = g (..., n, 1)`` (module docstring) with the
     joints on a limit that ``g`` or ``prev`` (the step before, zeros at first) pushes further out held
     (:func:`nik.kernels.lm_step.hold`)."""
@@ -178,10 +180,9 @@ def _held_step(A, g, q, box: Box, prev, lam, cfg: LMCfg):
         f = (~held).to(A.dtype)
         A = A * (f[..., :, None] * f[..., None, :]) + (1.0 - f).diag_embed()
         g = g * f[..., None]
-    n = A.shape[-1]
     if cfg.damping == "marquardt":
         A = A + (lam[..., None] * (torch.diagonal(A, dim1=-2, dim2=-1) + cfg.eps)).diag_embed()
-    A = A + cfg.eps * torch.eye(n, dtype=A.dtype, device=A.device)
+    A = A + eye_eps
     if cfg.linear_solver == "lu":
         dq, info = torch.linalg.solve_ex(A, g)
         return dq.squeeze(-1), info
@@ -189,7 +190,7 @@ def _held_step(A, g, q, box: Box, prev, lam, cfg: LMCfg):
     return torch.cholesky_solve(g, L).squeeze(-1), info
 
 
-def _step(ev: Eval, q: torch.Tensor, box: Box, lam: torch.Tensor, cfg: LMCfg):
+def _step(ev: Eval, q: torch.Tensor, box: Box, lam: torch.Tensor, cfg: LMCfg, eye_eps: torch.Tensor):
     """``(dq (b, K, n), good (b, K))``: one damped step with the active set (two solves where the first pushes a
     joint out), scaled to ``max_step``; zero and not good where the solve failed or is not finite."""
     J, e = ev.J, ev.e
@@ -197,12 +198,12 @@ def _step(ev: Eval, q: torch.Tensor, box: Box, lam: torch.Tensor, cfg: LMCfg):
     z = None if ev.z is None else ev.z / lam[..., None]
     r = e if z is None else e - (J @ z[..., None])[..., 0]
     g = (J * r[..., :, None]).sum(-2).unsqueeze(-1)
-    dq, info = _held_step(A, g, q, box, torch.zeros_like(q), lam, cfg)
+    dq, info = _held_step(A, g, q, box, torch.zeros_like(q), lam, cfg, eye_eps)
     if z is not None:
         dq = dq + z
     out = ((q <= box.lo) & (dq < 0)) | ((q >= box.hi) & (dq > 0))
     if cfg.hold == "twice" and bool((out & ~box.wrap).any()):
-        dq2, info = _held_step(A, g, q, box, dq, lam, cfg)
+        dq2, info = _held_step(A, g, q, box, dq, lam, cfg, eye_eps)
         dq = dq2 if z is None else dq2 + z
     big = dq.abs().amax(dim=-1, keepdim=True)
     dq = dq * torch.clamp(cfg.max_step / big.clamp_min(1e-30), max=1.0)
@@ -226,13 +227,13 @@ def _select(ev: Eval, keep) -> Eval:
 
 
 def _where(acc, a: Eval, b: Eval) -> Eval:
+    """``a`` where ``acc (b, K)``, else ``b`` (the fields that ``b`` lacks are ``a``'s; ``done`` is kept apart)."""
     out = []
-    for x, y in zip(a, b, strict=True):
-        if x is None or y is None:
+    for i, (x, y) in enumerate(zip(a, b, strict=True)):
+        if x is None or y is None or i == 3:
             out.append(x)
             continue
-        m = acc.reshape(*acc.shape, *([1] * (x.dim() - acc.dim())))
-        out.append(torch.where(m, x, y))
+        out.append(torch.where(acc.reshape(*acc.shape, *([1] * (x.dim() - acc.dim()))), x, y))
     return Eval(*out)
 
 
@@ -251,7 +252,9 @@ def lm_loop(evaluate: Callable, q0: torch.Tensor, box: Box, cfg: LMCfg, *, resta
     iters = int(cfg.iters)
     first = iters if rs.first_iters is None else int(rs.first_iters)
     rows = torch.arange(B, device=device)
-    q = _project(box, q0)
+    project = _projection(box)
+    eye_eps = cfg.eps * torch.eye(n, dtype=q0.dtype, device=device)
+    q = project(q0)
     ev = evaluate(q, rows)
     E = ev.E
     done = ev.done | (E <= cfg.cost_tol)
@@ -313,9 +316,9 @@ def lm_loop(evaluate: Callable, q0: torch.Tensor, box: Box, cfg: LMCfg, *, resta
                     for t in (rows, q, E, done, lam, stall, age, left, best_q, best_E, restart, live)
                 )
                 ev = _select(ev, keep)
-        dq, good = _step(ev, q, box, lam, cfg)
-        moving = live[:, None] & torch.ones_like(good)
-        qc = _project(box, q + torch.where(moving[..., None], dq, torch.zeros_like(dq)))
+        dq, good = _step(ev, q, box, lam, cfg, eye_eps)
+        moving = None if compact else live[:, None].expand_as(good)  # compact: every row in the batch moves
+        qc = project(q + (dq if compact else torch.where(moving[..., None], dq, torch.zeros_like(dq))))
         n_restart = int(restart.sum())
         if n_restart:  # remember the best of the spent start, then put a fresh start in its place
             better = restart & (E < best_E)
@@ -323,20 +326,23 @@ def lm_loop(evaluate: Callable, q0: torch.Tensor, box: Box, cfg: LMCfg, *, resta
             best_E = torch.where(better, E, best_E)
             fresh = torch.zeros_like(qc)
             fresh[restart] = rs.sampler(n_restart).to(dtype=qc.dtype, device=device)
-            qc = torch.where(restart[..., None], _project(box, fresh), qc)
+            qc = torch.where(restart[..., None], project(fresh), qc)
             left = left - restart.sum(1, dtype=torch.int32)
         new = evaluate(qc, rows)
-        acc = (_accepted(cfg, good, new, E) | restart) & moving
+        acc = _accepted(cfg, good, new, E) | restart
+        step = 1
+        if not compact:
+            acc, step = acc & moving, moving.int()
         gain = torch.where(acc, E - new.E, torch.zeros_like(E))
-        stall = torch.where((gain >= cfg.stall_rel * E) | restart, torch.zeros_like(stall), stall + moving.int())
-        age = torch.where(restart, torch.zeros_like(age), age + moving.int())
+        stall = torch.where((gain >= cfg.stall_rel * E) | restart, torch.zeros_like(stall), stall + step)
+        age = torch.where(restart, torch.zeros_like(age), age + step)
         q = torch.where(acc[..., None], qc, q)
         ev = _where(acc, new, ev)
         E = ev.E
         done = torch.where(acc, new.done | (new.E <= cfg.cost_tol), done)
-        lam = torch.where(acc, lam * cfg.lambda_down, torch.where(moving, lam * cfg.lambda_up, lam))
-        lam = lam.clamp(cfg.lambda_min, cfg.lambda_max * cfg.lambda_up)
+        up = lam * cfg.lambda_up if compact else torch.where(moving, lam * cfg.lambda_up, lam)
+        lam = torch.where(acc, lam * cfg.lambda_down, up).clamp(cfg.lambda_min, cfg.lambda_max * cfg.lambda_up)
         if n_restart:
             lam = torch.where(restart, torch.full_like(lam, cfg.lambda0), lam)
-        out_it[rows[live]] += 1
+        out_it[rows if compact else rows[live]] += 1
     return LMRun(out_q, out_E, out_conv, out_it)
