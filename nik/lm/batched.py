@@ -14,7 +14,8 @@ solved by a Cholesky factorisation (``torch.linalg.cholesky_ex`` + ``cholesky_so
 symmetric positive definite; a failed factorisation counts as a rejected step), limited to ``max_step``
 radians per joint, then brought inside the limits (wrapping joints wrap, the others are clamped).
 A step is kept only if it lowers ``|e|^2``; lambda then shrinks by ``lambda_down``, otherwise it
-grows by ``lambda_up``. One iteration costs one FK + Jacobian per row.
+grows by ``lambda_up``. One iteration costs one FK + Jacobian per row. The iteration is the one torch LM
+(:func:`nik.lm.loop.lm_loop`) with the pose rows of :func:`pose_evaluator`.
 
 Per-target work (:func:`lm_solve`, :func:`lm_run`):
 
