@@ -32,6 +32,7 @@ import nik
 from nik.lm import LMCfg
 from nik.poses import matrix_to_rpy
 from nik.swarm import default_cfg, refine
+from nik.swarm.driver import Polish
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
 TOL_POS, TOL_ROT = DEFAULT_TOL_POS, DEFAULT_TOL_ROT  # m, rad: 0.1 mm / 0.1 deg, nik's one tolerance
@@ -232,8 +233,7 @@ def main(argv=None):
                         tol_pos=TOL_POS,
                         tol_rot=TOL_ROT,
                         seed=args.seed,
-                        polish=p,
-                        polish_starts=4,
+                        polish=Polish(starts=4) if p else False,
                     )
                 )
                 report(

@@ -55,26 +55,28 @@ def _prepared(robot):
 
 
 def _polish(robot, Tf: torch.Tensor, q: torch.Tensor, steps: int = 3) -> torch.Tensor:
-    """``steps`` damped Newton steps on the robot's FK for ``q: (N, 8, 6)`` towards ``Tf: (N, 4, 4)``.
+    """``steps`` Gauss-Newton steps on the robot's FK for ``q: (N, 8, 6)`` towards ``Tf: (N, 4, 4)``: the one torch LM
+    (:func:`nik.lm.loop.lm_loop`) with a small iteration cap, no limits (the caller wraps into them), a fixed damping
+    of 1e-12 (float64; 1e-6 below) and every step taken.
 
     For arms that fit their family only within the tolerance (:data:`nik.analytic.geometry.POLISH_ABOVE`):
     the closed form is exact for the ideal arm, and a step from there converges quadratically.
     """
+    from dataclasses import replace
+
+    from nik.lm.batched import LMCfg, chain_of, pose_evaluator
+    from nik.lm.loop import Box, lm_loop
+
     shape = q.shape
-    qf = q.reshape(-1, 6)
+    qf = q.reshape(-1, 1, 6)
     Tt = Tf[:, None].expand(-1, shape[1], 4, 4).reshape(-1, 4, 4)
-    eye = torch.eye(6, dtype=q.dtype, device=q.device)
     damping = 1e-12 if q.dtype == torch.float64 else 1e-6
-    for _ in range(steps):
-        T, J = robot.fk_and_jacobian(qf)
-        dp = Tt[:, :3, 3] - T[:, :3, 3]
-        M = Tt[:, :3, :3] @ T[:, :3, :3].transpose(-1, -2)
-        dr = 0.5 * torch.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0], M[:, 1, 0] - M[:, 0, 1]], dim=-1)
-        e = torch.cat([dp, dr], dim=-1)
-        Jt = J.transpose(-1, -2)
-        dq = torch.linalg.solve(Jt @ J + damping * eye, (Jt @ e[..., None]))[..., 0]
-        qf = qf + torch.nan_to_num(dq, nan=0.0, posinf=0.0, neginf=0.0)
-    return qf.reshape(shape)
+    cfg = replace(LMCfg(), iters=steps, stall_iters=steps + 1, damping="fixed", eps=damping, max_step=math.inf,
+                  linear_solver="lu", accept="always", cost_tol=0.0)  # fmt: skip
+    chain = chain_of(robot, qf, wrap=False)
+    inf = torch.full_like(chain.lo, math.inf)
+    box = Box(-inf, inf, torch.zeros_like(chain.wrap))
+    return lm_loop(pose_evaluator(Tt, chain, cfg, (0.0, 0.0)), qf, box, cfg).q.reshape(shape)
 
 
 def _kernel(compiled: bool):

@@ -381,54 +381,41 @@ def _model(robot, plan):
 def rest_torch(robot, T, q, ok, plan, half, tol_pos: float, tol_rot: float) -> torch.Tensor:
     """``q: (B, dof)`` with the answers where ``ok`` moved towards ``plan.q_rest`` in the null space of the task
     (classic where ``half`` is None, else towards the bounds ``half: (B, 6)``): the steps of
-    :func:`nik.kernels.driver.rest_posture`, batched. Returns a new tensor."""
-    from nik.lm.batched import _residual, bounded_residual
-    from nik.poses import within_bounds
+    :func:`nik.kernels.driver.rest_posture`, batched, as the one torch LM (:func:`nik.lm.loop.lm_loop`) in its
+    null-space mode: the preference step ``z = s (rest_weight (q_rest - q) + up)`` (``s = 1 / lambda``: doubled after
+    a kept step up to 1, halved after a refused one, stopping below 1/64) plus the least-squares correction of the
+    task rows, kept only where the task still holds and the preference cost fell. Returns a new tensor."""
+    from dataclasses import replace
 
-    rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None else 0.5
+    from nik.lm.batched import LMCfg, chain_of, pose_evaluator
+    from nik.lm.loop import Box, lm_loop
+
+    base = plan.lm_cfg if plan.lm_cfg is not None else LMCfg()
+    cfg = replace(base, iters=REST_ITERS, stall_iters=REST_ITERS + 1, damping="fixed", eps=REST_DAMPING,
+                  lambda0=1.0, lambda_down=0.5, lambda_up=2.0, lambda_min=1.0, lambda_max=64.0, cost_tol=0.0,
+                  accept="feasible", compiled=False)  # fmt: skip
     qr, weight, _ = preference(robot, plan, q.shape[0], None)
-    qr = torch.from_numpy(qr).to(q)
-    q = q.clone()
-    s = torch.where(ok, 1.0, 0.0).to(q)
-    w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=q.dtype, device=q.device)
-    eye = torch.eye(6, dtype=q.dtype, device=q.device) * REST_DAMPING
-    max_step = plan.lm_cfg.max_step if plan.lm_cfg is not None else 0.5
+    qr = torch.from_numpy(qr).to(q).expand(q.shape[0], -1)
+    T = T.to(q)
+    chain = chain_of(robot, q, wrap=False)
+    task = pose_evaluator(T, chain, cfg, (tol_pos, tol_rot), half)
 
-    def task(qq):
-        Tq, J = robot.fk_and_jacobian(qq)
-        if half is None:
-            e, _, pos, rot = _residual(T[..., :3, :], Tq[..., :3, :], rw)
-            return e, J * w[:, None], (pos <= tol_pos) & (rot <= tol_rot)
-        e, Jr, _, _, _, inside = bounded_residual(T, Tq[..., :3, :], J, half, rw)
-        return e, Jr, inside & within_bounds(T, Tq, half)
+    def evaluate(qq, rows):
+        ev = task(qq, rows)
+        qr_ = qr.index_select(0, rows)
+        cost, up = _preference_torch(robot, qq[:, 0], qr_, weight, plan.manipulability)
+        z = weight * (qr_ - qq[:, 0]) + up
+        return ev._replace(E=cost[:, None], done=torch.zeros_like(ev.done), feasible=ev.done, z=z[:, None])
 
-    e, J, _ = task(q)
     if half is None:
-        live = torch.full_like(s, 6.0)
+        live = torch.full((q.shape[0],), 6.0, dtype=q.dtype, device=q.device)
     else:
         live = torch.isfinite(half[:, :3]).sum(-1).to(q) + torch.isfinite(half[:, 3:]).any(-1).to(q) * (
             3 - torch.isinf(half[:, 3:]).sum(-1).to(q).clamp(max=1)
         )
-    s = torch.where(live < q.shape[1], s, torch.zeros_like(s))  # no null space: nothing to move
-    dist, up = _preference_torch(robot, q, qr, weight, plan.manipulability)
-    for _ in range(REST_ITERS):
-        if not bool((s >= 1.0 / 64.0).any()):
-            break
-        z = s[:, None] * (weight * (qr - q) + up)
-        rhs = e - (J @ z[..., None])[..., 0]
-        y = torch.linalg.solve(J @ J.transpose(-1, -2) + eye, rhs[..., None])[..., 0]
-        dq = z + (J.transpose(-1, -2) @ y[..., None])[..., 0]
-        qc = robot.clamp(q + dq)
-        ec, Jc, done = task(qc)
-        dc, upc = _preference_torch(robot, qc, qr, weight, plan.manipulability)
-        good = (s >= 1.0 / 64.0) & done & (dc < dist) & (dq.abs().amax(-1) <= max_step) & torch.isfinite(dq).all(-1)
-        q = torch.where(good[:, None], qc, q)
-        up = torch.where(good[:, None], upc, up)
-        e = torch.where(good[:, None], ec, e)
-        J = torch.where(good[:, None, None], Jc, J)
-        dist = torch.where(good, dc, dist)
-        s = torch.where(good, (2.0 * s).clamp(max=1.0), s * 0.5)
-    return q
+    active = ok & (live < q.shape[1])  # no null space: nothing to move
+    box = Box(chain.lo, chain.hi, chain.wrap, robot.clamp)
+    return lm_loop(evaluate, q[:, None], box, cfg, active=active).q
 
 
 def _preference_torch(robot, q: torch.Tensor, qr: torch.Tensor, weight: float, mw: float):

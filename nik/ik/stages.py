@@ -229,8 +229,10 @@ def _max_abs(x):
 
 
 def _near_prior(plan: Plan, job: Job, idx, q_near):
-    """``(b, n)`` starts: :func:`nik.kernels.driver.near_prior` on the targets ``idx`` (compiled), or the same steps
-    batched in torch (the torch backend)."""
+    """``(b, n)`` starts: :func:`nik.kernels.driver.near_prior` on the targets ``idx`` (compiled), or the same walk
+    batched in torch (the torch backend): the one torch LM (:func:`nik.lm.loop.lm_loop`) on the pose rows and the
+    prior rows ``w (q - q_near)`` (:func:`nik.lm.loop.with_prior`), Gauss-Newton steps (no damping beyond the prior,
+    every step taken), ``NEAR_PRIOR_STEPS`` for each weight ``w`` of ``NEAR_PRIOR``."""
     if job.model is not None:
         from nik.kernels import driver
         from nik.kernels.chain import WRAPS
@@ -243,34 +245,22 @@ def _near_prior(plan: Plan, job: Job, idx, q_near):
         driver.near_prior(job.model.G, local, job.backend.rows(job.T, idx), q_near, opts[ROT_WEIGHT], opts[MAX_STEP],
                           q)  # fmt: skip
         return q
-    from nik.lm.batched import _residual
+    from dataclasses import replace
+
+    from nik.lm.batched import LMCfg, chain_of, pose_evaluator
+    from nik.lm.loop import Box, lm_loop, with_prior
 
     robot, T = job.robot, job.backend.rows(job.T, idx)
-    rw = plan.lm_cfg.rot_weight if plan.lm_cfg is not None else 0.5
-    max_step = plan.lm_cfg.max_step if plan.lm_cfg is not None else 0.5
-    lo, hi = robot.limits[:, 0].to(q_near), robot.limits[:, 1].to(q_near)
-    wr = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=q_near.dtype, device=q_near.device)
-    eye = torch.eye(robot.dof, dtype=q_near.dtype, device=q_near.device)
+    chain = chain_of(robot, q_near, wrap=False)
+    base = plan.lm_cfg if plan.lm_cfg is not None else LMCfg()
+    # Gauss-Newton with the prior rows (no damping beyond them, every step taken), NEAR_PRIOR_STEPS steps a weight
+    cfg = replace(base, iters=NEAR_PRIOR_STEPS, stall_iters=NEAR_PRIOR_STEPS + 1, damping="fixed", eps=1e-9,
+                  linear_solver="lu", accept="always", compiled=False)  # fmt: skip
+    pose = pose_evaluator(T.to(q_near), chain, cfg, (0.0, 0.0))
+    box = Box(chain.lo, chain.hi, chain.wrap)
     q = q_near.clone()
-    for w in NEAR_PRIOR:
-        for _ in range(NEAR_PRIOR_STEPS):
-            Tq, J = robot.fk_and_jacobian(q)
-            e = _residual(T[..., :3, :], Tq[..., :3, :], rw)[0]
-            J = J * wr[:, None]
-            A = J.transpose(-1, -2) @ J + (w * w + 1e-9) * eye
-            g = (J.transpose(-1, -2) @ e[..., None])[..., 0] - w * w * (q - q_near)
-            dq = torch.zeros_like(q)
-            for _ in range(2):  # the joints on a limit that the descent or the step pushes out are held
-                held = ((q <= lo) & ((g < 0) | (dq < 0))) | ((q >= hi) & ((g > 0) | (dq > 0)))
-                free = (~held).to(q)
-                Ah = A * free[:, :, None] * free[:, None, :] + eye * held.to(q)[:, :, None]
-                dq = torch.linalg.solve(Ah, (g * free)[..., None])[..., 0]
-                if not bool((((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))).any()):
-                    break
-            big = dq.abs().amax(-1, keepdim=True)
-            f = torch.where(big > max_step, max_step / big.clamp_min(1e-300), torch.ones_like(big))
-            dq = torch.where(torch.isfinite(big), f * dq, torch.zeros_like(dq))
-            q = torch.maximum(torch.minimum(q + dq, hi), lo)
+    for w in NEAR_PRIOR:  # a schedule of prior weights, each the one LM
+        q = lm_loop(with_prior(pose, q_near, w), q[:, None], box, cfg).q
     return q
 
 

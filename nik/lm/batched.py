@@ -14,7 +14,8 @@ solved by a Cholesky factorisation (``torch.linalg.cholesky_ex`` + ``cholesky_so
 symmetric positive definite; a failed factorisation counts as a rejected step), limited to ``max_step``
 radians per joint, then brought inside the limits (wrapping joints wrap, the others are clamped).
 A step is kept only if it lowers ``|e|^2``; lambda then shrinks by ``lambda_down``, otherwise it
-grows by ``lambda_up``. One iteration costs one FK + Jacobian per row.
+grows by ``lambda_up``. One iteration costs one FK + Jacobian per row. The iteration is the one torch LM
+(:func:`nik.lm.loop.lm_loop`) with the pose rows of :func:`pose_evaluator`.
 
 Per-target work (:func:`lm_solve`, :func:`lm_run`):
 
@@ -43,48 +44,24 @@ the dead-zone error grew.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import replace
 from functools import partial
+from typing import NamedTuple
 
 import torch
 
 from nik.costs.pose import DEAD_ZONE, bounded_residual
 from nik.costs.pose import dead_zone as _dead_zone
 from nik.kinematics import chain_jacobian
+from nik.lm.loop import Box, Eval, LMCfg, LMRun, Restarts, lm_loop
 from nik.poses import matrix_to_quaternion, rotation_modes, tool_error
-from nik.robots.joints import wrap_into, wrap_mask
+from nik.robots.joints import wrap_mask
 from nik.robots.model import Robot
 from nik.robots.reach import within_reach
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
-__all__ = ["DEAD_ZONE", "LMCfg", "LMRun", "bounded_residual", "lm_run", "lm_solve", "so3_log"]
-
-
-@dataclass
-class LMCfg:
-    """Levenberg-Marquardt settings (``method="lm"``, ``polish=True`` and the solver's default refinement)."""
-
-    iters: int = 25  # iteration limit of one start (each iteration: one FK + Jacobian per start)
-    starts: int = 32  # kept for compatibility (the old number of uniform starts); see first_starts / restarts
-    first_starts: int = 16  # without guesses: the first start is the best of this many uniform configurations
-    restarts: int = 2  # fresh uniform starts a failing target draws in the first pass (one when its start is spent)
-    tail_starts: int = 16  # then the targets still failing (0.3 % on panda): this many uniform starts side by side...
-    tail_restarts: int = 16  # ...and this many more fresh starts per target
-    stall_iters: int = 4  # a start stops after this many iterations in a row without progress...
-    stall_rel: float = 1e-3  # ...progress meaning |e|^2 lowered by at least this fraction
-    rot_weight: float = 0.5  # m/rad, weight of the rotation error rows
-    lambda0: float = 1e-3  # initial damping (relative to diag(J^T J))
-    lambda_up: float = 5.0  # damping factor after a rejected step
-    lambda_down: float = 0.3  # damping factor after an accepted step
-    lambda_min: float = 1e-9
-    lambda_max: float = 1e6
-    eps: float = 1e-9  # added to diag(J^T J), m^2
-    max_step: float = 0.5  # rad, largest change of any joint in one step
-    compiled: bool = False  # FK + Jacobian + error through torch.compile (needs a C compiler; eager fallback).
-    #   Measured (panda, one thread): 2.3x faster per evaluation at a fixed 10,000 rows, but end to end
-    #   slower (10,000 targets: 0.018 vs 0.011 ms per target from guesses, 0.19 vs 0.13 multistart; the
-    #   batch shrinks as targets finish, and guards/recompiles cost more than they save), plus a
-    #   one-off compile of 15-25 s. Hence off by default.
+__all__ = ["DEAD_ZONE", "Chain", "LMCfg", "LMRun", "bounded_residual", "chain_of", "lm_run", "lm_solve",
+           "pose_evaluator", "so3_log"]  # fmt: skip
 
 
 def so3_log(R: torch.Tensor) -> torch.Tensor:
@@ -162,31 +139,63 @@ def _evaluator(compiled: bool):
     return run
 
 
-@dataclass
-class LMRun:
-    """Result of :func:`lm_run` for B targets with K starts each.
+class Chain(NamedTuple):
+    """The arm as :func:`lm_run` takes it: the normal form ``G, offsets`` (:mod:`nik.kinematics`) in the dtype/device
+    of the targets, ``lo, hi: (dof,)`` limits, ``wrap: (dof,)`` bool, ``prismatic: (dof,)`` bool or None (all
+    revolute)."""
 
-    Attributes:
-        q: (B, dof) answer per target (converged start with the lowest error, else the lowest error).
-        E: (B,) squared weighted error of ``q`` (m^2).
-        converged: (B,) bool, within tolerance.
-        iterations: (B,) long, iterations spent.
-    """
+    G: torch.Tensor
+    offsets: torch.Tensor
+    lo: torch.Tensor
+    hi: torch.Tensor
+    wrap: torch.Tensor
+    prismatic: torch.Tensor | None = None
 
-    q: torch.Tensor
-    E: torch.Tensor
-    converged: torch.Tensor
-    iterations: torch.Tensor
+
+def chain_of(robot: Robot, like: torch.Tensor, wrap: bool = True) -> Chain:
+    """:class:`Chain` of ``robot`` in the dtype/device of ``like``; ``wrap=False``: no joint wraps (all clamped)."""
+    G, off = robot._params(like)
+    lo, hi = robot.limits_as(like)
+    wraps = wrap_mask(robot.limits, prismatic=robot.prismatic).to(like.device) & wrap
+    return Chain(G, off, lo, hi, wraps, robot.prismatic.to(like.device))
+
+
+def pose_evaluator(T_target: torch.Tensor, chain: Chain, cfg: LMCfg, tol: tuple[float, float], bounds=None):
+    """``evaluate(q (b, K, n), rows) -> Eval`` of :func:`nik.lm.loop.lm_loop` for the pose rows towards
+    ``T_target: (B, 3|4, 4)`` (module docstring): done within ``tol = (tol_pos, tol_rot)`` (m, rad), or with
+    ``bounds: (B, 6)`` inside every bound (the bounded error)."""
+    dtype, device = T_target.dtype, T_target.device
+    rw = cfg.rot_weight
+    row_w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=dtype, device=device)[:, None]
+    prismatic = chain.prismatic
+    kw = {"prismatic": prismatic} if prismatic is not None and bool(prismatic.any()) else {}
+    kernel = _evaluator(cfg.compiled and not kw)
+    Tt = T_target[:, None, :3, :]
+    bnd = None if bounds is None else bounds.to(dtype=dtype, device=device)[:, None, :]
+    G, off = chain.G, chain.offsets
+    last = [None, Tt, bnd]  # the rows of the last call and their targets (the loop changes rows when it compacts)
+
+    def evaluate(q, rows):
+        if rows is not last[0]:
+            full = rows.shape[0] == Tt.shape[0]
+            last[:] = rows, (Tt if full else Tt[rows]), (bnd if full or bnd is None else bnd[rows])
+        T, b = last[1], last[2]
+        if b is not None:
+            e, J, E, _, _, inside = _evaluate_bounded(q, T, b, G, off, rw, **kw)
+            return Eval(e, J, E, inside)
+        if kw:
+            e, J, E, pos, rot = _evaluate_eager(q, T, G, off, row_w, rw, **kw)
+        else:
+            e, J, E, pos, rot = kernel(q, T, G, off, row_w, rw)
+        return Eval(e, J, E, (pos <= tol[0]) & (rot <= tol[1]))
+
+    return evaluate
 
 
 def lm_run(
     T_target: torch.Tensor,
     q0: torch.Tensor,
-    G: torch.Tensor,
-    offsets: torch.Tensor,
-    lo: torch.Tensor,
-    hi: torch.Tensor,
-    wrap: torch.Tensor,
+    chain: Chain,
     *,
     cfg: LMCfg,
     tol_pos: float,
@@ -196,10 +205,10 @@ def lm_run(
     first_iters: int | None = None,
     sampler=None,
     reachable: torch.Tensor | None = None,
-    prismatic: torch.Tensor | None = None,
     bounds: torch.Tensor | None = None,
 ) -> LMRun:
-    """Levenberg-Marquardt from ``q0: (B, K, dof)`` towards ``T_target: (B, 3|4, 4)``, restarting in place.
+    """Levenberg-Marquardt from ``q0: (B, K, dof)`` towards ``T_target: (B, 3|4, 4)``, restarting in place: the one
+    loop (:func:`nik.lm.loop.lm_loop`) on the pose rows (:func:`pose_evaluator`).
 
     Each of the ``B x K`` rows is one start. A row that stalls (``cfg.stall_iters`` iterations without
     progress) or runs ``iters`` iterations without converging is, while its target has restarts left
@@ -209,155 +218,14 @@ def lm_run(
     ``iters``). A target leaves the batch as soon as one of its rows converges, or when
     none of its rows can go on. Only failing targets ever draw restarts.
 
-    ``G, offsets`` are the normal form (:mod:`nik.kinematics`) in the dtype/device of ``T_target``;
-    ``lo, hi: (dof,)`` limits, ``wrap: (dof,)`` bool; ``prismatic`` (None: all revolute) is passed to
-    the kernel when some joint is prismatic. ``bounds: (B, 6)`` (None: the tolerances): tolerant goals
-    (:func:`bounded_residual`; ``tol_pos, tol_rot`` then unused).
+    ``chain``: the arm (:class:`Chain`). ``bounds: (B, 6)`` (None: the tolerances): tolerant goals
+    (:func:`bounded_residual`; ``tol_pos, tol_rot`` then unused; a step that lands inside every bound is kept).
     """
-    B, K, n = q0.shape
-    dtype, device = T_target.dtype, T_target.device
-    rw = cfg.rot_weight
-    row_w = torch.tensor([1.0, 1.0, 1.0, rw, rw, rw], dtype=dtype, device=device)[:, None]
-    any_wrap = bool(wrap.any())
-    kw = {"prismatic": prismatic} if prismatic is not None and bool(prismatic.any()) else {}
-    eye_eps = cfg.eps * torch.eye(n, dtype=dtype, device=device)
-    if sampler is None:
-        restarts = 0
-
-    def clamp(q):
-        if any_wrap:
-            q = torch.where(wrap, wrap_into(q, lo, hi), q)
-        return torch.minimum(torch.maximum(q, lo), hi)
-
-    kernel = _evaluator(cfg.compiled and not kw)
-    tolerant = bounds is not None
-    bnd = bounds.to(dtype=dtype, device=device)[:, None, :] if tolerant else torch.zeros(B, 1, 0, device=device)
-
-    def evaluate(q, Tt, bnd):
-        if tolerant:
-            return _evaluate_bounded(q, Tt, bnd, G, offsets, rw, **kw)
-        if kw:
-            e, J, E, pos, rot = _evaluate_eager(q, Tt, G, offsets, row_w, rw, **kw)
-        else:
-            e, J, E, pos, rot = kernel(q, Tt, G, offsets, row_w, rw)
-        return e, J, E, pos, rot, (pos <= tol_pos) & (rot <= tol_rot)
-
-    Tt = T_target[:, None, :3, :]
-    q = clamp(q0)
-    e, J, E, pos, rot, ok = evaluate(q, Tt, bnd)
-    lam = torch.full((B, K), cfg.lambda0, dtype=dtype, device=device)
-    stall = torch.zeros((B, K), dtype=torch.int32, device=device)
-    # the starts given run first_iters iterations at most, fresh ones iters
-    first = iters if first_iters is None else int(first_iters)
-    age = torch.full((B, K), iters - first, dtype=torch.int32, device=device)
-    left = torch.full((B,), int(restarts), dtype=torch.int32, device=device)
-    if reachable is not None:
-        left = torch.where(reachable.to(device), left, torch.zeros_like(left))
-    best_q, best_E = q.clone(), E.clone()  # per row, over its restarts
-    out_q = q[:, 0].clone()
-    out_E = E[:, 0].clone()
-    out_conv = torch.zeros(B, dtype=torch.bool, device=device)
-    out_it = torch.zeros(B, dtype=torch.long, device=device)
-    active = torch.arange(B, device=device)
-    total = max(first, 0) + int(restarts) * iters  # hard per-target budget
-
-    def finish(rows):
-        """Write the answers of the targets ``rows`` (indices into the active batch)."""
-        q_, E_, conv_ = q[rows], E[rows], ok[rows]
-        bq, bE = best_q[rows], best_E[rows]
-        better = (E_ < bE) | conv_
-        q_ = torch.where(better[..., None], q_, bq)
-        E_ = torch.where(better, E_, bE)
-        score = torch.where(conv_, E_, E_ + float("inf"))
-        anyc = conv_.any(1)
-        score = torch.where(anyc[:, None], score, E_)
-        i = score.argmin(dim=1)
-        tgt = active[rows]
-        out_q[tgt] = torch.gather(q_, 1, i[:, None, None].expand(-1, 1, n)).squeeze(1)
-        out_E[tgt] = torch.gather(E_, 1, i[:, None]).squeeze(1)
-        out_conv[tgt] = anyc
-
-    for it in range(total + 1):
-        conv = ok
-        spent = (stall >= cfg.stall_iters) | (age >= iters)
-        # rows to restart: spent, target not converged, restarts left (drawn in row order)
-        want = spent & ~conv.any(1, keepdim=True)
-        if restarts:
-            rank = torch.cumsum(want.to(torch.int32), dim=1)
-            restart = want & (rank <= left[:, None])
-        else:
-            restart = torch.zeros_like(want)
-        done = conv.any(1) | (spent & ~restart).all(1)
-        if it == total:
-            done = torch.ones_like(done)
-        if bool(done.any()):
-            rows = done.nonzero().squeeze(1)
-            finish(rows)
-            if bool(done.all()):
-                break
-            keep = (~done).nonzero().squeeze(1)
-            active, q, e, J, E, pos, rot, ok, lam, stall, age, left, best_q, best_E, restart, Tt, bnd = (
-                t.index_select(0, keep)
-                for t in (active, q, e, J, E, pos, rot, ok, lam, stall, age, left, best_q, best_E, restart, Tt, bnd)
-            )
-        A = (J[..., :, :, None] * J[..., :, None, :]).sum(-3)  # J^T J by broadcasting: faster than bmm here
-        g = (J * e[..., :, None]).sum(-2).unsqueeze(-1)
-        # active set (nik.kernels.lm_step.hold): a joint on a limit that the descent direction pushes further out is
-        # left out, and so is one that the step solved without it pushes out (the step is solved once more)
-        dq, info = _held_step(A, g, q, lo, hi, torch.zeros_like(q), lam, cfg.eps, eye_eps)
-        out = ((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))
-        if bool(out.any()):
-            dq, info = _held_step(A, g, q, lo, hi, dq, lam, cfg.eps, eye_eps)
-        big = dq.abs().amax(dim=-1, keepdim=True)
-        dq = dq * torch.clamp(cfg.max_step / big.clamp_min(1e-30), max=1.0)
-        dq = torch.where((info == 0)[..., None] & torch.isfinite(dq), dq, torch.zeros_like(dq))
-        qc = clamp(q + dq)
-        n_restart = int(restart.sum())
-        if n_restart:
-            # remember the best of the spent start, then put a fresh start in its place
-            better = restart & (E < best_E)
-            best_q = torch.where(better[..., None], q, best_q)
-            best_E = torch.where(better, E, best_E)
-            fresh = torch.zeros_like(qc)
-            fresh[restart] = sampler(n_restart).to(dtype=dtype, device=device)
-            qc = torch.where(restart[..., None], fresh, qc)
-            left = left - restart.sum(1, dtype=torch.int32)
-        ec, Jc, Ec, posc, rotc, okc = evaluate(qc, Tt, bnd)
-        good = info == 0
-        acc = ((Ec < E) & good) | restart
-        if tolerant:  # a step that reaches every bound is kept (the compiled kernel's rule)
-            acc = acc | (okc & good)
-        gain = torch.where(acc, E - Ec, torch.zeros_like(E))
-        stall = torch.where((gain >= cfg.stall_rel * E) | restart, torch.zeros_like(stall), stall + 1)
-        age = torch.where(restart, torch.zeros_like(age), age + 1)
-        a3 = acc[..., None]
-        q = torch.where(a3, qc, q)
-        e = torch.where(a3, ec, e)
-        J = torch.where(a3[..., None], Jc, J)
-        E = torch.where(acc, Ec, E)
-        pos = torch.where(acc, posc, pos)
-        rot = torch.where(acc, rotc, rot)
-        ok = torch.where(acc, okc, ok)
-        lam = torch.where(acc, lam * cfg.lambda_down, lam * cfg.lambda_up).clamp(cfg.lambda_min, cfg.lambda_max)
-        if n_restart:
-            lam = torch.where(restart, torch.full_like(lam, cfg.lambda0), lam)
-        out_it[active] += 1
-    return LMRun(out_q, out_E, out_conv, out_it)
-
-
-def _held_step(A, g, q, lo, hi, prev, lam, eps, eye_eps):
-    """``(dq (..., n), info)``: the damped step of ``A (..., n, n) dq = g (..., n, 1)`` with the joints on a limit
-    that ``g`` or ``prev`` (the step before, zeros at first) pushes further out held
-    (:func:`nik.kernels.lm_step.hold`)."""
-    gs = g.squeeze(-1)
-    held = ((q <= lo) & ((gs < 0) | (prev < 0))) | ((q >= hi) & ((gs > 0) | (prev > 0)))
-    if bool(held.any()):
-        f = (~held).to(A.dtype)
-        A = A * (f[..., :, None] * f[..., None, :]) + (1.0 - f).diag_embed()
-        g = g * f[..., None]
-    A = A + (lam[..., None] * (torch.diagonal(A, dim1=-2, dim2=-1) + eps)).diag_embed() + eye_eps
-    L, info = torch.linalg.cholesky_ex(A)
-    return torch.cholesky_solve(g, L).squeeze(-1), info
+    cfg = replace(cfg, iters=int(iters), accept="decrease" if bounds is None else "decrease_or_done")
+    evaluate = pose_evaluator(T_target, chain, cfg, (tol_pos, tol_rot), bounds)
+    box = Box(chain.lo, chain.hi, chain.wrap)
+    rs = Restarts(int(restarts), sampler, reachable, first_iters)
+    return lm_loop(evaluate, q0, box, cfg, restarts=rs)
 
 
 def lm_solve(
@@ -404,10 +272,7 @@ def lm_solve(
     dtype, device = T_target.dtype, T_target.device
     if generator is None:
         generator = torch.Generator(device=device).manual_seed(0)
-    G, off = robot._params(T_target)
-    lo, hi = robot.limits_as(T_target)
-    wraps = wrap_mask(robot.limits, prismatic=robot.prismatic).to(device) & wrap
-    prismatic = robot.prismatic.to(device)
+    chain = chain_of(robot, T_target, wrap)
     if bounds is not None:
         bounds = torch.as_tensor(bounds, dtype=dtype, device=device).expand(T_target.shape[0], 6)
     if q0 is None:
@@ -419,17 +284,12 @@ def lm_solve(
             reachable = reachable | torch.isinf(bounds[:, :3]).any(-1)
     run_from = partial(
         lm_run,
-        G=G,
-        offsets=off,
-        lo=lo,
-        hi=hi,
-        wrap=wraps,
+        chain=chain,
         cfg=cfg,
         tol_pos=tol_pos,
         tol_rot=tol_rot,
         iters=iters,
         sampler=lambda m: robot.sample(m, generator=generator, dtype=dtype, device=device),
-        prismatic=prismatic,
     )
     run = run_from(
         T_target[..., :3, :], q0, first_iters=first_iters, restarts=n_restarts, reachable=reachable, bounds=bounds

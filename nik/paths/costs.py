@@ -74,7 +74,7 @@ def solve_path(solver, T_path, q_start=None, *, costs=None, timing=False, vel_li
                            (vel_limits, acc_limits), kw)  # fmt: skip
     if not more:
         return res
-    return _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, acc_limits, **kw)
+    return _refine(solver, T_path, q_start, res, (per, path_terms), (timing, vel_limits, acc_limits), kw)
 
 
 def _manipulable(solver, T_path, q_start, res, weight: float, timing, limits: tuple, kw: dict):
@@ -155,9 +155,11 @@ def _manipulable(solver, T_path, q_start, res, weight: float, timing, limits: tu
     return out
 
 
-def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, acc_limits, *, tol_pos, tol_rot,
-            seed=0, representation=None, max_step=PATH_MAX_STEP, world=None, closed=None, bounds=None,
-            q_rest=None):  # fmt: skip
+def _refine(solver, T_path, q_start, res, terms: tuple[list, list], timed: tuple, kw: dict):
+    """The path problem of the module docstring from the search's answer ``res``, solved by the one torch LM
+    (:func:`nik.lm.problem.solve_problem` over :class:`nik.lm.problem.PathProblem`); ``terms``: ``(per-configuration
+    terms, path terms)`` of the user; ``timed``: ``(timing, vel_limits, acc_limits)``; ``kw``: the search's keywords
+    (``tol_pos``, ``tol_rot``, ``seed``, ``representation``, ``max_step``, ``world``, ``bounds``, ``q_rest``)."""
     from nik import costs as C
     from nik.costs.collision import CollisionTerm
     from nik.ik.costs import _unmet, call_terms, warn_unmet
@@ -169,8 +171,12 @@ def _refine(solver, T_path, q_start, res, per, path_terms, timing, vel_limits, a
     from nik.paths.trajopt import path_collisions
     from nik.poses import pose_error
 
+    per, path_terms = terms
+    timing, vel_limits, acc_limits = timed
+    tol_pos, tol_rot, bounds, q_rest = kw["tol_pos"], kw["tol_rot"], kw.get("bounds"), kw.get("q_rest")
+    seed, world, max_step = kw.get("seed", 0), kw.get("world"), kw.get("max_step", PATH_MAX_STEP)
     robot = solver.robot
-    Tn, dtype, device = _poses(T_path, representation)
+    Tn, dtype, device = _poses(T_path, kw.get("representation"))
     N, n = Tn.shape[0], robot.dof
     plan = with_goal(solver.plan(backend="compiled", tol_pos=tol_pos, tol_rot=tol_rot, seed=seed), bounds, q_rest,
                      batch=N)  # fmt: skip

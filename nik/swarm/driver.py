@@ -19,7 +19,7 @@ from nik.swarm.pso import PSOCfg, pso_init, pso_step
 from nik.swarm.sapso import SAPSOCfg, sapso_init, sapso_step
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT
 
-__all__ = ["ALGORITHMS", "METHODS", "SwarmResult", "SwarmRun", "default_cfg", "refine", "run_swarm"]
+__all__ = ["ALGORITHMS", "METHODS", "Polish", "SwarmResult", "SwarmRun", "default_cfg", "refine", "run_swarm"]
 
 
 class _Algorithm(NamedTuple):
@@ -35,6 +35,15 @@ ALGORITHMS = {
     "ga": _Algorithm(GACfg, ga_init, ga_step),
 }
 METHODS = (*ALGORITHMS, "lm")
+
+
+class Polish(NamedTuple):
+    """The LM polish of :func:`refine` (``polish=Polish(...)``; ``polish=True`` is ``Polish()``): ``cfg`` the LM's
+    settings (None: :class:`nik.lm.LMCfg`'s), ``starts`` the best remembered particles each failing target starts
+    from."""
+
+    cfg: LMCfg | None = None
+    starts: int = 1
 
 
 def default_cfg(method: str):
@@ -155,10 +164,8 @@ def refine(
     tol_rot: float = DEFAULT_TOL_ROT,
     max_iters: int | None = None,
     seed: int = 0,
-    polish: bool = False,
+    polish: bool | Polish = False,
     history: bool = False,
-    polish_cfg: LMCfg | None = None,
-    polish_starts: int = 1,
     compiled: bool = False,
 ) -> SwarmResult:
     """Solve IK for a batch of targets by a swarm (or Levenberg-Marquardt), to tolerance.
@@ -177,8 +184,9 @@ def refine(
         tol_pos, tol_rot: success and stopping tolerances, metres and radians.
         max_iters: overrides ``cfg.iters`` (also the horizon of time schedules).
         seed: seeds a ``torch.Generator`` on ``T_target``'s device: same seed, same result.
-        polish: finish targets the swarm left outside tolerance with LM (``polish_cfg``) from
-            the ``polish_starts`` best remembered particles.
+        polish: finish targets the swarm left outside tolerance with LM (:func:`nik.lm.lm_solve`, the one torch
+            LM) from the best remembered particles: True (:class:`Polish` defaults) or a :class:`Polish` (its
+            ``cfg`` and number of ``starts``).
         history: record the best objective value per iteration.
         compiled: use the ``torch.compile``'d FK kernel for the particles (large batches).
 
@@ -209,6 +217,10 @@ def refine(
         cfg = replace(cfg, iters=int(max_iters))
     generator = torch.Generator(device=device)
     generator.manual_seed(int(seed))
+    if polish is not False and not isinstance(polish, bool | Polish):
+        got = type(polish).__name__
+        raise ValueError(f"polish: expected True, False or nik.swarm.driver.Polish(cfg, starts), got {got}")
+    polish_cfg, polish_starts = polish if isinstance(polish, Polish) else Polish()
     polish_it = torch.zeros(B, dtype=torch.long, device=device)
     hist = None
 
