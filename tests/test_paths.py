@@ -161,6 +161,7 @@ def test_redundant_arm_without_q_start_keeps_one_posture(panda):
 def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
     """Back and forth six times along a line whose far end the arm cannot reach in that orientation: without the
     secondary objective (joint-limit centring) the posture drifts into a limit and then jumps; with it, neither."""
+    import nik.paths.candidates as candidates
     import nik.paths.solve as paths
 
     lo, hi = panda.robot.limits.double().T
@@ -182,7 +183,7 @@ def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert int(res.success.sum()) == int(panda.solve(T).success.sum())  # every waypoint any solve reaches
-    monkeypatch.setattr(paths, "PATH_PULL", 0.0)
+    monkeypatch.setattr(candidates, "PATH_PULL", 0.0)  # the chains' pull, where _chain_path reads it
     monkeypatch.setattr(paths, "_smooth", lambda *a: True)  # the chain alone, without the global search's rescue
     plain, plain_margin = run()  # the check can fail: nearest-to-the-predecessor alone drifts and jumps
     assert plain_margin < 0.05 and plain.path.largest_step > math.radians(90.0)
