@@ -679,3 +679,12 @@ def test_a_generate_whose_process_dies_between_its_renames_leaves_the_old_datase
     assert torch.equal(load_dataset(out).q, old)  # the next process puts the old one back
     generate_dataset("kuka_kr", 100, out, seed=2, overwrite=True, progress=False, fsync=False)
     assert _leftovers(tmp_path, "d") == []
+
+
+def test_the_generator_takes_its_resolved_arguments_as_one_job():
+    """The writer of a dataset takes one resolved job (``_Job``), not 23 arguments (issue 46, item 4)."""
+    import inspect
+
+    from nik.data.generate import _generate
+
+    assert len(inspect.signature(_generate).parameters) <= 12

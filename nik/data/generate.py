@@ -28,7 +28,9 @@ import os
 import sys
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -481,61 +483,61 @@ def generate_dataset(
     if threads is not None:
         torch.set_num_threads(threads)
     try:
-        return _generate(
-            robot,
-            n,
-            out,
-            seed,
-            sampler,
-            rng,
-            ranges_desc,
-            splits,
-            tdtype,
-            dtype_name,
-            device,
-            branch,
-            classifier,
-            overwrite,
-            int(chunk_size),
-            compiled,
-            progress,
-            fsync,
-            int(block_size),
-            stream,
-            max_candidates,
-            shard,
-            rows,
-        )
+        job = _Job(
+            robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dtype_name, device, branch, classifier,
+            overwrite, int(chunk_size), compiled, progress, fsync, int(block_size), stream, max_candidates, shard, rows,
+        )  # fmt: skip
+        return _generate(job)
     finally:
         if threads is not None:
             torch.set_num_threads(previous_threads)
 
 
-def _generate(
-    robot,
-    n,
-    out,
-    seed,
-    sampler,
-    rng,
-    ranges_desc,
-    splits,
-    tdtype,
-    dtype_name,
-    device,
-    branch,
-    classifier,
-    overwrite,
-    chunk_size,
-    compiled,
-    progress,
-    fsync,
-    block_size,
-    stream,
-    max_candidates,
-    shard=None,
-    rows=None,
-) -> Path:
+@dataclass(frozen=True)
+class _Job:
+    """One :func:`generate_dataset` run, its arguments checked and resolved: the robot, ``n`` rows and the output
+    directory; the randomness (``seed``, ``sampler``, the ranges ``rng (dof, 2)`` and their description, the
+    sample ``stream``, ``block_size``, ``max_candidates``); the splits' sizes; the storage dtype (``tdtype``,
+    ``dtype_name``); where FK runs (``device``, ``compiled``); the branch filter (``branch``, ``classifier``); how
+    it is written (``overwrite``, ``chunk_size``, ``progress``, ``fsync``); and the shard (``shard``, ``rows``:
+    ``(start, stop)`` of the rows this run writes; None: all ``n``)."""
+
+    robot: Any
+    n: int
+    out: Any
+    seed: int
+    sampler: str
+    rng: Any
+    ranges_desc: Any
+    splits: Any
+    tdtype: Any
+    dtype_name: str
+    device: Any
+    branch: Any
+    classifier: Any
+    overwrite: bool
+    chunk_size: int
+    compiled: bool
+    progress: Any
+    fsync: bool
+    block_size: int
+    stream: Any
+    max_candidates: int
+    shard: Any = None
+    rows: Any = None
+
+
+def _generate(job: _Job) -> Path:
+    """Write the dataset of ``job`` (:class:`_Job`) under a temporary name, then rename it into place."""
+    robot, n, out, seed, sampler, rng, ranges_desc, splits = (
+        job.robot, job.n, job.out, job.seed, job.sampler, job.rng, job.ranges_desc, job.splits,
+    )  # fmt: skip
+    tdtype, dtype_name, device, branch, classifier, overwrite = (
+        job.tdtype, job.dtype_name, job.device, job.branch, job.classifier, job.overwrite,
+    )  # fmt: skip
+    chunk_size, compiled, progress, fsync = job.chunk_size, job.compiled, job.progress, job.fsync
+    block_size = job.block_size
+    stream, max_candidates, shard, rows = job.stream, job.max_candidates, job.shard, job.rows
     row_start, row_stop = rows if rows is not None else (0, n)
     m_rows = row_stop - row_start  # rows this run writes (n unless a shard)
     atomic = AtomicDirectory(out, overwrite=overwrite)

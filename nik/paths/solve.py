@@ -118,6 +118,8 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -151,6 +153,7 @@ __all__ = [
     "PATH_PULL",
     "PATH_PULL_CAP",
     "PATH_RESTARTS",
+    "PathOptions",
     "jumps",
     "open_note",
     "solve_path",
@@ -158,24 +161,26 @@ __all__ = [
 ]
 
 
-def solve_path(
-    solver,
-    T_path,
-    q_start=None,
-    *,
-    tol_pos: float,
-    tol_rot: float,
-    seed: int = 0,
-    representation: str | None = None,
-    max_step: float = PATH_MAX_STEP,
-    world=None,
-    closed: bool | None = None,
-    timing: bool | dict = False,
-    vel_limits=None,
-    acc_limits=None,
-    bounds=None,
-    q_rest=None,
-) -> IKResult:
+@dataclass(frozen=True)
+class PathOptions:
+    """The options of one :func:`solve_path` call: :meth:`nik.IKSolver.solve_path`'s keywords (metres, radians),
+    described in :func:`solve_path`'s Args. ``tol_pos``, ``tol_rot`` have no default: the caller states them."""
+
+    tol_pos: float
+    tol_rot: float
+    seed: int = 0
+    representation: str | None = None
+    max_step: float = PATH_MAX_STEP
+    world: Any = None
+    closed: bool | None = None
+    timing: bool | dict = False
+    vel_limits: Any = None
+    acc_limits: Any = None
+    bounds: Any = None
+    q_rest: Any = None
+
+
+def solve_path(solver, T_path, q_start, options: PathOptions) -> IKResult:
     """One continuous joint trajectory through the waypoints ``T_path`` (see :meth:`nik.IKSolver.solve_path`).
 
     Args:
@@ -183,6 +188,7 @@ def solve_path(
             docstring, "settings").
         T_path: ``(N, 4, 4)``, ``(N, 7)`` or ``(N, 6)`` waypoints in order (metres, radians), N >= 2.
         q_start: ``(dof,)`` the joints before the path (radians, inside the limits) or None.
+        options: the call's :class:`PathOptions`, whose fields are:
         tol_pos, tol_rot: success tolerances, metres and radians.
         seed: seeds the uniform starts and restarts.
         representation: ``"matrix"`` | ``"quat"`` (w first) | ``"quat_xyzw"`` (ROS order) | ``"rpy"``; inferred from the
@@ -221,6 +227,10 @@ def solve_path(
             the limits, a solver whose settings a path cannot follow (``backend="torch"``; ``refine="none"`` on an
             arm without a closed form).
     """
+    o = options
+    tol_pos, tol_rot, seed, representation, max_step = o.tol_pos, o.tol_rot, o.seed, o.representation, o.max_step
+    world, closed, timing, vel_limits, acc_limits = o.world, o.closed, o.timing, o.vel_limits, o.acc_limits
+    bounds, q_rest = o.bounds, o.q_rest
     Tn, dtype, device = _poses(T_path, representation)
     if Tn.shape[0] < 2:
         raise ValueError(f"T_path: a path needs at least 2 waypoints, got {Tn.shape[0]}")
