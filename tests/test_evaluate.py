@@ -348,10 +348,12 @@ def test_evaluate_reads_another_split_and_tells_its_hooks(odd_arm, tmp_path):
     most 12 parameters (issue 46, item 4)."""
     import inspect
 
-    from nik.data import generate_dataset, load_dataset
+    from nik.data import Sampling, generate_dataset, load_dataset
     from nik.evaluate import EvalHooks, evaluate
 
-    data = generate_dataset(odd_arm, 40, tmp_path / "d", seed=1, val_fraction=0.2, progress=False, fsync=False)
+    data = generate_dataset(
+        odd_arm, 40, tmp_path / "d", seed=1, progress=False, fsync=False, sampling=Sampling(val_fraction=0.2)
+    )
     said, rows = [], []
     hooks = EvalHooks(progress=said.append, on_row=lambda rep: rows.append(len(rep.rows)))
     report = evaluate(odd_arm, data=(data, "val"), n=100, checkpoint=None, swarm="lm", include_pk=False, hooks=hooks)
