@@ -37,7 +37,7 @@ def child(args) -> None:
 
     torch.set_num_threads(args.threads)
     import nik
-    from nik.data import generate_dataset
+    from nik.data import Compute, generate_dataset
 
     robot = nik.load_robot(args.robot)
     out = Path(args.out)
@@ -48,10 +48,9 @@ def child(args) -> None:
         70000,
         out / "warmup",
         dtype=args.dtype,
-        compiled=args.compiled,
         progress=False,
         overwrite=True,
-        threads=args.threads,
+        compute=Compute(compiled=args.compiled, threads=args.threads),
     )
     warm = time.perf_counter() - t0
     shutil.rmtree(out / "warmup")
@@ -62,11 +61,10 @@ def child(args) -> None:
         args.n,
         out / "bench",
         dtype=args.dtype,
-        compiled=args.compiled,
         progress=False,
         seed=0,
         overwrite=True,
-        threads=args.threads,
+        compute=Compute(compiled=args.compiled, threads=args.threads),
     )
     dt = time.perf_counter() - t0
     size = sum(f.stat().st_size for f in (out / "bench").iterdir())

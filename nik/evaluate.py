@@ -29,7 +29,16 @@ from nik.poses import matrix_to_rpy, pose_error, rpy_to_matrix
 from nik.robots import Robot, load_robot
 from nik.tolerances import DEFAULT_TOL_POS, DEFAULT_TOL_ROT, score
 
-__all__ = ["EvalRow", "EvalReport", "evaluate", "markdown_table", "plot_errors", "robot_to_urdf", "write_report"]
+__all__ = [
+    "EvalHooks",
+    "EvalRow",
+    "EvalReport",
+    "evaluate",
+    "markdown_table",
+    "plot_errors",
+    "robot_to_urdf",
+    "write_report",
+]
 
 #: Refinement methods evaluated after the network, in table order.
 REFINEMENTS = ("lm", "pso", "sapso", "ipso", "ga")
@@ -37,6 +46,15 @@ REFINEMENTS = ("lm", "pso", "sapso", "ipso", "ga")
 #: row carries one-time costs (compiled kernels loaded, caches filled, first allocations). Batches above
 #: 10,000 poses may take another path than the warm-up (the compiled one stops there: ``nik.ik.lean``).
 WARMUP_TARGETS = 16
+
+
+@dataclass(frozen=True)
+class EvalHooks:
+    """What :func:`evaluate` tells as it runs: ``progress(message)`` before each row, ``on_row(report)`` after each
+    row is added (the CLI writes the table there); None: nothing."""
+
+    progress: object = None
+    on_row: object = None
 
 
 @dataclass
@@ -300,25 +318,24 @@ def _network_rows_solver(robot: Robot, checkpoint, report: EvalReport) -> dict |
 def evaluate(
     robot: Robot | str | Path,
     *,
-    data: str | Path,
+    data: str | Path | tuple,
     checkpoint: str | Path | None = None,
     n: int = 1000,
-    split: str = "test",
     refinements: tuple[str, ...] = REFINEMENTS,
     swarm: str = "ipso",
     include_pk: bool = True,
     tol_pos: float = DEFAULT_TOL_POS,
     tol_rot: float = DEFAULT_TOL_ROT,
     seed: int = 0,
-    progress=None,
     device: str | torch.device = "cpu",
-    on_row=None,
+    hooks: EvalHooks | None = None,
 ) -> EvalReport:
-    """Evaluate every pipeline on the first ``n`` poses of a dataset's ``split``.
+    """Evaluate every pipeline on the first ``n`` poses of a dataset's test split (or another one).
 
     Args:
         robot: the arm (object, built-in name or file); the dataset and checkpoint must match it.
-        data: dataset directory (``nik generate``).
+        data: dataset directory (``nik generate``), evaluated on its ``"test"`` split; or ``(directory, split)`` for
+            another split (``"train"``, ``"val"``).
         checkpoint: the network of the network rows: ``"auto"``, the one installed or shipped with nik for this
             robot's definition hash (as ``IKSolver(robot)`` finds it); a path to a trained network; ``None`` /
             ``"none"``: no network rows (a note says why). The rows "default pipeline" (``IKSolver(robot)``,
@@ -329,8 +346,8 @@ def evaluate(
         swarm: the uniform-init swarm row's method (no network).
         include_pk: add pytorch-kinematics' ``PseudoInverseIK`` as a peer.
         tol_pos, tol_rot: tolerances the refinements stop at (metres, radians).
-        progress: optional callable ``progress(message)`` told before each row.
-        on_row: optional callable ``on_row(report)`` told after each row is added (the CLI writes the table
+        hooks: :class:`EvalHooks`, the callables told as the evaluation runs: ``progress(message)`` before each
+            row, ``on_row(report)`` after each row is added (the CLI writes the table
             there, so rows already computed survive a failure in a later one).
         device: where every pipeline computes (``"cpu"``, ``"cuda"``); timings synchronise the GPU.
 
@@ -349,6 +366,9 @@ def evaluate(
 
     dev = resolve_device(device)
     robot = load_robot(robot) if not isinstance(robot, Robot) else robot
+    if not isinstance(data, str | Path) and not (isinstance(data, tuple | list) and len(data) == 2):
+        raise ValueError(f"data: expected a dataset directory or (directory, split), got {data!r:.80}")
+    data, split = (data, "test") if isinstance(data, str | Path) else data
     ds = load_dataset(data, robot=robot)
     part = ds.split(split)
     if len(part) == 0:
@@ -363,7 +383,9 @@ def evaluate(
         device=str(dev),
         end_link=robot.end_link,
     )
-    say = progress or (lambda msg: None)
+    hooks = hooks or EvalHooks()
+    say = hooks.progress or (lambda msg: None)
+    on_row = hooks.on_row
 
     def add(method: str, q: torch.Tensor, seconds: float, note: str = "") -> None:
         row, errs = _row(method, robot, T, q, seconds, note)

@@ -33,6 +33,7 @@ Guess providers ``(robot, T, ...) -> q (B, dof)`` live in :mod:`nik.ik.guesses`,
 
 from __future__ import annotations
 
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -233,9 +234,8 @@ class IKSolver:
         tol_rot: float = DEFAULT_TOL_ROT,
         seed: int = 0,
         q_near=None,
-        max_iters: int | None = None,
         representation: str | None = None,
-        plan: Plan | None = None,
+        plan: Plan | dict | None = None,
         world=None,
         bounds=None,
         q_rest=None,
@@ -256,11 +256,12 @@ class IKSolver:
                 found, return the one nearest to it (joint motion, see :func:`nik.kernels.closed.pick`).
                 Closed-form arms pick among the 8 closed-form solutions; otherwise the refinement is
                 also run from ``q_near`` itself and the successful answer nearest ``q_near`` is kept.
-            max_iters: iteration limit of the refinement (default: the method's config).
             representation: ``"matrix"`` | ``"quat"`` (w first) | ``"quat_xyzw"`` (ROS order) | ``"rpy"``; inferred from
                 the shape when None (7 numbers: ``"quat"``).
-            plan: a plan of :meth:`plan` (changed with ``dataclasses.replace``) to run instead of the solver's
-                own; its tolerances, seed and iteration cap then replace the arguments.
+            plan: the refinement's settings, one group: a dict of :class:`~nik.ik.plan.Plan` fields changed in the
+                call's own plan (``{"max_iters": 20}``: the refinement's iteration limit; default the method's
+                config), or a plan of :meth:`plan` (changed with ``dataclasses.replace``) to run instead of the
+                solver's own: its tolerances, seed and iteration cap then replace the arguments.
             world: a :class:`nik.World` for this call instead of the solver's (:mod:`nik.ik.collide`).
             bounds: a tolerant goal per axis of the target's tool frame (:mod:`nik.ik.bounds`: 6 half-widths x, y, z
                 m, rx, ry, rz rad, ``math.inf`` = free, or ``(B, 6)``; ``"position"``, ``"axis_z"``): success means
@@ -285,12 +286,15 @@ class IKSolver:
         Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
+        plan, changes = _plan_changes(plan, costs is not None)
+        max_iters = changes.pop("max_iters", None)
         if costs is not None:  # the built-in terms take their keyword's compiled route (nik.ik.costs.route)
             call = dict(tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, q_near=q_near, max_iters=max_iters, plan=plan,
                         representation=representation, world=world, bounds=bounds, q_rest=q_rest,
                         rest_weight=rest_weight)  # fmt: skip
             return solve_routed(self, T_target, costs, call)
-        if plan is None and q_near is None and max_iters is None and representation is None and world is None:
+        simple = plan is None and not changes and max_iters is None
+        if simple and q_near is None and representation is None and world is None:
             res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is q_rest is None else None
             if res is not None:  # one pose in one kernel call (nik.ik.backends.one_pose)
                 return res
@@ -299,6 +303,7 @@ class IKSolver:
         if plan is None:
             n = _count(T_target)
             plan = self.plan(backend=be.name, tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, max_iters=max_iters, poses=n)
+            plan = replace(plan, **changes) if changes else plan
         plan = with_goal(plan, bounds, q_rest, rest_weight)
         return solve_costs(self, be, plan, T_target, q_near, representation, world, costs)
 
@@ -403,6 +408,23 @@ class IKSolver:
             max_step=step, world=world, closed=closed, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits,
             bounds=bounds, q_rest=q_rest, costs=costs,
         )  # fmt: skip
+
+
+def _plan_changes(plan, costs: bool) -> tuple:
+    """``(plan, changes)`` of :meth:`IKSolver.solve`'s ``plan=``: a :class:`~nik.ik.plan.Plan` (or None) as it is,
+    with no changes, or a dict of Plan fields as ``(None, changes)``; a field the Plan lacks is a one-line ValueError,
+    and so is a change other than ``max_iters`` with ``costs=`` (whose plan :func:`nik.ik.costs.solve_routed` makes)."""
+    if plan is None or isinstance(plan, Plan):
+        return plan, {}
+    if not isinstance(plan, dict):
+        raise ValueError(f"plan: expected a Plan, a dict of Plan fields or None, got {type(plan).__name__}")
+    names = {f.name for f in fields(Plan)}
+    bad = sorted(set(plan) - names) or (sorted(set(plan) - {"max_iters"}) if costs else [])
+    if bad:
+        raise ValueError(
+            f"plan: {bad[0]!r} is not a field the call can change (Plan fields: {', '.join(sorted(names))})"
+        )
+    return None, dict(plan)
 
 
 def _count(T_target) -> int | None:

@@ -14,7 +14,7 @@ import torch
 from torch.testing import assert_close
 
 import nik
-from nik.data import branch_classifier, branch_name, generate_dataset, load_dataset, resolve_ranges
+from nik.data import Compute, Sampling, branch_classifier, branch_name, generate_dataset, load_dataset, resolve_ranges
 from nik.data import generate as gen_mod
 from nik.data.storage import AtomicDirectory
 from nik.errors import DatasetError
@@ -32,7 +32,7 @@ def kuka():
 def small(tmp_path_factory, kuka):
     """One small float64 dataset shared by the read-only tests."""
     out = tmp_path_factory.mktemp("ds") / "kuka_small"
-    generate_dataset(kuka, 5000, out, seed=7, chunk_size=1500, progress=False, fsync=False)
+    generate_dataset(kuka, 5000, out, seed=7, progress=False, fsync=False, compute=Compute(chunk_size=1500))
     return out
 
 
@@ -75,7 +75,9 @@ def test_every_q_inside_the_limits(small, kuka):
 
 @pytest.mark.parametrize("sampler", ["uniform", "sobol"])
 def test_every_q_inside_training_ranges_file(tmp_path, kuka, sampler):
-    out = generate_dataset(kuka, 4000, tmp_path / "c", ranges=KUKA_RANGES, sampler=sampler, progress=False, fsync=False)
+    out = generate_dataset(
+        kuka, 4000, tmp_path / "c", progress=False, fsync=False, sampling=Sampling(ranges=KUKA_RANGES, sampler=sampler)
+    )
     ds = load_dataset(out)
     rng = (
         torch.tensor([[-180, 180], [-120, 35], [-120, 120], [-180, 180], [-120, 120], [-180, 180]], dtype=torch.float64)
@@ -92,7 +94,9 @@ def test_sobol_is_more_even_than_uniform(tmp_path, kuka):
     spreads = {}
     for sampler in ("uniform", "sobol"):
         ds = load_dataset(
-            generate_dataset(kuka, 4096, tmp_path / sampler, sampler=sampler, progress=False, fsync=False)
+            generate_dataset(
+                kuka, 4096, tmp_path / sampler, progress=False, fsync=False, sampling=Sampling(sampler=sampler)
+            )
         )
         lo, hi = kuka.limits[:, 0], kuka.limits[:, 1]
         u = ((ds.q - lo) / (hi - lo)).numpy()
@@ -138,11 +142,10 @@ def test_same_seed_same_arrays_across_chunk_and_block_boundaries(tmp_path, kuka,
             12000,
             tmp_path / f"c{chunk}",
             seed=3,
-            chunk_size=chunk,
-            sampler=sampler,
-            block_size=4096,
             progress=False,
             fsync=False,
+            sampling=Sampling(sampler=sampler, block_size=4096),
+            compute=Compute(chunk_size=chunk),
         )
         arrays = _arrays(out)
         if ref is None:
@@ -152,7 +155,13 @@ def test_same_seed_same_arrays_across_chunk_and_block_boundaries(tmp_path, kuka,
                 assert torch.equal(a, b), f"chunk {chunk} differs"
     other = _arrays(
         generate_dataset(
-            kuka, 12000, tmp_path / "s4", seed=4, block_size=4096, sampler=sampler, progress=False, fsync=False
+            kuka,
+            12000,
+            tmp_path / "s4",
+            seed=4,
+            progress=False,
+            fsync=False,
+            sampling=Sampling(block_size=4096, sampler=sampler),
         )
     )
     assert not torch.equal(other[0], ref[0])
@@ -163,7 +172,7 @@ def test_same_arrays_with_one_or_two_threads(tmp_path, kuka):
     arrays = []
     for threads in (1, 2):
         out = generate_dataset(
-            kuka, 20000, tmp_path / f"t{threads}", seed=5, threads=threads, progress=False, fsync=False
+            kuka, 20000, tmp_path / f"t{threads}", seed=5, progress=False, fsync=False, compute=Compute(threads=threads)
         )
         arrays.append(_arrays(out))
     assert torch.get_num_threads() == before  # restored
@@ -189,10 +198,14 @@ def test_splits_disjoint_and_covering(small):
 
 def test_split_fractions_validated(tmp_path, kuka):
     with pytest.raises(ValueError, match="leaves no training"):
-        generate_dataset(kuka, 10, tmp_path / "x", val_fraction=0.5, test_fraction=0.5, progress=False)
+        generate_dataset(
+            kuka, 10, tmp_path / "x", progress=False, sampling=Sampling(val_fraction=0.5, test_fraction=0.5)
+        )
     with pytest.raises(ValueError, match="val_fraction"):
-        generate_dataset(kuka, 10, tmp_path / "x", val_fraction=-0.1, progress=False)
-    out = generate_dataset(kuka, 10, tmp_path / "y", val_fraction=0, test_fraction=0, progress=False, fsync=False)
+        generate_dataset(kuka, 10, tmp_path / "x", progress=False, sampling=Sampling(val_fraction=-0.1))
+    out = generate_dataset(
+        kuka, 10, tmp_path / "y", progress=False, fsync=False, sampling=Sampling(val_fraction=0, test_fraction=0)
+    )
     assert load_dataset(out).splits == {"train": (0, 10), "val": (10, 10), "test": (10, 10)}
 
 
@@ -230,7 +243,16 @@ def test_failed_overwrite_keeps_the_old_dataset(tmp_path, kuka, monkeypatch):
     robot = nik.load_robot("kuka_kr")
     monkeypatch.setattr(robot, "fk", _failing_fk(robot.fk, fail_at=2))
     with pytest.raises(RuntimeError, match="simulated"):
-        generate_dataset(robot, 3000, out, seed=2, overwrite=True, chunk_size=1000, block_size=1000, progress=False)
+        generate_dataset(
+            robot,
+            3000,
+            out,
+            seed=2,
+            overwrite=True,
+            progress=False,
+            sampling=Sampling(block_size=1000),
+            compute=Compute(chunk_size=1000),
+        )
     for a, b in zip(_arrays(out), old, strict=True):
         assert torch.equal(a, b)
     assert _leftovers(tmp_path, "d") == []
@@ -252,7 +274,14 @@ def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch):
     robot = nik.load_robot("kuka_kr")
     monkeypatch.setattr(robot, "fk", _failing_fk(robot.fk, fail_at=2))
     with pytest.raises(RuntimeError, match="simulated"):
-        generate_dataset(robot, 5000, tmp_path / "d", chunk_size=1000, block_size=1000, progress=False)
+        generate_dataset(
+            robot,
+            5000,
+            tmp_path / "d",
+            progress=False,
+            sampling=Sampling(block_size=1000),
+            compute=Compute(chunk_size=1000),
+        )
     assert not (tmp_path / "d").exists()
     assert list(tmp_path.iterdir()) == []
 
@@ -265,7 +294,14 @@ def test_keyboard_interrupt_leaves_nothing(tmp_path, monkeypatch):
 
     monkeypatch.setattr(robot, "fk", interrupt)
     with pytest.raises(KeyboardInterrupt):
-        generate_dataset(robot, 5000, tmp_path / "d", chunk_size=1000, block_size=1000, progress=False)
+        generate_dataset(
+            robot,
+            5000,
+            tmp_path / "d",
+            progress=False,
+            sampling=Sampling(block_size=1000),
+            compute=Compute(chunk_size=1000),
+        )
     assert list(tmp_path.iterdir()) == []
 
 
@@ -273,7 +309,7 @@ def test_killed_run_leaves_no_final_dir_and_next_run_cleans_up(tmp_path):
     """A process killed outright (SIGKILL) mid-write: no final directory; the next run removes its temporary."""
     script = (
         "import nik, sys\n"
-        "from nik.data import generate_dataset\n"
+        "from nik.data import Compute, Sampling, generate_dataset\n"
         "robot = nik.load_robot('kuka_kr')\n"
         "fk = robot.fk\n"
         "calls = [0]\n"
@@ -283,7 +319,8 @@ def test_killed_run_leaves_no_final_dir_and_next_run_cleans_up(tmp_path):
         "        import os, signal; os.kill(os.getpid(), signal.SIGKILL)\n"
         "    return fk(q, **kw)\n"
         "robot.fk = slow\n"
-        f"generate_dataset(robot, 5000, {str(tmp_path / 'd')!r}, chunk_size=1000, block_size=1000, progress=False)\n"
+        f"generate_dataset(robot, 5000, {str(tmp_path / 'd')!r}, sampling=Sampling(block_size=1000), "
+        "compute=Compute(chunk_size=1000), progress=False)\n"
     )
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert proc.returncode == -9, proc.stderr
@@ -364,10 +401,11 @@ def test_not_a_dataset(tmp_path):
         ({"n": 0}, "positive"),
         ({"n": -5}, "positive"),
         ({"robot": "no_such_robot"}, "unknown robot"),
-        ({"ranges": [[0, 1]] * 5}, "5 ranges"),
-        ({"ranges": [[-4, 4]] * 6}, "outside the joint limits"),
-        ({"ranges": [[1, 0]] * 6}, "lo < hi"),
-        ({"sampler": "halton"}, "sampler"),
+        ({"sampling": Sampling(ranges=[[0, 1]] * 5)}, "5 ranges"),
+        ({"sampling": Sampling(ranges=[[-4, 4]] * 6)}, "outside the joint limits"),
+        ({"sampling": Sampling(ranges=[[1, 0]] * 6)}, "lo < hi"),
+        ({"sampling": Sampling(sampler="halton")}, "sampler"),
+        ({"sampling": {"sampler": "sobol"}}, "sampling: expected a nik.data.Sampling"),
         ({"dtype": "float16"}, "dtype"),
         ({"branch": 9}, "0..7"),
     ],
@@ -496,7 +534,14 @@ def test_stored_branch_labels_and_branch_filter(tmp_path):
     ref = None
     for chunk in (5000, 1234):
         out = generate_dataset(
-            puma, 2000, tmp_path / f"b3_{chunk}", seed=1, branch=3, chunk_size=chunk, progress=False, fsync=False
+            puma,
+            2000,
+            tmp_path / f"b3_{chunk}",
+            seed=1,
+            branch=3,
+            progress=False,
+            fsync=False,
+            compute=Compute(chunk_size=chunk),
         )
         ds3 = load_dataset(out)
         assert len(ds3) == 2000 and bool((ds3.branch == 3).all())
@@ -543,12 +588,10 @@ def test_compiled_fk_is_reproducible_across_chunks_and_threads(tmp_path, kuka):
             9000,
             tmp_path / f"c{chunk}",
             seed=6,
-            chunk_size=chunk,
-            block_size=4096,
-            compiled=True,
-            threads=threads,
             progress=False,
             fsync=False,
+            sampling=Sampling(block_size=4096),
+            compute=Compute(chunk_size=chunk, compiled=True, threads=threads),
         )
         arrays.append(_arrays(out))
     for a, b in zip(*arrays, strict=True):
@@ -562,7 +605,7 @@ def test_dataset_of_an_arm_with_a_prismatic_joint(tmp_path):
     assert branch_classifier(robot) is None  # branch labels are for PUMA-like (all-revolute) arms
     ranges = tmp_path / "ranges.yaml"
     ranges.write_text("angles: deg\nranges: [[-90, 90], [-90, 90], [0.4, 0.8], [-90, 90], [-45, 45], [-90, 90]]\n")
-    out = generate_dataset(robot, 2000, tmp_path / "st", ranges=ranges, progress=False, fsync=False)
+    out = generate_dataset(robot, 2000, tmp_path / "st", progress=False, fsync=False, sampling=Sampling(ranges=ranges))
     ds = load_dataset(out)
     assert ds.branch is None
     assert_close(ds.pose, robot.fk(ds.q), atol=1e-12, rtol=0)
@@ -575,7 +618,7 @@ def test_dataset_of_an_arm_with_a_prismatic_joint(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("angles: deg\nranges: [[-90, 90], [-90, 90], [0.1, 0.8], [-90, 90], [-45, 45], [-90, 90]]\n")
     with pytest.raises(ValueError, match=r"joint 3 range \[100 mm, 800 mm\] lies outside the joint limits \[304.8 mm"):
-        generate_dataset(robot, 10, tmp_path / "bad", ranges=bad, progress=False, fsync=False)
+        generate_dataset(robot, 10, tmp_path / "bad", progress=False, fsync=False, sampling=Sampling(ranges=bad))
 
 
 def _siblings(tmp_path, name):
@@ -620,14 +663,18 @@ def test_a_kill_at_any_instant_leaves_the_old_or_the_new_dataset_whole(tmp_path,
     if what == "merge":
         for seed in (1, 2):
             shards[seed] = [
-                generate_dataset(kuka, 60, tmp_path / f"s{seed}{i}", seed=seed, shard=(i, 2), block_size=30)
+                generate_dataset(
+                    kuka, 60, tmp_path / f"s{seed}{i}", seed=seed, shard=(i, 2), sampling=Sampling(block_size=30)
+                )
                 for i in range(2)
             ]
 
     def run(seed):
         if what == "merge":
             return merge_shards(out, shards[seed], overwrite=True)
-        return generate_dataset(kuka, 60, out, seed=seed, overwrite=True, block_size=30, progress=False)
+        return generate_dataset(
+            kuka, 60, out, seed=seed, overwrite=True, progress=False, sampling=Sampling(block_size=30)
+        )
 
     run(1)
     old = _arrays(out)[0]
@@ -679,3 +726,22 @@ def test_a_generate_whose_process_dies_between_its_renames_leaves_the_old_datase
     assert torch.equal(load_dataset(out).q, old)  # the next process puts the old one back
     generate_dataset("kuka_kr", 100, out, seed=2, overwrite=True, progress=False, fsync=False)
     assert _leftovers(tmp_path, "d") == []
+
+
+def test_the_generator_takes_grouped_options(tmp_path, kuka):
+    """``generate_dataset`` groups what is drawn (``Sampling``) and where it computes (``Compute``), and its writer
+    takes one resolved job (``_Job``): at most 12 parameters each (issue 46, item 4). The groups carry the options:
+    Sobol rows differ from uniform ones, and a small chunk changes nothing."""
+    import inspect
+
+    from nik.data.generate import _generate
+
+    assert len(inspect.signature(_generate).parameters) <= 12
+    assert len(inspect.signature(generate_dataset).parameters) <= 12
+    kw = dict(seed=3, progress=False, fsync=False)
+    plain = _arrays(generate_dataset(kuka, 300, tmp_path / "u", **kw))
+    chunked = _arrays(generate_dataset(kuka, 300, tmp_path / "c", compute=Compute(chunk_size=64), **kw))
+    sobol = _arrays(generate_dataset(kuka, 300, tmp_path / "s", sampling=Sampling(sampler="sobol"), **kw))
+    assert torch.equal(plain[0], chunked[0]) and torch.equal(plain[1], chunked[1])
+    assert not torch.equal(plain[0], sobol[0])
+    assert load_dataset(tmp_path / "s").meta["sampler"] == "sobol"

@@ -8,7 +8,7 @@ import pytest
 
 import nik
 from nik.cli import main
-from nik.data import generate_dataset, load_dataset, merge_shards, shard_rows
+from nik.data import Compute, Sampling, generate_dataset, load_dataset, merge_shards, shard_rows
 from nik.errors import DatasetError
 
 BLOCK = 1000  # small randomness blocks: several shards of a small dataset (the CLI keeps the default)
@@ -17,7 +17,10 @@ BLOCK = 1000  # small randomness blocks: several shards of a small dataset (the 
 def _gen(robot, out, shard=None, **kw):
     args = dict(seed=5, block_size=BLOCK, chunk_size=700, progress=False, fsync=False)
     args.update(kw)
-    return generate_dataset(robot, 3500, out, shard=shard, **args)
+    sampling = Sampling(**{k: args.pop(k) for k in ("sampler", "block_size") if k in args})
+    return generate_dataset(
+        robot, 3500, out, shard=shard, sampling=sampling, compute=Compute(chunk_size=args.pop("chunk_size")), **args
+    )
 
 
 def _assert_same_dataset(a, b):

@@ -80,10 +80,12 @@ def _pose_args(robot):
 # -- CUDA ------------------------------------------------------------------------------
 @cuda
 def test_generate_on_cuda_draws_the_same_joints_and_the_same_poses_to_rounding(tmp_path):
-    from nik.data import generate_dataset, load_dataset
+    from nik.data import Compute, generate_dataset, load_dataset
 
     a = load_dataset(generate_dataset("kuka_kr", 2000, tmp_path / "cpu", seed=1, progress=False))
-    b = load_dataset(generate_dataset("kuka_kr", 2000, tmp_path / "gpu", seed=1, device="cuda", progress=False))
+    b = load_dataset(
+        generate_dataset("kuka_kr", 2000, tmp_path / "gpu", seed=1, progress=False, compute=Compute(device="cuda"))
+    )
     assert torch.equal(a.q, b.q)
     torch.testing.assert_close(a.pose, b.pose, rtol=0, atol=1e-12)
     assert b.meta["fk"]["device"].startswith("cuda")

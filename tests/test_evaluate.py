@@ -118,7 +118,9 @@ def test_a_peer_row_that_cannot_be_built_is_skipped_with_a_one_line_note(odd_arm
     with pytest.raises(RuntimeError, match="no roll-pitch-yaw form"):
         robot_to_urdf(odd_arm)
     seen = []
-    report = _short_eval(odd_arm, odd_data, on_row=lambda rep: seen.append([r.method for r in rep.rows]))
+    report = _short_eval(
+        odd_arm, odd_data, hooks=ev.EvalHooks(on_row=lambda rep: seen.append([r.method for r in rep.rows]))
+    )
     methods = [r.method for r in report.rows]
     assert "pytorch-kinematics" not in methods and len(methods) >= 1
     assert seen[-1] == methods  # told after every row
@@ -338,3 +340,25 @@ def test_a_network_the_solver_set_aside_is_said_in_its_row_with_what_guessed_ins
     for method in ("network", "network + lm"):
         assert rows[method].note.startswith("guess network") and "set aside" not in rows[method].note
     assert "set aside" in markdown_table(report)
+
+
+def test_evaluate_reads_another_split_and_tells_its_hooks(odd_arm, tmp_path):
+    """``evaluate(data=(directory, split), hooks=EvalHooks(progress, on_row))``: the poses of that split (the val
+    split here, twice the test split's size), a progress message before each row and the report after each row; at
+    most 12 parameters (issue 46, item 4)."""
+    import inspect
+
+    from nik.data import Sampling, generate_dataset, load_dataset
+    from nik.evaluate import EvalHooks, evaluate
+
+    data = generate_dataset(
+        odd_arm, 40, tmp_path / "d", seed=1, progress=False, fsync=False, sampling=Sampling(val_fraction=0.2)
+    )
+    said, rows = [], []
+    hooks = EvalHooks(progress=said.append, on_row=lambda rep: rows.append(len(rep.rows)))
+    report = evaluate(odd_arm, data=(data, "val"), n=100, checkpoint=None, swarm="lm", include_pk=False, hooks=hooks)
+    assert report.n == len(load_dataset(data).split("val")) == 8 != len(load_dataset(data).split("test"))
+    assert rows == list(range(1, len(report.rows) + 1)) and len(said) == len(report.rows)
+    with pytest.raises(ValueError, match="data: expected a dataset directory"):
+        evaluate(odd_arm, data=(data, "val", 3))
+    assert len(inspect.signature(evaluate).parameters) <= 12

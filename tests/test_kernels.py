@@ -646,3 +646,39 @@ def test_closed_form_solutions_match_nik_analytic_solve(name):
     for b, s in zip(*np.nonzero(valid), strict=True):  # every valid solution reaches its target (own FK)
         fk(G, joints, q[b, s], Tq)
         np.testing.assert_allclose(Tq, T[b].numpy(), atol=1e-9)
+
+
+def _n_params(fn) -> int:
+    """Parameters of ``fn`` (a numba dispatcher: its Python function), as the issue's reviewer counts them."""
+    import inspect
+
+    return len(inspect.signature(getattr(fn, "py_func", fn)).parameters)
+
+
+def test_seeded_and_closed_form_kernels_take_grouped_arrays():
+    """The network, the answers, the refined rows and the outputs travel as tuples of arrays: at most 12
+    parameters per kernel (issue 46, item 4)."""
+    from nik.kernels import closed, seeded
+
+    for fn in (seeded.ranked_hypotheses, seeded.merge, closed.guess):
+        assert _n_params(fn) <= 12, fn.__name__
+
+
+def test_merge_takes_the_better_refined_row_and_adds_its_iterations():
+    """``merge(answers, idx, refined, strict, tol_pos, tol_rot)`` in place, against the rule worked by hand: target
+    ``idx[i]`` takes refined row ``i`` where its score (m + 0.1 rad) is lower (``strict``) or not higher, keeps
+    ``ok`` equal to both errors within the tolerances, and counts the targets still failing."""
+    from nik.kernels.seeded import merge
+
+    q = np.zeros((3, 2))
+    pos, rot = np.array([1e-3, 1e-3, 1e-6]), np.array([1e-2, 1e-2, 1e-6])
+    its, ok = np.array([5, 5, 5], dtype=np.int64), np.array([False, False, True])
+    rq = np.array([[1.0, 1.0], [2.0, 2.0]])
+    rpos, rrot, rit = np.array([1e-6, 1e-3]), np.array([1e-6, 1e-2]), np.array([3, 4], dtype=np.int64)
+    idx = np.array([0, 1], dtype=np.int64)
+    failing = merge((q, pos, rot, its, ok), idx, (rq, rpos, rrot, rit), True, 1e-4, 1e-3)
+    assert failing == 1  # target 1: the refined row ties and strict keeps the old one, still failing
+    assert q[0].tolist() == [1.0, 1.0] and q[1].tolist() == [0.0, 0.0]
+    assert ok.tolist() == [True, False, True] and its.tolist() == [8, 9, 5]
+    failing = merge((q, pos, rot, its, ok), idx[1:], (rq[1:], rpos[1:], rrot[1:], rit[1:]), False, 1e-4, 1e-3)
+    assert failing == 1 and q[1].tolist() == [2.0, 2.0]  # not strict: a tie takes the refined row

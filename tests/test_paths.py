@@ -161,6 +161,7 @@ def test_redundant_arm_without_q_start_keeps_one_posture(panda):
 def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
     """Back and forth six times along a line whose far end the arm cannot reach in that orientation: without the
     secondary objective (joint-limit centring) the posture drifts into a limit and then jumps; with it, neither."""
+    import nik.paths.candidates as candidates
     import nik.paths.solve as paths
 
     lo, hi = panda.robot.limits.double().T
@@ -182,7 +183,7 @@ def test_redundant_arm_does_not_drift_into_a_limit_and_jump(panda, monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert int(res.success.sum()) == int(panda.solve(T).success.sum())  # every waypoint any solve reaches
-    monkeypatch.setattr(paths, "PATH_PULL", 0.0)
+    monkeypatch.setattr(candidates, "PATH_PULL", 0.0)  # the chains' pull, where _chain_path reads it
     monkeypatch.setattr(paths, "_smooth", lambda *a: True)  # the chain alone, without the global search's rescue
     plain, plain_margin = run()  # the check can fail: nearest-to-the-predecessor alone drifts and jumps
     assert plain_margin < 0.05 and plain.path.largest_step > math.radians(90.0)
@@ -595,3 +596,57 @@ def test_bad_closed_timing_or_bounds_is_a_one_line_error(ur5, kw, match):
     with pytest.raises(ValueError, match=match) as err:
         ur5.solve_path(_line(ur5.robot, q0, [0.0, 1.0, 0.0], 0.05, 5), **kw)
     assert "\n" not in str(err.value)
+
+
+def test_the_path_solver_is_modules_of_one_job_each():
+    """``nik.paths.solve`` keeps ``solve_path`` (and the names its callers read) while parsing, the call's state,
+    candidates, the choice, the posture search, repairs and the report live in modules of their own, each opening
+    with a docstring; the path kernels and ``solve_path`` take at most 12 parameters (issue 46, item 4)."""
+    import importlib
+    import inspect
+
+    from nik.paths import kernels, trajopt
+    from nik.paths.solve import PathOptions, solve_path
+
+    jobs = ("parse", "run", "candidates", "choice", "search", "repair", "report", "settings", "solve")
+    for name in jobs:
+        mod = importlib.import_module(f"nik.paths.{name}")
+        assert mod.__doc__ and len(mod.__doc__.split()) > 15, name
+        assert len(inspect.getsource(mod).splitlines()) < 700, name  # no module of six jobs again
+    assert inspect.getmodule(solve_path).__name__ == "nik.paths.solve"
+    for fn in (kernels.path_chains, kernels.path_chains_toward, kernels.path_chains_bounded,
+               kernels.path_chains_bounded_toward, trajopt.polish_path, solve_path):  # fmt: skip
+        params = inspect.signature(getattr(fn, "py_func", fn)).parameters
+        assert len(params) <= 12, fn.__name__
+    with pytest.raises(TypeError):
+        PathOptions()  # the tolerances are the caller's to state
+
+
+def test_path_chains_with_grouped_arrays_follow_a_path_as_the_drifting_chains_do(ur5):
+    """``path_chains(G, joints, T, starts, lm, pull, pull_cap, out)`` is ``path_chains_toward`` drifting to the middle
+    of the ranges, and its answers reach the waypoints by FK (an independent check: the torch FK)."""
+    from nik.ik.model import model_of
+    from nik.kernels.chain import LOWER, UPPER
+    from nik.kernels.lm import seed_state
+    from nik.paths.kernels import path_chains, path_chains_toward
+
+    robot = ur5.robot
+    lm = model_of(robot).lm
+    lo, hi = robot.limits.double().T
+    q0 = lo + (hi - lo) * torch.tensor([0.4, 0.3, 0.6, 0.5, 0.45, 0.5], dtype=torch.float64)
+    T = np.ascontiguousarray(_line(robot, q0, [0.0, 1.0, 0.0], 0.05, 8).numpy())
+    starts = q0.numpy()[None].copy()
+    opts, iopts = lm.options(1e-6, 1e-5)
+    run = (opts, iopts, np.zeros(8, dtype=np.int64), seed_state(0))
+
+    def out():
+        return (np.empty((1, 8, 6)), np.empty((1, 8), dtype=np.int64), np.empty((1, 8), dtype=bool),
+                np.empty((1, 8)), np.empty((1, 8)))  # fmt: skip
+
+    a, b = out(), out()
+    path_chains(lm.G, lm.joints, T, starts, run, 0.02, 0.01, a)
+    mid = (0.5 * (lm.joints[:, LOWER] + lm.joints[:, UPPER]))[None].copy()
+    path_chains_toward(lm.G, lm.joints, T, starts, (mid, np.full(1, 0.02), np.full(1, 0.01)), run, b)
+    assert np.array_equal(a[0], b[0]) and a[2].all()
+    pos, rot = nik.pose_error(torch.from_numpy(T), robot.fk(torch.from_numpy(a[0][0])))
+    assert float(pos.max()) < 1e-5 and float(rot.max()) < 1e-4

@@ -179,8 +179,8 @@ def test_seed_makes_results_repeatable():
     robot = nik.load_robot("ur5")
     _, T = _targets(robot, 3, 13)
     solver = nik.IKSolver(robot, refine="pso")
-    a = solver.solve(T, seed=5, max_iters=20, tol_pos=1e-3, tol_rot=1e-2)
-    b = solver.solve(T, seed=5, max_iters=20, tol_pos=1e-3, tol_rot=1e-2)
+    a = solver.solve(T, seed=5, plan={"max_iters": 20}, tol_pos=1e-3, tol_rot=1e-2)
+    b = solver.solve(T, seed=5, plan={"max_iters": 20}, tol_pos=1e-3, tol_rot=1e-2)
     assert torch.equal(a.q, b.q)
 
 
@@ -246,9 +246,9 @@ def test_fallback_to_the_closed_form_rescues_a_poor_network(tmp_path):
     q, T = _targets(robot, 32, 18)
     torch.manual_seed(0)
     path = save_checkpoint(IKNet(robot, hidden=[4]).fit_normalisation(T, q), tmp_path / "poor.ckpt")  # untrained
-    without = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback=False).solve(T, max_iters=3)
+    without = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback=False).solve(T, plan={"max_iters": 3})
     assert not bool(without.success.all())
-    rescued = nik.IKSolver(robot, checkpoint=path, refine="lm").solve(T, max_iters=3)
+    rescued = nik.IKSolver(robot, checkpoint=path, refine="lm").solve(T, plan={"max_iters": 3})
     _check_round_trip(robot, rescued, T, 1e-4, 1e-3)
 
 
@@ -260,10 +260,10 @@ def test_multistart_fallback_rescues_a_poor_network_on_an_arm_without_closed_for
     q, T = _targets(robot, 32, 19)
     torch.manual_seed(0)
     path = save_checkpoint(IKNet(robot, hidden=[4]).fit_normalisation(T, q), tmp_path / "poor.ckpt")  # untrained
-    without = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback=False).solve(T, max_iters=3)
+    without = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback=False).solve(T, plan={"max_iters": 3})
     assert not bool(without.success.all())
     rescued = nik.IKSolver(robot, checkpoint=path, refine="lm", fallback="multistart")
-    rescued = rescued.solve(T, tol_pos=1e-4, tol_rot=1e-3, max_iters=3)
+    rescued = rescued.solve(T, tol_pos=1e-4, tol_rot=1e-3, plan={"max_iters": 3})
     _check_round_trip(robot, rescued, T, 1e-4, 1e-3)
 
 
@@ -511,3 +511,22 @@ def test_a_path_given_x_y_z_w_gives_the_trajectory_of_the_same_path_given_w_firs
     res = solver.solve_path(wxyz[:, [0, 1, 2, 4, 5, 6, 3]], q[0], representation="quat_xyzw")
     assert bool(ref.success.all()) and bool(res.success.all())
     torch.testing.assert_close(res.q, ref.q, atol=1e-9, rtol=0)
+
+
+def test_solve_plan_dict_changes_the_iteration_cap_and_refuses_unknown_fields():
+    """``solve(plan={"max_iters": N})``: the refinement's iteration limit as one field of the plan group (the
+    solver's own plan of the call, that field changed): no refinement at 0 iterations, the same answer as the plan
+    changed by hand, and a field the plan lacks refused in one line. ``solve`` takes at most 12 parameters."""
+    import inspect
+
+    robot = nik.load_robot("ur5")
+    _, T = _targets(robot, 4, 21)
+    solver = nik.IKSolver(robot, checkpoint=None, analytic=False)
+    none = solver.solve(T, plan={"max_iters": 0, "restarts": False, "hypotheses": False, "fallback": "none"})
+    assert int(none.iterations.sum()) == 0 and not bool(none.success.any())
+    capped = solver.solve(T, seed=2, plan={"max_iters": 3})
+    by_hand = solver.solve(T, plan=solver.plan(seed=2, max_iters=3, poses=4))
+    assert torch.equal(capped.q, by_hand.q) and int(capped.iterations.max()) >= 1
+    with pytest.raises(ValueError, match="plan: 'iterations' is not a field"):
+        solver.solve(T, plan={"iterations": 3})
+    assert len(inspect.signature(nik.IKSolver.solve).parameters) - 1 <= 12  # self aside

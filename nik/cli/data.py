@@ -102,7 +102,7 @@ def register(sub) -> None:
 def _cmd_generate(args) -> int:
     import time
 
-    from nik.data import DEFAULT_CHUNK, generate_dataset
+    from nik.data import DEFAULT_CHUNK, Compute, Sampling, generate_dataset
 
     if args.n <= 0:
         raise ValueError(f"--n must be a positive integer, got {args.n}")
@@ -118,19 +118,20 @@ def _cmd_generate(args) -> int:
         args.n,
         args.out,
         seed=args.seed,
-        sampler=args.sampler,
-        ranges=args.ranges,
-        val_fraction=args.val_fraction,
-        test_fraction=args.test_fraction,
         dtype=args.dtype,
-        device=args.device,
         branch=args.branch,
         overwrite=args.overwrite,
-        chunk_size=args.chunk_size or DEFAULT_CHUNK,
-        compiled={"auto": "auto", "eager": False, "compiled": True}[args.fk],
-        threads=args.threads,
         progress=None if not args.no_progress else False,
         shard=shard,
+        sampling=Sampling(
+            sampler=args.sampler, ranges=args.ranges, val_fraction=args.val_fraction, test_fraction=args.test_fraction
+        ),
+        compute=Compute(
+            device=args.device,
+            chunk_size=args.chunk_size or DEFAULT_CHUNK,
+            compiled={"auto": "auto", "eager": False, "compiled": True}[args.fk],
+            threads=args.threads,
+        ),
     )
     dt = time.perf_counter() - t0
     if shard is not None:

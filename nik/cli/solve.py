@@ -395,7 +395,7 @@ def _cmd_solve(args) -> int:
             tol_rot=math.radians(args.tol_deg),
             seed=args.seed,
             q_near=q_near,
-            max_iters=args.max_iters,
+            plan={"max_iters": args.max_iters},  # the refinement's iteration limit (None: its config)
             bounds=goal,
         )
     res = res.to("cpu")
@@ -579,7 +579,7 @@ def _print_table(robot, res, *, tolerance: str, scene: str = "", limit: int = 50
 
 
 def _cmd_evaluate(args) -> int:
-    from nik.evaluate import REFINEMENTS, evaluate, markdown_table, write_report
+    from nik.evaluate import REFINEMENTS, EvalHooks, evaluate, markdown_table, write_report
 
     robot = robot_from_args(args)
     refinements = tuple(m.strip() for m in args.refinements.split(",") if m.strip())
@@ -595,17 +595,18 @@ def _cmd_evaluate(args) -> int:
     out = Path(args.out) if args.out else Path("runs") / "eval" / robot.name
     report = evaluate(
         robot,
-        data=args.data,
+        data=(args.data, args.split),
         checkpoint=args.checkpoint,
         n=args.n,
-        split=args.split,
         refinements=refinements,
         swarm=args.swarm,
         include_pk=not args.no_pk,
         seed=args.seed,
         device=args.device,
-        progress=lambda msg: print(f"evaluating: {msg}", file=sys.stderr, flush=True),
-        on_row=lambda rep: write_report(rep, out, plot=False),  # each row is kept as soon as it is made
+        hooks=EvalHooks(
+            progress=lambda msg: print(f"evaluating: {msg}", file=sys.stderr, flush=True),
+            on_row=lambda rep: write_report(rep, out, plot=False),  # each row is kept as soon as it is made
+        ),
     )
     paths = write_report(report, out)
     print(markdown_table(report))

@@ -3,6 +3,7 @@
 generate_dataset(robot, n, out, seed=...)  -> writes data/NAME/ (q.npy, pose.npy, branch.npy, meta.json)
 load_dataset(path, robot=None)             -> IKDataset (.q (N, dof), .pose (N, 4, 4), .meta, splits)
 generate_dataset(..., shard=(i, k))         -> shard i of k of that dataset; merge_shards(out, dirs) joins them
+generate_dataset(..., sampling=Sampling(sampler="sobol"), compute=Compute(device="cuda"))  -> grouped options
 
 The room may import kinematics, poses and robots; never nets, analytic, lm, swarm, ik, learn or cli.
 """
@@ -11,6 +12,8 @@ from nik.data.branches import BRANCH_NAMES, BranchClassifier, branch_classifier,
 from nik.data.generate import (
     BLOCK_SIZE,
     DEFAULT_CHUNK,
+    Compute,
+    Sampling,
     generate_dataset,
     parse_shard,
     resolve_ranges,
@@ -24,8 +27,10 @@ __all__ = [
     "BLOCK_SIZE",
     "BRANCH_NAMES",
     "BranchClassifier",
+    "Compute",
     "DEFAULT_CHUNK",
     "IKDataset",
+    "Sampling",
     "branch_classifier",
     "branch_labels",
     "branch_name",

@@ -28,7 +28,9 @@ import os
 import sys
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -42,7 +44,9 @@ from nik.robots.yamlfile import load_yaml
 __all__ = [
     "BLOCK_SIZE",
     "COMPILE_THRESHOLD",
+    "Compute",
     "DEFAULT_CHUNK",
+    "Sampling",
     "generate_dataset",
     "parse_shard",
     "resolve_ranges",
@@ -352,27 +356,70 @@ class _BackgroundIO:
 # ---------------------------------------------------------------------------
 # The generator
 # ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Sampling:
+    """Which rows :func:`generate_dataset` draws and how it splits them (each field changes the dataset).
+
+    Attributes:
+        sampler: ``"uniform"`` (iid uniform in the ranges) or ``"sobol"`` (scrambled Sobol
+            sequence from ``torch.quasirandom``, low discrepancy; at most 2^30 points).
+        ranges: ``None``/``"limits"`` (joint limits), a YAML ranges file, or ``(dof, 2)`` radians;
+            see :func:`resolve_ranges`.
+        block_size: samples per randomness block (changes the numbers drawn; keep the default).
+        val_fraction, test_fraction: sizes of the validation and test splits (fractions of n,
+            rounded). Splits are contiguous row ranges train | val | test; the samples are
+            drawn independently of their index, so this is a random split (Sobol: each part
+            is itself a spread-out stretch of the sequence).
+    """
+
+    sampler: str = "uniform"
+    ranges: Any = None
+    block_size: int = BLOCK_SIZE
+    val_fraction: float = 0.1
+    test_fraction: float = 0.1
+
+
+@dataclass(frozen=True)
+class Compute:
+    """Where and how :func:`generate_dataset` computes (the dataset does not depend on it beyond FK rounding, which
+    ``meta["fk"]`` records).
+
+    Attributes:
+        device: where FK runs (``"cpu"``, ``"cuda"``); the random numbers are always drawn on
+            the CPU so a dataset does not depend on the device beyond FK rounding.
+        chunk_size: samples processed at once; bounds memory (about 1 KB per sample), does not
+            change the result.
+        compiled: ``True``: run the ``torch.compile``'d FK (compiles once, several seconds; then
+            up to 1.2x faster end to end here); ``False``: eager FK; ``"auto"`` (default): compiled when
+            ``n >= COMPILE_THRESHOLD`` (10,000,000), where the compile time pays off. Compiled
+            and eager FK may differ in the last bit (both are FK to ~1e-16 m), so the choice is
+            recorded in ``meta["fk"]``; either way the result is deterministic.
+        threads: torch threads for sampling, labels and FK while generating (restored afterwards;
+            ``None``: leave torch's setting). Writing and hashing run in one more thread, so the
+            default 1 keeps 2 cores busy without oversubscribing them (oversubscribed, torch's
+            thread pool slows down several-fold). The result does not depend on it.
+    """
+
+    device: Any = "cpu"
+    chunk_size: int = DEFAULT_CHUNK
+    compiled: bool | str = "auto"
+    threads: int | None = 1
+
+
 def generate_dataset(
     robot,
     n: int,
     out: str | Path,
     *,
     seed: int = 0,
-    sampler: str = "uniform",
-    ranges=None,
-    val_fraction: float = 0.1,
-    test_fraction: float = 0.1,
+    sampling: Sampling | None = None,
     dtype: str | torch.dtype = "float64",
-    device: str | torch.device = "cpu",
     branch: int | None = None,
     overwrite: bool = False,
-    chunk_size: int = DEFAULT_CHUNK,
-    compiled: bool | str = "auto",
     progress: bool | None = None,
     fsync: bool = True,
-    block_size: int = BLOCK_SIZE,
-    threads: int | None = 1,
     shard=None,
+    compute: Compute | None = None,
 ) -> Path:
     """Generate ``n`` (joint vector, pose) pairs and write them to the directory ``out``.
 
@@ -381,43 +428,24 @@ def generate_dataset(
         n: number of samples (> 0).
         out: dataset directory to create, e.g. ``data/kuka_kr_1m``.
         seed: random seed; the same arguments give bit-identical arrays.
-        sampler: ``"uniform"`` (iid uniform in the ranges) or ``"sobol"`` (scrambled Sobol
-            sequence from ``torch.quasirandom``, low discrepancy; at most 2^30 points).
-        ranges: ``None``/``"limits"`` (joint limits), a YAML ranges file, or ``(dof, 2)`` radians;
-            see :func:`resolve_ranges`.
-        val_fraction, test_fraction: sizes of the validation and test splits (fractions of n,
-            rounded). Splits are contiguous row ranges train | val | test; the samples are
-            drawn independently of their index, so this is a random split (Sobol: each part
-            is itself a spread-out stretch of the sequence).
+        sampling: :class:`Sampling`, which rows are drawn and how they are split (default: uniform in the joint
+            limits, 10 % validation, 10 % test).
         dtype: ``"float32"`` or ``"float64"``: storage dtype of q and pose. q is drawn in float64,
             rounded to ``dtype`` (and kept inside the ranges); the pose is FK of exactly the
             stored q, computed in float64 and rounded once, so ``FK(stored q) == stored pose`` to
             the storage precision.
-        device: where FK runs (``"cpu"``, ``"cuda"``); the random numbers are always drawn on
-            the CPU so a dataset does not depend on the device beyond FK rounding.
         branch: keep only samples of this IK branch label (0..7; see :mod:`nik.data.branches`),
             by rejection until n are kept (deterministic: the first n accepted candidates).
             ValueError for arms without a branch classifier.
         overwrite: replace an existing dataset at ``out`` (the old one is removed only after the
             new one is complete). Without it an existing ``out`` is a FileExistsError.
-        chunk_size: samples processed at once; bounds memory (about 1 KB per sample), does not
-            change the result.
-        compiled: ``True``: run the ``torch.compile``'d FK (compiles once, several seconds; then
-            up to 1.2x faster end to end here); ``False``: eager FK; ``"auto"`` (default): compiled when
-            ``n >= COMPILE_THRESHOLD`` (10,000,000), where the compile time pays off. Compiled
-            and eager FK may differ in the last bit (both are FK to ~1e-16 m), so the choice is
-            recorded in ``meta["fk"]``; either way the result is deterministic.
         progress: show a tqdm progress bar; None (default): a bar when stderr is a terminal, else a progress line
             every :data:`PROGRESS_EVERY_S` seconds; False: nothing.
         fsync: flush files to disk before the final rename.
-        block_size: samples per randomness block (changes the numbers drawn; keep the default).
-        threads: torch threads for sampling, labels and FK while generating (restored afterwards;
-            ``None``: leave torch's setting). Writing and hashing run in one more thread, so the
-            default 1 keeps 2 cores busy without oversubscribing them (oversubscribed, torch's
-            thread pool slows down several-fold). The result does not depend on it.
         shard: ``(i, k)`` or ``"i/k"``: write only shard ``i`` (0-based) of ``k`` of this dataset, the
             rows :func:`shard_rows` gives; join the shards with :func:`nik.data.merge_shards`
             (``nik data merge``). Not with ``branch`` (rejection makes every row depend on all before it).
+        compute: :class:`Compute`, where and how it computes (default: FK on the CPU, one torch thread).
 
     Returns:
         The dataset directory ``out`` (a :class:`pathlib.Path`).
@@ -428,6 +456,13 @@ def generate_dataset(
     """
     from nik.robots import load_robot
 
+    sampling, compute = sampling or Sampling(), compute or Compute()
+    if not isinstance(sampling, Sampling) or not isinstance(compute, Compute):
+        name, got = ("sampling", sampling) if not isinstance(sampling, Sampling) else ("compute", compute)
+        raise ValueError(f"{name}: expected a nik.data.{name.title()}, got {type(got).__name__}")
+    sampler, ranges, block_size = sampling.sampler, sampling.ranges, sampling.block_size
+    val_fraction, test_fraction = sampling.val_fraction, sampling.test_fraction
+    device, chunk_size, compiled, threads = compute.device, compute.chunk_size, compute.compiled, compute.threads
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or int(n) <= 0:
         raise ValueError(f"n must be a positive integer, got {n!r}")
     n = int(n)
@@ -481,61 +516,61 @@ def generate_dataset(
     if threads is not None:
         torch.set_num_threads(threads)
     try:
-        return _generate(
-            robot,
-            n,
-            out,
-            seed,
-            sampler,
-            rng,
-            ranges_desc,
-            splits,
-            tdtype,
-            dtype_name,
-            device,
-            branch,
-            classifier,
-            overwrite,
-            int(chunk_size),
-            compiled,
-            progress,
-            fsync,
-            int(block_size),
-            stream,
-            max_candidates,
-            shard,
-            rows,
-        )
+        job = _Job(
+            robot, n, out, seed, sampler, rng, ranges_desc, splits, tdtype, dtype_name, device, branch, classifier,
+            overwrite, int(chunk_size), compiled, progress, fsync, int(block_size), stream, max_candidates, shard, rows,
+        )  # fmt: skip
+        return _generate(job)
     finally:
         if threads is not None:
             torch.set_num_threads(previous_threads)
 
 
-def _generate(
-    robot,
-    n,
-    out,
-    seed,
-    sampler,
-    rng,
-    ranges_desc,
-    splits,
-    tdtype,
-    dtype_name,
-    device,
-    branch,
-    classifier,
-    overwrite,
-    chunk_size,
-    compiled,
-    progress,
-    fsync,
-    block_size,
-    stream,
-    max_candidates,
-    shard=None,
-    rows=None,
-) -> Path:
+@dataclass(frozen=True)
+class _Job:
+    """One :func:`generate_dataset` run, its arguments checked and resolved: the robot, ``n`` rows and the output
+    directory; the randomness (``seed``, ``sampler``, the ranges ``rng (dof, 2)`` and their description, the
+    sample ``stream``, ``block_size``, ``max_candidates``); the splits' sizes; the storage dtype (``tdtype``,
+    ``dtype_name``); where FK runs (``device``, ``compiled``); the branch filter (``branch``, ``classifier``); how
+    it is written (``overwrite``, ``chunk_size``, ``progress``, ``fsync``); and the shard (``shard``, ``rows``:
+    ``(start, stop)`` of the rows this run writes; None: all ``n``)."""
+
+    robot: Any
+    n: int
+    out: Any
+    seed: int
+    sampler: str
+    rng: Any
+    ranges_desc: Any
+    splits: Any
+    tdtype: Any
+    dtype_name: str
+    device: Any
+    branch: Any
+    classifier: Any
+    overwrite: bool
+    chunk_size: int
+    compiled: bool
+    progress: Any
+    fsync: bool
+    block_size: int
+    stream: Any
+    max_candidates: int
+    shard: Any = None
+    rows: Any = None
+
+
+def _generate(job: _Job) -> Path:
+    """Write the dataset of ``job`` (:class:`_Job`) under a temporary name, then rename it into place."""
+    robot, n, out, seed, sampler, rng, ranges_desc, splits = (
+        job.robot, job.n, job.out, job.seed, job.sampler, job.rng, job.ranges_desc, job.splits,
+    )  # fmt: skip
+    tdtype, dtype_name, device, branch, classifier, overwrite = (
+        job.tdtype, job.dtype_name, job.device, job.branch, job.classifier, job.overwrite,
+    )  # fmt: skip
+    chunk_size, compiled, progress, fsync = job.chunk_size, job.compiled, job.progress, job.fsync
+    block_size = job.block_size
+    stream, max_candidates, shard, rows = job.stream, job.max_candidates, job.shard, job.rows
     row_start, row_stop = rows if rows is not None else (0, n)
     m_rows = row_stop - row_start  # rows this run writes (n unless a shard)
     atomic = AtomicDirectory(out, overwrite=overwrite)

@@ -178,11 +178,13 @@ def solutions(k, G, joints, tol_pos, tol_rot, T, q, valid):
 
 
 @kernel
-def guess(k, G, joints, check_tol, T, q_near, use_near, limit_rounding, tol_pos, tol_rot, reachable, q, pos, rot, ok):
+def guess(k, G, joints, check_tol, T, q_near, use_near, limit_rounding, tol_pos, tol_rot, reachable, out):
     """The closed-form guess of each target ``T: (B, 4, 4)`` in one call: its 8 solutions (:func:`solutions`, FK
     check within ``check_tol``), the one :func:`pick` chooses into ``q: (B, 6)``, that answer's position (m) and
-    rotation (rad) errors ``pos, rot: (B,)`` and ``ok: (B,)``: within ``tol_pos, tol_rot``. Returns how many
-    targets miss the tolerance while ``reachable: (B,)`` (those a refinement should take up)."""
+    rotation (rad) errors ``pos, rot: (B,)`` and ``ok: (B,)``: within ``tol_pos, tol_rot``; ``out = (q, pos, rot,
+    ok)``, written in place. Returns how many targets miss the tolerance while ``reachable: (B,)`` (those a
+    refinement should take up)."""
+    q, pos, rot, ok = out
     n = joints.shape[0]
     q8, valid8 = np.empty((1, 8, n)), np.empty((1, 8), dtype=np.bool_)
     Tq = np.empty((3, 4))

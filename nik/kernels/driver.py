@@ -189,10 +189,8 @@ def solve(
     hyp = np.empty((0, 0, n))
     guessed = True
     if source == SOURCE_NETWORK:
-        hyp, p, r, o, _ = ranked_hypotheses(
-            flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads, G, joints, Tin, T,
-            tol_pos, tol_rot,
-        )  # fmt: skip
+        net = (flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads)
+        hyp, p, r, o, _ = ranked_hypotheses(net, G, joints, Tin, T, tol_pos, tol_rot)
         for b in range(B):
             q[b] = hyp[b, 0]
             pos[b], rot[b], ok[b] = p[b], r[b], o[b]
@@ -200,7 +198,7 @@ def solve(
     elif source == SOURCE_ANALYTIC:
         closed_guess(
             closed, G, joints, check_tol, T, q_near if use_near else q, use_near, limit_rounding, tol_pos, tol_rot,
-            reachable, q, pos, rot, ok,
+            reachable, (q, pos, rot, ok),
         )  # fmt: skip
     else:
         guessed = False
@@ -224,7 +222,7 @@ def solve(
                 G, joints, _rows(T, idx), _rows(q, idx), opts, iopts,
                 _budgets(reach, budget if restarts_first else 0), seed,
             )  # fmt: skip
-            merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, False, tol_pos, tol_rot)
+            merge((q, pos, rot, iterations, ok), idx, (rq, rpos, rrot, rit), False, tol_pos, tol_rot)
     # near
     if use_near and near:
         b_all = _budgets(reachable, budget if restarts and fallback != FALLBACK_NONE else 0)
@@ -282,7 +280,7 @@ def solve(
             rq, rit = np.empty((m, n)), np.empty(m, dtype=np.int64)
             conv, rpos, rrot = np.empty(m, dtype=np.bool_), np.empty(m), np.empty(m)
             lm_starts(G, joints, _rows(T, idx), starts, opts, iopts, seed, rq, rit, conv, rpos, rrot)
-            merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, True, tol_pos, tol_rot)
+            merge((q, pos, rot, iterations, ok), idx, (rq, rpos, rrot, rit), True, tol_pos, tol_rot)
     # fallback
     skip = fallback == FALLBACK_NONE
     skip = skip or (fallback == FALLBACK_ANALYTIC and source == SOURCE_ANALYTIC)
@@ -301,14 +299,14 @@ def solve(
                 rok = np.empty(m, dtype=np.bool_)
                 closed_guess(
                     closed, G, joints, check_tol, Ti, start, True, limit_rounding, tol_pos, tol_rot,
-                    _rows(reachable, idx), rq, rpos, rrot, rok,
+                    _rows(reachable, idx), (rq, rpos, rrot, rok),
                 )  # fmt: skip
                 rit = np.zeros(m, dtype=np.int64)
             else:
                 rq, rit, rpos, rrot = _lm(
                     G, joints, Ti, np.zeros((m, n)), opts, iopts_multi, _budgets(_rows(reachable, idx), budget), seed
                 )
-            merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, True, tol_pos, tol_rot)
+            merge((q, pos, rot, iterations, ok), idx, (rq, rpos, rrot, rit), True, tol_pos, tol_rot)
     return every
 
 

@@ -74,28 +74,15 @@ def hypotheses(flat, layout, activation, in_mean, in_std, out_center, out_half, 
 
 
 @kernel
-def ranked_hypotheses(
-    flat,
-    layout,
-    activation,
-    in_mean,
-    in_std,
-    out_center,
-    out_half,
-    prismatic,
-    heads,
-    G,
-    joints,
-    Tin,
-    T,
-    tol_pos,
-    tol_rot,
-):
+def ranked_hypotheses(net, G, joints, Tin, T, tol_pos, tol_rot):
     """:func:`hypotheses` of the network's input poses ``Tin: (B, 4, 4)`` then :func:`rank` against the targets
     ``T: (B, 4, 4)`` by the FK of ``G, joints`` in one call (``Tin`` is ``T`` unless the network was made for the arm
     without the robot's base/tool frames: then ``base^-1 @ T @ tool^-1``), scratch allocated here: returns
     ``(q (B, K, n) ranked, pos (B,), rot (B,), ok (B,), failing)``: the best hypothesis' errors (metres, radians),
-    whether it is within ``tol_pos, tol_rot``, and how many are not."""
+    whether it is within ``tol_pos, tol_rot``, and how many are not. ``net``: the packed network, the tuple
+    ``(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads)``
+    (:attr:`nik.nets.compiled.PackedNet.arrays`)."""
+    flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads = net
     B, n = T.shape[0], out_center.shape[0]
     x = np.empty((B, 9), dtype=flat.dtype)
     y = np.empty((B, layout[layout.shape[0] - 1, 0]), dtype=flat.dtype)
@@ -171,10 +158,13 @@ def lm_starts(G, joints, Tt, starts, opts, iopts, seed, q, iterations, converged
 
 
 @kernel
-def merge(q, pos, rot, iterations, ok, idx, rq, rpos, rrot, rit, strict, tol_pos, tol_rot):
-    """In place: target ``idx[i]`` of the answers ``q, pos, rot, iterations, ok`` takes row ``i`` of the refined
-    ``rq, rpos, rrot`` where that is better (metres + 0.1 x radians; ``strict``: lower, else not higher), and
-    ``rit[i]`` is added to its iterations; ``ok`` is kept equal to ``pos <= tol_pos and rot <= tol_rot``."""
+def merge(answers, idx, refined, strict, tol_pos, tol_rot):
+    """In place: target ``idx[i]`` of the ``answers = (q, pos, rot, iterations, ok)`` takes row ``i`` of the
+    ``refined = (rq, rpos, rrot, rit)`` where that is better (metres + 0.1 x radians; ``strict``: lower, else not
+    higher), and ``rit[i]`` is added to its iterations; ``ok`` is kept equal to ``pos <= tol_pos and rot <= tol_rot``.
+    Returns how many targets still fail."""
+    q, pos, rot, iterations, ok = answers
+    rq, rpos, rrot, rit = refined
     n = q.shape[1]
     for i in range(idx.shape[0]):
         b = idx[i]

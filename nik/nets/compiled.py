@@ -51,9 +51,15 @@ class PackedNet:
         base/tool frames: :meth:`nik.ik.model.Model.arm_targets`); the ranking is always against ``T``."""
         from nik.kernels.seeded import ranked_hypotheses
 
-        return ranked_hypotheses(
+        return ranked_hypotheses(self.arrays, G, joints, T if Tin is None else Tin, T, tol_pos, tol_rot)
+
+    @property
+    def arrays(self) -> tuple:
+        """``(flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads)``: the network as
+        the kernels take it (:func:`nik.kernels.seeded.ranked_hypotheses`)."""
+        return (
             self.flat, self.layout, self.activation, self.in_mean, self.in_std, self.out_center, self.out_half,
-            self.prismatic, self.heads, G, joints, T if Tin is None else Tin, T, tol_pos, tol_rot,
+            self.prismatic, self.heads,
         )  # fmt: skip
 
 

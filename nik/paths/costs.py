@@ -26,7 +26,7 @@ import warnings
 import numpy as np
 import torch
 
-from nik.paths.solve import PATH_MAX_STEP
+from nik.paths.solve import PATH_MAX_STEP, PathOptions
 from nik.paths.solve import solve_path as search_path
 
 __all__ = ["PATH_MAX_STEP", "solve_path"]
@@ -51,7 +51,9 @@ def solve_path(solver, T_path, q_start=None, *, costs=None, timing=False, vel_li
     term's ``q_rest``, its weight unused: the path's own pulls serve it), the manipulability the path's null-space
     step (:func:`_manipulable`); only the other terms make the problem."""
     if costs is None:
-        return search_path(solver, T_path, q_start, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+        return search_path(
+            solver, T_path, q_start, PathOptions(timing=timing, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+        )
     from nik.ik.costs import route
     from nik.paths.solve import _poses
 
@@ -63,12 +65,14 @@ def solve_path(solver, T_path, q_start=None, *, costs=None, timing=False, vel_li
     kw.update(tol_pos=r.tol_pos, tol_rot=r.tol_rot, world=r.world, bounds=r.bounds, q_rest=q_rest)
     solver, per = r.solver, r.costs or []
     if not per and not path_terms and not r.manipulability:
-        return search_path(solver, T_path, q_start, timing=timing, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+        return search_path(
+            solver, T_path, q_start, PathOptions(timing=timing, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+        )
     more = bool(per or path_terms)
     with warnings.catch_warnings(record=True) if more else contextlib.nullcontext():  # folded into the report's
         if more:
             warnings.simplefilter("always")
-        res = search_path(solver, T_path, q_start, vel_limits=vel_limits, acc_limits=acc_limits, **kw)
+        res = search_path(solver, T_path, q_start, PathOptions(vel_limits=vel_limits, acc_limits=acc_limits, **kw))
     if r.manipulability:
         res = _manipulable(solver, T_path, q_start, res, r.manipulability, None if more else timing,
                            (vel_limits, acc_limits), kw)  # fmt: skip

@@ -172,7 +172,7 @@ def path_dp(cand, valid, wraps, q_start, use_start, slack, choice):
 
 
 @kernel
-def path_chains(G, joints, T, starts, opts, iopts, restarts, seed, pull, pull_cap, q, iterations, ok, pos, rot):
+def path_chains(G, joints, T, starts, lm, pull, pull_cap, out):
     """``K`` chains of LM along the path ``T: (N, 4, 4)``, one from each start ``starts: (K, n)``.
 
     Waypoint 0 of chain ``c`` is solved from ``starts[c]``; waypoint ``i`` from the chain's answer at ``i - 1``
@@ -182,32 +182,33 @@ def path_chains(G, joints, T, starts, opts, iopts, restarts, seed, pull, pull_ca
     from that seed is tried from the previous answer itself, then from up to ``restarts[i]`` uniform starts.
 
     Args:
-        G, joints: the model (:func:`nik.kernels.chain.chain_model`); opts, iopts: :func:`nik.kernels.lm.lm_options`
-            (first starts 0: the seed is the first start).
-        restarts: (N,) int64, uniform restarts a waypoint may draw (0 where it is out of reach).
-        seed: (1,) uint64 (:func:`nik.kernels.lm.seed_state`): waypoint ``i`` of chain ``c`` draws from its stream.
-        q: (K, N, n) out, the answers; iterations: (K, N) int64 out; ok: (K, N) bool out, within both tolerances;
-        pos, rot: (K, N) out, metres and radians (the LM scratch is allocated here: threads never share it).
+        G, joints: the model (:func:`nik.kernels.chain.chain_model`).
+        lm: ``(opts, iopts, restarts, seed)``: opts, iopts: :func:`nik.kernels.lm.lm_options` (first starts 0: the
+            seed is the first start); restarts: (N,) int64, uniform restarts a waypoint may draw (0 where it is out
+            of reach); seed: (1,) uint64 (:func:`nik.kernels.lm.seed_state`): waypoint ``i`` of chain ``c`` draws
+            from its stream.
+        out: ``(q, iterations, ok, pos, rot)``, written in place: q: (K, N, n) the answers; iterations: (K, N)
+            int64; ok: (K, N) bool, within both tolerances; pos, rot: (K, N), metres and radians (the LM scratch is
+            allocated here: threads never share it).
     """
     K, n = starts.shape
     targets = np.empty((K, n))
     for c in range(K):
         for j in range(n):
             targets[c, j] = 0.5 * (joints[j, LOWER] + joints[j, UPPER])
-    pulls, caps = np.full(K, pull), np.full(K, pull_cap)
-    args = (opts, iopts, restarts, seed, q, iterations, ok, pos, rot)
-    path_chains_toward(G, joints, T, starts, targets, pulls, caps, *args)
+    path_chains_toward(G, joints, T, starts, (targets, np.full(K, pull), np.full(K, pull_cap)), lm, out)
 
 
 @kernel
-def path_chains_toward(
-    G, joints, T, starts, targets, pull, pull_cap, opts, iopts, restarts, seed, q, iterations, ok, pos, rot
-):
-    """:func:`path_chains` with a posture of its own per chain: waypoint ``i`` of chain ``c`` is seeded by the
-    chain's answer at ``i - 1`` moved towards ``targets[c] (n,)`` by ``pull[c]`` times its distance from there (at
-    most ``pull_cap[c]`` per joint). On a redundant arm each chain drifts along the self-motion towards its own
-    posture (the global search's tracks: :func:`nik.paths.solve._search_path`). ``targets: (K, n)``, ``pull,
-    pull_cap: (K,)``; the other arguments and outputs as :func:`path_chains`."""
+def path_chains_toward(G, joints, T, starts, drift, lm, out):
+    """:func:`path_chains` with a posture of its own per chain: ``drift = (targets, pull, pull_cap)``; waypoint ``i``
+    of chain ``c`` is seeded by the chain's answer at ``i - 1`` moved towards ``targets[c] (n,)`` by ``pull[c]``
+    times its distance from there (at most ``pull_cap[c]`` per joint). On a redundant arm each chain drifts along the
+    self-motion towards its own posture (the global search's tracks: :mod:`nik.paths.search`). ``targets: (K, n)``,
+    ``pull, pull_cap: (K,)``; the other arguments and outputs as :func:`path_chains`."""
+    targets, pull, pull_cap = drift
+    opts, iopts, restarts, seed = lm
+    q, iterations, ok, pos, rot = out
     K, n = starts.shape
     N = T.shape[0]
     x = np.empty(n)
@@ -236,11 +237,9 @@ def path_chains_toward(
 
 
 @kernel
-def path_chains_bounded(
-    G, joints, T, starts, half, modes, opts, iopts, restarts, seed, pull, pull_cap, q, iterations, ok, pos, rot
-):
-    """:func:`path_chains` towards tolerant goals (:mod:`nik.ik.bounds`): waypoint ``i`` is reached when its error
-    in the target's tool frame lies inside ``half[i] (6,)`` (rotation mode ``modes[i]``); LM is
+def path_chains_bounded(G, joints, T, starts, goal, lm, pull, pull_cap, out):
+    """:func:`path_chains` towards tolerant goals (:mod:`nik.ik.bounds`), ``goal = (half, modes)``: waypoint ``i`` is
+    reached when its error in the target's tool frame lies inside ``half[i] (6,)`` (rotation mode ``modes[i]``); LM is
     :func:`nik.kernels.lm._lm_one_bounded`. Arguments and outputs otherwise as :func:`path_chains` (``pos, rot``:
     position error m, geodesic angle rad to the pose as given)."""
     K, n = starts.shape
@@ -248,17 +247,17 @@ def path_chains_bounded(
     for c in range(K):
         for j in range(n):
             targets[c, j] = 0.5 * (joints[j, LOWER] + joints[j, UPPER])
-    pulls, caps = np.full(K, pull), np.full(K, pull_cap)
-    args = (opts, iopts, restarts, seed, q, iterations, ok, pos, rot)
-    path_chains_bounded_toward(G, joints, T, starts, targets, pulls, caps, half, modes, *args)
+    path_chains_bounded_toward(G, joints, T, starts, (targets, np.full(K, pull), np.full(K, pull_cap)), goal, lm, out)
 
 
 @kernel
-def path_chains_bounded_toward(
-    G, joints, T, starts, targets, pull, pull_cap, half, modes, opts, iopts, restarts, seed, q, iterations, ok, pos, rot
-):
-    """:func:`path_chains_bounded` with a posture of its own per chain (``targets: (K, n)``, ``pull, pull_cap:
-    (K,)``, as :func:`path_chains_toward`)."""
+def path_chains_bounded_toward(G, joints, T, starts, drift, goal, lm, out):
+    """:func:`path_chains_bounded` with a posture of its own per chain (``drift = (targets, pull, pull_cap)``:
+    ``targets: (K, n)``, ``pull, pull_cap: (K,)``, as :func:`path_chains_toward`)."""
+    targets, pull, pull_cap = drift
+    half, modes = goal
+    opts, iopts, restarts, seed = lm
+    q, iterations, ok, pos, rot = out
     K, n = starts.shape
     N = T.shape[0]
     x = np.empty(n)

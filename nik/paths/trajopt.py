@@ -221,7 +221,6 @@ def polish_path(
     max_step: float,
     reachable: np.ndarray | None = None,
     always: bool = False,
-    cfg: TrajCfg | None = None,
     q_rest: np.ndarray | None = None,
     closed: bool = False,
     collision: tuple | None = None,
@@ -238,7 +237,8 @@ def polish_path(
     step from the last row back to the first (modulo whole turns on joints that wrap) counts as one more step, so that
     no window opens a loop to smooth a step (the last window's row after is the first row). ``collision``: the
     collision arrays (as :func:`optimise_path`'s): the windows are optimised with collision rows and kept only where
-    they collide at no more samples (:func:`path_collisions`) than before, nor does the whole path."""
+    they collide at no more samples (:func:`path_collisions`) than before, nor does the whole path. The windows run
+    with :func:`optimise_path`'s default configuration for ``model``."""
     from nik.kernels.trajopt import path_check
 
     Q = np.ascontiguousarray(Q, dtype=np.float64)
@@ -266,7 +266,7 @@ def polish_path(
     if always:
         bad[:] = True
     lo, hi = model.joints[:, 1], model.joints[:, 2]
-    sub = (cfg or TrajCfg()).col_sub
+    sub = TrajCfg().col_sub
 
     def hits(rows, before, after) -> int:
         """Colliding samples of ``rows`` (waypoints and inside the steps from ``before``, and to ``after``)."""
@@ -279,7 +279,7 @@ def polish_path(
         after = Q1[b] if b < N else (_loop_end(Q1, model.joints) if closed else None)
         res = optimise_path(
             model, T[a:b], Q1[a:b], q_start=before, q_end=after, max_step=max_step, tol_pos=tol_pos, tol_rot=tol_rot,
-            cfg=cfg, q_rest=q_rest, collision=collision,
+            q_rest=q_rest, collision=collision,
         )  # fmt: skip
         ok2 = (res.pos_err <= tol_pos) & (res.rot_err <= tol_rot)
         inside = bool(((res.q >= lo) & (res.q <= hi)).all())

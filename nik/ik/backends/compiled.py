@@ -152,8 +152,8 @@ class CompiledBackend:
     def merge(answers, job: Job, idx, res: Refined, strict: bool) -> int:
         """:meth:`nik.ik.stages.Answers.merge` in one kernel call; returns how many targets still fail."""
         return _kernels().merge(
-            answers.q, answers.pos_err, answers.rot_err, answers.iterations, answers.ok(job), idx, res.q,
-            res.pos_err, res.rot_err, res.iterations, strict, job.tol_pos, job.tol_rot,
+            (answers.q, answers.pos_err, answers.rot_err, answers.iterations, answers.ok(job)), idx,
+            (res.q, res.pos_err, res.rot_err, res.iterations), strict, job.tol_pos, job.tol_rot,
         )  # fmt: skip
 
     # -- the job -------------------------------------------------------------------
@@ -320,7 +320,7 @@ class CompiledBackend:
         use_near = q_near is not None
         guess(
             model.closed, model.G, model.joints, model.closed_check[job.dtype], T, q_near if use_near else q, use_near,
-            LIMIT_ROUNDING, job.tol_pos, job.tol_rot, reachable, q, pos, rot, ok,
+            LIMIT_ROUNDING, job.tol_pos, job.tol_rot, reachable, (q, pos, rot, ok),
         )  # fmt: skip
         return q, pos, rot
 
