@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from nik.kernels.collision import ArmSpheres, Scene
+
 __all__ = ["blocked_targets", "collision_names_compiled", "kernel_arguments", "signed_distances_compiled"]
 
 _EMPTY = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
@@ -20,8 +22,6 @@ def kernel_arguments(robot, model, world=None, *, self_collision: bool = True):
     """``(G, joints), (arm, scene)``: the model arrays before ``q`` and the collision groups after it,
     ``arm = ArmSpheres(spheres, sphere_frame, body_start, pairs, self_on)`` and
     ``scene = Scene(spheres, boxes, capsules)`` (:mod:`nik.kernels.collision`)."""
-    from nik.kernels.collision import ArmSpheres, Scene
-
     G, joints = robot.chain_arrays()
     arm = ArmSpheres(*model.arrays(), bool(self_collision))
     return (G, joints), (arm, Scene(*(world.packed() if world is not None else _EMPTY)))
