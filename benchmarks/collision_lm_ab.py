@@ -44,6 +44,30 @@ def _names(fn) -> list[str]:
     return list(inspect.signature(getattr(fn, "py_func", fn)).parameters)
 
 
+#: the fields of this checkout's argument groups by the names of the flat signature a base before them takes
+_FLAT = {
+    "targets": ("Tt", "bounds", "modes"),
+    "given": ("starts", "n_starts", "restarts"),
+    "arm": ("spheres", "sphere_frame", "body_start", "pairs", "self_on"),
+    "scene": ("w_spheres", "w_boxes", "w_capsules"),
+    "out": ("q", "free", "done_out", "iterations", "pos", "rot"),
+}
+
+
+def _flat(names: list[str], a: tuple) -> dict:
+    """The call's arguments ``a`` (of the signature ``names``) by the names of the flat signature: each group's
+    fields spread (the settings by their own field names)."""
+    kw = {}
+    for name, v in zip(names, a, strict=True):
+        if name in _FLAT:
+            kw.update(zip(_FLAT[name], v, strict=True))
+        elif name == "settings":
+            kw.update(v._asdict())
+        else:
+            kw[name] = v
+    return kw
+
+
 def _cfg(pairs: list[str]):
     """``KEY=VALUE`` strings -> a CollideCfg (each value cast to its field's type)."""
     from nik.ik.collide import CollideCfg
@@ -88,11 +112,12 @@ def main(argv=None) -> None:
 
     def counted(fn):
         keep = set(_names(fn))
+        grouped = "settings" in keep  # this checkout's signature: called as the pipeline calls it
 
         def call(*a):
-            kw = dict(zip(ours_names, a, strict=True))
+            kw = _flat(ours_names, a)
             t = time.process_time()
-            got = fn(**{k: v for k, v in kw.items() if k in keep})
+            got = fn(*a) if grouped else fn(**{k: v for k, v in kw.items() if k in keep})
             dt, its = time.process_time() - t, int(np.asarray(kw["iterations"]).sum())
             restarts = np.asarray(kw["restarts"])
             first = restarts.sum() == 0 and kw["starts"].shape[1] == 1 and float(kw["margin"]) > 0.0

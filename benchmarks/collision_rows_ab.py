@@ -85,29 +85,30 @@ def _loops(mod):
     residual_in, collides_in, rows_work, link_bounds = mod.residual_in, mod.collides_in, mod.rows_work, mod.link_bounds
 
     @numba.njit
-    def rows(G, joints, Q, spheres, sf, bs, pairs, ws, wb, wc, self_on, margin, reps, out, Jout):
+    def rows(G, joints, Q, arm, scene, margin, reps, out, Jout):
+        spheres, bs, pairs = arm[0], arm[2], arm[3]
         n, R = Q.shape[1], pairs.shape[0] + bs.shape[0] - 1
         bounds = np.empty((bs.shape[0] - 1, 4))
         link_bounds(spheres, bs, bounds)
-        wf, wi = rows_work(n, spheres, bs, ws, wb, wc)
+        work = rows_work(n, arm, scene)
         r, Jr = np.empty(R), np.empty((R, n))
         for _ in range(reps):
             for b in range(Q.shape[0]):
-                residual_in(G, joints, Q[b], spheres, sf, bs, pairs, ws, wb, wc, self_on, margin, r, Jr, bounds, wf, wi)
+                residual_in(G, joints, Q[b], arm, scene, margin, r, Jr, bounds, work)
                 out[b] = r
                 Jout[b] = Jr
 
     @numba.njit
-    def check(G, joints, Q, spheres, sf, bs, pairs, ws, wb, wc, self_on, margin, reps, out):
+    def check(G, joints, Q, arm, scene, margin, reps, out):
+        spheres, bs, pairs = arm[0], arm[2], arm[3]
         n, R = Q.shape[1], pairs.shape[0] + bs.shape[0] - 1
         bounds = np.empty((bs.shape[0] - 1, 4))
         link_bounds(spheres, bs, bounds)
-        wf, wi = rows_work(n, spheres, bs, ws, wb, wc)
+        work = rows_work(n, arm, scene)
         d = np.empty(R)
         for _ in range(reps):
             for b in range(Q.shape[0]):
-                out[b] = collides_in(G, joints, Q[b], spheres, sf, bs, pairs, ws, wb, wc, self_on, margin, d, bounds,
-                                     wf, wi)  # fmt: skip
+                out[b] = collides_in(G, joints, Q[b], arm, scene, margin, d, bounds, work)
 
     return rows, check
 

@@ -80,7 +80,7 @@ def _pass(name: str, a) -> str:
     restarts, or margin 0 (one start, none); other stages keep their name."""
     if not name.startswith("re-solve"):
         return name
-    starts, restarts, margin = a[3], np.asarray(a[9]), float(a[21])
+    starts, restarts, margin = a[3].q, np.asarray(a[3].restarts), float(a[8].margin)  # Starts, CollideOpts
     if margin == 0.0:
         return "re-solve: margin 0, from the last answer"
     if restarts.sum() == 0 and starts.shape[1] == 1:

@@ -216,7 +216,7 @@ def test_one_configuration_check_is_that_of_the_all_pairs_rows():
     exact = np.empty((len(Q), len(model.pairs) + len(model.links)))
     collision_distances_batch(G, joints, Q, *rest, exact)
     bounds = np.empty((len(model.links), 4))
-    link_bounds(rest[0], rest[2], bounds)
+    link_bounds(rest[0].spheres, rest[0].body_start, bounds)
     d = np.empty(exact.shape[1])
     for margin in (0.0, 0.01):
         hit = np.array([collides_bounded(G, joints, q, *rest, margin, d, bounds) for q in Q])
@@ -290,7 +290,7 @@ def test_the_hands_slack_never_blocks_a_pose_that_a_free_configuration_reaches_w
     model = collision_model(robot)
     n, tol_pos, tol_rot = robot.dof, 1e-4, 1e-3
     (G, joints), rest = kernel_arguments(robot, model, nik.World(), self_collision=False)
-    spheres, frames = rest[0], rest[1]
+    spheres, frames = rest[0].spheres, rest[0].sphere_frame
     hand = np.flatnonzero(frames == n)
     assert hand.size  # the hand rides on the last frame
     levers = np.linalg.norm(spheres[hand, :3] - G[n][:3, 3], axis=1)

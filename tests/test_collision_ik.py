@@ -248,7 +248,7 @@ def _uniform_only(robot, world, T, descents):
     """The collision LM kernel on ``T (B, 4, 4)`` from uniform starts only (16 restarts of 16 draws, no given start,
     solver seed 0, the converged stop off): ``(q, free, done, iterations)``."""
     from nik.collision.compiled import kernel_arguments
-    from nik.kernels.collision_lm import collision_lm
+    from nik.kernels.collision_lm import Answers, CollideOpts, Starts, Targets, collision_lm
     from nik.kernels.lm import CLASSIC, lm_options, seed_state
 
     (G, joints), rest = kernel_arguments(robot, collision_model(robot), world)
@@ -256,9 +256,10 @@ def _uniform_only(robot, world, T, descents):
     B, n = len(T), robot.dof
     q, free, done = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=bool)
     its, pos, rot = np.empty(B, dtype=np.int64), np.empty(B), np.empty(B)
-    collision_lm(G, joints, T, np.zeros((B, 1, n)), np.zeros(B, dtype=np.int64), np.zeros((B, 6)),
-                 np.full(B, CLASSIC, dtype=np.int64), opts, iopts, np.full(B, 16, dtype=np.int64), 16, 0,
-                 seed_state(0), *rest, 0.005, 1.0, 10, descents, 0.0, q, free, done, its, pos, rot)  # fmt: skip
+    collision_lm(G, joints, Targets(T, np.zeros((B, 6)), np.full(B, CLASSIC, dtype=np.int64)),
+                 Starts(np.zeros((B, 1, n)), np.zeros(B, dtype=np.int64), np.full(B, 16, dtype=np.int64)), *rest, opts,
+                 iopts, CollideOpts(0.005, 1.0, 16, 0, 10, descents, 0.0), seed_state(0),
+                 Answers(q, free, done, its, pos, rot))  # fmt: skip
     return q, free, done, its
 
 
@@ -379,7 +380,7 @@ def test_the_other_given_starts_stop_at_their_own_converged_fraction():
     with every start at 2e-3, in fewer iterations, and the answers called done are free and at the pose."""
     from nik.collision.compiled import kernel_arguments
     from nik.ik.collide import CollideCfg
-    from nik.kernels.collision_lm import collision_lm
+    from nik.kernels.collision_lm import Answers, CollideOpts, Starts, Targets, collision_lm
     from nik.kernels.lm import CLASSIC, lm_options, seed_state
 
     assert CollideCfg().converged_given == 2e-2 and CollideCfg().converged == 2e-3
@@ -395,9 +396,10 @@ def test_the_other_given_starts_stop_at_their_own_converged_fraction():
     def solve(restarts, *given):
         q, free, done = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=bool)
         its, pos, rot = np.empty(B, dtype=np.int64), np.empty(B), np.empty(B)
-        collision_lm(G, joints, T, starts, np.full(B, 9, dtype=np.int64), np.zeros((B, 6)),
-                     np.full(B, CLASSIC, dtype=np.int64), opts, iopts, np.full(B, restarts, dtype=np.int64), 16, 0,
-                     seed_state(0), *rest, 0.005, 1.0, 10, 4, 2e-3, q, free, done, its, pos, rot, *given)  # fmt: skip
+        collision_lm(G, joints, Targets(T, np.zeros((B, 6)), np.full(B, CLASSIC, dtype=np.int64)),
+                     Starts(starts, np.full(B, 9, dtype=np.int64), np.full(B, restarts, dtype=np.int64)), *rest, opts,
+                     iopts, CollideOpts(0.005, 1.0, 16, 0, 10, 4, 2e-3, *given), seed_state(0),
+                     Answers(q, free, done, its, pos, rot))  # fmt: skip
         return q, done, its
 
     for restarts in (0, 16):
@@ -425,24 +427,24 @@ def test_a_uniform_start_is_the_free_draw_nearest_the_pose_with_fewer_collision_
     world = _table_and_box()
     T = _poses(robot, 8, seed=7, world=world)
     (G, joints), rest = kernel_arguments(robot, model, world)
-    spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on = rest
+    spheres, sphere_frame, body_start, pairs, self_on = rest[0]
     opts, _ = lm_options()
     rw, n, tries = opts[ROT_WEIGHT], robot.dof, 16
     R = pairs.shape[0] + body_start.shape[0] - 1
     r, lb, Tc, ec, d = np.empty(R), np.empty((body_start.shape[0] - 1, 4)), np.empty((3, 4)), np.empty(6), np.empty(6)
     link_bounds(spheres, body_start, lb)
-    wf, wi = rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules)
+    work = rows_work(n, *rest)
     bnd, drawn, draw_E, qs, qc = np.zeros(6), np.empty((tries, n)), np.empty(tries), np.empty(n), np.empty(n)
 
     def hits(q):
-        return collides_in(G, joints, q, *rest, 0.0, r, lb, wf, wi)
+        return collides_in(G, joints, q, *rest, 0.0, r, lb, work)
 
     ours_checks, before_checks, starts = 0, 0, 0
     for b, Tt in enumerate(T):
         rng, ref = np.array([b + 1], dtype=np.uint64), np.array([b + 1], dtype=np.uint64)
         for _ in range(4):  # four starts a target from one stream
-            found, checks = _nearest_free(G, joints, Tt, rw, bnd, CLASSIC, tries, rng, *rest, Tc, ec, d, r, lb, wf,
-                                          wi, drawn, draw_E, qs)  # fmt: skip
+            found, checks = _nearest_free(G, joints, (Tt, bnd, CLASSIC), rw, (tries, drawn, draw_E), rng, *rest, lb,
+                                          (Tc, ec, d, r, work), qs)  # fmt: skip
             best, kept, before = np.inf, None, 0  # the rule before, on the same stream
             for _ in range(tries):
                 _draw(joints, ref, qc)

@@ -181,7 +181,7 @@ def test_collision_rows_match_finite_differences():
     T = np.ascontiguousarray(robot.fk(torch.from_numpy(Q)).numpy())
     opts = trajopt_options(TrajCfg(w_col=2.0, col_margin=0.03, col_sub=3), math.radians(10.0))
     qs = np.clip(Q[0] + 0.1, m.lo, m.hi)
-    rows = len(col[3]) + len(col[2]) - 1
+    rows = len(col[0].pairs) + len(col[0].body_start) - 1  # col = (ArmSpheres, Scene)
     R = residual_count(N, n, True, False, rows=rows, sub=3)
     r = np.empty(R)
     cost = residuals_collision(m.G, m.joints, T, Q, qs, True, Q[0], False, opts, col, r)

@@ -1,13 +1,17 @@
 """The compiled path of the distances (:mod:`nik.kernels.collision`): the arrays it takes, and batched calls.
 
 :func:`kernel_arguments` gives, for a robot, its model and a world, the tuple that follows ``q`` in every kernel
-of :mod:`nik.kernels.collision` (``G, joints`` first): what the LM pipeline passes per call. The world's arrays
-come from :meth:`nik.collision.World.packed` (rebuilt only after a change), so a changed world costs nothing here.
+of :mod:`nik.kernels.collision` (``G, joints`` first): the two named groups ``(arm, scene)``
+(:class:`nik.kernels.collision.ArmSpheres`, :class:`nik.kernels.collision.Scene`), what the LM pipeline passes per
+call. The world's arrays come from :meth:`nik.collision.World.packed` (rebuilt only after a change), so a changed
+world costs nothing here.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from nik.kernels.collision import ArmSpheres, Scene
 
 __all__ = ["blocked_targets", "collision_names_compiled", "kernel_arguments", "signed_distances_compiled"]
 
@@ -15,12 +19,12 @@ _EMPTY = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
 
 
 def kernel_arguments(robot, model, world=None, *, self_collision: bool = True):
-    """``(G, joints), (spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on)``:
-    the model arrays before ``q`` and the collision arrays after it."""
+    """``(G, joints), (arm, scene)``: the model arrays before ``q`` and the collision groups after it,
+    ``arm = ArmSpheres(spheres, sphere_frame, body_start, pairs, self_on)`` and
+    ``scene = Scene(spheres, boxes, capsules)`` (:mod:`nik.kernels.collision`)."""
     G, joints = robot.chain_arrays()
-    spheres, frames, start, pairs = model.arrays()
-    world_arrays = world.packed() if world is not None else _EMPTY
-    return (G, joints), (spheres, frames, start, pairs, *world_arrays, bool(self_collision))
+    arm = ArmSpheres(*model.arrays(), bool(self_collision))
+    return (G, joints), (arm, Scene(*(world.packed() if world is not None else _EMPTY)))
 
 
 def signed_distances_compiled(robot, q, world=None, *, model=None, self_collision: bool = True) -> np.ndarray:
@@ -66,7 +70,7 @@ def blocked_targets(
     if depth < 0:
         raise ValueError(f"blocked_targets: depth must be >= 0 (halvings of a step), got {depth}")
     (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
-    spheres, frames, n = rest[0], rest[1], joints.shape[0]
+    spheres, frames, n = rest[0].spheres, rest[0].sphere_frame, joints.shape[0]
     tool = G[n][:3, 3]
     hand = float(hand_lever(G, spheres, frames))
     levers = [hand]
@@ -96,7 +100,7 @@ def collision_names_compiled(robot, q, world=None, *, model=None, self_collision
     model = collision_model(robot) if model is None else model
     Q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, robot.dof))
     (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
-    counts = [len(a) for a in rest[4:7]]
+    counts = [len(a) for a in rest[1]]
     pair_hit = np.empty((len(Q), len(model.pairs)), dtype=np.bool_)
     world_hit = np.empty((len(Q), len(model.links), sum(counts)), dtype=np.bool_)
     overlaps_batch(G, joints, Q, *rest, pair_hit, world_hit)

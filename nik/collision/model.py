@@ -417,11 +417,11 @@ def _pair_rows(robot, model: CollisionModel, Q: np.ndarray, never_clearance, pro
     above it (the compiled broad phase, :func:`nik.kernels.collision.collision_rows_batch`), which is all the
     "always" (below 0) and "never" (above the clearance) tests read. Memory ``O(PAIR_CHUNK * (P + L))`` whatever
     the spheres' count (no sphere-pair arrays)."""
-    from nik.kernels.collision import collision_rows_batch
+    from nik.kernels.collision import ArmSpheres, Scene, collision_rows_batch
 
     G, joints = robot.chain_arrays()  # the arguments of nik.collision.compiled.kernel_arguments, no world
-    no_world = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
-    rest = (*model.arrays(), *no_world, True)
+    no_world = Scene(np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
+    rest = (ArmSpheres(*model.arrays(), True), no_world)
     cutoff = max(0.0, float(never_clearance)) if never_clearance is not None else 0.0
     P = len(model.pairs)
     for s in range(0, len(Q), PAIR_CHUNK):

@@ -1,12 +1,17 @@
 """Signed distances of the arm's spheres and their Jacobians for one configuration: LM residual rows, compiled.
 
-The model is data (:meth:`nik.collision.CollisionModel.arrays`, :meth:`nik.collision.World.packed`):
+The model is data (:meth:`nik.collision.CollisionModel.arrays`, :meth:`nik.collision.World.packed`), passed as
+two named groups after ``G, joints`` and the configuration (:func:`nik.collision.compiled.kernel_arguments` builds
+them):
 
-- ``spheres: (S, 4)`` centre in its frame and radius (metres), ``sphere_frame: (S,)`` int64 (0 = base, k = the
-  frame after joint k), ``body_start: (L + 1,)`` int64 (link ``l`` owns spheres ``body_start[l]:body_start[l+1]``),
-  ``pairs: (P, 2)`` int64 active link pairs;
-- the world: ``w_spheres: (Ns, 4)``, ``w_boxes: (Nb, 15)`` (R row by row, centre, half sizes),
-  ``w_capsules: (Nc, 7)``.
+- ``arm`` (:class:`ArmSpheres`): ``spheres: (S, 4)`` centre in its frame and radius (metres), ``sphere_frame: (S,)``
+  int64 (0 = base, k = the frame after joint k), ``body_start: (L + 1,)`` int64 (link ``l`` owns spheres
+  ``body_start[l]:body_start[l+1]``), ``pairs: (P, 2)`` int64 active link pairs, ``self_on`` whether they count;
+- ``scene`` (:class:`Scene`), the world: ``spheres: (Ns, 4)``, ``boxes: (Nb, 15)`` (R row by row, centre, half
+  sizes), ``capsules: (Nc, 7)``.
+
+Inside a kernel the groups are unpacked by position (``spheres, sphere_frame, body_start, pairs, self_on = arm``),
+so a plain tuple in the same order works too.
 
 Rows (``R = P + L``): row ``p < P`` is the smallest ``|c_i - c_j| - r_i - r_j`` over the spheres of pair ``p``
 (``inf`` when ``self_on`` is False); row ``P + l`` is the smallest signed distance from link ``l``'s spheres
@@ -28,6 +33,7 @@ by finite differences.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -35,6 +41,8 @@ from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, OFFSET, PRISMATIC, UPPER, _joint, _start
 
 __all__ = [
+    "ArmSpheres",
+    "Scene",
     "blocked_poses",
     "collides_batch",
     "collides_bounded",
@@ -48,6 +56,24 @@ __all__ = [
     "overlaps_batch",
     "residual_bounded",
 ]
+
+
+class ArmSpheres(NamedTuple):
+    """The arm's sphere model as the kernels take it (:meth:`nik.collision.CollisionModel.arrays`)."""
+
+    spheres: np.ndarray  #: (S, 4) centre in its frame and radius (metres)
+    sphere_frame: np.ndarray  #: (S,) int64, the frame each sphere rides on (0 the base, k after joint k)
+    body_start: np.ndarray  #: (L + 1,) int64, link ``l`` owns spheres ``body_start[l]:body_start[l + 1]``
+    pairs: np.ndarray  #: (P, 2) int64, the link pairs checked
+    self_on: bool  #: whether the pairs count (False: their rows are ``inf``)
+
+
+class Scene(NamedTuple):
+    """The world's obstacles as the kernels take them (:meth:`nik.collision.World.packed`)."""
+
+    spheres: np.ndarray  #: (Ns, 4) centre and radius (metres)
+    boxes: np.ndarray  #: (Nb, 15) rotation row by row, centre, half sizes
+    capsules: np.ndarray  #: (Nc, 7) the segment's two ends and the radius
 
 
 @kernel
@@ -346,12 +372,14 @@ def _place_link(F, spheres, sphere_frame, body_start, link, X, placed):
 
 
 @kernel
-def rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules, capsules=True):
+def rows_work(n, arm, scene, capsules=True):
     """``(wf, wi)``: the scratch of :func:`_rows_in` for a chain of ``n`` joints, the model and the world (float64
     and int64, 1-D), allocated once by a caller that evaluates many configurations (an LM, a batch) rather than on
     every evaluation (13 small arrays: about 1 us of a 5-10 us evaluation). It also holds each link's capsule
     (:func:`link_capsules`, computed here once: the scratch belongs to this model; ~1 us, so ``capsules`` False for
     a caller that evaluates one configuration: the pairs' broad phase then stops at the links' spheres)."""
+    spheres, body_start = arm[0], arm[2]
+    w_spheres, w_boxes, w_capsules = scene
     S, L = spheres.shape[0], body_start.shape[0] - 1
     No = w_spheres.shape[0] + w_boxes.shape[0] + w_capsules.shape[0]
     a = (n + 1) * 12 + 3 * S + 3 * L + 4 * No + 6
@@ -365,24 +393,18 @@ def rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules, capsules=T
 
 
 @kernel
-def _rows(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
-    want_jacobian, cutoff, bounds, stop,
-):  # fmt: skip
+def _rows(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop):
     """:func:`_rows_in` with its scratch allocated here (:func:`rows_work`)."""
-    wf, wi = rows_work(q.shape[0], spheres, body_start, w_spheres, w_boxes, w_capsules, False)
-    return _rows_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-                    d, J, want_jacobian, cutoff, bounds, stop, wf, wi)  # fmt: skip
+    work = rows_work(q.shape[0], arm, scene, False)
+    return _rows_in(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop, work)
 
 
 @kernel
-def _rows_in(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
-    want_jacobian, cutoff, bounds, stop, wf, wi,
-):  # fmt: skip
+def _rows_in(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop, work):
     """The rows (module docstring) with the broad phase: ``d[k]`` is exact wherever it is at most ``cutoff``, else
     a lower bound above ``cutoff`` (Jacobian row 0). ``bounds (L, 4)``: :func:`link_bounds`. ``stop``: return at the
     first row below ``cutoff`` (the rows after it are left unset). Returns whether a row is below ``cutoff``.
+    ``work``: the scratch ``(wf, wi)`` of :func:`rows_work`.
 
     The broad phase, each test a lower bound of the distances it skips (a signed distance is 1-Lipschitz, so a
     bounding sphere's distance minus its radius bounds every sphere inside it): a pair of links whose bounding
@@ -391,6 +413,9 @@ def _rows_in(
     bounding sphere) is skipped; a link and an obstacle whose bound is above ``cutoff``
     likewise. A row is the smallest of its exact distances and its skipped bounds, so below ``cutoff`` it equals
     the all-pairs minimum (the minimising pair is never skipped)."""
+    spheres, sphere_frame, body_start, pairs, self_on = arm
+    w_spheres, w_boxes, w_capsules = scene
+    wf, wi = work
     n = q.shape[0]
     S = spheres.shape[0]
     P = pairs.shape[0]
@@ -564,51 +589,37 @@ def _rows_in(
 
 
 @kernel
-def collision_distances(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J
-):
+def collision_distances(G, joints, q, arm, scene, d, J):
     """Rows ``d (P + L,)`` (metres) and their Jacobian ``J (P + L, n)`` for ``q: (n,)`` (module docstring)."""
-    bounds = np.empty((body_start.shape[0] - 1, 4))
-    link_bounds(spheres, body_start, bounds)
-    _rows(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d, J,
-          True, np.inf, bounds, False)  # fmt: skip
+    bounds = np.empty((arm[2].shape[0] - 1, 4))
+    link_bounds(arm[0], arm[2], bounds)
+    _rows(G, joints, q, arm, scene, d, J, True, np.inf, bounds, False)
 
 
 @kernel
-def collision_residual(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr
-):
+def collision_residual(G, joints, q, arm, scene, margin, r, Jr):
     """LM rows ``r = max(0, margin - d)`` ``(P + L,)`` and ``Jr = dr/dq`` ``(P + L, n)`` for ``q: (n,)``; returns
     the smallest distance ``d`` where it is at most ``margin`` (metres), else a lower bound above ``margin``
     (``inf`` when there is nothing to check). Rows the broad phase puts farther than ``margin`` are not computed
     sphere by sphere (their residual is 0 either way)."""
-    bounds = np.empty((body_start.shape[0] - 1, 4))
-    link_bounds(spheres, body_start, bounds)
-    return residual_bounded(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                            self_on, margin, r, Jr, bounds)  # fmt: skip
+    bounds = np.empty((arm[2].shape[0] - 1, 4))
+    link_bounds(arm[0], arm[2], bounds)
+    return residual_bounded(G, joints, q, arm, scene, margin, r, Jr, bounds)
 
 
 @kernel
-def residual_bounded(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr,
-    bounds,
-):  # fmt: skip
+def residual_bounded(G, joints, q, arm, scene, margin, r, Jr, bounds):
     """:func:`collision_residual` with the links' bounds ``(L, 4)`` of :func:`link_bounds` given (computed once by
     a caller that evaluates many configurations of one model)."""
-    wf, wi = rows_work(q.shape[0], spheres, body_start, w_spheres, w_boxes, w_capsules, False)
-    return residual_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                       self_on, margin, r, Jr, bounds, wf, wi)  # fmt: skip
+    work = rows_work(q.shape[0], arm, scene, False)
+    return residual_in(G, joints, q, arm, scene, margin, r, Jr, bounds, work)
 
 
 @kernel
-def residual_in(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, r, Jr,
-    bounds, wf, wi,
-):  # fmt: skip
-    """:func:`residual_bounded` with its scratch ``wf, wi`` given (:func:`rows_work`, once per call of the LM of
+def residual_in(G, joints, q, arm, scene, margin, r, Jr, bounds, work):
+    """:func:`residual_bounded` with its scratch ``work`` given (:func:`rows_work`, once per call of the LM of
     :mod:`nik.kernels.collision_lm`)."""
-    _rows_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r, Jr,
-             True, margin, bounds, False, wf, wi)  # fmt: skip
+    _rows_in(G, joints, q, arm, scene, r, Jr, True, margin, bounds, False, work)
     smallest = np.inf
     for k in range(r.shape[0]):
         dist = r[k]
@@ -625,68 +636,53 @@ def residual_in(
 
 
 @kernel
-def collides_bounded(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, d, bounds
-):
+def collides_bounded(G, joints, q, arm, scene, margin, d, bounds):
     """Whether some row of ``q: (n,)`` is below ``margin`` (metres), stopping at the first such row, no Jacobian;
     ``d (P + L,)`` scratch, ``bounds (L, 4)``: :func:`link_bounds` (the test of :func:`collides_batch`, for one
     configuration)."""
-    wf, wi = rows_work(q.shape[0], spheres, body_start, w_spheres, w_boxes, w_capsules, False)
-    return collides_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-                       margin, d, bounds, wf, wi)  # fmt: skip
+    work = rows_work(q.shape[0], arm, scene, False)
+    return collides_in(G, joints, q, arm, scene, margin, d, bounds, work)
 
 
 @kernel
-def collides_in(
-    G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, d, bounds,
-    wf, wi,
-):  # fmt: skip
-    """:func:`collides_bounded` with its scratch ``wf, wi`` given (:func:`rows_work`)."""
+def collides_in(G, joints, q, arm, scene, margin, d, bounds, work):
+    """:func:`collides_bounded` with its scratch ``work`` given (:func:`rows_work`)."""
     J = np.empty((0, q.shape[0]))
-    return _rows_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-                    d, J, False, margin, bounds, True, wf, wi)  # fmt: skip
+    return _rows_in(G, joints, q, arm, scene, d, J, False, margin, bounds, True, work)
 
 
 @kernel
-def collision_distances_batch(
-    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, D
-):
+def collision_distances_batch(G, joints, Q, arm, scene, D):
     """Rows ``D (B, P + L)`` for ``Q: (B, n)``, exact (every sphere pair), no Jacobian."""
-    collision_rows_batch(G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                         self_on, np.inf, D)  # fmt: skip
+    collision_rows_batch(G, joints, Q, arm, scene, np.inf, D)
 
 
 @kernel
-def collision_rows_batch(
-    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, cutoff, D
-):
+def collision_rows_batch(G, joints, Q, arm, scene, cutoff, D):
     """Rows ``D (B, P + L)`` for ``Q: (B, n)`` through the broad phase of ``cutoff`` (metres): each row equal to
     the exact one (:func:`collision_distances_batch`) wherever either is at most ``cutoff``, else a lower bound
     above ``cutoff`` (what the tests compare)."""
     J = np.empty((0, Q.shape[1]))
-    bounds = np.empty((body_start.shape[0] - 1, 4))
-    link_bounds(spheres, body_start, bounds)
-    wf, wi = rows_work(Q.shape[1], spheres, body_start, w_spheres, w_boxes, w_capsules)
+    bounds = np.empty((arm[2].shape[0] - 1, 4))
+    link_bounds(arm[0], arm[2], bounds)
+    work = rows_work(Q.shape[1], arm, scene)
     for b in range(Q.shape[0]):
-        _rows_in(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-                 D[b], J, False, cutoff, bounds, False, wf, wi)  # fmt: skip
+        _rows_in(G, joints, Q[b], arm, scene, D[b], J, False, cutoff, bounds, False, work)
 
 
 @kernel
-def collides_batch(
-    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, out
-):
+def collides_batch(G, joints, Q, arm, scene, margin, out):
     """``out (B,)`` bool: some row of ``Q[b]`` is below ``margin`` (metres); each configuration stops at its first
     such row."""
+    spheres, body_start, pairs = arm[0], arm[2], arm[3]
     R = pairs.shape[0] + body_start.shape[0] - 1
     d = np.empty(R)
     J = np.empty((0, Q.shape[1]))
     bounds = np.empty((body_start.shape[0] - 1, 4))
     link_bounds(spheres, body_start, bounds)
-    wf, wi = rows_work(Q.shape[1], spheres, body_start, w_spheres, w_boxes, w_capsules)
+    work = rows_work(Q.shape[1], arm, scene)
     for b in range(Q.shape[0]):
-        out[b] = _rows_in(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                          self_on, d, J, False, margin, bounds, True, wf, wi)  # fmt: skip
+        out[b] = _rows_in(G, joints, Q[b], arm, scene, d, J, False, margin, bounds, True, work)
 
 
 @kernel
@@ -702,11 +698,12 @@ def _link_bound(F, bounds, sphere_frame, body_start, link, c):
 
 
 @kernel
-def _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes, w_capsules, g, c, cut,
-                below):  # fmt: skip
+def _link_world(X, F, bounds, arm, scene, link, g, c, cut, below):
     """The smallest row of link ``link`` against the world: exact where at most ``cut``, else a lower bound above it
     (an obstacle farther than ``cut`` from the link's bounding sphere is that bound: a signed distance is
     1-Lipschitz); returned as soon as it is below ``below``."""
+    spheres, sphere_frame, body_start = arm[0], arm[1], arm[2]
+    w_spheres, w_boxes, w_capsules = scene
     s0, s1 = body_start[link], body_start[link + 1]
     rad = _link_bound(F, bounds, sphere_frame, body_start, link, c)
     best = np.inf
@@ -725,9 +722,10 @@ def _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres
 
 
 @kernel
-def _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, cut, below):
+def _pair_row(X, F, bounds, arm, a, b, c, cb, cut, below):
     """The row of links ``a`` and ``b``: exact where at most ``cut``, else a lower bound above it (their bounding
     spheres' distance); returned as soon as it is below ``below``."""
+    spheres, sphere_frame, body_start = arm[0], arm[1], arm[2]
     ra = _link_bound(F, bounds, sphere_frame, body_start, a, c)
     rb = _link_bound(F, bounds, sphere_frame, body_start, b, cb)
     dx, dy, dz = c[0] - cb[0], c[1] - cb[1], c[2] - cb[2]
@@ -745,11 +743,11 @@ def _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, cut,
 
 
 @kernel
-def _fixed_rows(X, F, bounds, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, on, g,
-                cut):  # fmt: skip
+def _fixed_rows(X, F, bounds, arm, scene, on, g, cut):
     """The smallest row among those whose links all have ``on[frame]`` (placed in ``X``, frames ``F``, the links'
     bounds ``bounds``): pairs with both links on such frames, and such links (not on frame 0) against the world;
     exact where at most ``cut``, else a lower bound above it."""
+    _, sphere_frame, body_start, pairs, self_on = arm
     L = body_start.shape[0] - 1
     best = np.inf
     c, cb = np.empty(3), np.empty(3)
@@ -757,8 +755,7 @@ def _fixed_rows(X, F, bounds, spheres, sphere_frame, body_start, pairs, w_sphere
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or not on[sphere_frame[s0]] or sphere_frame[s0] == 0:
             continue
-        best = min(best, _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes,
-                                     w_capsules, g, c, cut, -np.inf))  # fmt: skip
+        best = min(best, _link_world(X, F, bounds, arm, scene, link, g, c, cut, -np.inf))
     if self_on:
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
@@ -766,17 +763,16 @@ def _fixed_rows(X, F, bounds, spheres, sphere_frame, body_start, pairs, w_sphere
                 continue
             if not (on[sphere_frame[body_start[a]]] and on[sphere_frame[body_start[b]]]):
                 continue
-            best = min(best, _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, cut, -np.inf))
+            best = min(best, _pair_row(X, F, bounds, arm, a, b, c, cb, cut, -np.inf))
     return best
 
 
 @kernel
-def _sweep_rows(
-    X, F, bounds, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, k, n, g, below
-):  # fmt: skip
+def _sweep_rows(X, F, bounds, arm, scene, k, n, g, below):
     """The smallest row of the links on frame ``k`` (placed in ``X``, frames ``F``, the links' bounds ``bounds``):
     against the world, and against the links on frames 0, ``k`` and ``n``; exact where at most ``below``, else a
     lower bound above it; returned as soon as one is below ``below`` (then an upper bound of it)."""
+    _, sphere_frame, body_start, pairs, self_on = arm
     L = body_start.shape[0] - 1
     best = np.inf
     c, cb = np.empty(3), np.empty(3)
@@ -784,8 +780,7 @@ def _sweep_rows(
         s0, s1 = body_start[link], body_start[link + 1]
         if s1 <= s0 or sphere_frame[s0] != k:
             continue
-        best = min(best, _link_world(X, F, bounds, spheres, sphere_frame, body_start, link, w_spheres, w_boxes,
-                                     w_capsules, g, c, below, below))  # fmt: skip
+        best = min(best, _link_world(X, F, bounds, arm, scene, link, g, c, below, below))
         if best < below:
             return best
     if self_on:
@@ -796,7 +791,7 @@ def _sweep_rows(
             fa, fb = sphere_frame[body_start[a]], sphere_frame[body_start[b]]
             if not ((fa == k and (fb == 0 or fb == k or fb == n)) or (fb == k and (fa == 0 or fa == k or fa == n))):
                 continue
-            best = min(best, _pair_row(X, F, bounds, spheres, sphere_frame, body_start, a, b, c, cb, below, below))
+            best = min(best, _pair_row(X, F, bounds, arm, a, b, c, cb, below, below))
             if best < below:
                 return best
     return best
@@ -844,13 +839,16 @@ def _lever(spheres, sphere_frame, k, M, prismatic):
 
 
 @kernel
-def _piece_blocked(G, joints, F, X, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                   self_on, sweep, j, k, n, g, Tj, rho, slack, x, half, depth, stack):  # fmt: skip
+def _piece_blocked(G, joints, arm, scene, work, swept, x, half):
     """Whether every value of joint ``j`` within ``half`` of ``x`` leaves the links on frame ``k`` colliding for every
-    configuration within ``slack`` of the pose (:func:`blocked_poses`'s sweep ``sweep``: 0 the first joint, 1 the
-    last). A piece is blocked where the row at its centre is below ``-(rho * half + slack)`` (a sphere moves at most
-    ``rho`` per unit of the joint); else, unless that row is at least ``-slack`` or the piece is ``depth`` halvings
-    deep, its two halves are judged the same way (``stack (depth + 2, 2)``: scratch)."""
+    configuration within ``slack`` of the pose (``swept = (sweep, j, k, n, rho, slack, depth)``, :func:`blocked_poses`'s
+    sweep ``sweep``: 0 the first joint, 1 the last). A piece is blocked where the row at its centre is below
+    ``-(rho * half + slack)`` (a sphere moves at most ``rho`` per unit of the joint); else, unless that row is at least
+    ``-slack`` or the piece is ``depth`` halvings deep, its two halves are judged the same way. ``work = (F, X, lb, g,
+    Tj, stack)``: the frames and placed spheres of the pose, the links' bounds, scratch (``stack (depth + 2, 2)``)."""
+    spheres, sphere_frame = arm[0], arm[1]
+    F, X, lb, g, Tj, stack = work
+    sweep, j, k, n, rho, slack, depth = swept
     top = 0
     stack[0, 0], stack[0, 1] = x, half
     while top >= 0:
@@ -869,8 +867,7 @@ def _piece_blocked(G, joints, F, X, lb, spheres, sphere_frame, body_start, pairs
             _rigid_inverse_times(F[n], Tj, F[n - 1])
         _place_frame(F, spheres, sphere_frame, k, X)  # frames 0 and n stay placed
         reach = rho * w + slack  # a row at least -reach here may be free somewhere in the piece
-        worst = _sweep_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                            self_on, k, n, g, -reach)  # fmt: skip
+        worst = _sweep_rows(X, F, lb, arm, scene, k, n, g, -reach)
         if worst < -reach:
             continue
         if worst >= -slack or w <= half / 2.0**depth * 1.5:  # may be free here, or as fine as allowed
@@ -882,10 +879,7 @@ def _piece_blocked(G, joints, F, X, lb, spheres, sphere_frame, body_start, pairs
 
 
 @kernel
-def blocked_poses(
-    G, joints, T, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, slack, samples,
-    depth, out,
-):  # fmt: skip
+def blocked_poses(G, joints, T, arm, scene, slack, samples, depth, out):
     """``out (B,)`` bool: no configuration whose tool pose is within ``slack`` of ``T[b] (4, 4)`` is free, proven
     by the rows the pose fixes (metres; ``slack`` bounds how far a sphere on the last two frames moves between two
     such configurations: the position tolerance plus the rotation tolerance times the sphere's lever).
@@ -904,6 +898,7 @@ def blocked_poses(
     motion over one step is proven on a finer step only where it needs one (:func:`_piece_blocked`). The sweep ends
     (not proven) at once where a value's row is at least ``-slack`` (a configuration there may be free), or where a
     piece ``depth`` halvings deep is still open; ``depth`` 0 is the plain sweep."""
+    spheres, sphere_frame, body_start = arm[0], arm[1], arm[2]
     n = joints.shape[0]
     S = spheres.shape[0]
     F = np.zeros((n + 1, 3, 4))
@@ -930,8 +925,7 @@ def blocked_poses(
         for i in range(n + 1):
             on[i] = i == 0 or i == n
         _place(F, spheres, sphere_frame, X)  # only the spheres on frames 0 and n are read
-        if _fixed_rows(X, F, lb, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-                       on, g, -slack) < -slack:  # fmt: skip
+        if _fixed_rows(X, F, lb, arm, scene, on, g, -slack) < -slack:
             out[b] = True
             continue
         if samples < 2:
@@ -947,9 +941,8 @@ def blocked_poses(
             blocked = True
             for i in range(samples):
                 x = lo + ((i * 7919) % samples) * h  # a stride through the range: a free value is met early
-                if not _piece_blocked(G, joints, F, X, lb, spheres, sphere_frame, body_start, pairs, w_spheres,
-                                      w_boxes, w_capsules, self_on, sweep, j, k, n, g, Tj, rho, slack, x, h / 2,
-                                      depth, stack):  # fmt: skip
+                swept = (sweep, j, k, n, rho, slack, depth)
+                if not _piece_blocked(G, joints, arm, scene, (F, X, lb, g, Tj, stack), swept, x, h / 2):
                     blocked = False
                     break
             if blocked:
@@ -958,14 +951,13 @@ def blocked_poses(
 
 
 @kernel
-def overlaps_batch(
-    G, joints, Q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, pair_hit,
-    world_hit,
-):  # fmt: skip
+def overlaps_batch(G, joints, Q, arm, scene, pair_hit, world_hit):
     """What overlaps (distance below 0) in each ``Q[b] (n,)``: ``pair_hit (B, P)`` bool, the pairs (False where
     ``self_on`` is False); ``world_hit (B, L, No)`` bool, link ``l`` and obstacle ``o`` (numbered spheres, boxes,
     capsules, as :meth:`nik.collision.World.packed`; False for the links on frame 0). The names of
     :func:`nik.collision.collision_names`, compiled; the same broad phase (cutoff 0) as the check."""
+    spheres, sphere_frame, body_start, pairs = arm[0], arm[1], arm[2], arm[3]
+    w_spheres, w_boxes, w_capsules = scene
     n = Q.shape[1]
     S, P, L = spheres.shape[0], pairs.shape[0], body_start.shape[0] - 1
     Ns, Nb = w_spheres.shape[0], w_boxes.shape[0]
@@ -977,8 +969,7 @@ def overlaps_batch(
     X = np.empty((S, 3))
     g = np.empty(3)
     for b in range(Q.shape[0]):
-        _rows(G, joints, Q[b], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, d,
-              J, False, 0.0, bounds, False)  # fmt: skip
+        _rows(G, joints, Q[b], arm, scene, d, J, False, 0.0, bounds, False)
         for p in range(P):
             pair_hit[b, p] = d[p] < 0.0
         world_hit[b, :, :] = False

@@ -44,6 +44,7 @@ per target (same seed, same answer). The settings and what they trade: :class:`n
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -77,10 +78,50 @@ from nik.kernels.lm import (
 )
 from nik.kernels.lm_step import _damped_step, _judge, _stalled
 
-__all__ = ["collision_lm"]
+__all__ = ["Answers", "CollideOpts", "Starts", "Targets", "collision_lm"]
 
 #: the finishing step's collision rows reach this fraction of ``tol_pos`` (module docstring)
 FINISH_MARGIN = 0.2
+
+
+class Targets(NamedTuple):
+    """The goal of each target of :func:`collision_lm`."""
+
+    T: np.ndarray  #: (B, 4, 4) the target poses
+    bounds: np.ndarray  #: (B, 6) the dead zone of a tolerant goal (:func:`nik.kernels.lm._score`)
+    modes: np.ndarray  #: (B,) int64 the rotation mode (``CLASSIC``: the tolerances of the options)
+
+
+class Starts(NamedTuple):
+    """The starts of each target of :func:`collision_lm`."""
+
+    q: np.ndarray  #: (B, H, n) given starts
+    count: np.ndarray  #: (B,) int64 how many of them target ``b`` uses (>= 0)
+    restarts: np.ndarray  #: (B,) int64 the uniform starts target ``b`` may draw at most
+
+
+class CollideOpts(NamedTuple):
+    """The settings of :func:`collision_lm` (:class:`nik.ik.collide.CollideCfg` says what each trades)."""
+
+    margin: float  #: metres, the collision rows' reach
+    weight: float  #: the collision rows' weight
+    tries: int  #: draws per uniform start
+    patience: int  #: uniform restarts in a row that do not lower the best sum by 1 % before giving up (0: never)
+    finish: int  #: iteration limit of the finishing step (0: none)
+    descents: int  #: the uniform starts the collision LM runs from, at least (<= 0: all)
+    converged: float  #: a descent ends at a kept step lowering its sum by less than this fraction (0: off)
+    converged_given: float = -1.0  #: the same for the given starts after the first (< 0: ``converged``)
+
+
+class Answers(NamedTuple):
+    """What :func:`collision_lm` writes, per target."""
+
+    q: np.ndarray  #: (B, n) the answer, inside the limits
+    free: np.ndarray  #: (B,) bool, collision-free
+    done: np.ndarray  #: (B,) bool, reached and free
+    iterations: np.ndarray  #: (B,) int64
+    pos: np.ndarray  #: (B,) float64, the position error of ``q`` (m)
+    rot: np.ndarray  #: (B,) float64, the angle error of ``q`` (rad)
 
 
 @kernel
@@ -92,13 +133,15 @@ def _sum_sq(r):
 
 
 @kernel
-def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame, body_start, pairs, w_spheres,
-                 w_boxes, w_capsules, self_on, order, score, Tc, ec, d, r, Jr, lb, wf, wi):  # fmt: skip
+def _rank_starts(G, joints, tgt, rw, starts, H, arm, scene, lb, order, score, chk):
     """How many of the given starts ``starts[:H] (H, n)`` LM runs from, their indices in ``order``: the first (the
     answer that collided: near the caller's ``q_near`` or the path's previous waypoint, it keeps an answer on its
     branch), then the other free ones (every row >= 0, brought inside the limits) nearest the pose first (the pose
     error of :func:`nik.kernels.lm._score`); the colliding ones are dropped before any iteration (a colliding
-    hypothesis mostly lands on a colliding answer)."""
+    hypothesis mostly lands on a colliding answer). ``tgt = (Tt, bnd, mode)``: the target; ``chk = (Tc, ec, d, r,
+    work)``: scratch (a pose, two 6-vectors, the rows, :func:`nik.kernels.collision.rows_work`'s)."""
+    Tt, bnd, mode = tgt
+    Tc, ec, d, r, work = chk
     n = starts.shape[1]
     q = np.empty(n)
     if H == 0:
@@ -108,8 +151,7 @@ def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame,
     for s in range(1, H):
         _copy(starts[s], q)
         _bounds(joints, q)
-        if not collides_in(G, joints, q, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                           self_on, 0.0, r, lb, wf, wi):  # fmt: skip
+        if not collides_in(G, joints, q, arm, scene, 0.0, r, lb, work):
             _chain(G, joints, q, Tc)
             e = _score(Tt, Tc, rw, bnd, mode, ec, d)
             k = m  # insertion sort (stable) after the first: a handful of starts
@@ -122,15 +164,19 @@ def _rank_starts(G, joints, Tt, starts, H, rw, bnd, mode, spheres, sphere_frame,
 
 
 @kernel
-def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-             self_on, margin, w2, lb, opts, limit, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A,
-             g, dq, qc, wf, wi, norms):  # fmt: skip
-    """LM with collision rows of reach ``margin`` from ``qs (n,)`` (moved in place) towards ``Tt`` until done (the
-    pose within the tolerances and free), stalled or ``limit`` iterations; returns ``(S, pos, rot, near, done,
-    iterations)``: the sum, the pose errors, the smallest row (exact where at most ``margin``). ``norms``: the pose
-    counts as reached only where also its position error <= ``opts[TOL_POS]`` and its angle <= ``opts[TOL_ROT]``
-    (the success judge; the finishing step's bounds reach past it). ``conv_rel``: it also ends at a kept step that
-    lowers the sum by less than that fraction of it (converged: ``CollideCfg.converged``; 0: never)."""
+def _descend(G, joints, tgt, qs, arm, scene, rows, opts, stop, ws, norms):
+    """LM with collision rows of reach ``margin`` from ``qs (n,)`` (moved in place) towards ``tgt = (Tt, bnd, mode)``
+    until done (the pose within the tolerances and free), stalled or ``limit`` iterations; returns ``(S, pos, rot,
+    near, done, iterations)``: the sum, the pose errors, the smallest row (exact where at most ``margin``).
+    ``rows = (margin, w2, lb)``: the rows' reach, their weight squared, the links' bounds; ``stop = (limit,
+    stall_limit, conv_rel)``; ``ws``: the scratch of :func:`collision_lm`. ``norms``: the pose counts as reached only
+    where also its position error <= ``opts[TOL_POS]`` and its angle <= ``opts[TOL_ROT]`` (the success judge; the
+    finishing step's bounds reach past it). ``conv_rel``: it also ends at a kept step that lowers the sum by less
+    than that fraction of it (converged: ``CollideCfg.converged``; 0: never)."""
+    Tt, bnd, mode = tgt
+    margin, w2, lb = rows
+    limit, stall_limit, conv_rel = stop
+    T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, work = ws
     n = qs.shape[0]
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     lambda0, lam_up, lam_down = opts[LAMBDA0], opts[LAMBDA_UP], opts[LAMBDA_DOWN]
@@ -139,8 +185,7 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
     total = 0
     E, p_e, r_e, reached = _eval(G, joints, qs, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
     reached = reached and (not norms or (p_e <= tol_pos and r_e <= tol_rot))
-    near = residual_in(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                       self_on, margin, r, Jr, lb, wf, wi)  # fmt: skip
+    near = residual_in(G, joints, qs, arm, scene, margin, r, Jr, lb, work)
     S = E + w2 * _sum_sq(r)
     done = reached and near >= 0.0
     lam = lambda0
@@ -159,8 +204,7 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
             Ec, p_c, r_c, reached_c = _eval(G, joints, qc, Tt, rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, d)
             reached_c = reached_c and (not norms or (p_c <= tol_pos and r_c <= tol_rot))
             if reached_c or Ec < S:  # else rejected by the pose rows alone (Sc >= Ec >= S): no collision rows
-                near_c = residual_in(G, joints, qc, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                                     w_capsules, self_on, margin, rc, Jrc, lb, wf, wi)  # fmt: skip
+                near_c = residual_in(G, joints, qc, arm, scene, margin, rc, Jrc, lb, work)
                 Sc = Ec + w2 * _sum_sq(rc)
                 donec = reached_c and near_c >= 0.0
         kept, lam = _judge(good, S, Sc, donec, lam, lam_down, lam_up, lam_min, lam_max)
@@ -180,33 +224,32 @@ def _descend(G, joints, Tt, bnd, mode, qs, spheres, sphere_frame, body_start, pa
 
 
 @kernel
-def _finish(G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on,
-            fmargin, w2, lb, fopts, limit, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc,
-            wf, wi, qf):  # fmt: skip
+def _finish(G, joints, Tt, qs, fgoal, arm, scene, rows, stop, ws, qf):
     """The finishing step from ``qs (n,)`` (module docstring): :func:`_descend` with the pose rows' dead zone the box
-    inscribed in the tolerances (``fbnd``, rotation weight ``fopts[ROT_WEIGHT] = tol_pos / tol_rot``), the rows'
-    reach ``fmargin``, done by the success judge's norms and free at margin 0; ``qs`` moves only where it is done.
-    Returns ``(done, pos, rot, near, iterations)``."""
+    inscribed in the tolerances (``fgoal = (fbnd, fopts)``, rotation weight ``fopts[ROT_WEIGHT] = tol_pos /
+    tol_rot``), the rows ``rows = (fmargin, w2, lb)`` of reach ``fmargin``, done by the success judge's norms and
+    free at margin 0; ``qs`` moves only where it is done (``qf (n,)``: scratch). Returns ``(done, pos, rot, near,
+    iterations)``."""
+    fbnd, fopts = fgoal
     _copy(qs, qf)
-    _, p_f, r_f, near, done, its = _descend(
-        G, joints, Tt, fbnd, -1, qf, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-        self_on, fmargin, w2, lb, fopts, limit, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g,
-        dq, qc, wf, wi, True,
-    )  # fmt: skip
+    _, p_f, r_f, near, done, its = _descend(G, joints, (Tt, fbnd, -1), qf, arm, scene, rows, fopts, stop, ws, True)
     if done:
         _copy(qf, qs)
     return done, p_f, r_f, near, its
 
 
 @kernel
-def _nearest_free(G, joints, Tt, rw, bnd, mode, tries, rng, spheres, sphere_frame, body_start, pairs, w_spheres,
-                  w_boxes, w_capsules, self_on, Tc, ec, d, r, lb, wf, wi, drawn, draw_E, qs):  # fmt: skip
-    """One uniform start's draw: ``tries`` configurations drawn from ``rng`` into ``drawn (tries, n)``, their pose
-    errors (:func:`nik.kernels.lm._score`) in ``draw_E (tries,)``; the free one nearest the pose (the first of equals)
-    copied into ``qs (n,)``. The draws are checked for collisions nearest the pose first, up to the first free one:
-    the same start as checking, in the order drawn, each draw nearer than the nearest free one so far (the rule before
-    this one), with fewer checks (that rule checks every new nearest, free or not). Returns ``(found, checks)``:
+def _nearest_free(G, joints, tgt, rw, draws, rng, arm, scene, lb, chk, qs):
+    """One uniform start's draw (``draws = (tries, drawn, draw_E)``): ``tries`` configurations drawn from ``rng`` into
+    ``drawn (tries, n)``, their pose errors (:func:`nik.kernels.lm._score`, towards ``tgt = (Tt, bnd, mode)``) in
+    ``draw_E (tries,)``; the free one nearest the pose (the first of equals) copied into ``qs (n,)`` (``chk``: the
+    scratch of :func:`_rank_starts`). The draws are checked for collisions nearest the pose first, up to the first
+    free one: the same start as checking, in the order drawn, each draw nearer than the nearest free one so far, with
+    fewer checks (checking in the order drawn checks every new nearest, free or not). Returns ``(found, checks)``:
     whether a draw is free, the collision checks made; ``draw_E`` is left inf at the draws checked."""
+    Tt, bnd, mode = tgt
+    tries, drawn, draw_E = draws
+    Tc, ec, d, r, work = chk
     for t in range(tries):
         _draw(joints, rng, drawn[t])
         _chain(G, joints, drawn[t], Tc)
@@ -221,43 +264,47 @@ def _nearest_free(G, joints, Tt, rw, bnd, mode, tries, rng, spheres, sphere_fram
             return False, checks
         draw_E[t] = math.inf
         checks += 1
-        if not collides_in(G, joints, drawn[t], spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                           w_capsules, self_on, 0.0, r, lb, wf, wi):  # fmt: skip
+        if not collides_in(G, joints, drawn[t], arm, scene, 0.0, r, lb, work):
             _copy(drawn[t], qs)
             return True, checks
 
 
 @kernel
-def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, sphere_frame, body_start, pairs,
-             w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts, fmargin, finish,
-             stall_limit, conv_rel, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq,
-             qc, qp, wf, wi, work, qf, J0, drawn, draw_E):  # fmt: skip
-    """The uniform starts of one target, before any collision iteration: ``count`` of them, each the free draw nearest
-    the pose among ``tries`` (:func:`_nearest_free`, scratch ``drawn``, ``draw_E``; a target none of whose draws is free
-    gets no start), taken to the pose by the pose-only LM, judged by the sum :func:`_descend` starts from (pose rows +
-    ``w2`` times the rows at ``margin``: one rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in
-    ``pool_S``, the smallest row in ``pool_near``), ``porder`` their indices by that sum, lowest first (stable). A start
-    that is done as it stands (the pose reached and free), or done by the finishing step (``fin``: at the pose,
-    overlapping by at most ``slack``), ends the preparation. Returns ``(m, hit, iterations, pos, rot)``: the starts
+def _prepare(G, joints, tgt, opts, uni, arm, scene, rows, fstep, pools, ws, wp):
+    """The uniform starts of one target ``tgt = (Tt, bnd, mode)``, before any collision iteration (``uni = (count,
+    tries, rng, iopts)``): ``count`` of them, each the free draw nearest the pose among ``tries``
+    (:func:`_nearest_free`; a target none of whose draws is free gets no start), taken to the pose by the pose-only LM
+    (``iopts``), judged by the sum :func:`_descend` starts from (pose rows + ``w2`` times the rows at ``margin``,
+    ``rows = (margin, w2, lb)``: one rows call without the Jacobian) and put in ``pool (count, n)`` (that sum in
+    ``pool_S``, the smallest row in ``pool_near``; ``pools = (pool, pool_S, pool_near, porder)``), ``porder`` their
+    indices by that sum, lowest first (stable). A start that is done as it stands (the pose reached and free), or done
+    by the finishing step (``fstep = (fin, slack, fbnd, fopts, fmargin, finish, stall_limit, conv_rel)``: ``fin``, at
+    the pose, overlapping by at most ``slack``), ends the preparation. ``ws``: the scratch of :func:`collision_lm`,
+    ``wp = (qp, work, qf, J0, drawn, draw_E)`` this step's. Returns ``(m, hit, iterations, pos, rot)``: the starts
     kept, the index in ``pool`` of the done one (-1: none; then ``pos, rot`` are inf), the iterations spent (the
     pose-only LM's and the finishing step's)."""
+    Tt, bnd, mode = tgt
+    count, tries, rng, iopts = uni
+    margin, w2, lb = rows
+    fin, slack, fbnd, fopts, fmargin, finish, stall_limit, conv_rel = fstep
+    pool, pool_S, pool_near, porder = pools
+    T, J, e, d, r = ws[0], ws[5], ws[2], ws[4], ws[7]
+    qp, lm_work, qf, J0, drawn, draw_E = wp
+    chk = (ws[1], ws[3], ws[4], ws[7], ws[15])  # Tc, ec, d, r and the rows' scratch: a draw's check
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
     total = 0
     m = 0
     for _ in range(count):
         qs = pool[m]
-        found, _ = _nearest_free(G, joints, Tt, rw, bnd, mode, tries, rng, spheres, sphere_frame, body_start, pairs,
-                                 w_spheres, w_boxes, w_capsules, self_on, Tc, ec, d, r, lb, wf, wi, drawn, draw_E,
-                                 qs)  # fmt: skip
+        found, _ = _nearest_free(G, joints, tgt, rw, (tries, drawn, draw_E), rng, arm, scene, lb, chk, qs)
         if not found:
             continue
         # to the pose by LM without the collision rows (an iteration a small part of the cost of one with them)
-        its, _, _, _ = _lm_one_bounded(G, joints, Tt, qs, bnd, mode, opts, iopts, 0, rng, qp, work)
+        its, _, _, _ = _lm_one_bounded(G, joints, Tt, qs, bnd, mode, opts, iopts, 0, rng, qp, lm_work)
         total += its
         _copy(qp, qs)
         E, p_s, r_s, reached = _eval(G, joints, qs, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
-        _rows_in(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, r,
-                 J0, False, margin, lb, False, wf, wi)  # fmt: skip
+        _rows_in(G, joints, qs, arm, scene, r, J0, False, margin, lb, False, ws[15])
         near = math.inf
         S = E
         for k in range(r.shape[0]):
@@ -267,11 +314,8 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
         if reached and near >= 0.0:  # done as it stands (the collision LM would stop before its first iteration)
             return m, m, total, p_s, r_s
         if fin and p_s <= tol_pos and r_s <= tol_rot and -slack <= near < 0.0:
-            fdone, p_f, r_f, _, its = _finish(
-                G, joints, Tt, qs, fbnd, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules,
-                self_on, fmargin, w2, lb, fopts, finish, stall_limit, conv_rel, T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc,
-                A, g, dq, qc, wf, wi, qf,
-            )  # fmt: skip
+            fdone, p_f, r_f, _, its = _finish(G, joints, Tt, qs, (fbnd, fopts), arm, scene, (fmargin, w2, lb),
+                                              (finish, stall_limit, conv_rel), ws, qf)  # fmt: skip
             total += its
             if fdone:
                 return m, m, total, p_f, r_f
@@ -286,30 +330,30 @@ def _prepare(G, joints, Tt, bnd, mode, opts, iopts, count, tries, rng, spheres, 
 
 
 @kernel
-def collision_lm(
-    G, joints, Tt, starts, n_starts, bounds, modes, opts, iopts, restarts, tries, patience, seed,
-    spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, weight, finish,
-    descents, converged, q, free, done_out, iterations, pos, rot, converged_given=-1.0,
-):  # fmt: skip
-    """LM with collision rows for each target ``Tt[b] (4, 4)`` (module docstring).
+def collision_lm(G, joints, targets, given, arm, scene, opts, iopts, settings, seed, out):
+    """LM with collision rows for each target ``targets.T[b] (4, 4)`` (module docstring).
 
     Args:
-        G, joints: the chain model; ``spheres ... self_on``: :func:`nik.collision.compiled.kernel_arguments`.
-        starts: (B, H, n) given starts, ``n_starts: (B,)`` int64 how many of them target ``b`` uses (>= 0).
-        bounds: (B, 6), modes: (B,) int64: the goal (``modes[b] == CLASSIC``: the tolerances of ``opts``).
+        G, joints: the chain model; ``arm, scene``: :func:`nik.collision.compiled.kernel_arguments`.
+        targets: :class:`Targets` ``(T (B, 4, 4), bounds (B, 6), modes (B,) int64)``: the goal (``modes[b] ==
+            CLASSIC``: the tolerances of ``opts``).
+        given: :class:`Starts` ``(q (B, H, n), count (B,), restarts (B,))``: the given starts, how many of them
+            target ``b`` uses (>= 0), the uniform starts it may draw at most.
         opts, iopts: :func:`nik.kernels.lm.lm_options` (``iters``, ``stall_iters`` per start).
-        restarts: (B,) int64 uniform starts each target may draw at most; ``tries``: draws per uniform start.
-        seed: (1,) uint64; ``margin``: metres, the collision rows' reach; ``weight``: their weight.
-        finish: iteration limit of the finishing step (module docstring; 0: none).
-        descents: the uniform starts the collision LM runs from, at least: the best by the sum it starts from
-            (also every one near the pose or free: module docstring; <= 0: all of them).
-        converged: a descent ends at a kept step that lowers its sum by less than this fraction of it (0: off;
-            :attr:`nik.ik.collide.CollideCfg.converged`): the first given start's and the uniform starts'.
-        converged_given: the same for the other given starts (the network's hypotheses or the closed form's
-            branches; < 0, the default: ``converged``; :attr:`nik.ik.collide.CollideCfg.converged_given`).
-        q: (B, n) out, inside the limits; free, done_out: (B,) bool out (collision-free; reached and free);
-        iterations: (B,) int64 out; pos, rot: (B,) float64 out, the pose errors of ``q`` (m, rad).
+        settings: :class:`CollideOpts` ``(margin, weight, tries, patience, finish, descents, converged,
+            converged_given)``: ``descents`` the uniform starts the collision LM runs from, at least, the best by the
+            sum it starts from (also every one near the pose or free: module docstring); ``converged`` applies to
+            the first given start and the uniform starts, ``converged_given`` to the other given starts (the
+            network's hypotheses or the closed form's branches; < 0: ``converged``).
+        seed: (1,) uint64.
+        out: :class:`Answers` ``(q (B, n), free (B,), done (B,), iterations (B,), pos (B,), rot (B,))`` written:
+            the answers inside the limits, collision-free, reached and free, the iterations, the pose errors (m, rad).
     """
+    Tt, bounds, modes = targets
+    starts, n_starts, restarts = given
+    margin, weight, tries, patience, finish, descents, converged, converged_given = settings
+    q, free, done_out, iterations, pos, rot = out
+    spheres, sphere_frame, body_start, pairs, _ = arm
     B, n = q.shape
     R = pairs.shape[0] + body_start.shape[0] - 1
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
@@ -327,8 +371,8 @@ def collision_lm(
     order, score = np.empty(starts.shape[1], dtype=np.int64), np.empty(starts.shape[1])
     lb = np.empty((body_start.shape[0] - 1, 4))  # the links' bounds, once per call (the broad phase)
     link_bounds(spheres, body_start, lb)
-    wf, wi = rows_work(n, spheres, body_start, w_spheres, w_boxes, w_capsules)  # the rows' scratch, once per call
-    work = np.empty(_work_size(n))  # the pose-only LM's scratch (the uniform starts' first leg)
+    work = rows_work(n, arm, scene)  # the rows' scratch, once per call
+    lm_work = np.empty(_work_size(n))  # the pose-only LM's scratch (the uniform starts' first leg)
     # the finishing step's goal: isotropic in the tolerances, its dead zone the box inscribed in them
     fopts = opts.copy()
     fin_on = finish > 0 and tol_pos > 0.0 and tol_rot > 0.0
@@ -349,6 +393,9 @@ def collision_lm(
     porder = np.empty(most, dtype=np.int64)
     J0 = np.empty((0, n))  # the rows without their Jacobian
     drawn, draw_E = np.empty((max(tries, 1), n)), np.empty(max(tries, 1))  # a uniform start's draws
+    ws = (T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, work)  # the descents' scratch
+    wp = (qp, lm_work, qf, J0, drawn, draw_E)  # the uniform starts' preparation's
+    pools = (pool, pool_S, pool_near, porder)
     for b in range(B):
         rng[0] = seed[0] ^ (np.uint64(b) * _STREAM)
         bnd, mode = bounds[b], modes[b]
@@ -368,21 +415,17 @@ def collision_lm(
             s += 1
             if s == H and not ranked:
                 ranked = True
-                H = _rank_starts(G, joints, Tt[b], starts[b], n_starts[b], rw, bnd, mode, spheres, sphere_frame,
-                                 body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, order, score, Tc, ec, d,
-                                 r, Jr, lb, wf, wi)  # fmt: skip
+                H = _rank_starts(G, joints, (Tt[b], bnd, mode), rw, starts[b], n_starts[b], arm, scene, lb, order,
+                                 score, (Tc, ec, d, r, work))  # fmt: skip
                 if s >= H + nu:
                     break
             if s == H and not prepared:
                 # every uniform start drawn and taken to the pose first, then the collision LM from the best
                 # `descents` by the sum it starts from, lowest first (module docstring)
                 prepared = True
-                m, hit, its, p_h, r_h = _prepare(
-                    G, joints, Tt[b], bnd, mode, opts, iopts, restarts[b], tries, rng, spheres, sphere_frame,
-                    body_start, pairs, w_spheres, w_boxes, w_capsules, self_on, margin, w2, lb, fin, slack, fbnd, fopts,
-                    fmargin, finish, stall_limit, converged, pool, pool_S, pool_near, porder, T, Tc, e, ec, d, J, Jc,
-                    r, rc, Jr, Jrc, A, g, dq, qc, qp, wf, wi, work, qf, J0, drawn, draw_E,
-                )  # fmt: skip
+                fstep = (fin, slack, fbnd, fopts, fmargin, finish, stall_limit, converged)
+                m, hit, its, p_h, r_h = _prepare(G, joints, (Tt[b], bnd, mode), opts, (restarts[b], tries, rng, iopts),
+                                                 arm, scene, (margin, w2, lb), fstep, pools, ws, wp)  # fmt: skip
                 total += its
                 if hit >= 0:
                     best_S, best_free, best_done, best_pos, best_rot = 0.0, True, True, p_h, r_h
@@ -410,14 +453,11 @@ def collision_lm(
                 # at the pose and overlapping by less than the tolerance can move the hand: the finishing step first
                 _, p_s, r_s, _ = _eval(G, joints, qs, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
                 if p_s <= tol_pos and r_s <= tol_rot:
-                    near_s = residual_in(G, joints, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                                         w_capsules, self_on, 0.0, r, Jr, lb, wf, wi)  # fmt: skip
+                    near_s = residual_in(G, joints, qs, arm, scene, 0.0, r, Jr, lb, work)
                     if -slack <= near_s < 0.0:
-                        fdone, p_f, r_f, near_f, its = _finish(
-                            G, joints, Tt[b], qs, fbnd, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                            w_capsules, self_on, fmargin, w2, lb, fopts, finish, stall_limit, converged, T, Tc, e, ec,
-                            d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, wf, wi, qf,
-                        )  # fmt: skip
+                        fdone, p_f, r_f, near_f, its = _finish(G, joints, Tt[b], qs, (fbnd, fopts), arm, scene,
+                                                               (fmargin, w2, lb), (finish, stall_limit, converged), ws,
+                                                               qf)  # fmt: skip
                         total += its
                         if fdone:
                             best_S, best_free, best_done, best_pos, best_rot = 0.0, True, True, p_f, r_f
@@ -425,21 +465,15 @@ def collision_lm(
                             break
             # the other given starts (the hypotheses) stop at `conv_given`; the answer and the restarts at `converged`
             conv = conv_given if 0 < s < H else converged
-            S, p_e, r_e, near, done, its = _descend(
-                G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                w_capsules, self_on, margin, w2, lb, opts, limit, stall_limit, conv, T, Tc, e, ec, d, J, Jc, r,
-                rc, Jr, Jrc, A, g, dq, qc, wf, wi, False,
-            )  # fmt: skip
+            S, p_e, r_e, near, done, its = _descend(G, joints, (Tt[b], bnd, mode), qs, arm, scene, (margin, w2, lb),
+                                                    opts, (limit, stall_limit, conv), ws, False)  # fmt: skip
             total += its
             if not done and margin > 0.0 and near >= 0.0 and S < best_S:
                 # free, and held off the goal by the margin rows (a goal nearer an obstacle than the margin): on
                 # from here with the rows pushing only where spheres overlap, before any other start
                 _copy(qs, qp)
-                S0, p0, r0, near0, done0, its = _descend(
-                    G, joints, Tt[b], bnd, mode, qs, spheres, sphere_frame, body_start, pairs, w_spheres, w_boxes,
-                    w_capsules, self_on, 0.0, w2, lb, opts, limit, stall_limit, converged, T, Tc, e, ec, d, J, Jc, r,
-                    rc, Jr, Jrc, A, g, dq, qc, wf, wi, False,
-                )  # fmt: skip
+                S0, p0, r0, near0, done0, its = _descend(G, joints, (Tt[b], bnd, mode), qs, arm, scene, (0.0, w2, lb),
+                                                         opts, (limit, stall_limit, converged), ws, False)  # fmt: skip
                 total += its
                 if done0:
                     S, p_e, r_e, near, done = S0, p0, r0, near0, True
@@ -468,27 +502,6 @@ def collision_lm(
                 _draw(joints, rng, best_q)
             _bounds(joints, best_q)
             _, best_pos, best_rot, _ = _eval(G, joints, best_q, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
-            best_free = (
-                residual_in(
-                    G,
-                    joints,
-                    best_q,
-                    spheres,
-                    sphere_frame,
-                    body_start,
-                    pairs,
-                    w_spheres,
-                    w_boxes,
-                    w_capsules,
-                    self_on,
-                    0.0,
-                    r,
-                    Jr,
-                    lb,
-                    wf,
-                    wi,
-                )
-                >= 0.0  # fmt: skip
-            )
+            best_free = residual_in(G, joints, best_q, arm, scene, 0.0, r, Jr, lb, work) >= 0.0
         _copy(best_q, q[b])
         free[b], done_out[b], iterations[b], pos[b], rot[b] = best_free, best_done, total, best_pos, best_rot

@@ -48,7 +48,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, _chain, _chain_jacobian
-from nik.kernels.collision import collision_residual
+from nik.kernels.collision import ArmSpheres, Scene, collision_residual
 from nik.kernels.lm import _residual
 from nik.kernels.lm_step import _cap, _damped, _judge
 
@@ -147,8 +147,8 @@ def _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g
     """The collision rows (module docstring) added to ``H, g`` (with ``build``) and written to ``r`` from ``at`` (when
     its length is > 0); ``info[0]``: the smallest signed distance over the samples (metres). Returns the cost."""
     N, n = Q.shape
-    spheres, frames, start, pairs, w_sph, w_box, w_cap, self_on = col
-    R = pairs.shape[0] + start.shape[0] - 1
+    arm, scene = col  # nik.kernels.collision.ArmSpheres, Scene
+    R = arm.pairs.shape[0] + arm.body_start.shape[0] - 1
     sub = max(int(opts[COL_SUB]), 1)
     sc, margin = math.sqrt(opts[W_COL]), opts[COL_MARGIN]
     keep = r.shape[0] > 0
@@ -164,8 +164,7 @@ def _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g
                 x0 = qs[j] if i < 0 else Q[i, j]
                 x1 = x0 if k == 0 else (Q[i + 1, j] if i + 1 < N else qe[j])
                 qx[j] = (1.0 - t) * x0 + t * x1
-            d = collision_residual(G, joints, qx, spheres, frames, start, pairs, w_sph, w_box, w_cap, self_on, margin,
-                                   rr, Jr)  # fmt: skip
+            d = collision_residual(G, joints, qx, arm, scene, margin, rr, Jr)
             info[0] = min(info[0], d)
             a, wa = (i, sc * (1.0 - t)) if i >= 0 else (-1, 0.0)
             b, wb = (i + 1, sc * t) if (k > 0 and i + 1 < N) else (-1, 0.0)
@@ -310,7 +309,7 @@ def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, po
                     H[i * n + j, 0] += sr * sr
                     g[i * n + j] -= sr * res
     info[0] = np.inf
-    if opts[W_COL] > 0.0 and col[3].shape[0] + col[2].shape[0] > 1:
+    if opts[W_COL] > 0.0 and col[0].pairs.shape[0] + col[0].body_start.shape[0] > 1:
         cost += _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g, r, at, col, info)
     return cost
 
@@ -318,16 +317,9 @@ def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, po
 @kernel
 def _no_collision():
     """The collision arguments of no model (no rows)."""
-    return (
-        np.empty((0, 4)),
-        np.empty(0, dtype=np.int64),
-        np.zeros(1, dtype=np.int64),
-        np.empty((0, 2), dtype=np.int64),
-        np.empty((0, 4)),
-        np.empty((0, 15)),
-        np.empty((0, 7)),
-        False,
-    )
+    arm = ArmSpheres(np.empty((0, 4)), np.empty(0, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                     np.empty((0, 2), dtype=np.int64), False)  # fmt: skip
+    return arm, Scene(np.empty((0, 4)), np.empty((0, 15)), np.empty((0, 7)))
 
 
 @kernel
