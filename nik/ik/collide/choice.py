@@ -22,7 +22,9 @@ class CollideCfg:
     overlaps by less than the tolerance can move the hand within it; 0: off); ``descents``: the uniform restarts
     the collision LM runs from, ranked by their starting sum (further ones only where nearly free; <= 0: all);
     ``converged`` / ``converged_given``: a descent ends at a kept step that lowers its sum by less than that
-    fraction of it (the answer and the restarts / the other given starts; 0: off).
+    fraction of it (the answer and the restarts / the other given starts; 0: off); ``mesh_steer``: where the
+    meshes judge and the spheres' re-solve found no free answer, solve on with the mesh rows
+    (:mod:`nik.ik.collide.mesh_step`).
 
     The defaults were chosen on the built-in panda's scenes (``benchmarks/collision_speed.py``,
     ``benchmarks/collision_lm_ab.py``): each saves iterations without losing a target there. Fewer ``restarts``
@@ -40,6 +42,7 @@ class CollideCfg:
     descents: int = 4
     converged: float = 2e-3
     converged_given: float = 2e-2
+    mesh_steer: bool = True
 
 
 @dataclass(frozen=True)

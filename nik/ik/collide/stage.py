@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from nik.ik.collide.choice import CollideCfg, Setup, _like, _numpy, setup
+from nik.ik.collide.mesh_step import MeshStep, mesh_step
 from nik.ik.collide.resolver import _collision_solve, _goal, _judge, _pusher, _solve_free, rest_free
 from nik.ik.collide.starts import _starts
 from nik.ik.collide.verdict import _meshes_judge
@@ -94,6 +95,13 @@ def resolve(robot, plan, T: torch.Tensor, res, s: Setup, cfg: CollideCfg | None 
         changed[idx] = True
     if s.mesh is not None and s.covered:  # the meshes judge what the spheres still call colliding
         _meshes_judge(robot, s, q, hit, success, changed, idx, done, q_own, own_ok)
+    if s.mesh is not None and cfg.mesh_steer and idx.size:  # the meshes steer where the spheres found nothing
+        rows = idx[~success[idx]]
+        if rows.size:
+            step = MeshStep(plan, s, cfg, float32, model.lo32, model.hi32)
+            qm, okm = mesh_step(robot, step, np.ascontiguousarray(Tnp[rows]), q[rows], q_own[rows])
+            won = rows[okm]
+            q[won], hit[won], success[won], changed[won] = qm[okm], False, True, True
     if prefers(plan):
         ok = success & ~hit
         (qr, weight, _), push = preference(robot, plan, B, None), _pusher(robot, s, plan, cfg, goal, Tnp)
