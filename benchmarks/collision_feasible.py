@@ -8,9 +8,10 @@ For each robot and seed: a scene drawn from the seed (a table just below the arm
 3 spheres placed by the seed in the shell the arm reaches, sizes scaled by its reach), ``--targets`` poses of
 random configurations that the robot's meshes call free of the scene and of the arm itself (coal,
 :class:`nik.collision.meshcheck.MeshCheck` with the pairs the model leaves out by decision left out: each target
-has a known free answer). Two solvers, one thread: ``IKSolver(robot, self_collision=False)`` (no world) and
+has a known free answer). Three solvers, one thread: ``IKSolver(robot, self_collision=False)`` (no world),
 ``IKSolver(robot, world=scene)`` (the default: the meshes judge where coal is installed, the spheres steer, the
-meshes steer where the spheres refuse, :mod:`nik.ik.collide`). Reported: found % (success of the collision solver),
+meshes steer where the spheres refuse, :mod:`nik.ik.collide`) and the same without the mesh step
+(``CollideCfg(mesh_steer=False)``). Reported: found % (success of the collision solver),
 answers called free that collide on the meshes (must be 0), CPU time per target of each (one call each after a
 warm-up call) and their ratio; then per robot the median and the spread (min - max) over the seeds.
 
@@ -107,30 +108,63 @@ def targets(robot, model, world, n: int, seed: int):
     return np.ascontiguousarray(robot.fk(free)), mesh
 
 
+class _Steered:
+    """Counts the targets the collision stage hands to the mesh step (:mod:`nik.ik.collide.mesh_step`), those it
+    finds, and the CPU seconds it takes, while installed (``with``)."""
+
+    def __enter__(self):
+        import nik.ik.collide.stage as stage
+
+        self.stage, self.fn = stage, stage.mesh_step
+        self.targets, self.found, self.cpu = 0, 0, 0.0
+
+        def counted(robot, step, T, first, own):
+            c = time.process_time()
+            q, ok = self.fn(robot, step, T, first, own)
+            self.cpu += time.process_time() - c
+            self.targets, self.found = self.targets + len(T), self.found + int(ok.sum())
+            return q, ok
+
+        stage.mesh_step = counted
+        return self
+
+    def __exit__(self, *exc):
+        self.stage.mesh_step = self.fn
+
+
 def run(name: str, seeds: list[int], n: int) -> list[dict]:
-    """One row per seed: found % with and without a world, false free, us per target, the ratio."""
+    """One row per seed: found % with and without a world, false free, us per target, the ratio, the mesh step."""
+    from nik.ik.collide import CollideCfg
+
     robot, model = load(name)
     rows = []
     for seed in seeds:
         world = scene(robot, seed)
         T, mesh = targets(robot, model, world, n, seed)
         plain, safe = nik.IKSolver(robot, self_collision=False), nik.IKSolver(robot, world=world)
+        spheres = nik.IKSolver(robot, world=world)
+        spheres.collide_cfg = CollideCfg(mesh_steer=False)
         out, cpu = {}, {}
-        for key, solver in (("plain", plain), ("safe", safe)):
+        for key, solver in (("plain", plain), ("spheres", spheres), ("safe", safe)):
             solver.solve(T[:8])  # kernels, networks, the mesh check loaded before timing
-            c = time.process_time()
-            out[key] = solver.solve(T)
-            cpu[key] = (time.process_time() - c) / len(T)
+            with _Steered() as steered:
+                c = time.process_time()
+                out[key] = solver.solve(T)
+                cpu[key] = (time.process_time() - c) / len(T)
         res = out["safe"]
         free = np.asarray(res.collision_free, dtype=bool)
         false_free = int(mesh.collides(np.asarray(res.q, dtype=np.float64)[free], world).sum())
         rows.append({"robot": name, "seed": seed, "targets": len(T), "found": float(np.mean(res.success)),
                      "plain": float(np.mean(out["plain"].success)), "false_free": false_free,
                      "us_plain": 1e6 * cpu["plain"], "us_world": 1e6 * cpu["safe"],
-                     "ratio": cpu["safe"] / cpu["plain"], "obstacles": sum(world.counts())})  # fmt: skip
+                     "ratio": cpu["safe"] / cpu["plain"], "obstacles": sum(world.counts()),
+                     "spheres": float(np.mean(out["spheres"].success)), "ratio_spheres": cpu["spheres"] / cpu["plain"],
+                     "steered": steered.targets, "steer_found": steered.found, "steer_s": steered.cpu})  # fmt: skip
         r = rows[-1]
         print(f"{name} seed {seed}: {r['targets']} targets, found {r['found']:.1%} (no world {r['plain']:.1%}), "
-              f"false free {false_free}, {r['us_world']:.0f} vs {r['us_plain']:.0f} us/target: {r['ratio']:.2f}x",
+              f"false free {false_free}, {r['us_world']:.0f} vs {r['us_plain']:.0f} us/target: {r['ratio']:.2f}x; "
+              f"mesh step {r['steer_found']}/{r['steered']} in {r['steer_s']:.2f} s; without it found "
+              f"{r['spheres']:.1%}, {r['ratio_spheres']:.2f}x",
               flush=True)  # fmt: skip
     return rows
 
@@ -143,20 +177,24 @@ def report(rows: list[dict], argv: list[str]) -> str:
              "targets from configurations free on the meshes, so each has a free answer). Goal: >= 99.5 % found, "
              "<= 2x the time without a world.", "",
              "| robot | seed | targets | found | found, no world | called free, mesh colliding | us/target world "
-             "| us/target no world | ratio |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             "| us/target no world | ratio | mesh step: found / targets, CPU s | without the mesh step: found, ratio |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in rows:
         lines.append(
             f"| {r['robot']} | {r['seed']} | {r['targets']} | {r['found']:.1%} | {r['plain']:.1%} "
-            f"| {r['false_free']} | {r['us_world']:.0f} | {r['us_plain']:.0f} | {r['ratio']:.2f}x |"
+            f"| {r['false_free']} | {r['us_world']:.0f} | {r['us_plain']:.0f} | {r['ratio']:.2f}x "
+            f"| {r['steer_found']} / {r['steered']}, {r['steer_s']:.2f} "
+            f"| {r['spheres']:.1%}, {r['ratio_spheres']:.2f}x |"
         )
-    lines += ["", "| robot | found: median (min - max) | ratio: median (min - max) | called free, mesh colliding |",
-              "|---|---|---|---|"]  # fmt: skip
+    lines += ["", "| robot | found: median (min - max) | ratio: median (min - max) | called free, mesh colliding "
+              "| without the mesh step: found, ratio (medians) |", "|---|---|---|---|---|"]  # fmt: skip
     for name in dict.fromkeys(r["robot"] for r in rows):
         rs = [r for r in rows if r["robot"] == name]
         f, x = [r["found"] for r in rs], [r["ratio"] for r in rs]
         lines.append(f"| {name} | {statistics.median(f):.1%} ({min(f):.1%} - {max(f):.1%}) "
                      f"| {statistics.median(x):.2f}x ({min(x):.2f} - {max(x):.2f}) "
-                     f"| {sum(r['false_free'] for r in rs)} |")  # fmt: skip
+                     f"| {sum(r['false_free'] for r in rs)} | {statistics.median(r['spheres'] for r in rs):.1%}, "
+                     f"{statistics.median(r['ratio_spheres'] for r in rs):.2f}x |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

@@ -43,7 +43,8 @@ class MeshDistance:
             v = np.asarray(g.vertices(), dtype=np.float64).reshape(-1, 3)
             c = (v.min(0) + v.max(0)) / 2
             self._bound.append((c, float(np.sqrt(((v - c) ** 2).sum(1).max()))))
-            g.buildConvexHull(False, "Qt")
+            if g.convex is None:  # built once per mesh check (Qhull: about 0.05 s a link), kept on its geometry
+                g.buildConvexHull(False, "Qt")
             self._hulls.append(g.convex)
         self._obstacles = []
         for geom, tf, name in check._world_geoms(world) if world is not None else []:
@@ -68,11 +69,21 @@ class MeshDistance:
         B, M, n = len(Q), len(self.rows), self.robot.dof
         r, J, d = np.zeros((B, M)), np.zeros((B, M, n)), np.zeros((B, M))
         prismatic = self.robot.prismatic.numpy().astype(bool)
+        a_idx = np.array([a for a, _ in self.rows], dtype=np.int64)
+        b_idx = np.array([b for _, b in self.rows], dtype=np.int64)
+        local = np.array([c for c, _ in self._bound]).reshape(-1, 3)
+        radius = np.array([rad for _, rad in self._bound] + [o[4] for o in reversed(self._obstacles)])
+        fixed = np.array([o[3] for o in reversed(self._obstacles)]).reshape(-1, 3)  # b < 0 indexes from the end
         for i, q in enumerate(Q):
             F = frames_at(self.robot, q)
             tf = self.check._transforms(q)
-            for m, (a, b) in enumerate(self.rows):
-                dist, pa, pb, normal = self._pair(tf, a, b, margin)
+            R = np.array([np.asarray(t.getRotation()) for t in tf])
+            t = np.array([np.asarray(t.getTranslation()) for t in tf])
+            centres = np.concatenate([np.einsum("kij,kj->ki", R, local) + t, fixed])
+            d[i] = np.linalg.norm(centres[a_idx] - centres[b_idx], axis=1) - radius[a_idx] - radius[b_idx]
+            for m in np.flatnonzero(d[i] <= margin):  # the bounding spheres within the margin: coal asked
+                a, b = self.rows[m]
+                dist, pa, pb, normal = self._pair(tf, a, b)
                 d[i, m] = dist
                 if dist >= margin or pa is None:
                     continue
@@ -83,24 +94,16 @@ class MeshDistance:
                 J[i, m] = row
         return r, J, d
 
-    def _pair(self, tf, a: int, b: int, margin: float):
-        """``(d, p_a, p_b, n)`` of row ``(a, b)`` (``b < 0``: obstacle ``-1 - b``); points None where the bounding
-        spheres are more than ``margin`` apart (``d`` their gap then)."""
+    def _pair(self, tf, a: int, b: int):
+        """``(d, p_a, p_b, n)`` of row ``(a, b)`` (``b < 0``: obstacle ``-1 - b``) placed by ``tf``; the points and
+        ``n`` None where coal gives no normal (``d`` <= 0 then)."""
         coal = self._coal
-        ca, ra = self._bound[a]
         ta = tf[a]
-        wa = np.asarray(ta.getRotation()) @ ca + np.asarray(ta.getTranslation())
         if b >= 0:
-            cb, rb = self._bound[b]
-            tb = tf[b]
-            wb = np.asarray(tb.getRotation()) @ cb + np.asarray(tb.getTranslation())
-            gb, hb = self.check._geoms[b], self._hulls[b]
+            gb, tb, hb = self.check._geoms[b], tf[b], self._hulls[b]
         else:
-            gb, tb, _, wb, rb = self._obstacles[-1 - b]
+            gb, tb = self._obstacles[-1 - b][:2]
             hb = gb
-        gap = float(np.linalg.norm(wa - wb)) - ra - rb
-        if gap > margin:
-            return gap, None, None, None
         req, res = coal.DistanceRequest(), coal.DistanceResult()
         dist = coal.distance(self.check._geoms[a], ta, gb, tb, req, res)
         pa, pb = np.array(res.getNearestPoint1()), np.array(res.getNearestPoint2())

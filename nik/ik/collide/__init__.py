@@ -25,7 +25,12 @@ colliding (:func:`nik.collision.compiled.blocked_targets`: the hand against the 
 last joint's links swept over their range) is not solved on (it would fail after the whole restart budget); with the
 meshes judging where the spheres do not cover them (below), or a tolerant goal (``bounds``: no pose is fixed), it
 is. Where the re-solve ends off the goal, once more from its answer with the rows at margin 0 (:func:`_solve_free`).
-The torch backend runs the same compiled kernel on the CPU (the answers go there and back).
+Where the meshes judge (below) and a target is still left without a free answer, the meshes steer
+(:mod:`nik.ik.collide.mesh_step`, ``CollideCfg.mesh_steer``): the pose term and rows of coal's mesh distances (their
+nearest points give the Jacobian) solved by :func:`nik.lm.problem.solve_problem`, from the re-solve's answer, the
+call's own, then the branches or hypotheses; so a target whose free answers all look colliding to the spheres
+(they overreach the meshes by centimetres) is found. The torch backend runs the same compiled kernel on the CPU
+(the answers go there and back).
 
 **Constraints compose**: every mix of ``bounds=``, ``q_rest=``, a world and self-collision, in
 :meth:`~nik.IKSolver.solve` and :meth:`~nik.IKSolver.solve_all`, on both backends:
@@ -83,7 +88,8 @@ other settings as ``solver.collide_cfg = CollideCfg(...)``.
 The stage's modules, one job each: :mod:`~nik.ik.collide.choice` (which model and check a call uses, the settings),
 :mod:`~nik.ik.collide.starts` (the starts of the re-solve), :mod:`~nik.ik.collide.resolver` (the collision LM, the
 posture without leaving free), :mod:`~nik.ik.collide.stage` (:func:`resolve`: the order of the steps),
-:mod:`~nik.ik.collide.verdict` (the meshes' verdict), :mod:`~nik.ik.collide.solutions` (:func:`solve_all`).
+:mod:`~nik.ik.collide.verdict` (the meshes' verdict), :mod:`~nik.ik.collide.mesh_step` (the meshes steer),
+:mod:`~nik.ik.collide.solutions` (:func:`solve_all`).
 """
 
 from nik.ik.collide.choice import (
