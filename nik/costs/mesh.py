@@ -4,7 +4,8 @@ Rows ``r = max(0, margin - d)`` metres, one per pair a :class:`nik.collision.mes
 SRDF's disabled pairs and the others its model leaves out by decision left out) and per moving link and obstacle:
 :class:`nik.collision.mesh_distance.MeshDistance` (coal's distance and nearest points; the convex hulls' signed
 distance where the meshes overlap), with the Jacobian ``n^T (J_p(a, p_a) - J_p(b, p_b))`` of the nearest points.
-Check: the meshes' verdict at margin 0 (:meth:`MeshCheck.collides`). Where the sphere model calls every free answer
+Check: every distance above 0 (the meshes' verdict at margin 0, :meth:`MeshCheck.collides`, from the pairs that
+can touch). Where the sphere model calls every free answer
 colliding (it overreaches the meshes by centimetres), these rows steer the collision stage (:mod:`nik.ik.collide`).
 
 The torch residual is a custom autograd function over the same rows (coal is not differentiable: its backward
@@ -66,8 +67,10 @@ class MeshCollisionTerm(Term):
         return r, J
 
     def check(self, q: torch.Tensor) -> torch.Tensor:
-        hit = self.distance.check.collides(q.detach().cpu().numpy(), self.world, self_collision=self.self_collision)
-        return ~torch.as_tensor(hit, device=q.device)
+        """``(B,)`` bool: every mesh distance above 0 (coal's distances of the pairs whose bounding spheres touch:
+        the verdict of :meth:`MeshCheck.collides` without asking about the pairs that cannot touch)."""
+        d = self.distance.rows_at(q.detach().cpu().numpy(), 0.0)[2]
+        return torch.as_tensor((d > 1e-9).all(1) if d.shape[1] else np.ones(len(d), dtype=bool), device=q.device)
 
     def why(self) -> str:
         return f"{self.name}: colliding on the meshes"

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from nik.costs.term import Term
 from nik.ik.collide.choice import CollideCfg, Setup
 
 __all__ = ["MeshStep", "mesh_step"]
@@ -55,6 +56,28 @@ def _distance(s: Setup):
     return got[1]
 
 
+class _CompiledGoal(Term):
+    """The call's pose term ``goal`` (:class:`nik.costs.pose.PoseTerm` or ``BoundedPoseTerm``) with its rows and
+    Jacobian from its compiled kernel (``goal.compiled``: the same residual, float64 CPU, several times faster than
+    its torch twin for one target), judged by its own check."""
+
+    def __init__(self, goal):
+        self.goal, self.name, self.weight = goal, goal.name, goal.weight
+
+    def residual(self, q: torch.Tensor) -> torch.Tensor:
+        return self.goal.residual(q)
+
+    def evaluate(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        r, J = self.goal.compiled(q.detach().cpu().numpy())
+        return torch.from_numpy(r).to(q), torch.from_numpy(J).to(q)
+
+    def check(self, q: torch.Tensor) -> torch.Tensor:
+        return self.goal.check(q)
+
+    def why(self) -> str:
+        return self.goal.why()
+
+
 def _problem(robot, plan, T: torch.Tensor, term):
     """The problem of the call's pose term for ``T: (k, 4, 4)`` and the mesh rows ``term``."""
     from nik import costs as C
@@ -66,7 +89,7 @@ def _problem(robot, plan, T: torch.Tensor, term):
         goal = C.pose(robot, T, tol_pos=plan.tol_pos, tol_rot=plan.tol_rot, rot_weight=rw)
     else:
         goal = C.bounded_pose(robot, T, plan.bounds.as_tensor(T.shape[0], T), rot_weight=rw)
-    return Problem([goal, term], C.limits(robot))
+    return Problem([_CompiledGoal(goal), term], C.limits(robot))
 
 
 def mesh_step(robot, step: MeshStep, T: np.ndarray, first: np.ndarray, own: np.ndarray):
