@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 import nik
 from nik.collision import collides, collision_model
@@ -40,6 +41,10 @@ def test_target_refused_by_the_spheres_is_found_with_the_meshes(refused_target):
     assert res.success[0] and res.collision_free[0] and res.pos_err[0] <= 1e-4 and res.rot_err[0] <= 1e-3
     assert not meshes.collides(q, world)[0]  # free on the meshes at margin 0
     assert collides(robot, q, world)[0]  # an answer the spheres alone would refuse
+
+    f32 = solver.solve(torch.from_numpy(T.astype(np.float32)))  # float32 tensors: judged as returned (rounded)
+    assert f32.q.dtype == torch.float32 and bool(f32.success[0]) and bool(f32.collision_free[0])
+    assert not meshes.collides(f32.q.double().numpy(), world)[0]
 
     solver.collide_cfg = CollideCfg(mesh_steer=False)  # without the mesh step: refused
     off = solver.solve(T)
