@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from nik.costs.term import Term
 from nik.ik.collide.choice import CollideCfg, Setup
 
 __all__ = ["MeshStep", "mesh_step"]
@@ -56,10 +55,13 @@ def _distance(s: Setup):
     return got[1]
 
 
-class _CompiledGoal(Term):
+class _CompiledGoal:
     """The call's pose term ``goal`` (:class:`nik.costs.pose.PoseTerm` or ``BoundedPoseTerm``) with its rows and
     Jacobian from its compiled kernel (``goal.compiled``: the same residual, float64 CPU, several times faster than
-    its torch twin for one target), judged by its own check."""
+    its torch twin for one target), judged by its own check; a :class:`nik.costs.term.Term` by its interface (the
+    costs room is imported only when the step runs)."""
+
+    hard, path = True, False
 
     def __init__(self, goal):
         self.goal, self.name, self.weight = goal, goal.name, goal.weight
