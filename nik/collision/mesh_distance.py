@@ -137,8 +137,11 @@ def _point_jacobian(F: np.ndarray, frame: int, p: np.ndarray, prismatic: np.ndar
     (:func:`nik.collision.urdf.frames_at`: frame ``i + 1`` turns about its own z with joint ``i``) per unit of each
     joint's speed; 0 for the joints after the frame."""
     dof = len(F) - 1
+    k = min(int(frame), dof)
     out = np.zeros((3, dof))
-    for i in range(min(int(frame), dof)):
-        z, o = F[i + 1][:3, 2], F[i + 1][:3, 3]
-        out[:, i] = z if prismatic[i] else np.cross(z, p - o)
+    if k:
+        z, v = F[1 : k + 1, :3, 2], p - F[1 : k + 1, :3, 3]  # (k, 3) axes and lever arms
+        cols = np.stack([z[:, 1] * v[:, 2] - z[:, 2] * v[:, 1], z[:, 2] * v[:, 0] - z[:, 0] * v[:, 2],
+                         z[:, 0] * v[:, 1] - z[:, 1] * v[:, 0]])  # fmt: skip
+        out[:, :k] = np.where(prismatic[:k], z.T, cols)
     return out
