@@ -40,6 +40,11 @@ class MeshDistance:
         self.check, self.robot, self._coal = check, check.robot, coal
         self._hulls, self._bound = [], []
         for g in check._geoms:
+            if not hasattr(g, "vertices"):  # a primitive (convex already): its own bounding sphere and hull
+                g.computeLocalAABB()
+                self._bound.append((np.asarray(g.aabb_center, dtype=np.float64), float(g.aabb_radius)))
+                self._hulls.append(g)
+                continue
             v = np.asarray(g.vertices(), dtype=np.float64).reshape(-1, 3)
             c = (v.min(0) + v.max(0)) / 2
             self._bound.append((c, float(np.sqrt(((v - c) ** 2).sum(1).max()))))
