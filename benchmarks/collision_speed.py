@@ -188,7 +188,7 @@ def _stages(robot, safe, T, B: int) -> None:
         setattr(MeshCheck, attr, _counted(fn, asked))
     originals += [
         (collide.Setup, "names", timer.wrap(collide.Setup, "names", "names")),
-        (collide, "_starts", timer.wrap(collide, "_starts", "starts (hypotheses)")),
+        (collide.stage, "_starts", timer.wrap(collide.stage, "_starts", "starts (hypotheses)")),
         (clm, "collision_lm", timer.wrap(clm, "collision_lm", "re-solve (LM with collision rows)")),
     ]
     if hasattr(compiled, "blocked_targets"):
