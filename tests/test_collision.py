@@ -316,6 +316,50 @@ def test_links_whose_spheres_overreach_their_geometry_are_named_with_the_figure(
         collision_model(robot)  # said once per robot and model
 
 
+PLATES = """<?xml version="1.0"?>
+<robot name="plates">
+  <link name="table"><collision><geometry><box size="0.5 0.5 0.02"/></geometry></collision></link>
+  <link name="tray"><collision><origin xyz="0 0 0.2"/><geometry><box size="0.3 0.3 0.01"/></geometry></collision>
+  </link>
+  <joint name="j1" type="revolute"><parent link="table"/><child link="tray"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>
+"""
+
+
+def _box_overreach(centers, radii, half) -> float:
+    """The largest distance from a point of the union of spheres' boundary (4096 a sphere, those inside no other
+    sphere) to the box of half sizes ``half`` centred at the origin: the analytic overreach."""
+    from nik.collision.fit import _fibonacci
+
+    pts = (centers[:, None] + radii[:, None, None] * _fibonacci(4096)[None]).reshape(-1, 3)
+    out = ~(np.linalg.norm(pts[:, None] - centers[None], axis=2) < radii[None] - 1e-9).any(axis=1)
+    return float(np.linalg.norm(np.maximum(np.abs(pts[out]) - half, 0.0), axis=1).max())
+
+
+def test_static_and_overreaching_links_get_more_spheres_and_stay_conservative(tmp_path):
+    path = tmp_path / "plates.urdf"
+    path.write_text(PLATES)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = nik.load_robot(path, end_link="tray")
+        model = collision_model(robot, samples=0)
+    rng = np.random.default_rng(3)
+    for link, half, centre, frame in (("table", [0.25, 0.25, 0.01], [0, 0, 0], 0), ("tray", [0.15, 0.15, 0.005],
+                                                                              [0, 0, 0.2], 1)):  # fmt: skip
+        half, centre = np.array(half), np.array(centre, dtype=float)
+        c, r = model.spheres(link)
+        assert int(model.frames[model.links.index(link)]) == frame
+        c = c - centre  # the box's frame (the tray's joint frame is the URDF link's: no rotation at q = 0)
+        plain = fit_spheres(box_triangles(2 * half), max_spheres=16)  # what each link had: 16 spheres at most
+        assert len(r) > 16
+        assert _box_overreach(c, r, half) < 0.7 * _box_overreach(plain.centers, plain.radii, half)
+        face = rng.uniform(-half, half, size=(4000, 3))  # points on the surface, each pushed to a face
+        axis = rng.integers(0, 3, 4000)
+        face[np.arange(4000), axis] = np.where(rng.random(4000) < 0.5, -1, 1) * half[axis]
+        assert (np.linalg.norm(face[:, None] - c[None], axis=2) <= r[None] + 1e-9).any(axis=1).all()
+
+
 def test_always_and_never_pairs_hold_on_fresh_samples():
     robot = nik.load_robot("ur5")
     model = collision_model(robot, source="capsules", samples=400, seed=0)  # the capsules' pairs: some always touch

@@ -5,7 +5,9 @@ Where the spheres come from (choices):
 - a robot loaded from a URDF with ``<collision>`` geometry (meshes, boxes, cylinders, spheres, capsules): one
   body per link that has some, riding on the frame of its joint (:mod:`nik.collision.urdf`), covered by spheres
   fitted by :func:`nik.collision.fit.fit_spheres` (conservative: every surface point is inside; the overreach
-  per link is reported in :attr:`CollisionModel.gaps` and :attr:`CollisionModel.volume_ratios`);
+  per link is reported in :attr:`CollisionModel.gaps` and :attr:`CollisionModel.volume_ratios`); the links on
+  frame 0 (static relative to the base) get more spheres, and a moving link reaching more than 2 cm past its
+  geometry is fitted again with more (:func:`_fit_link`);
 - otherwise, a built-in arm with a shipped model (``panda``, ``ur5``, ``xarm7``: spheres fitted to their vendors'
   meshes, :mod:`nik.collision.builtin`) gets that model, unless ``radius`` is given;
 - otherwise (DH / MDH / screw-axis files, or a URDF without collision geometry): a capsule of ``radius`` metres
@@ -46,7 +48,7 @@ __all__ = ["COLLISION_FORMAT", "CollisionModel", "collision_model", "link_capsul
 COLLISION_FORMAT = 1
 
 #: version of the fitting and the pair rules, part of the cache key (bump when they change: a cached fit is redone)
-FIT_VERSION = 2
+FIT_VERSION = 3
 
 
 @dataclass
@@ -311,7 +313,6 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, pro
     if source == "urdf" and (urdf is None or not _has_collision(urdf)):
         raise ValueError(f"robot {robot.name!r}: no URDF with <collision> geometry to fit spheres to")
     if urdf is not None and _has_collision(urdf):
-        from nik.collision.fit import fit_spheres
         from nik.collision.urdf import urdf_bodies
 
         bodies = urdf_bodies(robot, urdf)
@@ -319,7 +320,7 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, pro
         for i, b in enumerate(bodies):
             if progress is not None:
                 progress.say(f"fitting spheres to link {i + 1} of {len(bodies)} ({b.name})")
-            fits.append(fit_spheres(b.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed))
+            fits.append(_fit_link(b, tolerance, max_spheres, seed))
         spheres = [(f.centers, f.radii) for f in fits]
         return bodies, spheres, [f.gap for f in fits], [f.volume_ratio for f in fits], f"urdf:{urdf}"
     if source not in (None, "capsules"):
@@ -328,6 +329,46 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, pro
     spheres = [_capsule_spheres(b.triangles, b.radius) for b in bodies]
     gaps = [float(r[0] - b.radius) for b, (_, r) in zip(bodies, spheres, strict=True)]
     return bodies, spheres, gaps, [float("nan")] * len(bodies), "capsules"
+
+
+#: a link on a moving frame whose spheres reach farther than this past its geometry (metres) is fitted again,
+#: with :data:`MORE_SPHERES` times the spheres, and the tighter fit kept
+GAP_GOAL = 0.02
+
+#: the links on frame 0 (the base's: a torso, a pedestal, a head, the other arm of a two-armed robot placed by
+#: ``joint_values``) never move relative to the base, so they may carry this many times ``max_spheres``
+STATIC_SPHERES = 16
+
+#: the refit of a moving link over :data:`GAP_GOAL` has this many times the spheres (and twice the candidates)
+MORE_SPHERES = 4
+
+#: candidate centres of a fit (:func:`nik.collision.fit.fit_spheres`): a moving link's, a static link's
+CANDIDATES = (800, 2000)
+
+
+def _fit_link(body, tolerance: float, max_spheres: int, seed: int):
+    """The spheres of one URDF body (:func:`nik.collision.fit.fit_spheres`), tightened (choices): a body on frame
+    0 (static relative to the base) may use :data:`STATIC_SPHERES` times ``max_spheres`` among
+    ``CANDIDATES[1]`` centres (its spheres cost a check only where a moving link comes near: the broad phase skips
+    the others; a torso or pedestal of large thin faces needs many); a moving body whose spheres reach more than
+    :data:`GAP_GOAL` past it is fitted again with :data:`MORE_SPHERES` times the spheres and twice the candidates,
+    the tighter fit kept. Every fit is an exact cover, so every choice stays conservative; a link still far over
+    is named by :func:`_warn_overreach` (over :data:`OVERREACH_WARNING`). ``body``: a
+    :class:`nik.collision.urdf.Body` (triangles ``(T, 3, 3)``, metres); returns its
+    :class:`nik.collision.fit.SphereFit`."""
+    from nik.collision.fit import fit_spheres
+
+    if body.frame == 0:
+        budget = int(max_spheres) * STATIC_SPHERES
+        return fit_spheres(body.triangles, tolerance=tolerance, max_spheres=budget, seed=seed, candidates=CANDIDATES[1])
+    fit = fit_spheres(body.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed, candidates=CANDIDATES[0])
+    if fit.gap > GAP_GOAL:
+        more = fit_spheres(
+            body.triangles, tolerance=tolerance, max_spheres=int(max_spheres) * MORE_SPHERES, seed=seed,
+            candidates=2 * CANDIDATES[0],
+        )  # fmt: skip
+        fit = more if more.gap < fit.gap else fit
+    return fit
 
 
 def find_srdf(urdf: Path | None) -> tuple[Path | None, str]:
@@ -615,7 +656,9 @@ def collision_model(
         radius: capsule radius (metres), one or one per frame (``dof + 1``; frame 0 is the base); a value other
             than the default asks for capsules where the robot has no URDF geometry (not the shipped model).
         tolerance: sphere fitting stops once a link's spheres overreach it by at most this (metres).
-        max_spheres: at most this many spheres per link.
+        max_spheres: spheres per link: at most this many on a moving link (:data:`MORE_SPHERES` times as many
+            where those reach more than :data:`GAP_GOAL` past it), :data:`STATIC_SPHERES` times as many on a link
+            of frame 0 (:func:`_fit_link`).
         samples: configurations sampled to find the pairs that always / never touch (0: keep all pairs
             but the same-frame and adjacent ones).
         never_clearance: a pair never closer than this (metres) in every sample is left out; None keeps them.
