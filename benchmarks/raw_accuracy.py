@@ -19,12 +19,15 @@ How this matches their protocol:
 
 Rows beyond theirs: ``+ k GN steps``: the network's hypotheses followed by ``k`` damped Gauss-Newton steps through the
 differentiable FK (fixed damping, no line search, clamped to the limits; not the solver's LM): what a network with
-refinement steps in its forward pass reaches, reported apart from the network alone.
+refinement steps in its forward pass reaches, reported apart from the network alone. ``us / target``: wall time of
+the forward pass (all heads), and of the forward pass plus the steps (torch, autograd Jacobians, one thread: an upper
+bound of what compiled steps would cost).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -36,6 +39,8 @@ from nik.nets.pair import load_pair
 from nik.poses import rotation_vector
 from nik.tolerances import score
 
+#: The results file's hand-written section (what was tried to improve the figures) starts here; a rerun keeps it.
+NOTES = "## What was tried"
 #: Published per-sample figures on panda (mean position / rotation error), for the table.
 PUBLISHED = {"PAIK (panda)": (2.9, 1.5), "IKFlow (panda)": (5.4, 2.0)}
 
@@ -99,11 +104,13 @@ def measure(net, n: int, seed: int, gn: tuple[int, ...]) -> list[tuple[str, dict
         ("head 0 only", stats(pos[:, 0], rot[:, 0])),
         ("best of heads", stats(pos.gather(1, best), rot.gather(1, best))),
     ]
+    rows[0][1]["us"] = 1e6 * fwd_s / n
     for k in gn:
+        t0 = time.perf_counter()
         qk = gn_steps(robot, T, hyp, k)
+        gn_s = time.perf_counter() - t0
         pk, rk = hypothesis_pose_error(robot, T, qk)
-        rows.append((f"per sample + {k} GN steps", stats(pk, rk)))
-    rows[0][1]["forward_us_per_target"] = 1e6 * fwd_s / n
+        rows.append((f"per sample + {k} GN steps", {**stats(pk, rk), "us": 1e6 * (fwd_s + gn_s) / n}))
     return rows
 
 
@@ -113,13 +120,15 @@ def table(name: str, meta: str, rows: list[tuple[str, dict]]) -> str:
         "",
         meta,
         "",
-        "| samples | n | pos mean mm | pos median mm | pos p95 mm | rot mean deg | rot median deg | rot p95 deg |",
-        "|---|---|---|---|---|---|---|---|",
+        "| samples | n | pos mean mm | pos median mm | pos p95 mm | rot mean deg | rot median deg | rot p95 deg "
+        "| us / target |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for label, s in rows:
         out.append(
             f"| {label} | {s['n']} | {s['pos_mean']:.2f} | {s['pos_median']:.2f} | {s['pos_p95']:.2f} | "
-            f"{s['rot_mean']:.2f} | {s['rot_median']:.2f} | {s['rot_p95']:.2f} |"
+            f"{s['rot_mean']:.2f} | {s['rot_median']:.2f} | {s['rot_p95']:.2f} | "
+            + (f"{s['us']:.0f} |" if "us" in s else " |")
         )
     return "\n".join(out) + "\n"
 
@@ -136,7 +145,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
     parts = [
-        f"Command: `python benchmarks/raw_accuracy.py {' '.join(argv) if argv is not None else ''}`".rstrip() + "\n",
+        f"Command: `python benchmarks/raw_accuracy.py {' '.join(sys.argv[1:] if argv is None else argv)}`".rstrip()
+        + "\n",
         f"Targets: {a.n} per arm, FK of uniform joints inside the limits (seed {a.seed}); float64 FK; CPU, "
         f"{a.threads} thread(s). Published per sample (mean): "
         + ", ".join(f"{k} {p} mm / {r} deg" for k, (p, r) in PUBLISHED.items())
@@ -157,8 +167,10 @@ def main(argv=None) -> int:
         parts.append(text)
     if a.out is not None:
         a.out.parent.mkdir(parents=True, exist_ok=True)
+        old = a.out.read_text() if a.out.exists() else ""
+        notes = old[old.index(NOTES) :] if NOTES in old else ""  # the hand-written section is kept
         tmp = a.out.with_name(a.out.name + ".tmp")
-        tmp.write_text("\n".join(parts))
+        tmp.write_text("\n".join(parts) + ("\n" + notes if notes else ""))
         tmp.replace(a.out)
     return 0
 
