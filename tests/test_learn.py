@@ -354,3 +354,54 @@ def test_de_progress_warns_when_max_time_ends_before_bp(dataset, tmp_path, capsy
     assert lines[0].startswith("DE generation 1/1000000: ") and lines[0].endswith(
         "max_time (1.0 s) ends before BP starts"
     )
+
+
+# -- module settings: a dataclass or keywords ---------------------------------------
+def test_module_settings_come_as_one_dataclass_or_as_keywords_in_at_most_twelve_parameters():
+    import inspect
+
+    from nik.learn.modules import DEIK, DEIKCfg, GradientIK, GradientIKCfg, IKModule
+
+    for cls in (IKModule, GradientIK, DEIK):
+        assert len(inspect.signature(cls.__init__).parameters) <= 12, cls
+    a = GradientIK(GradientIKCfg(hidden=(16,), lr=0.01), optimizer="sgd")  # a keyword overrides the dataclass
+    b = GradientIK(hidden=(16,), lr=0.01, optimizer="sgd")
+    assert dict(a.hparams) == dict(b.hparams)
+    # flat plain values, so a checkpoint's hyper_parameters load with torch.load(weights_only=True)
+    assert set(a.hparams) == set(GradientIKCfg.__dataclass_fields__)
+    assert all(isinstance(v, (str, int, float, tuple)) for v in a.hparams.values())
+    assert (a.hparams.hidden, a.hparams.lr, a.hparams.optimizer, a.hparams.schedule) == ((16,), 0.01, "sgd", "none")
+    d = DEIK(DEIKCfg(pop_size=12, generations=3, bp=True), F=0.4)
+    assert (d.cfg.pop_size, d.cfg.F, d.hparams.bp, d.hparams.generations) == (12, 0.4, True, 3)
+    with pytest.raises(TypeError, match="hiden"):
+        GradientIK(hiden=(16,))
+    with pytest.raises(ValueError, match="optimizer"):
+        GradientIK(optimizer="rmsprop")
+    with pytest.raises(ValueError, match="generations"):
+        DEIK(bp=True, generations=None)
+
+
+def test_checkpoints_with_flat_keyword_hyperparameters_load(tmp_path):
+    """Checkpoints written before the settings dataclasses (hyper_parameters: the keywords, flat; LightningCLI's
+    runs add _class_path and _instantiator) build the same module."""
+    import lightning
+
+    from nik.learn.modules import DEIK, GradientIK
+
+    old = {"hidden": [16, 16], "activation": "silu", "representation": "rot6d", "output": "angles", "loss": "pose"}
+    old |= {"rot_weight": 0.5, "pose_weight": 1.0, "optimizer": "adam", "lr": 0.002, "momentum": 0.0}
+    old |= {"weight_decay": 0.0, "schedule": "cosine", "min_lr_ratio": 0.01, "lbfgs_max_iter": 20, "lbfgs_history": 50}
+    path = tmp_path / "old.ckpt"
+    torch.save({"state_dict": {}, "hyper_parameters": old, "pytorch-lightning_version": lightning.__version__}, path)
+    m = GradientIK.load_from_checkpoint(path)
+    assert (list(m.hparams.hidden), m.hparams.loss, m.hparams.lr, m.hparams.rot_weight) == (
+        [16, 16],
+        "pose",
+        0.002,
+        0.5,
+    )
+    cli = {"hidden": [8], "pop_size": 7, "bp": True, "generations": 2}
+    cli |= {"_class_path": "nik.learn.modules.DEIK", "_instantiator": "lightning.pytorch.cli.instantiate_module"}
+    torch.save({"state_dict": {}, "hyper_parameters": cli, "pytorch-lightning_version": lightning.__version__}, path)
+    d = DEIK.load_from_checkpoint(path)
+    assert isinstance(d, DEIK) and (d.cfg.pop_size, d.hparams.generations) == (7, 2)

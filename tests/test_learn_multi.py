@@ -105,3 +105,39 @@ def test_bad_module_arguments_are_refused():
         MultiSolutionIK(kind="flow")
     with pytest.raises(ValueError, match="pose_start"):
         MultiSolutionIK(pose_start=1.5)
+
+
+def test_settings_come_as_a_dataclass_or_keywords_and_old_checkpoints_load(tmp_path):
+    """At most 12 parameters; MultiSolutionCfg or keywords give the same hparams; a checkpoint written with the
+    keyword signature (flat hyper_parameters, the fixed choices among them) builds the same module."""
+    import inspect
+
+    import lightning
+
+    from nik.learn.multi import FIXED, MultiSolutionCfg
+
+    assert len(inspect.signature(MultiSolutionIK.__init__).parameters) <= 12
+    a = MultiSolutionIK(MultiSolutionCfg(kind="multihead", hidden=(32, 32)), heads=4)
+    b = MultiSolutionIK(kind="multihead", hidden=(32, 32), heads=4)
+    assert dict(a.hparams) == dict(b.hparams)
+    assert set(a.hparams) == set(MultiSolutionCfg.__dataclass_fields__) | set(FIXED)  # flat, no dataclass object
+    assert (a.hparams.heads, a.hparams.optimizer, a.hparams.output, a.hparams.schedule) == (
+        4,
+        "adam",
+        "sincos",
+        "cosine",
+    )
+    with pytest.raises(ValueError, match="loss"):
+        MultiSolutionIK(loss="joint")  # a choice the module fixes
+    old = {"kind": "multihead", "hidden": [32, 32], "activation": "silu", "heads": 4, "pose_start": 0.3}
+    old |= {"joint_weight": 0.01, "wta_eps": 0.05, "rot_weight": 1.0, "lr": 0.003, "schedule": "cosine"}
+    old |= {"min_lr_ratio": 0.01, "weight_decay": 0.0, "eval_samples": 100, **FIXED}
+    path = tmp_path / "old.ckpt"
+    torch.save({"state_dict": {}, "hyper_parameters": old, "pytorch-lightning_version": lightning.__version__}, path)
+    m = MultiSolutionIK.load_from_checkpoint(path)
+    assert (m.hparams.kind, list(m.hparams.hidden), m.hparams.lr, m.hparams.pose_start) == (
+        "multihead",
+        [32, 32],
+        0.003,
+        0.3,
+    )

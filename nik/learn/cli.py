@@ -242,19 +242,28 @@ def _accepted_keys(parser) -> list[str]:
 
 
 def _init_keys(class_path: str) -> list[str]:
-    """The constructor arguments of the class at ``class_path`` (the model's ``init_args``), or []."""
+    """The constructor arguments of the class at ``class_path`` (the model's ``init_args``), or []; a settings
+    dataclass among them (``cfg: GradientIKCfg | None``, whose fields are keywords too) adds its fields."""
+    import dataclasses
     import importlib
     import inspect
+    import typing
 
     module, _, name = class_path.rpartition(".")
     try:
         cls = getattr(importlib.import_module(module), name)
         params = inspect.signature(cls.__init__).parameters
-    except (ImportError, AttributeError, ValueError, TypeError):
+        hints = typing.get_type_hints(cls.__init__)
+    except (ImportError, AttributeError, ValueError, TypeError, NameError):
         return []
-    return [
+    keys = [
         p for p in params if p != "self" and params[p].kind not in (params[p].VAR_POSITIONAL, params[p].VAR_KEYWORD)
     ]
+    for p in list(keys):
+        for t in (hints.get(p), *typing.get_args(hints.get(p))):
+            if dataclasses.is_dataclass(t):
+                keys += [f.name for f in dataclasses.fields(t) if f.name not in keys]
+    return keys
 
 
 def _closest(key: str, accepted: list[str]) -> str:

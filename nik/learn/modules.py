@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import asdict, dataclass, replace
 
 import lightning as L
 import torch
@@ -38,7 +39,7 @@ from nik.learn.losses import LOSSES, evaluate, joint_mse, pose_loss
 from nik.learn.population import flat_params, init_population, population_fitness, sample_chunk, set_flat_params
 from nik.nets import IKNet, checkpoint_extra
 
-__all__ = ["IKModule", "GradientIK", "DEIK", "OutOfTime"]
+__all__ = ["IKModule", "IKModuleCfg", "GradientIK", "GradientIKCfg", "DEIK", "DEIKCfg", "OutOfTime"]
 
 #: Under a kept wall-clock budget a DE fitness evaluation runs in at least this many sample chunks, the clock checked
 #: before each: an evaluation then overruns the budget by at most about one chunk's time.
@@ -68,8 +69,59 @@ def _plain(value):
     return list(value) if isinstance(value, (list, tuple)) else value
 
 
+@dataclass
+class IKModuleCfg:
+    """Settings of :class:`IKModule` (the network and the objective); each is also a keyword of the module."""
+
+    hidden: tuple[int, ...] = (8,)
+    activation: str = "tanh"
+    representation: str = "rpy"
+    output: str = "angles"
+    loss: str = "joint"
+    rot_weight: float = 1.0
+    pose_weight: float = 1.0
+
+
+@dataclass
+class GradientIKCfg(IKModuleCfg):
+    """Settings of :class:`GradientIK`: :class:`IKModuleCfg`'s and the optimiser's (documented there)."""
+
+    optimizer: str = "adam"
+    lr: float = 1e-3
+    momentum: float = 0.0
+    weight_decay: float = 0.0
+    schedule: str = "none"
+    min_lr_ratio: float = 0.01
+    lbfgs_max_iter: int = 20
+    lbfgs_history: int = 50
+
+
+@dataclass
+class DEIKCfg(IKModuleCfg):
+    """Settings of :class:`DEIK`: :class:`IKModuleCfg`'s and differential evolution's (documented there)."""
+
+    pop_size: int = 220
+    F: float = 0.6
+    CR: float = 0.5
+    strategy: str = "rand1bin"
+    jde: bool = False
+    generations: int | None = 500
+    bound: float | None = 10.0
+    fitness_samples: int | None = None
+    bp: bool = False
+    bp_optimizer: str = "sgd"
+    bp_lr: float = 0.1
+    bp_momentum: float = 0.9
+    max_fk: int = 2**18
+    max_elements: int = 2**21
+
+
 class IKModule(L.LightningModule):
     """Shared part: the network, the objective, metrics, counters and the checkpoint block.
+
+    Settings: one :class:`IKModuleCfg` as ``cfg`` (keywords given too override its fields), or each setting as a
+    keyword (``IKModule(hidden=(64,), loss="pose")``, ``train.py``'s ``model.init_args``; a subclass's settings
+    likewise, with its own dataclass). ``hparams`` holds them flat, one key a setting.
 
     Args:
         hidden: hidden layer sizes (paper C: ``[8]``).
@@ -82,20 +134,12 @@ class IKModule(L.LightningModule):
         pose_weight: weight of the pose loss in ``both``.
     """
 
-    def __init__(
-        self,
-        hidden: tuple[int, ...] = (8,),
-        activation: str = "tanh",
-        representation: str = "rpy",
-        output: str = "angles",
-        loss: str = "joint",
-        rot_weight: float = 1.0,
-        pose_weight: float = 1.0,
-    ):
+    def __init__(self, cfg: IKModuleCfg | None = None, **kwargs):
         super().__init__()
-        if loss not in LOSSES:
-            raise ValueError(f"model.loss must be one of {LOSSES}, got {loss!r}")
-        self.save_hyperparameters()
+        cfg = IKModuleCfg(**kwargs) if cfg is None else replace(cfg, **kwargs)
+        if cfg.loss not in LOSSES:
+            raise ValueError(f"model.loss must be one of {LOSSES}, got {cfg.loss!r}")
+        self.record_settings(cfg)
         self.net: IKNet | None = None
         self.loss_evals = 0
         self.sample_evals = 0
@@ -112,6 +156,15 @@ class IKModule(L.LightningModule):
         self.train_s: float | None = None
         self._step_s = 0.0  # duration of the last training step (seconds)
         self._step_t0: float | None = None
+
+    def record_settings(self, cfg, fixed: dict | None = None) -> None:
+        """``hparams`` = the fields of the settings ``cfg`` (flat: one key a field, so a checkpoint's
+        ``hyper_parameters`` are the module's keywords and old checkpoints load), ``fixed`` (choices a subclass
+        makes, recorded too), and what Lightning adds under LightningCLI (``_class_path``, ``_instantiator``)."""
+        self.save_hyperparameters()
+        lightning_keys = {k: v for k, v in self.hparams.items() if k.startswith("_")}
+        self.hparams.clear()  # Lightning merges into what is there: the collected arguments (``cfg`` itself) go
+        self.save_hyperparameters({**asdict(cfg), **(fixed or {}), **lightning_keys})
 
     # -- network ---------------------------------------------------------------
     def net_config(self) -> dict:
@@ -310,30 +363,13 @@ class GradientIK(IKModule):
         lbfgs_history: L-BFGS memory.
     """
 
-    def __init__(
-        self,
-        hidden: tuple[int, ...] = (8,),
-        activation: str = "tanh",
-        representation: str = "rpy",
-        output: str = "angles",
-        loss: str = "joint",
-        rot_weight: float = 1.0,
-        pose_weight: float = 1.0,
-        optimizer: str = "adam",
-        lr: float = 1e-3,
-        momentum: float = 0.0,
-        weight_decay: float = 0.0,
-        schedule: str = "none",
-        min_lr_ratio: float = 0.01,
-        lbfgs_max_iter: int = 20,
-        lbfgs_history: int = 50,
-    ):
-        super().__init__(hidden, activation, representation, output, loss, rot_weight, pose_weight)
-        if optimizer not in ("sgd", "adam", "lbfgs"):
-            raise ValueError(f"model.optimizer must be sgd, adam or lbfgs, got {optimizer!r}")
-        if schedule not in ("none", "cosine"):
-            raise ValueError(f"model.schedule must be none or cosine, got {schedule!r}")
-        self.save_hyperparameters()
+    def __init__(self, cfg: GradientIKCfg | None = None, **kwargs):
+        cfg = GradientIKCfg(**kwargs) if cfg is None else replace(cfg, **kwargs)
+        if cfg.optimizer not in ("sgd", "adam", "lbfgs"):
+            raise ValueError(f"model.optimizer must be sgd, adam or lbfgs, got {cfg.optimizer!r}")
+        if cfg.schedule not in ("none", "cosine"):
+            raise ValueError(f"model.schedule must be none or cosine, got {cfg.schedule!r}")
+        super().__init__(cfg)
 
     def training_step(self, batch, batch_idx):
         loss = self.batch_loss(batch)
@@ -437,37 +473,14 @@ class DEIK(IKModule):
         max_fk, max_elements: memory bounds of the batched evaluation (see ``population_fitness``).
     """
 
-    def __init__(
-        self,
-        hidden: tuple[int, ...] = (8,),
-        activation: str = "tanh",
-        representation: str = "rpy",
-        output: str = "angles",
-        loss: str = "joint",
-        rot_weight: float = 1.0,
-        pose_weight: float = 1.0,
-        pop_size: int = 220,
-        F: float = 0.6,
-        CR: float = 0.5,
-        strategy: str = "rand1bin",
-        jde: bool = False,
-        generations: int | None = 500,
-        bound: float | None = 10.0,
-        fitness_samples: int | None = None,
-        bp: bool = False,
-        bp_optimizer: str = "sgd",
-        bp_lr: float = 0.1,
-        bp_momentum: float = 0.9,
-        max_fk: int = 2**18,
-        max_elements: int = 2**21,
-    ):
-        super().__init__(hidden, activation, representation, output, loss, rot_weight, pose_weight)
-        self.cfg = DECfg(pop_size=pop_size, F=F, CR=CR, strategy=strategy, jde=jde)
-        if bp and generations is None:
+    def __init__(self, cfg: DEIKCfg | None = None, **kwargs):
+        cfg = DEIKCfg(**kwargs) if cfg is None else replace(cfg, **kwargs)
+        if cfg.bp and cfg.generations is None:
             raise ValueError("model.bp (DE-BP) needs model.generations: how many DE generations before BP")
-        if bp_optimizer not in ("sgd", "adam"):
-            raise ValueError(f"model.bp_optimizer must be sgd or adam, got {bp_optimizer!r}")
-        self.save_hyperparameters()
+        if cfg.bp_optimizer not in ("sgd", "adam"):
+            raise ValueError(f"model.bp_optimizer must be sgd or adam, got {cfg.bp_optimizer!r}")
+        super().__init__(cfg)
+        self.cfg = DECfg(pop_size=cfg.pop_size, F=cfg.F, CR=cfg.CR, strategy=cfg.strategy, jde=cfg.jde)
         self.automatic_optimization = False
         self.de_state: DEState | None = None
         self.generator: torch.Generator | None = None

@@ -22,19 +22,27 @@ hash, ``net`` = the network's plain-data config with its ``kind``).
 
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import lightning as L
 import torch
 
-from nik.learn.modules import GradientIK
+from nik.learn.modules import GradientIK, GradientIKCfg
 from nik.nets.multi import BranchHeadsIKNet, BranchIKNet, MultiHypIKNet, hypothesis_pose_error
 from nik.tolerances import score
 
 #: Kinds trained on the hypothesis of each sample's branch label (the others: relaxed winner-takes-all).
 BRANCH_KINDS = ("branch_heads", "branch")
 
-__all__ = ["MultiSolutionIK", "CurvePlot", "FinalCheckpoint", "pose_loss_per_sample", "plot_history"]
+__all__ = [
+    "MultiSolutionIK",
+    "MultiSolutionCfg",
+    "CurvePlot",
+    "FinalCheckpoint",
+    "pose_loss_per_sample",
+    "plot_history",
+]
 
 
 def pose_loss_per_sample(q: torch.Tensor, T: torch.Tensor, robot, *, length_scale, rot_weight: float = 1.0):
@@ -46,8 +54,43 @@ def pose_loss_per_sample(q: torch.Tensor, T: torch.Tensor, robot, *, length_scal
     return pos / (length_scale**2) + rot_weight * rot
 
 
+#: The :class:`GradientIK` settings :class:`MultiSolutionIK` fixes (recorded in its ``hparams``; given back as keywords,
+#: e.g. by Lightning loading a checkpoint, they must have these values).
+FIXED = {
+    "optimizer": "adam",
+    "momentum": 0.0,
+    "representation": "rot6d",
+    "output": "sincos",
+    "loss": "both",
+    "pose_weight": 1.0,
+    "lbfgs_max_iter": 20,
+    "lbfgs_history": 50,
+}
+
+
+@dataclass
+class MultiSolutionCfg:
+    """Settings of :class:`MultiSolutionIK` (documented there); each is also a keyword of the module."""
+
+    kind: str = "branch_heads"
+    hidden: tuple[int, ...] = (512, 512, 512)
+    activation: str = "silu"
+    heads: int = 8
+    pose_start: float = 0.5
+    joint_weight: float = 0.01
+    wta_eps: float = 0.05
+    rot_weight: float = 1.0
+    lr: float = 1e-3
+    schedule: str = "cosine"
+    min_lr_ratio: float = 0.01
+    weight_decay: float = 0.0
+    eval_samples: int = 20000
+
+
 class MultiSolutionIK(GradientIK):
     """Two-phase training of a multi-solution network (module docstring).
+
+    Settings: one :class:`MultiSolutionCfg` as ``cfg`` (keywords override its fields) or each as a keyword.
 
     Args:
         kind: ``branch_heads`` (arms with branch labels; one pass), ``multihead``, or the legacy ``branch``.
@@ -62,43 +105,20 @@ class MultiSolutionIK(GradientIK):
         eval_samples: validation uses the first this many samples of each validation batch.
     """
 
-    def __init__(
-        self,
-        kind: str = "branch_heads",
-        hidden: tuple[int, ...] = (512, 512, 512),
-        activation: str = "silu",
-        heads: int = 8,
-        pose_start: float = 0.5,
-        joint_weight: float = 0.01,
-        wta_eps: float = 0.05,
-        rot_weight: float = 1.0,
-        lr: float = 1e-3,
-        schedule: str = "cosine",
-        min_lr_ratio: float = 0.01,
-        weight_decay: float = 0.0,
-        eval_samples: int = 20000,
-    ):
-        if kind not in (*BRANCH_KINDS, "multihead"):
-            raise ValueError(f"model.kind must be branch_heads, multihead or branch, got {kind!r}")
-        if not 0.0 <= pose_start <= 1.0:
-            raise ValueError(f"model.pose_start must be in [0, 1], got {pose_start}")
-        super().__init__(
-            hidden=hidden,
-            activation=activation,
-            representation="rot6d",
-            output="sincos",
-            loss="both",
-            rot_weight=rot_weight,
-            optimizer="adam",
-            lr=lr,
-            weight_decay=weight_decay,
-            schedule=schedule,
-            min_lr_ratio=min_lr_ratio,
-        )
-        self.save_hyperparameters()
-        # the fixed choices GradientIK reads from hparams
-        fixed = {"optimizer": "adam", "momentum": 0.0, "representation": "rot6d", "output": "sincos", "loss": "both"}
-        self.hparams.update({**fixed, "pose_weight": 1.0, "lbfgs_max_iter": 20, "lbfgs_history": 50})
+    def __init__(self, cfg: MultiSolutionCfg | None = None, **kwargs):
+        clash = sorted(k for k, v in kwargs.items() if k in FIXED and v != FIXED[k])
+        if clash:
+            raise ValueError(f"MultiSolutionIK fixes {', '.join(f'model.{k}={FIXED[k]!r}' for k in clash)}")
+        kwargs = {k: v for k, v in kwargs.items() if k not in FIXED}
+        cfg = MultiSolutionCfg(**kwargs) if cfg is None else replace(cfg, **kwargs)
+        if cfg.kind not in (*BRANCH_KINDS, "multihead"):
+            raise ValueError(f"model.kind must be branch_heads, multihead or branch, got {cfg.kind!r}")
+        if not 0.0 <= cfg.pose_start <= 1.0:
+            raise ValueError(f"model.pose_start must be in [0, 1], got {cfg.pose_start}")
+        gradient = {k: v for k, v in asdict(cfg).items() if k in GradientIKCfg.__dataclass_fields__}
+        super().__init__(GradientIKCfg(**{**gradient, **FIXED}))
+        # the fixed choices GradientIK reads from hparams are recorded beside the settings
+        self.record_settings(cfg, fixed=FIXED)
         self._total_steps = None
 
     # -- network -----------------------------------------------------------------
