@@ -108,7 +108,7 @@ def _collision_solve(robot, s: Setup, plan, cfg: CollideCfg, goal, T, starts, n_
     """:func:`nik.kernels.collision_lm.collision_lm` for targets ``T: (k, 4, 4)`` with the call's pose term ``goal``
     (:func:`_goal`; rows ``k`` of it) from ``starts: (k, H, n)`` (``n_starts (k,)`` of them) and ``restarts (k,)``
     uniform ones, the collision rows' reach ``margin``; returns ``(q (k, n), done (k,), iterations (k,))``."""
-    from nik.kernels.collision_lm import collision_lm
+    from nik.kernels.collision_lm import Answers, CollideOpts, Starts, Targets, collision_lm
     from nik.kernels.lm import ITERS, STALL_ITERS, seed_state
 
     _, half, modes, opts, iopts = goal
@@ -118,11 +118,13 @@ def _collision_solve(robot, s: Setup, plan, cfg: CollideCfg, goal, T, starts, n_
     k, n = starts.shape[0], starts.shape[2]
     q, free, done = np.empty((k, n)), np.empty(k, dtype=bool), np.empty(k, dtype=bool)
     it, pos, rot = np.empty(k, dtype=np.int64), np.empty(k), np.empty(k)
-    collision_lm(G, joints, np.ascontiguousarray(T), np.ascontiguousarray(starts), np.asarray(n_starts, dtype=np.int64),
-                 np.ascontiguousarray(half[:k]), np.ascontiguousarray(modes[:k]), opts, iopts,
-                 np.asarray(restarts, dtype=np.int64), cfg.tries, cfg.patience, seed_state(plan.seed), *rest, margin,
-                 cfg.weight, cfg.finish, cfg.descents, cfg.converged, q, free, done, it, pos, rot,
-                 cfg.converged_given)  # fmt: skip
+    targets = Targets(np.ascontiguousarray(T), np.ascontiguousarray(half[:k]), np.ascontiguousarray(modes[:k]))
+    given = Starts(np.ascontiguousarray(starts), np.asarray(n_starts, dtype=np.int64),
+                   np.asarray(restarts, dtype=np.int64))  # fmt: skip
+    settings = CollideOpts(float(margin), float(cfg.weight), int(cfg.tries), int(cfg.patience), int(cfg.finish),
+                           int(cfg.descents), float(cfg.converged), float(cfg.converged_given))  # fmt: skip
+    collision_lm(G, joints, targets, given, *rest, opts, iopts, settings, seed_state(plan.seed),
+                 Answers(q, free, done, it, pos, rot))  # fmt: skip
     return q, done, it
 
 
