@@ -286,15 +286,13 @@ class IKSolver:
         Targets that the reach bound proves out of reach are flagged (``reachable``), get no restarts,
         and a ``UserWarning`` names them (asking about millimetres when they lie 100 x beyond the reach).
         """
-        plan, changes = _plan_changes(plan, costs is not None)
-        max_iters = changes.pop("max_iters", None)
+        plan, max_iters, changes = _plan_changes(plan, costs is not None)
         if costs is not None:  # the built-in terms take their keyword's compiled route (nik.ik.costs.route)
             call = dict(tol_pos=tol_pos, tol_rot=tol_rot, seed=seed, q_near=q_near, max_iters=max_iters, plan=plan,
                         representation=representation, world=world, bounds=bounds, q_rest=q_rest,
                         rest_weight=rest_weight)  # fmt: skip
             return solve_routed(self, T_target, costs, call)
-        simple = plan is None and not changes and max_iters is None
-        if simple and q_near is None and representation is None and world is None:
+        if plan is max_iters is q_near is representation is world is None and not changes:
             res = one_pose(self, T_target, tol_pos, tol_rot, seed) if bounds is q_rest is None else None
             if res is not None:  # one pose in one kernel call (nik.ik.backends.one_pose)
                 return res
@@ -411,11 +409,12 @@ class IKSolver:
 
 
 def _plan_changes(plan, costs: bool) -> tuple:
-    """``(plan, changes)`` of :meth:`IKSolver.solve`'s ``plan=``: a :class:`~nik.ik.plan.Plan` (or None) as it is,
-    with no changes, or a dict of Plan fields as ``(None, changes)``; a field the Plan lacks is a one-line ValueError,
-    and so is a change other than ``max_iters`` with ``costs=`` (whose plan :func:`nik.ik.costs.solve_routed` makes)."""
+    """``(plan, max_iters, changes)`` of :meth:`IKSolver.solve`'s ``plan=``: a :class:`~nik.ik.plan.Plan` (or None)
+    as it is, with no changes, or a dict of Plan fields as ``(None, its max_iters or None, the other fields)``; a field
+    the Plan lacks is a one-line ValueError, and so is a change other than ``max_iters`` with ``costs=`` (whose plan
+    :func:`nik.ik.costs.solve_routed` makes)."""
     if plan is None or isinstance(plan, Plan):
-        return plan, {}
+        return plan, None, {}
     if not isinstance(plan, dict):
         raise ValueError(f"plan: expected a Plan, a dict of Plan fields or None, got {type(plan).__name__}")
     names = {f.name for f in fields(Plan)}
@@ -424,7 +423,8 @@ def _plan_changes(plan, costs: bool) -> tuple:
         raise ValueError(
             f"plan: {bad[0]!r} is not a field the call can change (Plan fields: {', '.join(sorted(names))})"
         )
-    return None, dict(plan)
+    changes = dict(plan)
+    return None, changes.pop("max_iters", None), changes
 
 
 def _count(T_target) -> int | None:
