@@ -133,17 +133,20 @@ def _cap(dq, max_step):
 
 
 @kernel(inline="always")
-def _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m):
+def _normal_equations(J, e, rows, prior, q, A, g, m):
     """``A = J^T J + w2 Jr_a^T Jr_a`` and ``g = J^T e - w2 Jr_a^T r_a - w_prior2 (q - q_prior)`` over the first ``m``
-    rows of ``J`` and the active extra rows ``a = active[:R]`` (``None``: none; see :func:`_damped_step`)."""
+    rows of ``J``, the active extra rows ``rows = (Jr, r, w2, active, R)`` (``a = active[:R]``; ``None``: none) and
+    the prior ``prior = (q_prior, w_prior2)`` (``None``: none; see :func:`_dense_step`)."""
     n = q.shape[0]
     for i in range(n):
         v = 0.0
-        if q_prior is not None:
+        if prior is not None:
+            q_prior, w_prior2 = prior
             v = -w_prior2 * (q[i] - q_prior[i])
         for k in range(m):
             v += J[k, i] * e[k]
-        if Jr is not None:
+        if rows is not None:
+            Jr, r, w2, active, R = rows
             for t in range(R):
                 k = active[t]
                 v -= w2 * Jr[k, i] * r[k]
@@ -152,7 +155,8 @@ def _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m)
             a = 0.0
             for k in range(m):
                 a += J[k, i] * J[k, c]
-            if Jr is not None:
+            if rows is not None:
+                Jr, r, w2, active, R = rows
                 for t in range(R):
                     k = active[t]
                     a += w2 * Jr[k, i] * Jr[k, c]
@@ -161,39 +165,57 @@ def _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m)
 
 
 @kernel
-def _damped_step(J, e, Jr, r, w2, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq):
-    """The damped, limit-aware step ``dq (n,)`` of the module docstring; False if it failed.
+def _dense_step(J, e, extra, prior, q, joints, lam, eps, max_step, work):
+    """The damped, limit-aware step ``work[2] = dq (n,)`` of the module docstring; False if it failed.
 
-    ``J (m, n), e (m,)``: the residual rows; ``Jr (R, n), r (R,)``: extra rows with weight ``w2`` (``None``: none);
-    ``q_prior (n,)``: the prior's target with weight ``w_prior2`` (``None``: none). Scratch ``A (n, n), g (n,)``."""
-    if Jr is None:
-        return _held_step(J, e, None, None, 0.0, None, 0, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq)
+    ``J (m, n), e (m,)``: the residual rows; ``extra = (Jr (R, n), r (R,), w2)``: extra rows with weight ``w2``
+    (``None``: none); ``prior = (q_prior (n,), w_prior2)``: the prior row (``None``: none; numba prunes both at
+    compile time). Scratch ``work = (A (n, n), g (n,), dq (n,))``."""
+    if extra is None:
+        return _held_step(J, e, None, prior, q, joints, lam, eps, max_step, work)
+    Jr, r, w2 = extra
     active = np.empty(r.shape[0], dtype=np.int64)  # the rows that push (most are 0), in order
     R = 0
     for k in range(r.shape[0]):
         if r[k] != 0.0:
             active[R] = k
             R += 1
-    return _held_step(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq)
+    return _held_step(J, e, (Jr, r, w2, active, R), prior, q, joints, lam, eps, max_step, work)
 
 
 @kernel
-def _held_step(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq):
-    """:func:`_damped_step` once the active extra rows ``active[:R]`` are known: the normal equations, the joints
-    held at their limits (solved once more when the solution pushes one out), the damped solve, the cap. Six rows (a
-    pose) take a copy of the sums with that count fixed at compile time (their loops unrolled)."""
+def _damped_step(J, e, Jr, r, w2, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq):
+    """:func:`_dense_step` with its groups spread out (``Jr``, ``q_prior``: ``None`` for none): the call of
+    :func:`nik.kernels.collision_lm._descend`, whose loop is to become a call of :func:`nik.kernels.lm_loop._lm_loop`
+    (then this goes)."""
+    if Jr is None:
+        if q_prior is None:
+            return _dense_step(J, e, None, None, q, joints, lam, eps, max_step, (A, g, dq))
+        return _dense_step(J, e, None, (q_prior, w_prior2), q, joints, lam, eps, max_step, (A, g, dq))
+    if q_prior is None:
+        return _dense_step(J, e, (Jr, r, w2), None, q, joints, lam, eps, max_step, (A, g, dq))
+    return _dense_step(J, e, (Jr, r, w2), (q_prior, w_prior2), q, joints, lam, eps, max_step, (A, g, dq))
+
+
+@kernel
+def _held_step(J, e, rows, prior, q, joints, lam, eps, max_step, work):
+    """:func:`_dense_step` once the active extra rows ``rows = (Jr, r, w2, active, R)`` are known: the normal
+    equations, the joints held at their limits (solved once more when the solution pushes one out), the damped solve,
+    the cap. Six rows (a pose) take a copy of the sums with that count fixed at compile time (their loops
+    unrolled)."""
+    A, g, dq = work
     n = q.shape[0]
     m = J.shape[0]
     ridge = eps
-    if q_prior is not None:
-        ridge = w_prior2 + eps
+    if prior is not None:
+        ridge = prior[1] + eps
     for i in range(n):
         dq[i] = 0.0
     for _ in range(2):
         if m == 6:
-            _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, 6)
+            _normal_equations(J, e, rows, prior, q, A, g, 6)
         else:
-            _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m)
+            _normal_equations(J, e, rows, prior, q, A, g, m)
         hold(q, joints, g, dq, A)
         for i in range(n):
             A[i, i] = _damped(A[i, i], lam, eps, ridge)
