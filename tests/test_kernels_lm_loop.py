@@ -13,7 +13,7 @@ import pytest
 numba = pytest.importorskip("numba")
 
 from nik.kernels.chain import LOWER, UPPER  # noqa: E402
-from nik.kernels.lm_loop import ACCEPT_ANY, ACCEPT_LOWER, _lm_loop, _loop_cfg  # noqa: E402
+from nik.kernels.lm_loop import ACCEPT_ANY, ACCEPT_LOWER, _lm_loop, _loop_cfg, problem_kind  # noqa: E402
 from nik.kernels.lm_step import _dense_step  # noqa: E402
 
 KERNELS = Path(__file__).resolve().parents[1] / "nik" / "kernels"
@@ -22,8 +22,8 @@ State = namedtuple("State", ["q", "J", "e"])
 
 
 @numba.njit
-def _measure(prob, s):
-    """|b - A q|^2, the rows J = A and e = b - A q; never done."""
+def _measure(prob, s, bar):
+    """|b - A q|^2, the rows J = A and e = b - A q; never done (every row counts: ``bar`` unused)."""
     m, n = prob.A.shape
     E = 0.0
     for k in range(m):
@@ -44,14 +44,17 @@ def _propose(prob, s, lam, c):
     return good, math.inf
 
 
+problem_kind(Lin, _measure, _propose)
+
+
 @numba.njit
 def _run(A, b, joints, q0, limit, lam0, accept):
     m, n = A.shape
     prob = Lin(A, b, joints, (np.empty((n, n)), np.empty(n), np.empty(n)))
     cur, other = State(q0.copy(), np.empty((m, n)), np.empty(m)), State(np.empty(n), np.empty((m, n)), np.empty(m))
     cfg = _loop_cfg(limit, lam0, (0.3, 5.0, 0.0, 1e6), math.inf, (1e-3, 4), (-math.inf, 0.0), accept)
-    E, done = _measure(prob, cur)
-    it, E, done, cur, other = _lm_loop(_measure, _propose, prob, cfg, cur, other, E, done)
+    E, done = _measure(prob, cur, math.inf)
+    it, E, done, cur, other = _lm_loop(prob, cfg, cur, other, E, done)
     return it, E, cur.q.copy()
 
 

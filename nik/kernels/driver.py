@@ -39,13 +39,12 @@ from nik.kernels.lm import (
     _eval,
     _lm_one_bounded,
     _measure_pose,
-    _propose_dense,
     _tool_error,
     _work_size,
     lm_solve,
     turns_toward,
 )
-from nik.kernels.lm_loop import ACCEPT_ANY, ACCEPT_LOWER, NEVER, _lm_loop, _loop_cfg
+from nik.kernels.lm_loop import ACCEPT_ANY, ACCEPT_LOWER, NEVER, _lm_loop, _loop_cfg, problem_kind
 from nik.kernels.lm_step import _dense_step
 from nik.kernels.manipulability import EPS as MANIP_EPS
 from nik.kernels.manipulability import _manipulability
@@ -87,8 +86,8 @@ def near_prior(G, joints, T, q_near, rw, max_step, q):
         for w in NEAR_PRIOR:  # the goal's tolerances -1: never done, every step taken
             prob = PoseProblem(G, joints, (T[b], rw, d, CLASSIC, -1.0, -1.0), (q_near[b], w * w), 1e-9, max_step, d,
                                work)  # fmt: skip
-            E, done = _measure_pose(prob, cur)
-            _, _, _, cur, other = _lm_loop(_measure_pose, _propose_dense, prob, cfg, cur, other, E, done)
+            E, done = _measure_pose(prob, cur, math.inf)
+            _, _, _, cur, other = _lm_loop(prob, cfg, cur, other, E, done)
         _copy(cur.q, q[b])
 
 
@@ -418,9 +417,10 @@ RestState = namedtuple("RestState", ["q", "T", "J", "e", "info", "grad"])
 
 
 @kernel
-def _measure_rest(prob, s):
+def _measure_rest(prob, s, bar):
     """The loop's measure of the posture problem: the task at ``s.q`` and the preference's cost (:func:`_preference`);
-    returns ``(cost, False)``, the cost ``inf`` where ``s.q`` has left the task (its tolerances or bounds)."""
+    returns ``(cost, False)``, the cost ``inf`` where ``s.q`` has left the task (its tolerances or bounds; ``bar``
+    unused)."""
     Tt, rw, bnd, mode, tol_pos, tol_rot = prob.goal
     _, p, r, done = _eval(prob.G, prob.joints, s.q, Tt, rw, bnd, mode, tol_pos, tol_rot, s.T, s.J, s.e, prob.d)
     T6, J6, A6, M6 = prob.geo
@@ -462,6 +462,9 @@ def _propose_rest(prob, s, lam, c):
     return good, big
 
 
+problem_kind(RestProblem, _measure_rest, _propose_rest)
+
+
 @kernel
 def rest_posture(model, T, q, goal, opts, posture, ok, fit):
     """In place: the answers ``q: (B, n)`` where ``ok[b]`` moved towards ``q_rest: (B, n)`` in the null space of the
@@ -497,8 +500,9 @@ def rest_posture(model, T, q, goal, opts, posture, ok, fit):
     Tc, dd = np.empty((3, 4)), np.empty(6)
     geo = (np.empty((3, 4)), np.empty((6, n)), np.empty((6, 6)), np.empty((6, n)))
     work, qp = (np.empty((n, n)), np.empty(n), np.empty(n)), np.empty(n)
-    cur = RestState(np.empty(n), np.empty((3, 4)), np.empty((6, n)), np.empty(6), np.zeros(4), np.empty(n))
-    other = RestState(np.empty(n), np.empty((3, 4)), np.empty((6, n)), np.empty(6), np.zeros(4), np.empty(n))
+    # grad stays 0 without the manipulability (the step reads it as 0 * grad: no garbage may enter)
+    cur = RestState(np.empty(n), np.empty((3, 4)), np.empty((6, n)), np.empty(6), np.zeros(4), np.zeros(n))
+    other = RestState(np.empty(n), np.empty((3, 4)), np.empty((6, n)), np.empty(6), np.zeros(4), np.zeros(n))
     free = joints.copy()  # no joint held at a limit: the step slides along it and the clamp follows
     for i in range(n):
         free[i, LOWER], free[i, UPPER] = -math.inf, math.inf
@@ -518,10 +522,10 @@ def rest_posture(model, T, q, goal, opts, posture, ok, fit):
         prob = RestProblem(G, joints, free, (T[b], rw, bnd, mode, tol_pos, tol_rot), q_rest[b], weight, mw, damping,
                            max_step, dd, geo, qp, work)  # fmt: skip
         _copy(q[b], cur.q)
-        E, _ = _measure_rest(prob, cur)
+        E, _ = _measure_rest(prob, cur, math.inf)
         if E == math.inf:  # not within the task: nothing to hold
             continue
-        _, _, _, cur, other = _lm_loop(_measure_rest, _propose_rest, prob, cfg, cur, other, E, False)
+        _, _, _, cur, other = _lm_loop(prob, cfg, cur, other, E, False)
         _copy(cur.q, q[b])
         pos[b], rot[b] = cur.info[1], cur.info[2]
         if mode != CLASSIC:

@@ -56,7 +56,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain, _chain_jacobian
-from nik.kernels.lm_loop import ACCEPT_DONE, ACCEPT_LOWER, _lm_loop, _loop_cfg
+from nik.kernels.lm_loop import ACCEPT_DONE, ACCEPT_LOWER, _lm_loop, _loop_cfg, problem_kind
 from nik.kernels.lm_step import _dense_step
 
 __all__ = [
@@ -419,9 +419,9 @@ def _bounded_evaluate(G, joints, q, Tt, rw, bnd, mode, T, J, e, d):
 
 
 @kernel
-def _measure_pose(prob, s):
+def _measure_pose(prob, s, bar):
     """The loop's measure of a pose problem (:data:`PoseProblem`): FK, rows and cost of ``s.q`` into the state
-    ``s`` (:data:`PoseState`); returns ``(cost, done)`` (:func:`_eval`)."""
+    ``s`` (:data:`PoseState`); returns ``(cost, done)`` (:func:`_eval_goal`; ``bar`` unused: every row counts)."""
     E, pos, rot, done = _eval_goal(prob.G, prob.joints, s.q, prob.goal, s.T, s.J, s.e, prob.d)
     s.info[0], s.info[1], s.info[2] = E, pos, rot
     return E, done
@@ -439,6 +439,9 @@ def _propose_dense(prob, s, lam, c):
             c.q[i] = s.q[i] + dq[i]
         _bounds(prob.joints, c.q)
     return good, math.inf
+
+
+problem_kind(PoseProblem, _measure_pose, _propose_dense)
 
 
 @kernel
@@ -570,8 +573,8 @@ def _lm_one_bounded(G, joints, Tt, q0, bnd, mode, opts, iopts, restarts, rng, q,
                 limit, stall_limit = iopts[TAIL_ITERS], iopts[TAIL_STALL_ITERS]
         stall = (opts[STALL_REL], stall_limit)
         cfg = _loop_cfg(limit, opts[LAMBDA0], damping, math.inf, stall, (-math.inf, 0.0), accept)
-        E, done = _measure_pose(prob, cur)
-        its, E, done, cur, other = _lm_loop(_measure_pose, _propose_dense, prob, cfg, cur, other, E, done)
+        E, done = _measure_pose(prob, cur, math.inf)
+        its, E, done, cur, other = _lm_loop(prob, cfg, cur, other, E, done)
         total += its
         if done:
             _copy(cur.q, q)

@@ -1,11 +1,14 @@
 """The one Levenberg-Marquardt loop of nik's compiled solvers: the problem and the configuration are its arguments.
 
 Every compiled least-squares iteration of nik is this loop (:func:`_lm_loop`); what differs between them is passed
-in, not written again:
+in, not written again. A problem is a named tuple whose class names its kind (:func:`problem_kind` registers the
+kind's two functions; numba picks them by the problem's type when it compiles a caller, so each kind's loop is
+compiled with its own functions inlined and cached with the caller):
 
-- ``measure(prob, s) -> (cost, done)``: the rows of the problem at the state ``s.q`` (FK, residual, Jacobian, any
-  extra rows or preference, written into the state ``s``), the cost the accept rule compares and whether ``s.q`` is
-  an answer (the loop stops there);
+- ``measure(prob, s, bar) -> (cost, done)``: the rows of the problem at the state ``s.q`` (FK, residual, Jacobian,
+  any extra rows or preference, written into the state ``s``), the cost the accept rule compares and whether ``s.q``
+  is an answer (the loop stops there); ``bar`` is the cost to beat (``inf`` for a start): a measure may skip rows
+  that cannot matter once the others already reach it (and return ``inf``);
 - ``propose(prob, s, lam, c) -> (good, big)``: the candidate ``c.q`` from ``s`` with damping ``lam``: the linear
   solver is the problem's (dense Cholesky of one pose, :func:`nik.kernels.lm_step._damped_step`; the band solver of
   a path, :mod:`nik.kernels.trajopt`), then the projection into the limits; ``big`` the step's largest entry;
@@ -28,7 +31,8 @@ Who configures it how:
 - a whole path (:func:`nik.kernels.trajopt.trajopt`): the band solver, stop on a small gain (``conv_rel``), on a
   feasible path, or when ``lam`` exceeds ``lam_stop``;
 - the collision rows of :mod:`nik.kernels.collision_lm` are extra rows of the pose state (``s.extra = (Jr, r,
-  w2)``), taken by the same dense step.
+  w2)``), taken by the same dense step (:func:`nik.kernels.lm._propose_dense`); their measure adds ``w2 |r|^2`` to
+  the pose cost, and skips the rows where the pose rows alone already exceed ``bar``.
 """
 
 from __future__ import annotations
@@ -36,10 +40,12 @@ from __future__ import annotations
 import math
 from collections import namedtuple
 
+from numba.extending import overload
+
 from nik.kernels._jit import kernel
 from nik.kernels.lm_step import _judge, _stalled
 
-__all__ = ["ACCEPT_ANY", "ACCEPT_DONE", "ACCEPT_LOWER", "NEVER", "LoopCfg"]
+__all__ = ["ACCEPT_ANY", "ACCEPT_DONE", "ACCEPT_LOWER", "NEVER", "LoopCfg", "problem_kind"]
 
 #: Accept rules: a good step whose cost is lower; or also one that is an answer; or every good step.
 ACCEPT_LOWER, ACCEPT_DONE, ACCEPT_ANY = 0, 1, 2
@@ -57,6 +63,53 @@ LoopCfg = namedtuple(
 )  # fmt: skip
 
 
+_KINDS: dict = {}  # problem class -> (measure, propose)
+
+
+def problem_kind(cls, measure, propose) -> None:
+    """Register the problem class ``cls`` (a named tuple) with its compiled ``measure`` and ``propose`` (module
+    docstring): :func:`_lm_loop` on a problem of that class calls them."""
+    _KINDS[cls] = (measure, propose)
+
+
+def _measure(prob, s, bar):
+    """The measure of ``prob``'s kind (compiled code only: :func:`problem_kind`)."""
+    raise NotImplementedError("nik.kernels.lm_loop._measure runs in compiled code only")
+
+
+def _propose(prob, s, lam, c):
+    """The proposal of ``prob``'s kind (compiled code only: :func:`problem_kind`)."""
+    raise NotImplementedError("nik.kernels.lm_loop._propose runs in compiled code only")
+
+
+def _kind(prob):
+    """The registered functions of the numba type ``prob`` (a named tuple of a registered class)."""
+    cls = getattr(prob, "instance_class", None)
+    if cls not in _KINDS:
+        raise TypeError(f"nik.kernels.lm_loop: {prob} is not a registered problem kind (problem_kind)")
+    return _KINDS[cls]
+
+
+@overload(_measure, jit_options={"nogil": True})
+def _measure_of(prob, s, bar):
+    fn = _kind(prob)[0]
+
+    def impl(prob, s, bar):
+        return fn(prob, s, bar)
+
+    return impl
+
+
+@overload(_propose, jit_options={"nogil": True})
+def _propose_of(prob, s, lam, c):
+    fn = _kind(prob)[1]
+
+    def impl(prob, s, lam, c):
+        return fn(prob, s, lam, c)
+
+    return impl
+
+
 @kernel
 def _loop_cfg(limit, lam0, damping, lam_stop, stall, conv, accept):
     """A :class:`LoopCfg` with its fields typed alike for every caller: ``damping = (down, up, lo, hi)``,
@@ -69,7 +122,7 @@ def _loop_cfg(limit, lam0, damping, lam_stop, stall, conv, accept):
 
 
 @kernel
-def _lm_loop(measure, propose, prob, cfg, cur, cand, E, done):
+def _lm_loop(prob, cfg, cur, cand, E, done):
     """Levenberg-Marquardt on ``prob`` from the state ``cur`` (measured: cost ``E``, ``done``), candidates in
     ``cand`` (module docstring). Returns ``(iterations, cost, done, state, other)``: the steps tried, the state that
     holds the answer and the other one (``cur`` and ``cand``, perhaps swapped)."""
@@ -77,12 +130,12 @@ def _lm_loop(measure, propose, prob, cfg, cur, cand, E, done):
     stall = 0
     it = 0
     while it < cfg.limit and not done:
-        good, big = propose(prob, cur, lam, cand)
+        good, big = _propose(prob, cur, lam, cand)
         it += 1
         Ec = math.inf
         donec = False
         if good:
-            Ec, donec = measure(prob, cand)
+            Ec, donec = _measure(prob, cand, E)
         ok = (donec and cfg.accept == ACCEPT_DONE) or cfg.accept == ACCEPT_ANY
         kept, lam = _judge(good, E, Ec, ok, lam, cfg.down, cfg.up, cfg.lo, cfg.hi)
         stall = _stalled(kept, E, Ec, stall, cfg.stall_rel)

@@ -1,7 +1,7 @@
 """The one Levenberg-Marquardt step of nik's compiled solvers, and its accept/reject and damping rule.
 
-Every compiled least-squares loop of nik takes its step and updates its damping here; each keeps only its own
-residual and Jacobian (and its own stopping test). The problem of a step, for ``q: (n,)``::
+The one compiled LM loop (:mod:`nik.kernels.lm_loop`) takes its steps and updates its damping here. The problem of a
+step, for ``q: (n,)``::
 
     minimise  |e - J dq|^2 + w2 |r + Jr dq|^2 + w_prior2 |q + dq - q_prior|^2 + lam dq^T (diag(A) + eps) dq
               + eps |dq|^2
@@ -20,26 +20,18 @@ caller's ``done`` says it is an answer); lambda then shrinks by ``down`` (not be
 (not above ``hi``). A kept step that lowers the cost by less than ``stall_rel`` of it counts as a stall
 (:func:`_stalled`).
 
-Who calls what (the choices where exact sharing would cost speed or change answers):
+Who calls it: the proposals of the one LM loop (:mod:`nik.kernels.lm_loop`): :func:`nik.kernels.lm._propose_dense`
+(one pose: :func:`_dense_step` with the state's extra rows, e.g. the collision rows, and the problem's prior row;
+``None`` where there are none: numba prunes those branches at compile time, so the hot one-pose step costs what it
+cost before) and :func:`nik.kernels.driver._propose_rest` (the null-space posture: the prior ``q + z`` with weight
+``damping``, no Marquardt damping, no joint held, no cap: a step above ``max_step`` is refused there). The path's
+proposal (:func:`nik.kernels.trajopt._propose_path`, ``M = N n`` unknowns) has a block-banded normal matrix, and a
+dense ``M x M`` Cholesky would cost ``O(M^3)`` against the band's ``O(M b^2)``, so its linear solver is the band
+solver (``band_cholesky``, ``band_solve``); it shares :func:`_damped` (the damped diagonal, without the ``eps``
+ridge: ``ridge = 0``) and :func:`_cap`, and clamps its joints into the limits after the step (a projected step)
+rather than holding them. The loop applies :func:`_judge` and :func:`_stalled`.
 
-- :mod:`nik.kernels.lm` (one pose, classic or tolerant goal): :func:`_damped_step` with no extra rows and no prior
-  (``Jr``, ``q_prior`` passed as ``None``: numba prunes those branches at compile time, so the hot one-pose step
-  costs what it cost before), :func:`_judge`, :func:`_stalled`;
-- :mod:`nik.kernels.collision_lm`: :func:`_damped_step` with the collision rows, :func:`_judge`, :func:`_stalled`;
-- :func:`nik.kernels.driver.near_prior`: :func:`_damped_step` with the prior, ``lam = 0`` (Gauss-Newton on a
-  fixed schedule of prior weights, no accept test);
-- :func:`nik.kernels.driver.rest_posture`: :func:`_damped_step` with the prior ``q + z`` and weight ``damping``
-  (the null-space step ``z + J^T (J J^T + damping I)^-1 (e - J z)`` is the solution of that problem, by the
-  push-through identity), no step cap (a step above ``max_step`` is rejected there), and :func:`_judge` on its step
-  scale ``1 / s`` (halved on a kept step, down to 1; doubled on a rejected one);
-- :mod:`nik.kernels.trajopt` (a whole path, ``M = N n`` unknowns): the normal matrix is block-banded, and a dense
-  ``M x M`` Cholesky would cost ``O(M^3)`` against the band's ``O(M b^2)``, so the path's linear solver is the one
-  band solver (``band_cholesky``, ``band_solve``); it shares :func:`_damped` (the damped diagonal, without the
-  ``eps`` ridge: ``ridge = 0``), :func:`_cap` and :func:`_judge`. Its joints are clamped into the limits after the
-  step (a projected step) rather than held, and its stopping test (a kept step that lowers the cost by at most
-  ``stall_rel`` of the new cost, or a feasible path) is its own.
-
-The sums are written in the order of the loops they replace, so the answers are those of before, bit for bit.
+The sums are written in a fixed order, so a given problem gets the same answer bit for bit.
 """
 
 from __future__ import annotations
@@ -55,23 +47,33 @@ __all__ = ["hold", "pushes_out"]
 
 
 @kernel
-def _cholesky_solve(A, b, x):
-    """Solve ``A x = b`` for a symmetric positive definite ``A (n, n)`` (overwritten by its Cholesky factor,
-    lower triangle). Returns False when a pivot is not positive or not finite."""
-    n = b.shape[0]
-    for j in range(n):
-        d = A[j, j]
+def _cholesky(A, m, ridge):
+    """``A[:m, :m] + ridge I`` (symmetric positive definite) factorised in place, ``L L^T`` in its lower triangle: the
+    one dense factorisation of the kernels (the LM step, :mod:`nik.kernels.manipulability`). Returns False when a
+    pivot is not positive or not finite."""
+    for j in range(m):
+        d = A[j, j] + ridge
         for k in range(j):
             d -= A[j, k] * A[j, k]
         if not d > 0.0 or not math.isfinite(d):
             return False
         d = math.sqrt(d)
         A[j, j] = d
-        for i in range(j + 1, n):
+        for i in range(j + 1, m):
             v = A[i, j]
             for k in range(j):
                 v -= A[i, k] * A[j, k]
             A[i, j] = v / d
+    return True
+
+
+@kernel
+def _cholesky_solve(A, b, x):
+    """Solve ``A x = b`` for a symmetric positive definite ``A (n, n)`` (overwritten by its Cholesky factor,
+    lower triangle, :func:`_cholesky`). Returns False when a pivot is not positive or not finite."""
+    n = b.shape[0]
+    if not _cholesky(A, n, 0.0):
+        return False
     for i in range(n):  # L y = b
         v = b[i]
         for k in range(i):

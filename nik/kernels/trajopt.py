@@ -51,7 +51,7 @@ from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, _chain, _chain_jacobian
 from nik.kernels.collision import collision_residual
 from nik.kernels.lm import _residual
-from nik.kernels.lm_loop import ACCEPT_LOWER, NEVER, _lm_loop, _loop_cfg
+from nik.kernels.lm_loop import ACCEPT_LOWER, NEVER, _lm_loop, _loop_cfg, problem_kind
 from nik.kernels.lm_step import _cap, _damped
 
 __all__ = [
@@ -403,9 +403,9 @@ def _feasible(Q, ends, opts, pos, rot, info):
 
 
 @kernel
-def _measure_path(prob, s):
+def _measure_path(prob, s, bar):
     """The loop's measure of a path (:data:`PathProblem`): the band ``s.H``, ``s.g`` and the fit of ``s.q``
-    (:func:`_terms`); returns ``(cost, feasible)`` (:func:`_feasible`)."""
+    (:func:`_terms`); returns ``(cost, feasible)`` (:func:`_feasible`; ``bar`` unused)."""
     cost = _terms(prob.G, prob.joints, prob.T, s.q, prob.ends, prob.opts, prob.col, True, (s.H, s.g, np.empty(0)),
                   (s.pos, s.rot, s.info))  # fmt: skip
     return cost, _feasible(s.q, prob.ends, prob.opts, s.pos, s.rot, s.info)
@@ -417,11 +417,9 @@ def _propose_path(prob, s, lam, c):
     solver, :func:`band_cholesky`, :func:`band_solve`), capped (:func:`nik.kernels.lm_step._cap`), ``c.q = s.q + dq``
     clamped into the limits (a projected step); returns ``(good, inf)``."""
     A, dq = prob.work
-    M, b = A.shape[0], A.shape[1] - 1
-    for f in range(M):
-        for k in range(b + 1):
-            A[f, k] = s.H[f, k]
-        A[f, 0] = _damped(s.H[f, 0], lam, prob.opts[EPS], 0.0)
+    b = A.shape[1] - 1
+    A[:] = s.H
+    A[:, 0] = _damped(s.H[:, 0], lam, prob.opts[EPS], 0.0)  # the damped diagonal, as a whole column
     if not band_cholesky(A, b):
         return False, math.inf
     band_solve(A, b, s.g, dq)
@@ -434,6 +432,9 @@ def _propose_path(prob, s, lam, c):
                 x = s.q[i, j] + dq[i * n + j]
                 c.q[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
     return good, math.inf
+
+
+problem_kind(PathProblem, _measure_path, _propose_path)
 
 
 @kernel
@@ -460,11 +461,11 @@ def trajopt(G, joints, T, Q, ends, opts, iters, col, fit):
     prob = PathProblem(G, joints, T, ends, opts, col, (np.empty((M, 3 * n)), np.empty(M)))
     cur, other = _path_state(N, n), _path_state(N, n)
     cur.q[:] = Q
-    cost, _ = _measure_path(prob, cur)
+    cost, _ = _measure_path(prob, cur, math.inf)
     rel = opts[STALL_REL]  # drop <= rel * new cost  <=>  drop <= rel / (1 + rel) * old cost
     cfg = _loop_cfg(iters, opts[LAMBDA0], (LAM_DOWN, LAM_UP, LAM_MIN, math.inf), LAM_STOP, (0.0, NEVER),
                     (rel / (1.0 + rel), 0.0), ACCEPT_LOWER)  # fmt: skip
-    it, cost, _, cur, _ = _lm_loop(_measure_path, _propose_path, prob, cfg, cur, other, cost, False)
+    it, cost, _, cur, _ = _lm_loop(prob, cfg, cur, other, cost, False)
     pos, rot, info = fit
     Q[:] = cur.q
     pos[:] = cur.pos
