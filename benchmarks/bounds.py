@@ -70,7 +70,7 @@ def part1(names, n: int, repeats: int) -> None:
                 seed = lm.seed_state(max(rep, 0))
                 if goal == "pose":
                     t = time.perf_counter()
-                    lm.lm_solve(G, joints, Tn, q0, opts, iopts, restarts, seed, *out)
+                    lm.lm_solve(G, joints, Tn, q0, opts, iopts, restarts, seed, tuple(out))
                     times[goal].append((time.perf_counter() - t) / n)
                     pos, rot = nik.pose_error(T, robot.fk(torch.from_numpy(out[0])))
                     ok = (pos <= 1e-4) & (rot <= math.radians(0.1))
@@ -78,7 +78,7 @@ def part1(names, n: int, repeats: int) -> None:
                     b = parse_bounds(goal, batch=n)
                     bounds, modes = b.expand(n), b.modes(n)
                     t = time.perf_counter()
-                    lm.lm_solve_bounded(G, joints, Tn, q0, bounds, modes, opts, iopts, restarts, seed, *out)
+                    lm.lm_solve_bounded(G, joints, Tn, q0, (bounds, modes), opts, iopts, restarts, seed, tuple(out))
                     times[goal].append((time.perf_counter() - t) / n)
                     ok = within_bounds(T, robot.fk(torch.from_numpy(out[0])), torch.from_numpy(bounds))
                 success[goal] = float(ok.double().mean())

@@ -112,12 +112,12 @@ def lm_compare(robot, n_targets: int, first_starts: int, *, with_numpy: bool = T
     info = np.empty(1, dtype=np.int64), np.empty(1, dtype=bool), np.empty(1), np.empty(1)
     cfg, single = LMCfg(), SingleLM.from_robot(robot)
     times_k, times_n, answers_n = [], [], []
-    K.lm_solve(G, joints, Tn[:1], q0, opts, iopts, budget, K.seed_state(0), answers[:1], *info)  # warm-up
+    K.lm_solve(G, joints, Tn[:1], q0, opts, iopts, budget, K.seed_state(0), (answers[:1], *info))  # warm-up
     for start in range(0, n_targets, 30):  # kernel and numpy interleaved by blocks of 30 targets
         block = range(start, min(start + 30, n_targets))
         for k in block:
             t = time.perf_counter_ns()
-            K.lm_solve(G, joints, Tn[k : k + 1], q0, opts, iopts, budget, K.seed_state(k), answers[k : k + 1], *info)
+            K.lm_solve(G, joints, Tn[k : k + 1], q0, opts, iopts, budget, K.seed_state(k), (answers[k : k + 1], *info))
             times_k.append((time.perf_counter_ns() - t) / 1e3)
         if not with_numpy:
             continue
@@ -199,8 +199,8 @@ calls = {
     "fk_batch": lambda: K.fk_batch(G, joints, q[None], T[None]),
     "fk_jacobian": lambda: K.fk_jacobian(G, joints, q, T, J),
     "lm_solve": lambda: K.lm_solve(G, joints, E, q[None], opts, iopts, np.ones(1, dtype=np.int64),
-                                   K.seed_state(0), np.empty((1, 7)), np.empty(1, dtype=np.int64),
-                                   np.empty(1, dtype=bool), one, one.copy()),
+                                   K.seed_state(0), (np.empty((1, 7)), np.empty(1, dtype=np.int64),
+                                   np.empty(1, dtype=bool), one, one.copy())),
     "pose_errors": lambda: K.pose_errors(G, joints, E, q[None], one, one.copy()),
     "uniform_configurations": lambda: K.uniform_configurations(joints, K.seed_state(0), np.empty((2, 7))),
     "poses_ok": lambda: poses.poses_ok(E, 1e-4),

@@ -284,13 +284,13 @@ def test_lm_reaches_the_bounds_and_torch_and_kernel_agree(name, case):
     opts, iopts = lm.lm_options()
     out = [np.empty((B, robot.dof)), np.empty(B, np.int64), np.empty(B, bool), np.empty(B), np.empty(B)]
     # with restarts: every target reached, checked by FK
-    args = (G, joints, T.numpy(), q0.numpy(), bounds, modes, opts, iopts)
-    lm.lm_solve_bounded(*args, np.full(B, 50), lm.seed_state(0), *out)
+    args = (G, joints, T.numpy(), q0.numpy(), (bounds, modes), opts, iopts)
+    lm.lm_solve_bounded(*args, np.full(B, 50), lm.seed_state(0), tuple(out))
     assert out[2].all()
     assert bool(robot.within_limits(torch.from_numpy(out[0])).all())
     assert bool(within_bounds(T, robot.fk(torch.from_numpy(out[0])), torch.from_numpy(bounds)).all())
     # without restarts, the same starts: the torch LM takes the same steps
-    lm.lm_solve_bounded(*args, np.zeros(B, np.int64), lm.seed_state(0), *out)
+    lm.lm_solve_bounded(*args, np.zeros(B, np.int64), lm.seed_state(0), tuple(out))
     q_t, it_t = torch_lm(robot, T, q0, restarts=0, bounds=torch.from_numpy(bounds))
     ok_t = within_bounds(T, robot.fk(q_t), torch.from_numpy(bounds))
     assert ok_t.numpy().tolist() == out[2].tolist()
@@ -311,8 +311,8 @@ def _assert_a_knife_edge_at_a_limit(lm, robot, T, q0, bounds, iterations):
     opts, iopts = lm.lm_options(first_iters=iterations - 1)
     out = [np.empty((1, robot.dof)), np.empty(1, np.int64), np.empty(1, bool), np.empty(1), np.empty(1)]
     G, joints = robot.chain_arrays()
-    args = (G, joints, T.numpy(), q0.numpy(), bounds, lm.rotation_modes(bounds), opts, iopts)
-    lm.lm_solve_bounded(*args, np.zeros(1, np.int64), lm.seed_state(0), *out)
+    args = (G, joints, T.numpy(), q0.numpy(), (bounds, lm.rotation_modes(bounds)), opts, iopts)
+    lm.lm_solve_bounded(*args, np.zeros(1, np.int64), lm.seed_state(0), tuple(out))
     q_t, _ = torch_lm(robot, T, q0, restarts=0, bounds=torch.from_numpy(bounds), max_iters=iterations - 1)
     np.testing.assert_allclose(q_t.numpy(), out[0], atol=1e-7)  # the same steps until the last one
     e, J = np.empty((1, 6)), np.empty((1, 6, robot.dof))
@@ -336,8 +336,8 @@ def test_position_only_reaches_every_reachable_position_on_kuka_kr():
     opts, iopts = lm.lm_options(first_starts=8)
     out = [np.empty((B, 6)), np.empty(B, np.int64), np.empty(B, bool), np.empty(B), np.empty(B)]
     q0 = np.zeros((B, 6))
-    args = (G, joints, T.numpy(), q0, bounds, goal.modes(B), opts, iopts)
-    lm.lm_solve_bounded(*args, np.full(B, 100), lm.seed_state(1), *out)
+    args = (G, joints, T.numpy(), q0, (bounds, goal.modes(B)), opts, iopts)
+    lm.lm_solve_bounded(*args, np.full(B, 100), lm.seed_state(1), tuple(out))
     reached = robot.fk(torch.from_numpy(out[0]))
     assert bool(within_bounds(T, reached, torch.from_numpy(bounds)).all())
     assert float((reached[:, :3, 3] - T[:, :3, 3]).norm(dim=-1).max()) <= 1e-4
@@ -371,8 +371,8 @@ def test_a_pose_out_of_reach_at_its_orientation_is_solved_with_the_tool_axis_fre
     opts, iopts = lm.lm_options(first_starts=8)
     out = [np.empty((m, 6)), np.empty(m, np.int64), np.empty(m, bool), np.empty(m), np.empty(m)]
     Tn = np.ascontiguousarray(T[out_of_reach].numpy())
-    lm.lm_solve_bounded(G, joints, Tn, np.zeros((m, 6)), half, lm.rotation_modes(half), opts, iopts,
-                        np.full(m, 200), lm.seed_state(0), *out)  # fmt: skip
+    lm.lm_solve_bounded(G, joints, Tn, np.zeros((m, 6)), (half, lm.rotation_modes(half)), opts, iopts,
+                        np.full(m, 200), lm.seed_state(0), tuple(out))  # fmt: skip
     assert bool(within_bounds(T[out_of_reach], robot.fk(torch.from_numpy(out[0])), goal).all())
     # one sample (the given orientation): nothing closed-form; the bounded LM from the clamped candidates serves
     res1 = closed_form_free_axis(robot, T[out_of_reach][:5], samples=1)

@@ -138,7 +138,7 @@ def _solve(robot, T, seed, *, q0=None, restarts=2, **kw):
     q0 = np.zeros((1, robot.dof)) if q0 is None else np.asarray(q0, dtype=np.float64).reshape(1, -1)
     restarts = np.array([restarts], dtype=np.int64)
     out = _outputs(1, robot.dof)
-    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), *out)
+    lm_solve(G, joints, T[None], q0, opts, iopts, restarts, seed_state(seed), tuple(out))
     q, it, conv, pos, rot = out
     return q[0], int(it[0]), bool(conv[0]), pos[0], rot[0]
 
@@ -244,7 +244,7 @@ def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_
     opts, iopts = lm_options(first_starts=8)
     restarts = np.array([50, 50, 50, 0, 50], dtype=np.int64)
     out = _outputs(5, robot.dof)
-    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), *out)
+    lm_solve(G, joints, T, np.zeros((5, robot.dof)), opts, iopts, restarts, seed_state(4), tuple(out))
     q, it, conv, pos, rot = out
     assert conv[[0, 1, 2, 4]].all() and not conv[3]
     assert it[3] <= 25  # one start of at most first_iters iterations
@@ -252,7 +252,7 @@ def test_a_batch_gives_each_target_the_answer_it_gets_alone_and_its_own_restart_
         rows = np.repeat(T[b : b + 1], b + 1, axis=0)
         alone = _outputs(b + 1, robot.dof)
         budget = np.full(b + 1, 50, dtype=np.int64)
-        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), *alone)
+        lm_solve(G, joints, rows, np.zeros((b + 1, 6)), opts, iopts, budget, seed_state(4), tuple(alone))
         assert np.array_equal(alone[0][b], q[b])
     errors = np.empty(5), np.empty(5)
     pose_errors(G, joints, T, q, *errors)

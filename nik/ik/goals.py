@@ -216,14 +216,14 @@ def solve_compiled(backend, robot, plan, T_target, q_near, representation) -> IK
     q, ok, it = np.empty((B, n)), np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
     pos, rot, d = np.empty(B), np.empty(B), np.empty((B, 6))
     seed = lm.seed_state(plan.seed)
-    driver.solve_bounded(model.G, model.joints, job.T, starts, half, modes, opts, iopts, iopts_multi,
-                         budget.astype(np.int64), seed, q, ok, it, pos, rot, d)  # fmt: skip
+    lm_args = (opts, iopts, iopts_multi, budget.astype(np.int64), seed)
+    driver.solve_bounded((model.G, model.joints), job.T, starts, (half, modes), lm_args, (q, ok, it, pos, rot, d))
     if prefers(plan):
         if plan.manipulability > 0.0:
             most_manipulable(robot, model, job.T, q, ok, lambda rows, qk: _inside(model, job.T, rows, qk, modes, half))
         qr, weight, popts = preference(robot, plan, B, opts)
-        driver.rest_posture(model.G, model.joints, job.T, q, half, modes, popts, qr, weight, REST_ITERS, REST_DAMPING,
-                            ok, pos, rot, d)  # fmt: skip
+        driver.rest_posture((model.G, model.joints), job.T, q, (half, modes), popts, (qr, weight, REST_ITERS,
+                            REST_DAMPING), ok, (pos, rot, d))  # fmt: skip
     if float32:  # rounded, clamped into the float32 limits, measured again against the asked bounds
         q = np.clip(q.astype(np.float32), model.lo32, model.hi32)
         full, _ = _modes_half(plan, B, 1.0)
@@ -258,8 +258,8 @@ def rest_compiled(plan, job, answers) -> None:
     if plan.q_rest is not None:
         nearest_candidates(plan, job, answers, qr)
         ok = answers.ok(job)
-    driver.rest_posture(model.G, model.joints, job.T, answers.q, half, modes, popts, qr, weight, REST_ITERS,
-                        REST_DAMPING, ok, answers.pos_err, answers.rot_err, np.empty((B, 6)))  # fmt: skip
+    driver.rest_posture((model.G, model.joints), job.T, answers.q, (half, modes), popts, (qr, weight, REST_ITERS,
+                        REST_DAMPING), ok, (answers.pos_err, answers.rot_err, np.empty((B, 6))))  # fmt: skip
 
 
 def _inside(model, T: np.ndarray, rows: np.ndarray, q: np.ndarray, modes: np.ndarray, half: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ serves every arm and plan.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -30,18 +31,21 @@ from nik.kernels.lm import (
     ROT_WEIGHT,
     TOL_POS,
     TOL_ROT,
+    PoseProblem,
+    PoseState,
     _bounded_check,
     _bounds,
     _copy,
     _eval,
-    _evaluate,
     _lm_one_bounded,
+    _measure_pose,
     _tool_error,
     _work_size,
     lm_solve,
     turns_toward,
 )
-from nik.kernels.lm_step import _damped_step, _judge
+from nik.kernels.lm_loop import ACCEPT_ANY, ACCEPT_LOWER, NEVER, _lm_loop, _loop_cfg, problem_kind
+from nik.kernels.lm_step import _dense_step
 from nik.kernels.manipulability import EPS as MANIP_EPS
 from nik.kernels.manipulability import _manipulability
 from nik.kernels.poses import reach_flags
@@ -59,27 +63,32 @@ FALLBACK_NONE, FALLBACK_ANALYTIC, FALLBACK_MULTISTART = 0, 1, 2
 
 
 @kernel
+def _pose_state(n):
+    """A :data:`nik.kernels.lm.PoseState` of ``n`` joints without extra rows, on arrays of its own."""
+    return PoseState(np.empty(n), np.empty((3, 4)), np.empty((6, n)), np.empty(6), np.empty(3), None)
+
+
+@kernel
 def near_prior(G, joints, T, q_near, rw, max_step, q):
     """``q: (B, n)`` out: from ``q_near: (B, n)``, Gauss-Newton steps on ``|e|^2 + w^2 |q - q_near|^2`` (``e``: the
     pose error of ``T: (B, 4, 4)``, rotation rows times ``rw``) with ``w`` over :data:`NEAR_PRIOR`, each
-    :data:`NEAR_PRIOR_STEPS` times: ``(J^T J + w^2 I) dq = J^T e - w^2 (q - q_near)`` (the one LM step,
-    :func:`nik.kernels.lm_step._damped_step`, with that prior and no Marquardt damping), the joints on a limit that it
-    pushes out held (:func:`nik.kernels.lm_step.hold`), scaled to ``max_step``, clamped into the limits (``joints``;
-    pass them without wrapping). Not exact (``w`` ends above 0): a start for LM that stays on the side of ``q_near``."""
+    :data:`NEAR_PRIOR_STEPS` times: ``(J^T J + w^2 I) dq = J^T e - w^2 (q - q_near)``. Each weight is one run of the
+    one LM loop (:func:`nik.kernels.lm_loop._lm_loop`) on the pose rows with that prior row, ``lam = 0``, every good
+    step kept, stop on a failed step: the joints on a limit that a step pushes out held
+    (:func:`nik.kernels.lm_step.hold`), scaled to ``max_step``, clamped into the limits (``joints``; pass them
+    without wrapping). Not exact (``w`` ends above 0): a start for LM that stays on the side of ``q_near``."""
     B, n = q.shape
-    Tc, J, e = np.empty((3, 4)), np.empty((6, n)), np.empty(6)
-    A, g, dq = np.empty((n, n)), np.empty(n), np.empty(n)
+    cur, other = _pose_state(n), _pose_state(n)
+    d, work = np.empty(6), (np.empty((n, n)), np.empty(n), np.empty(n))
+    cfg = _loop_cfg(NEAR_PRIOR_STEPS, 0.0, (1.0, 1.0, 0.0, 0.0), -1.0, (0.0, NEVER), (-math.inf, 0.0), ACCEPT_ANY)
     for b in range(B):
-        _copy(q_near[b], q[b])
-        for w in NEAR_PRIOR:
-            for _ in range(NEAR_PRIOR_STEPS):
-                _evaluate(G, joints, q[b], T[b], rw, Tc, J, e)
-                if not _damped_step(J, e, None, None, 0.0, q_near[b], w * w, q[b], joints, 0.0, 1e-9, max_step, A, g,
-                                    dq):  # fmt: skip
-                    break
-                for i in range(n):
-                    q[b, i] += dq[i]
-                _bounds(joints, q[b])
+        _copy(q_near[b], cur.q)
+        for w in NEAR_PRIOR:  # the goal's tolerances -1: never done, every step taken
+            prob = PoseProblem(G, joints, (T[b], rw, d, CLASSIC, -1.0, -1.0), (q_near[b], w * w), 1e-9, max_step, d,
+                               work)  # fmt: skip
+            E, done = _measure_pose(prob, cur, math.inf)
+            _, _, _, cur, other = _lm_loop(prob, cfg, cur, other, E, done)
+        _copy(cur.q, q[b])
 
 
 @kernel
@@ -120,67 +129,36 @@ def _lm(G, joints, T, q0, opts, iopts, budget, seed):
     B, n = T.shape[0], joints.shape[0]
     q, it = np.empty((B, n)), np.empty(B, dtype=np.int64)
     conv, pos, rot = np.empty(B, dtype=np.bool_), np.empty(B), np.empty(B)
-    lm_solve(G, joints, T, q0, opts, iopts, budget, seed, q, it, conv, pos, rot)
+    lm_solve(G, joints, T, q0, opts, iopts, budget, seed, (q, it, conv, pos, rot))
     return q, it, pos, rot
 
 
 @kernel
-def solve(
-    G,
-    joints,
-    T,
-    center,
-    radius,
-    slack,
-    source,
-    flat,
-    layout,
-    activation,
-    in_mean,
-    in_std,
-    out_center,
-    out_half,
-    prismatic,
-    heads,
-    Tin,
-    closed,
-    check_tol,
-    limit_rounding,
-    q_near,
-    use_near,
-    opts,
-    iopts,
-    iopts_multi,
-    budget,
-    seed,
-    restarts,
-    hypotheses,
-    near,
-    fallback,
-    tol_pos,
-    tol_rot,
-    q,
-    pos,
-    rot,
-    ok,
-    iterations,
-    reachable,
-):
+def solve(model, T, guess, Tin, closed_form, q_near, use_near, stages, out):
     """One call of the plan on ``T: (B, 4, 4)`` float64 targets.
 
     Args:
-        G, joints: the model; center, radius, slack: the reach bound (:func:`nik.kernels.poses.reach_flags`).
-        source: ``SOURCE_*``; flat ... heads, Tin: the packed network (:func:`nik.kernels.seeded.ranked_hypotheses`;
-            ``Tin`` its input poses); closed, check_tol, limit_rounding: the closed form
-            (:func:`nik.kernels.closed.guess`).
+        model: ``(G, joints)``, the chain model.
+        guess: ``(center, radius, slack, source, flat, layout, activation, in_mean, in_std, out_center, out_half,
+            prismatic, heads)``: the reach bound (:func:`nik.kernels.poses.reach_flags`), ``SOURCE_*`` and the packed
+            network (:func:`nik.kernels.seeded.ranked_hypotheses`); ``Tin``: its input poses.
+        closed_form: ``(closed, check_tol, limit_rounding)``, the closed form (:func:`nik.kernels.closed.guess`).
         q_near: (B, n), read when ``use_near``.
-        opts, iopts: LM options from given starts; iopts_multi: from the best uniform configurations (no guess);
-        budget: the restarts a target within reach may draw; seed: (1,) uint64.
-        restarts, hypotheses, near: the plan's flags; fallback: ``FALLBACK_*``; tol_pos, tol_rot: the stages'.
+        stages: ``(opts, iopts, iopts_multi, budget, seed, restarts, hypotheses, near, fallback, tol_pos, tol_rot)``:
+            LM options from given starts and from the best uniform configurations (no guess); the restarts a target
+            within reach may draw; seed (1,) uint64; the plan's flags; ``FALLBACK_*``; the stages' tolerances.
+        out: ``(q (B, n), pos, rot (B,), ok (B,) bool, iterations (B,) int64, reachable (B,) bool)``, written here.
 
-    Outputs ``q (B, n), pos, rot (B,), ok (B,) bool, iterations (B,) int64, reachable (B,) bool``; returns
-    whether every target is within reach.
+    Returns whether every target is within reach. The tuples are those of
+    :meth:`nik.ik.backends.compiled.CompiledBackend.driver_args` (gathered once per plan).
     """
+    G, joints = model
+    center, radius, slack, source, flat, layout, activation, in_mean, in_std, out_center, out_half, prismatic, heads = (
+        guess
+    )
+    closed, check_tol, limit_rounding = closed_form
+    opts, iopts, iopts_multi, budget, seed, restarts, hypotheses, near, fallback, tol_pos, tol_rot = stages
+    q, pos, rot, ok, iterations, reachable = out
     B, n = T.shape[0], joints.shape[0]
     every = reach_flags(T, center, radius, slack, reachable)
     for b in range(B):
@@ -311,9 +289,7 @@ def solve(
 
 
 @kernel
-def solve_bounded(
-    G, joints, T, starts, half, modes, opts, iopts, iopts_multi, budget, seed, q, ok, iterations, pos, rot, d
-):
+def solve_bounded(model, T, starts, goal, lm, out):
     """One call towards tolerant goals (:mod:`nik.ik.bounds`) on ``T: (B, 4, 4)`` float64 targets.
 
     Per target ``b``: its starts ``starts[b]: (K, n)`` (the network's hypotheses, the closed-form solutions, ``q_near``;
@@ -324,15 +300,20 @@ def solve_bounded(
     a target proven out of reach). The answer is the first inside, else the smallest bounded error.
 
     Args:
-        half: (B, 6) half-widths (m, rad, ``inf`` = free); modes: (B,) rotation modes
-            (:func:`nik.kernels.lm.rotation_modes`); opts, iopts, iopts_multi: LM options
-            (:func:`nik.kernels.lm.lm_options`);
-        budget: (B,) int64; seed: (1,) uint64 (target ``b`` draws from its own stream).
-
-    Outputs ``q (B, n)`` inside the limits, ``ok (B,)`` (FK of ``q`` inside every bound), ``iterations (B,)``,
-    ``pos, rot (B,)`` the classic errors (m, geodesic rad) and ``d (B, 6)`` the error per tool axis
-    (:func:`nik.kernels.lm.bounded_errors`; 0 on the entry of a free rotation axis).
+        model: ``(G, joints)``, the chain model.
+        goal: ``(half, modes)``: ``half (B, 6)`` half-widths (m, rad, ``inf`` = free), ``modes (B,)`` rotation modes
+            (:func:`nik.kernels.lm.rotation_modes`).
+        lm: ``(opts, iopts, iopts_multi, budget, seed)``: LM options (:func:`nik.kernels.lm.lm_options`), ``budget
+            (B,)`` int64, ``seed (1,)`` uint64 (target ``b`` draws from its own stream).
+        out: ``(q, ok, iterations, pos, rot, d)``, written here: ``q (B, n)`` inside the limits, ``ok (B,)`` (FK of
+            ``q`` inside every bound), ``iterations (B,)``, ``pos, rot (B,)`` the classic errors (m, geodesic rad)
+            and ``d (B, 6)`` the error per tool axis (:func:`nik.kernels.lm.bounded_errors`; 0 on the entry of a free
+            rotation axis).
     """
+    G, joints = model
+    half, modes = goal
+    opts, iopts, iopts_multi, budget, seed = lm
+    q, ok, iterations, pos, rot, d = out
     B, K, n = starts.shape
     rw = opts[ROT_WEIGHT]
     rng = np.empty(1, dtype=np.uint64)
@@ -420,22 +401,84 @@ def _preference(joints, q, q_rest, weight, mw, J6, A6, M6, grad):
     return 0.5 * weight * weight * dist + 0.5 * (mw / (w + MANIP_EPS)) ** 2, w
 
 
+#: The null-space posture problem of one answer for :func:`nik.kernels.lm_loop._lm_loop`: the model ``G, joints``
+#: and ``free`` (the limits open: no joint held), the goal of :func:`nik.kernels.lm._eval`, the posture ``q_rest (n,)``
+#: and its ``weight``, the manipulability weight ``mw``, the prior's weight ``damping``, the largest step
+#: ``max_step``; scratch ``d (6,)``, ``geo = (T6, J6, A6, M6)``, ``qp (n,)``, ``work = (A, g, dq)``.
+RestProblem = namedtuple(
+    "RestProblem", ["G", "joints", "free", "goal", "q_rest", "weight", "mw", "damping", "max_step", "d", "geo", "qp",
+                    "work"]
+)  # fmt: skip
+#: Its state: ``q (n,)``, ``T (3, 4)``, the task rows ``J (6, n)``, ``e (6,)``, ``info (4,)`` = (unused, position
+#: error m, rotation angle rad, manipulability ``w``) and ``grad (n,)``, the gradient of ``log w``.
+RestState = namedtuple("RestState", ["q", "T", "J", "e", "info", "grad"])
+
+
 @kernel
-def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damping, ok, pos, rot, d):
+def _measure_rest(prob, s, bar):
+    """The loop's measure of the posture problem: the task at ``s.q`` and the preference's cost (:func:`_preference`);
+    returns ``(cost, False)``, the cost ``inf`` where ``s.q`` has left the task (its tolerances or bounds; ``bar``
+    unused)."""
+    Tt, rw, bnd, mode, tol_pos, tol_rot = prob.goal
+    _, p, r, done = _eval(prob.G, prob.joints, s.q, Tt, rw, bnd, mode, tol_pos, tol_rot, s.T, s.J, s.e, prob.d)
+    T6, J6, A6, M6 = prob.geo
+    if prob.mw > 0.0:
+        _geometric(prob.G, prob.joints, s.q, s.J, rw, mode, T6, J6)
+    dist, w = _preference(prob.joints, s.q, prob.q_rest, prob.weight, prob.mw, J6, A6, M6, s.grad)
+    s.info[1], s.info[2], s.info[3] = p, r, w
+    return (dist if done else math.inf), False
+
+
+@kernel
+def _propose_rest(prob, s, lam, c):
+    """The loop's proposal of the posture problem: the null-space step of :func:`rest_posture` with ``s = 1 / lam``
+    (the dense step with the prior ``q + z``, no Marquardt damping, no joint held), refused above ``max_step``, then
+    brought inside the limits; returns ``(good, its largest entry)``."""
+    n = s.q.shape[0]
+    sc = 1.0 / lam
+    gm = 0.0  # the manipulability's share: s mw (w + EPS) grad(w) / |grad(w)|^2, grad(w) = w grad(log w)
+    w = s.info[3]
+    if prob.mw > 0.0 and w > 0.0:
+        g2 = 0.0
+        for i in range(n):
+            g2 += s.grad[i] * s.grad[i]
+        if g2 > 0.0:
+            gm = sc * prob.mw * (w + MANIP_EPS) / (w * g2)
+    qp = prob.qp
+    for i in range(n):
+        qp[i] = s.q[i] + sc * prob.weight * (prob.q_rest[i] - s.q[i]) + gm * s.grad[i]
+    good = _dense_step(s.J, s.e, None, (qp, prob.damping), s.q, prob.free, 0.0, 0.0, math.inf, prob.work)
+    dq = prob.work[2]
+    big = 0.0
+    if good:
+        for i in range(n):
+            big = max(big, abs(dq[i]))
+            c.q[i] = s.q[i] + dq[i]
+        good = big <= prob.max_step
+    if good:
+        _bounds(prob.joints, c.q)
+    return good, big
+
+
+problem_kind(RestProblem, _measure_rest, _propose_rest)
+
+
+@kernel
+def rest_posture(model, T, q, goal, opts, posture, ok, fit):
     """In place: the answers ``q: (B, n)`` where ``ok[b]`` moved towards ``q_rest: (B, n)`` in the null space of the
-    task, never leaving it (see :mod:`nik.ik.goals`).
+    task, never leaving it (see :mod:`nik.ik.goals`). ``model = (G, joints)``; ``goal = (half, modes)`` as
+    :func:`solve_bounded`'s; ``posture = (q_rest, weight, iters, damping)``; ``fit = (pos, rot, d)``, updated.
 
     Each iteration takes the step ``dq = z + J^T (J J^T + damping I)^-1 (e - J z)`` with ``z = s * weight * (q_rest -
     q)``: the task residual ``e`` (and its Jacobian ``J``: the classic error where ``modes[b] == CLASSIC``, else the
     bounded one of ``half[b]``, whose free rows vanish and so leave more room) is held (to first order) while the rest
     of the motion goes to ``q_rest``. That step is the one of ``|e - J dq|^2 + damping |dq - z|^2`` (the push-through
-    identity), solved by the one LM step of :func:`nik.kernels.lm_step._damped_step` with the prior ``q + z`` (weight
+    identity): the one LM loop (:func:`nik.kernels.lm_loop._lm_loop`) with the prior row ``q + z`` (weight
     ``damping``, no Marquardt damping, no joint held at a limit: a joint held would leave a 7-joint arm no null space
-    to move in; the clamp into the limits follows the step, as before the step was shared). The step is kept only
-    where FK of the result is still within tolerance (the tolerances of ``opts``, or inside every bound) and nearer
-    ``q_rest``; else ``s`` is halved (from 1; doubled after a kept one; stop below 1/64: the rule of
-    :func:`nik.kernels.lm_step._judge` on ``1 / s``). ``pos, rot, d`` are updated for the kept answers (as
-    :func:`solve_bounded`'s).
+    to move in; the clamp into the limits follows the step). The step is kept only where FK of the result is still
+    within tolerance (the tolerances of ``opts``, or inside every bound) and nearer ``q_rest``; else ``s`` is halved
+    (from 1; doubled after a kept one; stop below 1/64: the loop's damping ``lam = 1 / s``). ``pos, rot, d`` are
+    updated for the kept answers (as :func:`solve_bounded`'s).
     A target whose task has as many live rows as the arm has joints (a 6-joint arm, no free axis) has no null space
     and is left as it is.
 
@@ -445,19 +488,24 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
     (``weight = 0`` with ``q_rest`` anything: the manipulability alone); it stops after a kept step that lowers that
     cost by less than :data:`MANIP_STALL` of it (the measure has no target to reach).
     """
+    G, joints = model
+    half, modes = goal
+    q_rest, weight, iters, damping = posture
+    pos, rot, d = fit
     B, n = q.shape
     rw, tol_pos, tol_rot, max_step = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT], opts[MAX_STEP]
     mw = opts[MANIPULABILITY]
-    Tc = np.empty((3, 4))
-    J, Jc = np.empty((6, n)), np.empty((6, n))
-    e, ec, dd = np.empty(6), np.empty(6), np.empty(6)
-    A, g = np.empty((n, n)), np.empty(n)
-    qp, qc, dq = np.empty(n), np.empty(n), np.empty(n)
-    T6, J6, A6, M6 = np.empty((3, 4)), np.empty((6, n)), np.empty((6, 6)), np.empty((6, n))
-    grad, gradc = np.empty(n), np.empty(n)
-    free = joints.copy()  # no joint held at a limit: the step slides along it and the clamp follows (as before)
+    Tc, dd = np.empty((3, 4)), np.empty(6)
+    geo = (np.empty((3, 4)), np.empty((6, n)), np.empty((6, 6)), np.empty((6, n)))
+    work, qp = (np.empty((n, n)), np.empty(n), np.empty(n)), np.empty(n)
+    # grad stays 0 without the manipulability (the step reads it as 0 * grad: no garbage may enter)
+    cur = RestState(np.empty(n), np.empty((3, 4)), np.empty((6, n)), np.empty(6), np.zeros(4), np.zeros(n))
+    other = RestState(np.empty(n), np.empty((3, 4)), np.empty((6, n)), np.empty(6), np.zeros(4), np.zeros(n))
+    free = joints.copy()  # no joint held at a limit: the step slides along it and the clamp follows
     for i in range(n):
         free[i, LOWER], free[i, UPPER] = -math.inf, math.inf
+    conv = MANIP_STALL if mw > 0.0 else -math.inf  # the manipulability has no target: stop on a small gain
+    cfg = _loop_cfg(iters, 1.0, (0.5, 2.0, 1.0, math.inf), 64.0, (0.0, NEVER), (conv, 1e-9), ACCEPT_LOWER)
     for b in range(B):
         mode = modes[b]
         bnd = half[b]
@@ -469,54 +517,15 @@ def rest_posture(G, joints, T, q, half, modes, opts, q_rest, weight, iters, damp
                     live -= 1
         if not ok[b] or n <= live:  # no null space: nothing to move
             continue
-        _, p, r, done = _eval(G, joints, q[b], T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, J, e, dd)
-        if not done:
+        prob = RestProblem(G, joints, free, (T[b], rw, bnd, mode, tol_pos, tol_rot), q_rest[b], weight, mw, damping,
+                           max_step, dd, geo, qp, work)  # fmt: skip
+        _copy(q[b], cur.q)
+        E, _ = _measure_rest(prob, cur, math.inf)
+        if E == math.inf:  # not within the task: nothing to hold
             continue
-        if mw > 0.0:
-            _geometric(G, joints, q[b], J, rw, mode, T6, J6)
-        dist, w = _preference(joints, q[b], q_rest[b], weight, mw, J6, A6, M6, grad)
-        lam = 1.0  # 1 / s
-        for _ in range(iters):
-            s = 1.0 / lam
-            gm = 0.0  # the manipulability's share: s mw (w + EPS) grad(w) / |grad(w)|^2, grad(w) = w grad(log w)
-            if mw > 0.0 and w > 0.0:
-                g2 = 0.0
-                for i in range(n):
-                    g2 += grad[i] * grad[i]
-                if g2 > 0.0:
-                    gm = s * mw * (w + MANIP_EPS) / (w * g2)
-            for i in range(n):
-                qp[i] = q[b, i] + s * weight * (q_rest[b, i] - q[b, i]) + gm * grad[i]
-            good = _damped_step(J, e, None, None, 0.0, qp, damping, q[b], free, 0.0, 0.0, math.inf, A, g, dq)
-            big = 0.0
-            dc = math.inf
-            wc = 0.0
-            if good:
-                for i in range(n):
-                    big = max(big, abs(dq[i]))
-                    qc[i] = q[b, i] + dq[i]
-                good = big <= max_step
-            if good:
-                _bounds(joints, qc)
-                _, pc, rc, donec = _eval(G, joints, qc, T[b], rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, dd)
-                if mw > 0.0:
-                    _geometric(G, joints, qc, Jc, rw, mode, T6, J6)
-                dc, wc = _preference(joints, qc, q_rest[b], weight, mw, J6, A6, M6, gradc)
-                good = donec
-            kept, lam = _judge(good, dist, dc, False, lam, 0.5, 2.0, 1.0, math.inf)
-            if kept:
-                _copy(qc, q[b])
-                _copy(Jc.ravel(), J.ravel())
-                _copy(ec, e)
-                stall = mw > 0.0 and dist - dc < MANIP_STALL * dist
-                dist, p, r, w = dc, pc, rc, wc
-                if mw > 0.0:
-                    _copy(gradc, grad)
-                if big < 1e-9 or stall:
-                    break
-            elif lam > 64.0:
-                break
-        pos[b], rot[b] = p, r
+        _, _, _, cur, other = _lm_loop(prob, cfg, cur, other, E, False)
+        _copy(cur.q, q[b])
+        pos[b], rot[b] = cur.info[1], cur.info[2]
         if mode != CLASSIC:
             _chain(G, joints, q[b], Tc)
             _tool_error(T[b], Tc, mode, d[b])

@@ -49,14 +49,18 @@ error: 4.6, 100 %).
 from __future__ import annotations
 
 import math
+from collections import namedtuple
+from dataclasses import dataclass
 
 import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, WRAPS, _chain, _chain_jacobian
-from nik.kernels.lm_step import _damped_step, _judge, _stalled
+from nik.kernels.lm_loop import ACCEPT_DONE, ACCEPT_LOWER, _lm_loop, _loop_cfg, problem_kind
+from nik.kernels.lm_step import _dense_step
 
 __all__ = [
+    "LMOptions",
     "bounded_errors",
     "bounded_residuals",
     "lm_options",
@@ -87,29 +91,18 @@ CLASSIC = -2
 #: the residual's dead zone, as a fraction of each bound (see the module docstring)
 DEAD_ZONE = 0.5
 
+#: One pose's problem for :func:`nik.kernels.lm_loop._lm_loop`: the model ``G, joints``; the goal ``(Tt (4, 4), rw,
+#: bnd (6,), mode, tol_pos, tol_rot)`` of :func:`_eval`; the dense step's prior row ``(q_prior (n,), w_prior2)`` (or
+#: ``None``), ``eps`` and ``max_step``; scratch ``d (6,)`` and ``work = (A (n, n), g (n,), dq (n,))``.
+PoseProblem = namedtuple("PoseProblem", ["G", "joints", "goal", "prior", "eps", "max_step", "d", "work"])
+#: One pose's state: ``q (n,)``, its FK ``T (3, 4)``, rows ``J (6, n)``, ``e (6,)``, ``info (3,)`` = its cost,
+#: position error (m) and rotation angle (rad), and extra rows ``(Jr (R, n), r (R,), w2)`` (or ``None``).
+PoseState = namedtuple("PoseState", ["q", "T", "J", "e", "info", "extra"])
 
-def lm_options(
-    *,
-    rot_weight: float = 0.5,
-    lambda0: float = 1e-3,
-    lambda_up: float = 5.0,
-    lambda_down: float = 0.3,
-    lambda_min: float = 1e-9,
-    lambda_max: float = 1e6,
-    eps: float = 1e-9,
-    max_step: float = 0.5,
-    stall_rel: float = 1e-3,
-    tol_pos: float = 1e-4,
-    tol_rot: float = math.radians(0.1),
-    first_iters: int = 25,
-    iters: int = 25,
-    stall_iters: int = 4,
-    first_starts: int = 0,
-    tail_after: int | None = None,
-    tail_iters: int | None = None,
-    tail_stall_iters: int | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(opts, iopts)`` for :func:`lm_solve` (defaults: those of the batched LM's ``LMCfg`` and nik's one
+
+@dataclass(frozen=True)
+class LMOptions:
+    """The settings of the compiled one-pose LM (defaults: those of the batched LM's ``LMCfg`` and nik's one
     tolerance, 0.1 mm / 0.1 deg).
 
     Units: ``rot_weight`` m/rad, ``eps`` m^2, ``max_step`` rad (m for prismatic joints), ``tol_pos`` m,
@@ -119,17 +112,42 @@ def lm_options(
     ``tail_after`` (default: none) run ``tail_iters`` iterations at most and stop after ``tail_stall_iters``
     without progress (defaults ``iters`` and ``stall_iters``): longer runs for the hard targets that are left.
     """
+
+    rot_weight: float = 0.5
+    lambda0: float = 1e-3
+    lambda_up: float = 5.0
+    lambda_down: float = 0.3
+    lambda_min: float = 1e-9
+    lambda_max: float = 1e6
+    eps: float = 1e-9
+    max_step: float = 0.5
+    stall_rel: float = 1e-3
+    tol_pos: float = 1e-4
+    tol_rot: float = math.radians(0.1)
+    first_iters: int = 25
+    iters: int = 25
+    stall_iters: int = 4
+    first_starts: int = 0
+    tail_after: int | None = None
+    tail_iters: int | None = None
+    tail_stall_iters: int | None = None
+
+
+def lm_options(**settings) -> tuple[np.ndarray, np.ndarray]:
+    """``(opts, iopts)`` for :func:`lm_solve` from the keywords of :class:`LMOptions` (its fields; an unknown name
+    is a ``TypeError``)."""
+    o = LMOptions(**settings)
     opts = np.zeros(12)  # opts[MANIPULABILITY] = 0: set per call by the preference's caller
     opts[[ROT_WEIGHT, LAMBDA0, LAMBDA_UP, LAMBDA_DOWN, LAMBDA_MIN, LAMBDA_MAX]] = (
-        rot_weight, lambda0, lambda_up, lambda_down, lambda_min, lambda_max
+        o.rot_weight, o.lambda0, o.lambda_up, o.lambda_down, o.lambda_min, o.lambda_max
     )  # fmt: skip
-    opts[[EPS, MAX_STEP, STALL_REL, TOL_POS, TOL_ROT]] = eps, max_step, stall_rel, tol_pos, tol_rot
+    opts[[EPS, MAX_STEP, STALL_REL, TOL_POS, TOL_ROT]] = o.eps, o.max_step, o.stall_rel, o.tol_pos, o.tol_rot
     iopts = np.empty(7, dtype=np.int64)
-    iopts[[FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS]] = first_iters, iters, stall_iters, first_starts
+    iopts[[FIRST_ITERS, ITERS, STALL_ITERS, FIRST_STARTS]] = o.first_iters, o.iters, o.stall_iters, o.first_starts
     iopts[[TAIL_AFTER, TAIL_ITERS, TAIL_STALL_ITERS]] = (
-        2**62 if tail_after is None else tail_after,
-        iters if tail_iters is None else tail_iters,
-        stall_iters if tail_stall_iters is None else tail_stall_iters,
+        2**62 if o.tail_after is None else o.tail_after,
+        o.iters if o.tail_iters is None else o.tail_iters,
+        o.stall_iters if o.tail_stall_iters is None else o.tail_stall_iters,
     )
     if (iopts < 0).any():
         raise ValueError(f"lm_options: iteration counts and starts must be >= 0, got {iopts.tolist()}")
@@ -143,8 +161,8 @@ def seed_state(seed: int) -> np.ndarray:
 
 @kernel
 def _work_size(n):
-    """Length of :func:`lm_solve`'s scratch for ``n`` joints: ``42 + 12 n + n^2 + 5 n`` float64."""
-    return 42 + 12 * n + n * n + 5 * n
+    """Length of :func:`lm_solve`'s scratch for ``n`` joints: ``48 + 12 n + n^2 + 6 n`` float64."""
+    return 48 + 12 * n + n * n + 6 * n
 
 
 # ---------------------------------------------------------------------------
@@ -401,20 +419,48 @@ def _bounded_evaluate(G, joints, q, Tt, rw, bnd, mode, T, J, e, d):
 
 
 @kernel
-def _step(J, e, q, joints, lam, eps, max_step, A, g, dq):
-    """The damped, limit-aware step ``dq (n,)`` from ``J (6, n)`` and ``e (6,)``; False if it failed
-    (:func:`nik.kernels.lm_step._damped_step` with no extra rows and no prior)."""
-    return _damped_step(J, e, None, None, 0.0, None, 0.0, q, joints, lam, eps, max_step, A, g, dq)
+def _measure_pose(prob, s, bar):
+    """The loop's measure of a pose problem (:data:`PoseProblem`): FK, rows and cost of ``s.q`` into the state
+    ``s`` (:data:`PoseState`); returns ``(cost, done)`` (:func:`_eval_goal`; ``bar`` unused: every row counts)."""
+    E, pos, rot, done = _eval_goal(prob.G, prob.joints, s.q, prob.goal, s.T, s.J, s.e, prob.d)
+    s.info[0], s.info[1], s.info[2] = E, pos, rot
+    return E, done
 
 
 @kernel
-def _eval(G, joints, q, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d):
-    """FK, Jacobian and error of ``q`` by the classic error (``mode == CLASSIC``) or the bounded one; returns
-    ``(E, pos, rot, done)`` (``done``: within both tolerances, or inside every bound)."""
+def _propose_dense(prob, s, lam, c):
+    """The loop's proposal of a pose problem: the dense damped step of :func:`nik.kernels.lm_step._dense_step` (the
+    state's extra rows, the problem's prior), ``c.q = s.q + dq`` brought inside the limits (:func:`_bounds`);
+    returns ``(good, inf)`` (no tiny-step rule)."""
+    good = _dense_step(s.J, s.e, s.extra, prob.prior, s.q, prob.joints, lam, prob.eps, prob.max_step, prob.work)
+    if good:
+        dq = prob.work[2]
+        for i in range(s.q.shape[0]):
+            c.q[i] = s.q[i] + dq[i]
+        _bounds(prob.joints, c.q)
+    return good, math.inf
+
+
+problem_kind(PoseProblem, _measure_pose, _propose_dense)
+
+
+@kernel
+def _eval_goal(G, joints, q, goal, T, J, e, d):
+    """FK, Jacobian and error of ``q`` towards ``goal = (Tt, rw, bnd, mode, tol_pos, tol_rot)`` by the classic error
+    (``mode == CLASSIC``) or the bounded one; returns ``(E, pos, rot, done)`` (``done``: within both tolerances, or
+    inside every bound)."""
+    Tt, rw, bnd, mode, tol_pos, tol_rot = goal
     if mode == CLASSIC:
         E, pos, rot = _evaluate(G, joints, q, Tt, rw, T, J, e)
         return E, pos, rot, pos <= tol_pos and rot <= tol_rot
     return _bounded_evaluate(G, joints, q, Tt, rw, bnd, mode, T, J, e, d)
+
+
+@kernel
+def _eval(G, joints, q, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d):
+    """:func:`_eval_goal` with the goal spread out: the call of :mod:`nik.kernels.collision_lm` (it goes when that
+    module takes the goal as one tuple)."""
+    return _eval_goal(G, joints, q, (Tt, rw, bnd, mode, tol_pos, tol_rot), T, J, e, d)
 
 
 @kernel
@@ -438,8 +484,11 @@ def _bounded_check(Tt, T, bnd, mode, rw, e, d):
 
 
 @kernel
-def _best_uniform(G, joints, Tt, rw, bnd, mode, m, rng, q, cand, T, e, d):
-    """``q (n,)``: the best of ``m`` uniform configurations by ``|e|^2``."""
+def _best_uniform(G, joints, goal, m, rng, q, scratch):
+    """``q (n,)``: the best of ``m`` uniform configurations by ``|e|^2`` towards ``goal`` (as :func:`_eval_goal`'s);
+    ``scratch = (cand (n,), T (3, 4), e (6,), d (6,))``."""
+    Tt, rw, bnd, mode, _, _ = goal
+    cand, T, e, d = scratch
     best = math.inf
     for _ in range(m):
         _draw(joints, rng, cand)
@@ -467,9 +516,7 @@ def _lm_one_bounded(G, joints, Tt, q0, bnd, mode, opts, iopts, restarts, rng, q,
     geodesic rotation angle rad of ``q``)."""
     n = q0.shape[0]
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
-    lambda0, lam_up, lam_down = opts[LAMBDA0], opts[LAMBDA_UP], opts[LAMBDA_DOWN]
-    lam_min, lam_max, eps, max_step = opts[LAMBDA_MIN], opts[LAMBDA_MAX], opts[EPS], opts[MAX_STEP]
-    stall_rel = opts[STALL_REL]
+    damping = (opts[LAMBDA_DOWN], opts[LAMBDA_UP], opts[LAMBDA_MIN], opts[LAMBDA_MAX])
     iters, stall_iters, tail_after = iopts[ITERS], iopts[STALL_ITERS], iopts[TAIL_AFTER]
     # scratch views
     o = 0
@@ -491,6 +538,8 @@ def _lm_one_bounded(G, joints, Tt, q0, bnd, mode, opts, iopts, restarts, rng, q,
     o += n
     dq = work[o : o + n]
     o += n
+    qa = work[o : o + n]
+    o += n
     qc = work[o : o + n]
     o += n
     best_q = work[o : o + n]
@@ -498,57 +547,47 @@ def _lm_one_bounded(G, joints, Tt, q0, bnd, mode, opts, iopts, restarts, rng, q,
     cand = work[o : o + n]
     o += n
     d = work[o : o + 6]
+    o += 6
+    info = work[o : o + 3]
+    o += 3
+    infoc = work[o : o + 3]
 
+    goal = (Tt, rw, bnd, mode, tol_pos, tol_rot)
     if iopts[FIRST_STARTS] > 0:
-        _best_uniform(G, joints, Tt, rw, bnd, mode, iopts[FIRST_STARTS], rng, q, cand, T, e, d)
+        _best_uniform(G, joints, goal, iopts[FIRST_STARTS], rng, qa, (cand, T, e, d))
     else:
-        _copy(q0, q)
-    _bounds(joints, q)
+        _copy(q0, qa)
+    _bounds(joints, qa)
+    prob = PoseProblem(G, joints, goal, None, opts[EPS], opts[MAX_STEP], d, (A, g, dq))
+    cur, other = PoseState(qa, T, J, e, info, None), PoseState(qc, Tc, Jc, ec, infoc, None)
+    accept = ACCEPT_LOWER if mode == CLASSIC else ACCEPT_DONE
     limit = iopts[FIRST_ITERS]
     total = 0
     best_E, best_pos, best_rot = math.inf, math.inf, math.inf
     for start in range(restarts + 1):
         stall_limit = stall_iters
         if start > 0:
-            _draw(joints, rng, q)
+            _draw(joints, rng, cur.q)
             limit = iters
             if start > tail_after:
                 limit, stall_limit = iopts[TAIL_ITERS], iopts[TAIL_STALL_ITERS]
-        E, pos, rot, done = _eval(G, joints, q, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
-        lam = lambda0
-        stall = 0
-        for _ in range(limit):
-            if done:
-                break
-            good = _step(J, e, q, joints, lam, eps, max_step, A, g, dq)
-            total += 1
-            Ec = math.inf
-            donec = False
-            if good:
-                for i in range(n):
-                    qc[i] = q[i] + dq[i]
-                _bounds(joints, qc)
-                Ec, posc, rotc, donec = _eval(G, joints, qc, Tt, rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, d)
-            kept, lam = _judge(good, E, Ec, donec and mode != CLASSIC, lam, lam_down, lam_up, lam_min, lam_max)
-            stall = _stalled(kept, E, Ec, stall, stall_rel)
-            if kept:
-                _copy(qc, q)
-                _copy(Jc.ravel(), J.ravel())
-                _copy(ec, e)
-                E, pos, rot, done = Ec, posc, rotc, donec
-            if stall >= stall_limit:
-                break
+        stall = (opts[STALL_REL], stall_limit)
+        cfg = _loop_cfg(limit, opts[LAMBDA0], damping, math.inf, stall, (-math.inf, 0.0), accept)
+        E, done = _measure_pose(prob, cur, math.inf)
+        its, E, done, cur, other = _lm_loop(prob, cfg, cur, other, E, done)
+        total += its
         if done:
-            return total, True, pos, rot
+            _copy(cur.q, q)
+            return total, True, cur.info[1], cur.info[2]
         if E < best_E:
-            best_E, best_pos, best_rot = E, pos, rot
-            _copy(q, best_q)
+            best_E, best_pos, best_rot = E, cur.info[1], cur.info[2]
+            _copy(cur.q, best_q)
     _copy(best_q, q)
     return total, False, best_pos, best_rot
 
 
 @kernel
-def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, q, iterations, converged, pos, rot):
+def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, out):
     """Levenberg-Marquardt towards each target ``Tt[b]`` from ``q0[b]`` (or from the best of ``first_starts``
     uniform configurations), restarting from uniform configurations while the target is not reached.
 
@@ -560,15 +599,15 @@ def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, q, iterations, conv
         restarts: (B,) int64, fresh uniform starts each target may draw at most (0 for one proven out of reach).
         seed: (1,) uint64 (:func:`seed_state`); target ``b`` draws from its own stream of it, so its answer
             depends on the seed and ``b`` only.
-        q: (B, n) out: the answers, inside the limits: the first start within tolerance, else the start with
-            the lowest error (best effort).
-        iterations: (B,) int64 out: LM iterations spent (all starts).
-        converged: (B,) bool out: ``q`` is within both tolerances.
-        pos, rot: (B,) float64 out: position (m) and rotation (rad) error of ``q``.
+        out: ``(q, iterations, converged, pos, rot)``, written here: ``q (B, n)`` the answers, inside the limits:
+            the first start within tolerance, else the start with the lowest error (best effort); ``iterations (B,)
+            int64`` LM iterations spent (all starts); ``converged (B,) bool``: ``q`` is within both tolerances;
+            ``pos, rot (B,)`` float64: position (m) and rotation (rad) error of ``q``.
 
     The scratch is allocated here, per call (measured: no slower than a buffer kept by the caller, within
     0.1 us of a 4.4 us one-pose call), so threads sharing one model run side by side.
     """
+    q, iterations, converged, pos, rot = out
     scratch = np.empty(_work_size(q0.shape[1]))
     rng = np.empty(1, dtype=np.uint64)
     for b in range(Tt.shape[0]):
@@ -579,17 +618,19 @@ def lm_solve(G, joints, Tt, q0, opts, iopts, restarts, seed, q, iterations, conv
 
 
 @kernel
-def lm_solve_bounded(G, joints, Tt, q0, bounds, modes, opts, iopts, restarts, seed, q, iterations, converged, pos, rot):
+def lm_solve_bounded(G, joints, Tt, q0, goal, opts, iopts, restarts, seed, out):
     """:func:`lm_solve` towards tolerant goals: target ``b`` is reached when its error in the target's tool frame
     lies inside ``bounds[b]`` on every axis (see the module docstring).
 
     Args:
-        bounds: (B, 6) float64 half-widths ``x, y, z`` (m), ``rx, ry, rz`` (rad), ``inf`` = free
-            (:class:`nik.ik.bounds.Bounds`, ``expand(B)``).
-        modes: (B,) int64 rotation modes (:func:`rotation_modes` of ``bounds``).
+        goal: ``(bounds, modes)``: ``bounds (B, 6)`` float64 half-widths ``x, y, z`` (m), ``rx, ry, rz`` (rad),
+            ``inf`` = free (:class:`nik.ik.bounds.Bounds`, ``expand(B)``); ``modes (B,)`` int64 rotation modes
+            (:func:`rotation_modes` of ``bounds``).
         the others: as :func:`lm_solve` (``opts``' tolerances are not used); ``converged``: inside every bound;
         ``pos, rot``: the position error (m) and geodesic rotation angle (rad) of ``q`` (for reports).
     """
+    bounds, modes = goal
+    q, iterations, converged, pos, rot = out
     scratch = np.empty(_work_size(q0.shape[1]))
     rng = np.empty(1, dtype=np.uint64)
     for b in range(Tt.shape[0]):

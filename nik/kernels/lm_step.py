@@ -1,7 +1,7 @@
 """The one Levenberg-Marquardt step of nik's compiled solvers, and its accept/reject and damping rule.
 
-Every compiled least-squares loop of nik takes its step and updates its damping here; each keeps only its own
-residual and Jacobian (and its own stopping test). The problem of a step, for ``q: (n,)``::
+The one compiled LM loop (:mod:`nik.kernels.lm_loop`) takes its steps and updates its damping here. The problem of a
+step, for ``q: (n,)``::
 
     minimise  |e - J dq|^2 + w2 |r + Jr dq|^2 + w_prior2 |q + dq - q_prior|^2 + lam dq^T (diag(A) + eps) dq
               + eps |dq|^2
@@ -20,26 +20,18 @@ caller's ``done`` says it is an answer); lambda then shrinks by ``down`` (not be
 (not above ``hi``). A kept step that lowers the cost by less than ``stall_rel`` of it counts as a stall
 (:func:`_stalled`).
 
-Who calls what (the choices where exact sharing would cost speed or change answers):
+Who calls it: the proposals of the one LM loop (:mod:`nik.kernels.lm_loop`): :func:`nik.kernels.lm._propose_dense`
+(one pose: :func:`_dense_step` with the state's extra rows, e.g. the collision rows, and the problem's prior row;
+``None`` where there are none: numba prunes those branches at compile time, so the hot one-pose step costs what it
+cost before) and :func:`nik.kernels.driver._propose_rest` (the null-space posture: the prior ``q + z`` with weight
+``damping``, no Marquardt damping, no joint held, no cap: a step above ``max_step`` is refused there). The path's
+proposal (:func:`nik.kernels.trajopt._propose_path`, ``M = N n`` unknowns) has a block-banded normal matrix, and a
+dense ``M x M`` Cholesky would cost ``O(M^3)`` against the band's ``O(M b^2)``, so its linear solver is the band
+solver (``band_cholesky``, ``band_solve``); it shares :func:`_damped` (the damped diagonal, without the ``eps``
+ridge: ``ridge = 0``) and :func:`_cap`, and clamps its joints into the limits after the step (a projected step)
+rather than holding them. The loop applies :func:`_judge` and :func:`_stalled`.
 
-- :mod:`nik.kernels.lm` (one pose, classic or tolerant goal): :func:`_damped_step` with no extra rows and no prior
-  (``Jr``, ``q_prior`` passed as ``None``: numba prunes those branches at compile time, so the hot one-pose step
-  costs what it cost before), :func:`_judge`, :func:`_stalled`;
-- :mod:`nik.kernels.collision_lm`: :func:`_damped_step` with the collision rows, :func:`_judge`, :func:`_stalled`;
-- :func:`nik.kernels.driver.near_prior`: :func:`_damped_step` with the prior, ``lam = 0`` (Gauss-Newton on a
-  fixed schedule of prior weights, no accept test);
-- :func:`nik.kernels.driver.rest_posture`: :func:`_damped_step` with the prior ``q + z`` and weight ``damping``
-  (the null-space step ``z + J^T (J J^T + damping I)^-1 (e - J z)`` is the solution of that problem, by the
-  push-through identity), no step cap (a step above ``max_step`` is rejected there), and :func:`_judge` on its step
-  scale ``1 / s`` (halved on a kept step, down to 1; doubled on a rejected one);
-- :mod:`nik.kernels.trajopt` (a whole path, ``M = N n`` unknowns): the normal matrix is block-banded, and a dense
-  ``M x M`` Cholesky would cost ``O(M^3)`` against the band's ``O(M b^2)``, so the path's linear solver is the one
-  band solver (``band_cholesky``, ``band_solve``); it shares :func:`_damped` (the damped diagonal, without the
-  ``eps`` ridge: ``ridge = 0``), :func:`_cap` and :func:`_judge`. Its joints are clamped into the limits after the
-  step (a projected step) rather than held, and its stopping test (a kept step that lowers the cost by at most
-  ``stall_rel`` of the new cost, or a feasible path) is its own.
-
-The sums are written in the order of the loops they replace, so the answers are those of before, bit for bit.
+The sums are written in a fixed order, so a given problem gets the same answer bit for bit.
 """
 
 from __future__ import annotations
@@ -55,23 +47,33 @@ __all__ = ["hold", "pushes_out"]
 
 
 @kernel
-def _cholesky_solve(A, b, x):
-    """Solve ``A x = b`` for a symmetric positive definite ``A (n, n)`` (overwritten by its Cholesky factor,
-    lower triangle). Returns False when a pivot is not positive or not finite."""
-    n = b.shape[0]
-    for j in range(n):
-        d = A[j, j]
+def _cholesky(A, m, ridge):
+    """``A[:m, :m] + ridge I`` (symmetric positive definite) factorised in place, ``L L^T`` in its lower triangle: the
+    one dense factorisation of the kernels (the LM step, :mod:`nik.kernels.manipulability`). Returns False when a
+    pivot is not positive or not finite."""
+    for j in range(m):
+        d = A[j, j] + ridge
         for k in range(j):
             d -= A[j, k] * A[j, k]
         if not d > 0.0 or not math.isfinite(d):
             return False
         d = math.sqrt(d)
         A[j, j] = d
-        for i in range(j + 1, n):
+        for i in range(j + 1, m):
             v = A[i, j]
             for k in range(j):
                 v -= A[i, k] * A[j, k]
             A[i, j] = v / d
+    return True
+
+
+@kernel
+def _cholesky_solve(A, b, x):
+    """Solve ``A x = b`` for a symmetric positive definite ``A (n, n)`` (overwritten by its Cholesky factor,
+    lower triangle, :func:`_cholesky`). Returns False when a pivot is not positive or not finite."""
+    n = b.shape[0]
+    if not _cholesky(A, n, 0.0):
+        return False
     for i in range(n):  # L y = b
         v = b[i]
         for k in range(i):
@@ -133,17 +135,20 @@ def _cap(dq, max_step):
 
 
 @kernel(inline="always")
-def _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m):
+def _normal_equations(J, e, rows, prior, q, A, g, m):
     """``A = J^T J + w2 Jr_a^T Jr_a`` and ``g = J^T e - w2 Jr_a^T r_a - w_prior2 (q - q_prior)`` over the first ``m``
-    rows of ``J`` and the active extra rows ``a = active[:R]`` (``None``: none; see :func:`_damped_step`)."""
+    rows of ``J``, the active extra rows ``rows = (Jr, r, w2, active, R)`` (``a = active[:R]``; ``None``: none) and
+    the prior ``prior = (q_prior, w_prior2)`` (``None``: none; see :func:`_dense_step`)."""
     n = q.shape[0]
     for i in range(n):
         v = 0.0
-        if q_prior is not None:
+        if prior is not None:
+            q_prior, w_prior2 = prior
             v = -w_prior2 * (q[i] - q_prior[i])
         for k in range(m):
             v += J[k, i] * e[k]
-        if Jr is not None:
+        if rows is not None:
+            Jr, r, w2, active, R = rows
             for t in range(R):
                 k = active[t]
                 v -= w2 * Jr[k, i] * r[k]
@@ -152,7 +157,8 @@ def _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m)
             a = 0.0
             for k in range(m):
                 a += J[k, i] * J[k, c]
-            if Jr is not None:
+            if rows is not None:
+                Jr, r, w2, active, R = rows
                 for t in range(R):
                     k = active[t]
                     a += w2 * Jr[k, i] * Jr[k, c]
@@ -161,39 +167,57 @@ def _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m)
 
 
 @kernel
-def _damped_step(J, e, Jr, r, w2, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq):
-    """The damped, limit-aware step ``dq (n,)`` of the module docstring; False if it failed.
+def _dense_step(J, e, extra, prior, q, joints, lam, eps, max_step, work):
+    """The damped, limit-aware step ``work[2] = dq (n,)`` of the module docstring; False if it failed.
 
-    ``J (m, n), e (m,)``: the residual rows; ``Jr (R, n), r (R,)``: extra rows with weight ``w2`` (``None``: none);
-    ``q_prior (n,)``: the prior's target with weight ``w_prior2`` (``None``: none). Scratch ``A (n, n), g (n,)``."""
-    if Jr is None:
-        return _held_step(J, e, None, None, 0.0, None, 0, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq)
+    ``J (m, n), e (m,)``: the residual rows; ``extra = (Jr (R, n), r (R,), w2)``: extra rows with weight ``w2``
+    (``None``: none); ``prior = (q_prior (n,), w_prior2)``: the prior row (``None``: none; numba prunes both at
+    compile time). Scratch ``work = (A (n, n), g (n,), dq (n,))``."""
+    if extra is None:
+        return _held_step(J, e, None, prior, q, joints, lam, eps, max_step, work)
+    Jr, r, w2 = extra
     active = np.empty(r.shape[0], dtype=np.int64)  # the rows that push (most are 0), in order
     R = 0
     for k in range(r.shape[0]):
         if r[k] != 0.0:
             active[R] = k
             R += 1
-    return _held_step(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq)
+    return _held_step(J, e, (Jr, r, w2, active, R), prior, q, joints, lam, eps, max_step, work)
 
 
 @kernel
-def _held_step(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq):
-    """:func:`_damped_step` once the active extra rows ``active[:R]`` are known: the normal equations, the joints
-    held at their limits (solved once more when the solution pushes one out), the damped solve, the cap. Six rows (a
-    pose) take a copy of the sums with that count fixed at compile time (their loops unrolled)."""
+def _damped_step(J, e, Jr, r, w2, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq):
+    """:func:`_dense_step` with its groups spread out (``Jr``, ``q_prior``: ``None`` for none): the call of
+    :func:`nik.kernels.collision_lm._descend`, whose loop is to become a call of :func:`nik.kernels.lm_loop._lm_loop`
+    (then this goes)."""
+    if Jr is None:
+        if q_prior is None:
+            return _dense_step(J, e, None, None, q, joints, lam, eps, max_step, (A, g, dq))
+        return _dense_step(J, e, None, (q_prior, w_prior2), q, joints, lam, eps, max_step, (A, g, dq))
+    if q_prior is None:
+        return _dense_step(J, e, (Jr, r, w2), None, q, joints, lam, eps, max_step, (A, g, dq))
+    return _dense_step(J, e, (Jr, r, w2), (q_prior, w_prior2), q, joints, lam, eps, max_step, (A, g, dq))
+
+
+@kernel
+def _held_step(J, e, rows, prior, q, joints, lam, eps, max_step, work):
+    """:func:`_dense_step` once the active extra rows ``rows = (Jr, r, w2, active, R)`` are known: the normal
+    equations, the joints held at their limits (solved once more when the solution pushes one out), the damped solve,
+    the cap. Six rows (a pose) take a copy of the sums with that count fixed at compile time (their loops
+    unrolled)."""
+    A, g, dq = work
     n = q.shape[0]
     m = J.shape[0]
     ridge = eps
-    if q_prior is not None:
-        ridge = w_prior2 + eps
+    if prior is not None:
+        ridge = prior[1] + eps
     for i in range(n):
         dq[i] = 0.0
     for _ in range(2):
         if m == 6:
-            _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, 6)
+            _normal_equations(J, e, rows, prior, q, A, g, 6)
         else:
-            _normal_equations(J, e, Jr, r, w2, active, R, q_prior, w_prior2, q, A, g, m)
+            _normal_equations(J, e, rows, prior, q, A, g, m)
         hold(q, joints, g, dq, A)
         for i in range(n):
             A[i, i] = _damped(A[i, i], lam, eps, ridge)

@@ -13,8 +13,9 @@ geometric Jacobian itself: with ``z_k`` the axis of joint ``k`` and ``J_i = [v_i
 - 0 otherwise (a prismatic joint turns nothing),
 
 and ``d log w / dq_k = sum_i M_i . dJ_i/dq_k`` with ``M = (J J^T)^-1 J`` (``J (J^T J)^-1`` below 6 joints), solved
-by a Cholesky factorisation of the ``6 x 6`` (``n x n``) matrix; one that will not factorise (a singular
-configuration) is factorised again with a ridge of :data:`RIDGE` times its trace, so the direction stays finite.
+by a Cholesky factorisation of the ``6 x 6`` (``n x n``) matrix (:func:`nik.kernels.lm_step._cholesky`, the LM
+step's); one that will not factorise (a singular configuration) is factorised again with a ridge of :data:`RIDGE`
+times its trace, so the direction stays finite.
 The torch twin (:class:`nik.costs.manipulability.ManipulabilityTerm`) is the reference the tests compare against.
 """
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from nik.kernels._jit import kernel
 from nik.kernels.chain import PRISMATIC, _chain_jacobian
+from nik.kernels.lm_step import _cholesky
 
 __all__ = ["EPS", "RIDGE", "manipulability_rows"]
 
@@ -55,25 +57,6 @@ def _gram(J, A, m):
                 for r in range(6):
                     v += J[r, a] * J[r, c]
             A[a, c] = v
-
-
-@kernel
-def _cholesky(A, m, ridge):
-    """``A[:m, :m] + ridge I`` factorised in place (lower triangle); False where a pivot is not positive."""
-    for j in range(m):
-        d = A[j, j] + ridge
-        for k in range(j):
-            d -= A[j, k] * A[j, k]
-        if not d > 0.0 or not math.isfinite(d):
-            return False
-        d = math.sqrt(d)
-        A[j, j] = d
-        for i in range(j + 1, m):
-            v = A[i, j]
-            for k in range(j):
-                v -= A[i, k] * A[j, k]
-            A[i, j] = v / d
-    return True
 
 
 @kernel

@@ -43,6 +43,7 @@ Options ``opts: (len OPTS,) float64`` (:func:`trajopt_options` in :mod:`nik.path
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -50,7 +51,8 @@ from nik.kernels._jit import kernel
 from nik.kernels.chain import LOWER, UPPER, _chain, _chain_jacobian
 from nik.kernels.collision import ArmSpheres, Scene, collision_residual
 from nik.kernels.lm import _residual
-from nik.kernels.lm_step import _cap, _damped, _judge
+from nik.kernels.lm_loop import ACCEPT_LOWER, NEVER, _lm_loop, _loop_cfg, problem_kind
+from nik.kernels.lm_step import _cap, _damped
 
 __all__ = [
     "band_cholesky",
@@ -70,6 +72,14 @@ OPTS = 18
 #: the damping rule of :func:`trajopt` (:func:`nik.kernels.lm_step._judge`): lambda times ``LAM_DOWN`` after a kept
 #: step (not below ``LAM_MIN``), times ``LAM_UP`` after a rejected one; it stops once lambda exceeds ``LAM_STOP``
 LAM_DOWN, LAM_UP, LAM_MIN, LAM_STOP = 0.3, 5.0, 1e-12, 1e8
+
+#: A path's problem for :func:`nik.kernels.lm_loop._lm_loop`: the model ``G, joints``, the poses ``T (N, 4, 4)``, the
+#: fixed ends ``(qs (n,), has_start, qe (n,), has_end)``, ``opts``, the collision arrays ``col``; scratch
+#: ``work = (A (M, b + 1), dq (M,))`` (the factorised band and the step).
+PathProblem = namedtuple("PathProblem", ["G", "joints", "T", "ends", "opts", "col", "work"])
+#: A path's state: ``q (N, n)``, its band ``H (M, b + 1)`` and ``g (M,)`` (:func:`normal_equations`), ``pos, rot
+#: (N,)`` (metres, radians) and ``info (1,)`` (the smallest collision distance).
+PathState = namedtuple("PathState", ["q", "H", "g", "pos", "rot", "info"])
 
 
 @kernel
@@ -143,9 +153,12 @@ def _add_row(H, g, row, res, a, wa, b, wb):
 
 
 @kernel
-def _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g, r, at, col, info):
-    """The collision rows (module docstring) added to ``H, g`` (with ``build``) and written to ``r`` from ``at`` (when
-    its length is > 0); ``info[0]``: the smallest signed distance over the samples (metres). Returns the cost."""
+def _collision_terms(G, joints, Q, ends, opts, col, build, sums, at, info):
+    """The collision rows (module docstring) added to ``sums = (H, g, r)``: to ``H, g`` with ``build``, written to
+    ``r`` from ``at`` (when its length is > 0); ``info[0]``: the smallest signed distance over the samples (metres).
+    ``ends``: as :data:`PathProblem`'s. Returns the cost."""
+    qs, has_start, qe, has_end = ends
+    H, g, r = sums
     N, n = Q.shape
     arm, scene = col  # nik.kernels.collision.ArmSpheres, Scene
     R = arm.pairs.shape[0] + arm.body_start.shape[0] - 1
@@ -181,12 +194,16 @@ def _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g
 
 
 @kernel
-def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, pos, rot, col, info):
-    """The residual and, with ``build``, the band ``H = J^T J`` and ``g = -J^T r`` (zeroed here). ``r``: the residual
-    vector written in the order of the module docstring when its length is > 0 (:func:`residuals`). Fills
-    ``pos, rot: (N,)`` (metres, radians) and ``info[0]``, the smallest signed distance of the collision samples
-    (``inf`` without collision rows); returns the cost ``|r|^2``. ``col``: the collision arrays after ``q`` of
+def _terms(G, joints, T, Q, ends, opts, col, build, sums, fit):
+    """The residual and, with ``build``, the band ``H = J^T J`` and ``g = -J^T r`` (zeroed here) of ``sums = (H, g,
+    r)``. ``r``: the residual vector written in the order of the module docstring when its length is > 0
+    (:func:`residuals`). Fills ``fit = (pos, rot, info)``: ``pos, rot: (N,)`` (metres, radians) and ``info[0]``, the
+    smallest signed distance of the collision samples (``inf`` without collision rows); returns the cost ``|r|^2``.
+    ``ends``: as :data:`PathProblem`'s; ``col``: the collision arrays after ``q`` of
     :func:`nik.kernels.collision.collision_residual` (an empty model: no rows)."""
+    qs, has_start, qe, has_end = ends
+    H, g, r = sums
+    pos, rot, info = fit
     N, n = Q.shape
     rw = opts[ROT_WEIGHT]
     sv, sa, sh, sl = math.sqrt(opts[W_VEL]), math.sqrt(opts[W_ACC]), math.sqrt(opts[W_STEP]), math.sqrt(opts[W_LIM])
@@ -310,7 +327,7 @@ def _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, build, H, g, r, po
                     g[i * n + j] -= sr * res
     info[0] = np.inf
     if opts[W_COL] > 0.0 and col[0].pairs.shape[0] + col[0].body_start.shape[0] > 1:
-        cost += _collision_terms(G, joints, Q, qs, has_start, qe, has_end, opts, build, H, g, r, at, col, info)
+        cost += _collision_terms(G, joints, Q, ends, opts, col, build, sums, at, info)
     return cost
 
 
@@ -337,7 +354,7 @@ def residuals_collision(G, joints, T, Q, qs, has_start, qe, has_end, opts, col, 
     H = np.empty((1, 1))
     g = np.empty(1)
     pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
-    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, False, H, g, r, pos, rot, col, info)
+    return _terms(G, joints, T, Q, (qs, has_start, qe, has_end), opts, col, False, (H, g, r), (pos, rot, info))
 
 
 @kernel
@@ -351,13 +368,15 @@ def normal_equations_collision(G, joints, T, Q, qs, has_start, qe, has_end, opts
     """:func:`normal_equations` with the collision rows of ``col`` (as :func:`residuals_collision`)."""
     N = Q.shape[0]
     pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
-    return _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, np.empty(0), pos, rot, col, info)
+    ends = (qs, has_start, qe, has_end)
+    return _terms(G, joints, T, Q, ends, opts, col, True, (H, g, np.empty(0)), (pos, rot, info))
 
 
 @kernel
-def _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot, info):
+def _feasible(Q, ends, opts, pos, rot, info):
     """Every waypoint within ``TOL_POS`` / ``TOL_ROT`` (by ``pos, rot``), every step at most ``PATH_STEP`` and every
     collision sample (``info[0]``, its smallest distance) at least ``COL_MARGIN / 2`` clear."""
+    qs, has_start, qe, has_end = ends
     if not opts[TOL_POS] > 0.0 or info[0] < 0.5 * opts[COL_MARGIN]:
         return False
     N, n = Q.shape
@@ -376,53 +395,74 @@ def _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot, info):
 
 
 @kernel
-def trajopt(G, joints, T, Q, qs, has_start, qe, has_end, opts, iters, col, pos, rot, info):
-    """Optimise ``Q: (N, n)`` in place (inside the limits on entry and on return) towards the poses ``T: (N, 4, 4)``.
+def _measure_path(prob, s, bar):
+    """The loop's measure of a path (:data:`PathProblem`): the band ``s.H``, ``s.g`` and the fit of ``s.q``
+    (:func:`_terms`); returns ``(cost, feasible)`` (:func:`_feasible`; ``bar`` unused)."""
+    cost = _terms(prob.G, prob.joints, prob.T, s.q, prob.ends, prob.opts, prob.col, True, (s.H, s.g, np.empty(0)),
+                  (s.pos, s.rot, s.info))  # fmt: skip
+    return cost, _feasible(s.q, prob.ends, prob.opts, s.pos, s.rot, s.info)
 
-    ``qs: (n,)`` the joints before the path, counted when ``has_start``; ``qe: (n,)`` those after it, counted when
-    ``has_end``. ``col``: the collision arrays (:func:`residuals_collision`; no rows: ``_no_collision()``, or
-    ``W_COL`` 0). ``pos, rot: (N,)`` out, the pose errors of the returned ``Q`` (metres, radians); ``info[0]`` its
-    smallest collision distance. Returns ``(factorisations, final cost)``."""
+
+@kernel
+def _propose_path(prob, s, lam, c):
+    """The loop's proposal of a path: the damped band ``H + lambda (diag(H) + eps)`` factorised and solved (the band
+    solver, :func:`band_cholesky`, :func:`band_solve`), capped (:func:`nik.kernels.lm_step._cap`), ``c.q = s.q + dq``
+    clamped into the limits (a projected step); returns ``(good, inf)``."""
+    A, dq = prob.work
+    b = A.shape[1] - 1
+    A[:] = s.H
+    A[:, 0] = _damped(s.H[:, 0], lam, prob.opts[EPS], 0.0)  # the damped diagonal, as a whole column
+    if not band_cholesky(A, b):
+        return False, math.inf
+    band_solve(A, b, s.g, dq)
+    good = _cap(dq, prob.opts[MAX_STEP_LM])
+    if good:
+        joints = prob.joints
+        N, n = s.q.shape
+        for i in range(N):
+            for j in range(n):
+                x = s.q[i, j] + dq[i * n + j]
+                c.q[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
+    return good, math.inf
+
+
+problem_kind(PathProblem, _measure_path, _propose_path)
+
+
+@kernel
+def _path_state(N, n):
+    """A :data:`PathState` of ``N`` waypoints of ``n`` joints on arrays of its own."""
+    M = N * n
+    return PathState(np.empty((N, n)), np.zeros((M, 3 * n)), np.empty(M), np.empty(N), np.empty(N), np.empty(1))
+
+
+@kernel
+def trajopt(G, joints, T, Q, ends, opts, iters, col, fit):
+    """Optimise ``Q: (N, n)`` in place (inside the limits on entry and on return) towards the poses ``T: (N, 4, 4)``:
+    the one LM loop (:func:`nik.kernels.lm_loop._lm_loop`) with the band solver (module docstring).
+
+    ``ends = (qs, has_start, qe, has_end)``: ``qs: (n,)`` the joints before the path, counted when ``has_start``;
+    ``qe: (n,)`` those after it, counted when ``has_end``. ``col``: the collision arrays (:func:`residuals_collision`;
+    no rows: ``_no_collision()``, or ``W_COL`` 0). ``fit = (pos, rot, info)`` out: ``pos, rot: (N,)`` the pose errors
+    of the returned ``Q`` (metres, radians); ``info[0]`` its smallest collision distance. Returns ``(factorisations,
+    final cost)``. Stops after ``iters`` factorisations, on a kept step that lowers the cost by at most ``STALL_REL``
+    of the new cost, on a feasible path (:func:`_feasible`, checked after a kept step) or once lambda exceeds
+    ``LAM_STOP``."""
     N, n = Q.shape
-    M, b = N * n, 3 * n - 1
-    H = np.zeros((M, b + 1))
-    A = np.empty((M, b + 1))
-    g = np.empty(M)
-    dq = np.empty(M)
-    X = np.empty((N, n))
-    pt, rt = np.empty(N), np.empty(N)
-    none = np.empty(0)
-    lam = opts[LAMBDA0]
-    inf2 = np.empty(1)
-    cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot, col, info)
-    it = 0
-    while it < iters:
-        it += 1
-        for f in range(M):
-            for k in range(b + 1):
-                A[f, k] = H[f, k]
-            A[f, 0] = _damped(H[f, 0], lam, opts[EPS], 0.0)
-        if not band_cholesky(A, b):
-            _, lam = _judge(False, cost, cost, False, lam, LAM_DOWN, LAM_UP, LAM_MIN, math.inf)
-            continue
-        band_solve(A, b, g, dq)
-        good = _cap(dq, opts[MAX_STEP_LM])
-        new = math.inf
-        if good:
-            for i in range(N):
-                for j in range(n):
-                    x = Q[i, j] + dq[i * n + j]
-                    X[i, j] = min(max(x, joints[j, LOWER]), joints[j, UPPER])
-            new = _terms(G, joints, T, X, qs, has_start, qe, has_end, opts, False, H, g, none, pt, rt, col, inf2)
-        kept, lam = _judge(good, cost, new, False, lam, LAM_DOWN, LAM_UP, LAM_MIN, math.inf)
-        if kept:
-            Q[:] = X
-            drop = cost - new
-            cost = _terms(G, joints, T, Q, qs, has_start, qe, has_end, opts, True, H, g, none, pos, rot, col, info)
-            if drop <= opts[STALL_REL] * cost or _feasible(Q, qs, has_start, qe, has_end, opts, pos, rot, info):
-                break
-        elif lam > LAM_STOP:
-            break
+    M = N * n
+    prob = PathProblem(G, joints, T, ends, opts, col, (np.empty((M, 3 * n)), np.empty(M)))
+    cur, other = _path_state(N, n), _path_state(N, n)
+    cur.q[:] = Q
+    cost, _ = _measure_path(prob, cur, math.inf)
+    rel = opts[STALL_REL]  # drop <= rel * new cost  <=>  drop <= rel / (1 + rel) * old cost
+    cfg = _loop_cfg(iters, opts[LAMBDA0], (LAM_DOWN, LAM_UP, LAM_MIN, math.inf), LAM_STOP, (0.0, NEVER),
+                    (rel / (1.0 + rel), 0.0), ACCEPT_LOWER)  # fmt: skip
+    it, cost, _, cur, _ = _lm_loop(prob, cfg, cur, other, cost, False)
+    pos, rot, info = fit
+    Q[:] = cur.q
+    pos[:] = cur.pos
+    rot[:] = cur.rot
+    info[0] = cur.info[0]
     return it, cost
 
 

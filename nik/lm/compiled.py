@@ -158,7 +158,7 @@ class CompiledLM:
 
             joints = joints.copy()
             joints[:, WRAPS] = 0.0
-        klm.lm_solve(self.G, joints, T, q0, opts, iopts, budget, _seed(klm, seed), *astuple_run(run))
+        klm.lm_solve(self.G, joints, T, q0, opts, iopts, budget, _seed(klm, seed), astuple_run(run))
         return run
 
     def solve_starts(

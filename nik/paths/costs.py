@@ -124,8 +124,8 @@ def _manipulable(solver, T_path, q_start, res, weight: float, timing, limits: tu
     qm, scratch = q.copy(), (np.empty(N), np.empty(N), np.empty((N, 6)))
     for _ in range(REST_ITERS):  # one step per waypoint a sweep: the path moves as one, its steps watched
         qn = qm.copy()
-        driver.rest_posture(model.G, model.joints, Tn, qn, half, modes, opts, np.zeros((N, n)), 0.0, 1, REST_DAMPING,
-                            ok, *scratch)  # fmt: skip
+        driver.rest_posture((model.G, model.joints), Tn, qn, (half, modes), opts, (np.zeros((N, n)), 0.0, 1,
+                            REST_DAMPING), ok, scratch)  # fmt: skip
         if largest(qn) > bound or (s is not None and (s.colliding(robot, qn) & ~hit).any()):
             break
         qm, moved = qn, np.abs(qn - qm).max()

@@ -142,9 +142,9 @@ def _lm_batch(run: _Run, q0: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, 
     q, its, ok = np.empty((M, n)), np.empty(M, dtype=np.int64), np.empty(M, dtype=bool)
     pos, rot = np.empty(M), np.empty(M)
     lm_solve_bounded(
-        lm.G, lm.joints, T, np.ascontiguousarray(q0, dtype=np.float64), np.ascontiguousarray(run.half[rows]),
-        np.ascontiguousarray(run.modes[rows]), opts, iopts, np.zeros(M, dtype=np.int64), seed_state(run.seed),
-        q, its, ok, pos, rot,
+        lm.G, lm.joints, T, np.ascontiguousarray(q0, dtype=np.float64),
+        (np.ascontiguousarray(run.half[rows]), np.ascontiguousarray(run.modes[rows])), opts, iopts,
+        np.zeros(M, dtype=np.int64), seed_state(run.seed), (q, its, ok, pos, rot),
     )  # fmt: skip
     return q, its, ok
 

@@ -157,12 +157,12 @@ def optimise_path(
     pos, rot, info = np.empty(N), np.empty(N), np.empty(1)
     opts = trajopt_options(cfg, max_step, tol_pos, tol_rot, q_rest)
     col = k._no_collision() if collision is None else tuple(collision)
-    its, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
+    its, _ = k.trajopt(G, joints, T, Q, ends, opts, cfg.iters, col, (pos, rot, info))
     feasible = (pos <= tol_pos).all() and (rot <= tol_rot).all() and _largest_step(Q, q_start, q_end) <= max_step
     if tol_pos > 0.0 and feasible and info[0] >= 0.5 * opts[k.COL_MARGIN]:
         return TrajResult(Q, pos, rot, int(its), float(info[0]))  # feasible already
     opts[[k.W_VEL, k.W_ACC, k.W_STEP, k.W_LIM, k.W_REST]] *= FINISH  # the finish: the poses first, the shape kept
-    more, _ = k.trajopt(G, joints, T, Q, *ends, opts, cfg.iters, col, pos, rot, info)
+    more, _ = k.trajopt(G, joints, T, Q, ends, opts, cfg.iters, col, (pos, rot, info))
     return TrajResult(Q, pos, rot, int(its + more), float(info[0]))
 
 

@@ -264,8 +264,8 @@ class CompiledBackend:
         q, pos, rot = np.empty((B, n)), np.empty(B), np.empty(B)
         ok, iters = np.empty(B, dtype=bool), np.empty(B, dtype=np.int64)
         args = (
-            *static[0], job.T, *static[1], Tin, *static[2], job.q_near if use_near else q, use_near, *static[3],
-            q, pos, rot, ok, iters, job.reachable,
+            static[0], job.T, static[1], Tin, static[2], job.q_near if use_near else q, use_near, static[3],
+            (q, pos, rot, ok, iters, job.reachable),
         )  # fmt: skip
         key = (plan, job.dtype, use_near)
         if key not in self._compiled:  # compiled: asked once per plan, where it may answer from torch meanwhile

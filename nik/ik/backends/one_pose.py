@@ -162,7 +162,7 @@ def one_pose(solver, T_target, tol_pos, tol_rot, seed) -> IKResult | None:
     q, pos, rot = np.empty((1, model.dof)), np.empty(1), np.empty(1)
     ok, it, reach = np.empty(1, dtype=np.bool_), np.empty(1, dtype=np.int64), np.empty(1, dtype=np.bool_)
     Tin = model.arm_targets(a) if e.arm_frame else a
-    if not _SOLVE(*e.a0, a, *e.a1, Tin, *e.a2, q, False, *e.a3, q, pos, rot, ok, it, reach):
+    if not _SOLVE(e.a0, a, e.a1, Tin, e.a2, q, False, e.a3, (q, pos, rot, ok, it, reach)):
         warnings.warn(model.unreachable_message(a, reach), UserWarning, stacklevel=3)
     if f32:
         q, pos, rot, ok = as_float32(model, a, q, e.tol_pos, e.tol_rot)

@@ -64,9 +64,9 @@ def rest_free(robot, s: Setup | None, goal, T: np.ndarray, q: np.ndarray, ok, q_
     while todo.size and iters >= 1:
         qt = np.ascontiguousarray(q0[todo])
         k = todo.size
-        driver.rest_posture(model.G, model.joints, np.ascontiguousarray(T[todo]), qt, half[todo], modes[todo], opts,
-                            np.ascontiguousarray(q_rest[todo]), float(weight), iters, REST_DAMPING,
-                            np.ones(k, dtype=bool), np.empty(k), np.empty(k), np.empty((k, 6)))  # fmt: skip
+        driver.rest_posture((model.G, model.joints), np.ascontiguousarray(T[todo]), qt, (half[todo], modes[todo]),
+                            opts, (np.ascontiguousarray(q_rest[todo]), float(weight), iters, REST_DAMPING),
+                            np.ones(k, dtype=bool), (np.empty(k), np.empty(k), np.empty((k, 6))))  # fmt: skip
         moved = (qt != q0[todo]).any(1)
         hit = np.zeros(k, dtype=bool)
         if s is not None and moved.any():
