@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("numba")
 
 from nik.kernels.chain import LOWER, UPPER  # noqa: E402
-from nik.kernels.lm_step import _cap, _damped_step, _judge, _stalled  # noqa: E402
+from nik.kernels.lm_step import _cap, _dense_step, _judge, _stalled  # noqa: E402
 
 N = 7
 
@@ -29,7 +29,7 @@ def test_the_step_of_pose_rows_is_the_damped_normal_equations_solved_by_numpy():
     J, e = _rows(0, 6)
     q, lam, eps = np.zeros(N), 1e-2, 1e-9
     A, g, dq = np.empty((N, N)), np.empty(N), np.empty(N)
-    assert _damped_step(J, e, None, None, 0.0, None, 0.0, q, _joints(), lam, eps, 10.0, A, g, dq)
+    assert _dense_step(J, e, None, None, q, _joints(), lam, eps, 10.0, (A, g, dq))
     M = J.T @ J
     ref = np.linalg.solve(M + lam * np.diag(np.diag(M) + eps) + eps * np.eye(N), J.T @ e)
     assert np.allclose(dq, ref, rtol=1e-9, atol=1e-12)
@@ -41,7 +41,7 @@ def test_extra_rows_enter_as_stacked_weighted_rows_and_only_where_they_push():
     r[[1, 4, 5]] = 0.0  # rows that do not push: their Jacobian must not count
     w2, q, lam, eps = 4.0, np.zeros(N), 1e-3, 1e-9
     A, g, dq = np.empty((N, N)), np.empty(N), np.empty(N)
-    assert _damped_step(J, e, Jr, r, w2, None, 0.0, q, _joints(), lam, eps, 10.0, A, g, dq)
+    assert _dense_step(J, e, (Jr, r, w2), None, q, _joints(), lam, eps, 10.0, (A, g, dq))
     live = r != 0.0
     Js = np.vstack([J, math.sqrt(w2) * Jr[live]])
     es = np.concatenate([e, -math.sqrt(w2) * r[live]])
@@ -56,7 +56,7 @@ def test_the_prior_step_is_the_null_space_step_of_the_push_through_identity():
     rng = np.random.default_rng(4)
     q, z, d = rng.uniform(-1, 1, N), rng.normal(size=N), 1e-3
     A, g, dq = np.empty((N, N)), np.empty(N), np.empty(N)
-    assert _damped_step(J, e, None, None, 0.0, q + z, d, q, _joints(), 0.0, 0.0, math.inf, A, g, dq)
+    assert _dense_step(J, e, None, (q + z, d), q, _joints(), 0.0, 0.0, math.inf, (A, g, dq))
     ref = z + J.T @ np.linalg.solve(J @ J.T + d * np.eye(6), e - J @ z)
     assert np.allclose(dq, ref, rtol=1e-8, atol=1e-10)
 

@@ -13,6 +13,7 @@ term                    residual                                          compil
 :func:`posture`         ``q - q_rest`` (a preference)                     the null-space step of ``q_rest=``
 :func:`manipulability`  ``1 / (w + 1e-6)``, Yoshikawa's w (a preference)  :mod:`nik.kernels.manipulability`
 :func:`collision`       ``max(0, margin - d)``, self and world            ``nik.kernels.collision.collision_residual``
+:func:`mesh_collision`  the same on the meshes (coal; a hard constraint)  coal, :mod:`nik.collision.mesh_distance`
 :func:`smoothness`      path velocity, acceleration (a preference)        --
 :func:`step_cap`        a path's steps beyond ``max_step``                --
 :func:`custom`          the user's ``fn(q)``                              --
@@ -30,6 +31,7 @@ from nik.costs.collision import collision
 from nik.costs.custom import custom
 from nik.costs.limits import limits
 from nik.costs.manipulability import manipulability
+from nik.costs.mesh import mesh_collision
 from nik.costs.pose import bounded_pose, pose
 from nik.costs.posture import posture
 from nik.costs.smoothness import smoothness, step_cap
@@ -43,10 +45,11 @@ TERMS = {
     "posture": posture,
     "manipulability": manipulability,
     "collision": collision,
+    "mesh_collision": mesh_collision,
     "smoothness": smoothness,
     "step_cap": step_cap,
     "custom": custom,
 }
 
-__all__ = ["TERMS", "Term", "bounded_pose", "collision", "custom", "limits", "manipulability", "pose", "posture",
-           "smoothness", "step_cap"]  # fmt: skip
+__all__ = ["TERMS", "Term", "bounded_pose", "collision", "custom", "limits", "manipulability", "mesh_collision", "pose",
+           "posture", "smoothness", "step_cap"]  # fmt: skip

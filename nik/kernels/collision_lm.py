@@ -44,6 +44,7 @@ per target (same seed, same answer). The settings and what they trade: :class:`n
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from typing import NamedTuple
 
 import numpy as np
@@ -68,15 +69,17 @@ from nik.kernels.lm import (
     STALL_REL,
     TOL_POS,
     TOL_ROT,
+    PoseState,
     _bounds,
     _copy,
     _draw,
-    _eval,
+    _eval_goal,
     _lm_one_bounded,
+    _propose_dense,
     _score,
     _work_size,
 )
-from nik.kernels.lm_step import _damped_step, _judge, _stalled
+from nik.kernels.lm_loop import ACCEPT_DONE, _lm_loop, _loop_cfg, problem_kind
 
 __all__ = ["Answers", "CollideOpts", "Starts", "Targets", "collision_lm"]
 
@@ -163,64 +166,63 @@ def _rank_starts(G, joints, tgt, rw, starts, H, arm, scene, lb, order, score, ch
     return m
 
 
+#: The collision LM's problem for :func:`nik.kernels.lm_loop._lm_loop`: :data:`nik.kernels.lm.PoseProblem`'s fields
+#: (the dense step reads them) and the collision rows' ``arm, scene`` (:mod:`nik.kernels.collision`), their reach
+#: ``margin``, the links' bounds ``lb``, the rows' scratch ``rwork`` and ``norms`` (:func:`_descend`).
+CollisionProblem = namedtuple(
+    "CollisionProblem",
+    ["G", "joints", "goal", "prior", "eps", "max_step", "d", "work", "arm", "scene", "margin", "lb", "rwork", "norms"],
+)
+
+
+@kernel
+def _measure_collision(prob, s, bar):
+    """The loop's measure of a :data:`CollisionProblem` at ``s.q``: the pose rows (:func:`nik.kernels.lm._eval_goal`)
+    and, unless the pose rows alone already lose to ``bar`` (and ``s.q`` is not reached), the collision rows into
+    ``s.extra = (Jr, r, w2)``; ``s.info = (S, pos, rot, near)``. Returns ``(S, done)``: ``S = |e|^2 + w2 |r|^2``,
+    done where the pose is reached and free of the rows (``near >= 0``)."""
+    E, pos, rot, reached = _eval_goal(prob.G, prob.joints, s.q, prob.goal, s.T, s.J, s.e, prob.d)
+    reached = reached and (not prob.norms or (pos <= prob.goal[4] and rot <= prob.goal[5]))
+    s.info[1], s.info[2] = pos, rot
+    if not (reached or E < bar):  # rejected by the pose rows alone (S >= E >= bar): no collision rows
+        return math.inf, False
+    Jr, r, w2 = s.extra
+    near = residual_in(prob.G, prob.joints, s.q, prob.arm, prob.scene, prob.margin, r, Jr, prob.lb, prob.rwork)
+    S = E + w2 * _sum_sq(r)
+    s.info[0], s.info[3] = S, near
+    return S, reached and near >= 0.0
+
+
+problem_kind(CollisionProblem, _measure_collision, _propose_dense)
+
+
 @kernel
 def _descend(G, joints, tgt, qs, arm, scene, rows, opts, stop, ws, norms):
     """LM with collision rows of reach ``margin`` from ``qs (n,)`` (moved in place) towards ``tgt = (Tt, bnd, mode)``
-    until done (the pose within the tolerances and free), stalled or ``limit`` iterations; returns ``(S, pos, rot,
-    near, done, iterations)``: the sum, the pose errors, the smallest row (exact where at most ``margin``).
-    ``rows = (margin, w2, lb)``: the rows' reach, their weight squared, the links' bounds; ``stop = (limit,
-    stall_limit, conv_rel)``; ``ws``: the scratch of :func:`collision_lm`. ``norms``: the pose counts as reached only
-    where also its position error <= ``opts[TOL_POS]`` and its angle <= ``opts[TOL_ROT]`` (the success judge; the
-    finishing step's bounds reach past it). ``conv_rel``: it also ends at a kept step that lowers the sum by less
-    than that fraction of it (converged: ``CollideCfg.converged``; 0: never)."""
+    until done (the pose within the tolerances and free), stalled or ``limit`` iterations: the one compiled loop
+    (:func:`nik.kernels.lm_loop._lm_loop`) on a :data:`CollisionProblem`, Marquardt damping, a candidate that is done
+    kept. Returns ``(S, pos, rot, near, done, iterations)``: the sum, the pose errors, the smallest row (exact where
+    at most ``margin``). ``rows = (margin, w2, lb)``: the rows' reach, their weight squared, the links' bounds;
+    ``stop = (limit, stall_limit, conv_rel)``; ``ws``: the scratch of :func:`collision_lm`. ``norms``: the pose counts
+    as reached only where also its position error <= ``opts[TOL_POS]`` and its angle <= ``opts[TOL_ROT]`` (the
+    success judge; the finishing step's bounds reach past it). ``conv_rel``: it also ends at a kept step that lowers
+    the sum by less than that fraction of it (converged: ``CollideCfg.converged``; 0: never)."""
     Tt, bnd, mode = tgt
     margin, w2, lb = rows
     limit, stall_limit, conv_rel = stop
-    T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, work = ws
-    n = qs.shape[0]
-    rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
-    lambda0, lam_up, lam_down = opts[LAMBDA0], opts[LAMBDA_UP], opts[LAMBDA_DOWN]
-    lam_min, lam_max, eps, max_step = opts[LAMBDA_MIN], opts[LAMBDA_MAX], opts[EPS], opts[MAX_STEP]
-    stall_rel = opts[STALL_REL]
-    total = 0
-    E, p_e, r_e, reached = _eval(G, joints, qs, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
-    reached = reached and (not norms or (p_e <= tol_pos and r_e <= tol_rot))
-    near = residual_in(G, joints, qs, arm, scene, margin, r, Jr, lb, work)
-    S = E + w2 * _sum_sq(r)
-    done = reached and near >= 0.0
-    lam = lambda0
-    stall = 0
-    for _ in range(limit):
-        if done:
-            break
-        good = _damped_step(J, e, Jr, r, w2, None, 0.0, qs, joints, lam, eps, max_step, A, g, dq)
-        total += 1
-        Sc, near_c = math.inf, math.inf
-        donec = False
-        if good:
-            for i in range(n):
-                qc[i] = qs[i] + dq[i]
-            _bounds(joints, qc)
-            Ec, p_c, r_c, reached_c = _eval(G, joints, qc, Tt, rw, bnd, mode, tol_pos, tol_rot, Tc, Jc, ec, d)
-            reached_c = reached_c and (not norms or (p_c <= tol_pos and r_c <= tol_rot))
-            if reached_c or Ec < S:  # else rejected by the pose rows alone (Sc >= Ec >= S): no collision rows
-                near_c = residual_in(G, joints, qc, arm, scene, margin, rc, Jrc, lb, work)
-                Sc = Ec + w2 * _sum_sq(rc)
-                donec = reached_c and near_c >= 0.0
-        kept, lam = _judge(good, S, Sc, donec, lam, lam_down, lam_up, lam_min, lam_max)
-        stall = _stalled(kept, S, Sc, stall, stall_rel)
-        # a kept step that lowers the sum by less than `conv_rel` of it: the descent has converged (its end)
-        converged = kept and S - Sc < conv_rel * S
-        if kept:
-            _copy(qc, qs)
-            _copy(Jc.ravel(), J.ravel())
-            _copy(ec, e)
-            _copy(rc, r)
-            _copy(Jrc.ravel(), Jr.ravel())
-            S, p_e, r_e, near, done = Sc, p_c, r_c, near_c, donec
-        if stall >= stall_limit or converged:
-            break
-    return S, p_e, r_e, near, done, total
+    T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, work, info, infoc = ws
+    goal = (Tt, opts[ROT_WEIGHT], bnd, mode, opts[TOL_POS], opts[TOL_ROT])
+    prob = CollisionProblem(G, joints, goal, None, opts[EPS], opts[MAX_STEP], d, (A, g, dq), arm, scene, margin, lb,
+                            work, norms)  # fmt: skip
+    cur = PoseState(qs, T, J, e, info, (Jr, r, w2))
+    other = PoseState(qc, Tc, Jc, ec, infoc, (Jrc, rc, w2))
+    S, done = _measure_collision(prob, cur, math.inf)
+    damping = (opts[LAMBDA_DOWN], opts[LAMBDA_UP], opts[LAMBDA_MIN], opts[LAMBDA_MAX])
+    cfg = _loop_cfg(limit, opts[LAMBDA0], damping, math.inf, (opts[STALL_REL], stall_limit), (conv_rel, 0.0),
+                    ACCEPT_DONE)  # fmt: skip
+    total, S, done, cur, _ = _lm_loop(prob, cfg, cur, other, S, done)
+    _copy(cur.q, qs)  # the answer may sit in the candidate's buffer (the loop swaps the states)
+    return S, cur.info[1], cur.info[2], cur.info[3], done, total
 
 
 @kernel
@@ -303,7 +305,7 @@ def _prepare(G, joints, tgt, opts, uni, arm, scene, rows, fstep, pools, ws, wp):
         its, _, _, _ = _lm_one_bounded(G, joints, Tt, qs, bnd, mode, opts, iopts, 0, rng, qp, lm_work)
         total += its
         _copy(qp, qs)
-        E, p_s, r_s, reached = _eval(G, joints, qs, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
+        E, p_s, r_s, reached = _eval_goal(G, joints, qs, (Tt, rw, bnd, mode, tol_pos, tol_rot), T, J, e, d)
         _rows_in(G, joints, qs, arm, scene, r, J0, False, margin, lb, False, ws[15])
         near = math.inf
         S = E
@@ -393,7 +395,8 @@ def collision_lm(G, joints, targets, given, arm, scene, opts, iopts, settings, s
     porder = np.empty(most, dtype=np.int64)
     J0 = np.empty((0, n))  # the rows without their Jacobian
     drawn, draw_E = np.empty((max(tries, 1), n)), np.empty(max(tries, 1))  # a uniform start's draws
-    ws = (T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, work)  # the descents' scratch
+    info, infoc = np.empty(4), np.empty(4)  # a descent's state: its sum, pose errors, smallest row
+    ws = (T, Tc, e, ec, d, J, Jc, r, rc, Jr, Jrc, A, g, dq, qc, work, info, infoc)  # the descents' scratch
     wp = (qp, lm_work, qf, J0, drawn, draw_E)  # the uniform starts' preparation's
     pools = (pool, pool_S, pool_near, porder)
     for b in range(B):
@@ -451,7 +454,7 @@ def collision_lm(G, joints, targets, given, arm, scene, opts, iopts, settings, s
                 _copy(pool[porder[s - H]], qs)
             if fin and s < H:
                 # at the pose and overlapping by less than the tolerance can move the hand: the finishing step first
-                _, p_s, r_s, _ = _eval(G, joints, qs, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
+                _, p_s, r_s, _ = _eval_goal(G, joints, qs, (Tt[b], rw, bnd, mode, tol_pos, tol_rot), T, J, e, d)
                 if p_s <= tol_pos and r_s <= tol_rot:
                     near_s = residual_in(G, joints, qs, arm, scene, 0.0, r, Jr, lb, work)
                     if -slack <= near_s < 0.0:
@@ -501,7 +504,9 @@ def collision_lm(G, joints, targets, given, arm, scene, opts, iopts, settings, s
             else:
                 _draw(joints, rng, best_q)
             _bounds(joints, best_q)
-            _, best_pos, best_rot, _ = _eval(G, joints, best_q, Tt[b], rw, bnd, mode, tol_pos, tol_rot, T, J, e, d)
+            _, best_pos, best_rot, _ = _eval_goal(
+                G, joints, best_q, (Tt[b], rw, bnd, mode, tol_pos, tol_rot), T, J, e, d
+            )
             best_free = residual_in(G, joints, best_q, arm, scene, 0.0, r, Jr, lb, work) >= 0.0
         _copy(best_q, q[b])
         free[b], done_out[b], iterations[b], pos[b], rot[b] = best_free, best_done, total, best_pos, best_rot

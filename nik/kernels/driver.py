@@ -36,7 +36,7 @@ from nik.kernels.lm import (
     _bounded_check,
     _bounds,
     _copy,
-    _eval,
+    _eval_goal,
     _lm_one_bounded,
     _measure_pose,
     _tool_error,
@@ -402,9 +402,9 @@ def _preference(joints, q, q_rest, weight, mw, J6, A6, M6, grad):
 
 
 #: The null-space posture problem of one answer for :func:`nik.kernels.lm_loop._lm_loop`: the model ``G, joints``
-#: and ``free`` (the limits open: no joint held), the goal of :func:`nik.kernels.lm._eval`, the posture ``q_rest (n,)``
-#: and its ``weight``, the manipulability weight ``mw``, the prior's weight ``damping``, the largest step
-#: ``max_step``; scratch ``d (6,)``, ``geo = (T6, J6, A6, M6)``, ``qp (n,)``, ``work = (A, g, dq)``.
+#: and ``free`` (the limits open: no joint held), the goal of :func:`nik.kernels.lm._eval_goal`, the posture
+#: ``q_rest (n,)`` and its ``weight``, the manipulability weight ``mw``, the prior's weight ``damping``, the largest
+#: step ``max_step``; scratch ``d (6,)``, ``geo = (T6, J6, A6, M6)``, ``qp (n,)``, ``work = (A, g, dq)``.
 RestProblem = namedtuple(
     "RestProblem", ["G", "joints", "free", "goal", "q_rest", "weight", "mw", "damping", "max_step", "d", "geo", "qp",
                     "work"]
@@ -420,7 +420,7 @@ def _measure_rest(prob, s, bar):
     returns ``(cost, False)``, the cost ``inf`` where ``s.q`` has left the task (its tolerances or bounds; ``bar``
     unused)."""
     Tt, rw, bnd, mode, tol_pos, tol_rot = prob.goal
-    _, p, r, done = _eval(prob.G, prob.joints, s.q, Tt, rw, bnd, mode, tol_pos, tol_rot, s.T, s.J, s.e, prob.d)
+    _, p, r, done = _eval_goal(prob.G, prob.joints, s.q, (Tt, rw, bnd, mode, tol_pos, tol_rot), s.T, s.J, s.e, prob.d)
     T6, J6, A6, M6 = prob.geo
     if prob.mw > 0.0:
         _geometric(prob.G, prob.joints, s.q, s.J, rw, mode, T6, J6)

@@ -91,9 +91,9 @@ CLASSIC = -2
 #: the residual's dead zone, as a fraction of each bound (see the module docstring)
 DEAD_ZONE = 0.5
 
-#: One pose's problem for :func:`nik.kernels.lm_loop._lm_loop`: the model ``G, joints``; the goal ``(Tt (4, 4), rw,
-#: bnd (6,), mode, tol_pos, tol_rot)`` of :func:`_eval`; the dense step's prior row ``(q_prior (n,), w_prior2)`` (or
-#: ``None``), ``eps`` and ``max_step``; scratch ``d (6,)`` and ``work = (A (n, n), g (n,), dq (n,))``.
+#: One pose's problem for :func:`nik.kernels.lm_loop._lm_loop`: the model ``G, joints``; the goal ``(Tt (4, 4),
+#: rw, bnd (6,), mode, tol_pos, tol_rot)`` of :func:`_eval_goal`; the dense step's prior row ``(q_prior (n,),
+#: w_prior2)`` (or ``None``), ``eps`` and ``max_step``; scratch ``d (6,)`` and ``work = (A (n, n), g (n,), dq (n,))``.
 PoseProblem = namedtuple("PoseProblem", ["G", "joints", "goal", "prior", "eps", "max_step", "d", "work"])
 #: One pose's state: ``q (n,)``, its FK ``T (3, 4)``, rows ``J (6, n)``, ``e (6,)``, ``info (3,)`` = its cost,
 #: position error (m) and rotation angle (rad), and extra rows ``(Jr (R, n), r (R,), w2)`` (or ``None``).
@@ -454,13 +454,6 @@ def _eval_goal(G, joints, q, goal, T, J, e, d):
         E, pos, rot = _evaluate(G, joints, q, Tt, rw, T, J, e)
         return E, pos, rot, pos <= tol_pos and rot <= tol_rot
     return _bounded_evaluate(G, joints, q, Tt, rw, bnd, mode, T, J, e, d)
-
-
-@kernel
-def _eval(G, joints, q, Tt, rw, bnd, mode, tol_pos, tol_rot, T, J, e, d):
-    """:func:`_eval_goal` with the goal spread out: the call of :mod:`nik.kernels.collision_lm` (it goes when that
-    module takes the goal as one tuple)."""
-    return _eval_goal(G, joints, q, (Tt, rw, bnd, mode, tol_pos, tol_rot), T, J, e, d)
 
 
 @kernel

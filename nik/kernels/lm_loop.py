@@ -10,7 +10,7 @@ compiled with its own functions inlined and cached with the caller):
   is an answer (the loop stops there); ``bar`` is the cost to beat (``inf`` for a start): a measure may skip rows
   that cannot matter once the others already reach it (and return ``inf``);
 - ``propose(prob, s, lam, c) -> (good, big)``: the candidate ``c.q`` from ``s`` with damping ``lam``: the linear
-  solver is the problem's (dense Cholesky of one pose, :func:`nik.kernels.lm_step._damped_step`; the band solver of
+  solver is the problem's (dense Cholesky of one pose, :func:`nik.kernels.lm_step._dense_step`; the band solver of
   a path, :mod:`nik.kernels.trajopt`), then the projection into the limits; ``big`` the step's largest entry;
 - ``cfg`` (:class:`LoopCfg`): the stop rule, the damping schedule and the accept rule.
 

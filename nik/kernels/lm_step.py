@@ -22,8 +22,8 @@ caller's ``done`` says it is an answer); lambda then shrinks by ``down`` (not be
 
 Who calls it: the proposals of the one LM loop (:mod:`nik.kernels.lm_loop`): :func:`nik.kernels.lm._propose_dense`
 (one pose: :func:`_dense_step` with the state's extra rows, e.g. the collision rows, and the problem's prior row;
-``None`` where there are none: numba prunes those branches at compile time, so the hot one-pose step costs what it
-cost before) and :func:`nik.kernels.driver._propose_rest` (the null-space posture: the prior ``q + z`` with weight
+``None`` where there are none: numba prunes those branches at compile time, so the hot one-pose step does no work for
+them) and :func:`nik.kernels.driver._propose_rest` (the null-space posture: the prior ``q + z`` with weight
 ``damping``, no Marquardt damping, no joint held, no cap: a step above ``max_step`` is refused there). The path's
 proposal (:func:`nik.kernels.trajopt._propose_path`, ``M = N n`` unknowns) has a block-banded normal matrix, and a
 dense ``M x M`` Cholesky would cost ``O(M^3)`` against the band's ``O(M b^2)``, so its linear solver is the band
@@ -183,20 +183,6 @@ def _dense_step(J, e, extra, prior, q, joints, lam, eps, max_step, work):
             active[R] = k
             R += 1
     return _held_step(J, e, (Jr, r, w2, active, R), prior, q, joints, lam, eps, max_step, work)
-
-
-@kernel
-def _damped_step(J, e, Jr, r, w2, q_prior, w_prior2, q, joints, lam, eps, max_step, A, g, dq):
-    """:func:`_dense_step` with its groups spread out (``Jr``, ``q_prior``: ``None`` for none): the call of
-    :func:`nik.kernels.collision_lm._descend`, whose loop is to become a call of :func:`nik.kernels.lm_loop._lm_loop`
-    (then this goes)."""
-    if Jr is None:
-        if q_prior is None:
-            return _dense_step(J, e, None, None, q, joints, lam, eps, max_step, (A, g, dq))
-        return _dense_step(J, e, None, (q_prior, w_prior2), q, joints, lam, eps, max_step, (A, g, dq))
-    if q_prior is None:
-        return _dense_step(J, e, (Jr, r, w2), None, q, joints, lam, eps, max_step, (A, g, dq))
-    return _dense_step(J, e, (Jr, r, w2), (q_prior, w_prior2), q, joints, lam, eps, max_step, (A, g, dq))
 
 
 @kernel
