@@ -250,6 +250,20 @@ def test_a_file_that_records_the_decision_is_used_without_a_probe_until_its_weig
         judge.use(net, robot, nik.IKSolver, arm_frame=True)
 
 
+def test_a_record_made_while_the_kernels_still_compile_is_timed_not_provisional(tmp_path, monkeypatch, one_thread):
+    """``nik train`` on a machine whose kernels are not compiled yet: the record it writes must hold real times (a
+    provisional "serves both" would make one pose slower for good)."""
+    from nik.learn.report import record_use
+    from nik.nets.pair import save_pair
+
+    monkeypatch.setattr(judge, "_deferring", lambda: True)  # what a cold kernel cache says
+    robot = nik.load_robot("ur5")
+    path = save_pair(nik.models.load_pretrained(robot), tmp_path / "cold.safetensors")
+    decided = record_use(path)["against"]["multistart"]
+    assert all(x is not None and x > 0 for x in decided["pose_us"] + decided["batch_us"])
+    assert decided["pose"] == (decided["pose_us"][0] <= decided["pose_us"][1])
+
+
 def test_a_checkpoint_without_a_record_is_timed_once_on_first_use_and_kept_for_the_process(tmp_path, one_thread):
     """Issue 50 item 11: a network of train.py's kind (a Lightning-format checkpoint: no JSON, no record) is timed
     on its first call and serves each call type only where it paid, for every solver of the process."""

@@ -306,13 +306,15 @@ def measure(
     """Time ``net`` on ``robot``'s probes (module docstring, "Per call type") with solvers of ``solver_type``
     (:class:`nik.IKSolver`, given by the caller: this room lies below it); ``baseline`` is the guess without it
     (``multistart`` or ``analytic``: the closed form). A network that loses on wins serves no call type and is not
-    timed unless ``always`` (the figures of a report). Not kept (:func:`use` keeps it); 0.12-0.18 s of CPU."""
+    timed unless ``always`` (the figures of a report and of a network's record: then timed even while the kernels
+    are not compiled yet, after compiling them on this thread, so that a record is never provisional). Not kept
+    (:func:`use` keeps it); 0.12-0.18 s of CPU."""
     import numpy as np
 
     v = verdict(net, robot.arm if arm_frame else robot)
     if not v.earns and not always:
         return Use(False, False, v.wins, baseline=baseline, how="wins")
-    if _deferring():
+    if not always and _deferring():
         return Use(True, True, v.wins, baseline=baseline, how="provisional")
     kw = {"checkpoint": None, "analytic": baseline == "analytic", "backend": "compiled"}
     with_net, without = solver_type(robot, **kw), solver_type(robot, **kw)
