@@ -14,8 +14,8 @@ import pytest
 import torch
 
 import nik
-from nik.kernels import lm
 from nik.kernels.chain import LOWER, UPPER
+from nik.kernels.lm_step import _dense_step
 
 BACKENDS = ["compiled", "torch"]
 
@@ -111,8 +111,9 @@ def test_tiago_right_arm_joint_7_on_its_limit_answers_near(backend):
 
 
 def test_a_joint_on_its_limit_that_the_step_pushes_out_is_held_and_the_step_solved_again():
-    """nik.kernels.lm._step: joint 0 sits on its lower limit; the descent direction ``g`` pulls it inwards, but the
-    coupled step pushes it out: it is held (dq = 0) and the others take the whole step (main: dq_0 < 0, clamped)."""
+    """nik.kernels.lm_step._dense_step (the one-pose step): joint 0 sits on its lower limit; the descent direction
+    ``g`` pulls it inwards, but the coupled step pushes it out: it is held (dq = 0) and the others take the whole
+    step."""
     joints = np.zeros((2, 5))
     joints[:, LOWER], joints[:, UPPER] = -1.0, 1.0
     q = np.array([-1.0, 0.0])
@@ -122,6 +123,6 @@ def test_a_joint_on_its_limit_that_the_step_pushes_out_is_held_and_the_step_solv
     e = np.zeros(6)
     e[0], e[1] = 0.1, 1.0  # g = J^T e = (0.1, 1.1): joint 0 pulled inwards; the solved step has dq_0 = 0.1 - 1 < 0
     A, g, dq = np.empty((2, 2)), np.empty(2), np.empty(2)
-    assert lm._step(J, e, q, joints, 1e-6, 1e-12, 10.0, A, g, dq)
+    assert _dense_step(J, e, None, None, q, joints, 1e-6, 1e-12, 10.0, (A, g, dq))
     assert dq[0] == 0.0
     assert dq[1] == pytest.approx(1.1 / 2.0, rel=1e-4)  # least squares of the free joint alone: (J1.e) / |J1|^2
