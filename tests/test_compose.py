@@ -1,11 +1,13 @@
-"""Constraints compose (issue 34; nik/ik/collide.py): every mix of bounds, q_rest, world and self-collision in
-``solve`` (compiled and torch backends) and ``solve_all``, judged here by FK round trip, the joint limits and the
-sphere check (:func:`nik.collision.collides`), never by ``res.success`` alone."""
+"""Constraints compose (issue 34; nik/ik/collide/): every mix of bounds, q_rest, world and self-collision in
+``solve`` (compiled and torch backends) and ``solve_all``, and with a user's term and manipulability in
+``solve_path`` too, judged here by FK round trip, the joint limits and the sphere check
+(:func:`nik.collision.collides`), never by ``res.success`` alone."""
 
 from __future__ import annotations
 
 import itertools
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -132,3 +134,62 @@ def test_solve_all_composes_every_mix(ur5, backend, bounds, rest, use_world, sel
         assert (np.diff(d) >= 0).all()
         plain = solver.solve_all(Tin, bounds=bounds, world=world, n_starts=32).numpy()
         assert d[0] <= _near(plain, mid).min() + 1e-9
+
+
+#: every subset of the six of issue 46: (bounds, q_rest, world, self-collision, a user's term, manipulability)
+SIX = list(
+    itertools.product((None, "axis_z"), (None, "mid"), (False, True), (False, True), (False, True), (False, True))
+)
+#: the user's term: the first joint inside +-2.3 rad (most answers meet it; those that do not must be moved)
+Q0_MAX = 2.3
+
+
+def _first_joint_inside(q: torch.Tensor) -> torch.Tensor:
+    return (q[:, :1].abs() - Q0_MAX).clamp(min=0.0)
+
+
+def _costs(robot, user: bool, manip: bool):
+    costs = [nik.costs.custom(_first_joint_inside, name="first_joint_inside")] if user else []
+    return (costs + [nik.costs.manipulability(robot, weight=0.1)] if manip else costs) or None
+
+
+def _user_ok(q: np.ndarray, user: bool) -> np.ndarray:
+    return np.abs(q[:, 0]) <= Q0_MAX + 1e-6 if user else np.ones(len(q), dtype=bool)
+
+
+@pytest.mark.parametrize(("bounds", "rest", "use_world", "self_on", "user", "manip"), SIX)
+def test_solve_solve_all_and_solve_path_compose_every_mix_of_six(panda, ur5, bounds, rest, use_world, self_on, user,
+                                                                 manip):  # fmt: skip
+    """Issue 46: each of the 64 mixes in ``solve`` (panda, 12 targets), ``solve_all`` (ur5, one target) and
+    ``solve_path`` (panda, a 6-waypoint path from a free configuration, given as ``q_start``), success judged by FK,
+    the limits, the spheres and the user's term, never by ``res.success`` alone."""
+    robot, world, T = panda
+    world = world if use_world else None
+    solver = nik.IKSolver(robot, self_collision=self_on, mesh_verdict=False)
+    kw = dict(bounds=bounds, q_rest=rest, world=world, costs=_costs(robot, user, manip))
+    res = solver.solve(T, **kw)
+    q, success = np.asarray(res.q), np.asarray(res.success)
+    honest = _honest(robot, T, q, bounds, world, self_on) & _user_ok(q, user)
+    assert (success <= honest).all() and honest.mean() >= 10 / 12
+
+    probe, uworld, Tu = ur5
+    Q = (
+        nik.IKSolver(probe, self_collision=self_on, mesh_verdict=False)
+        .solve_all(
+            Tu[:1], n_starts=32, **dict(kw, world=uworld if use_world else None, costs=_costs(probe, user, manip))
+        )
+        .numpy()
+    )
+    assert Q.shape[0] >= 1
+    assert (_honest(probe, np.repeat(Tu[:1], len(Q), 0), Q, bounds, uworld if use_world else None, self_on)
+            & _user_ok(Q, user)).all()  # fmt: skip
+
+    q0 = torch.from_numpy(q[honest][0])
+    qs = robot.clamp(q0 + torch.linspace(0.0, 1.0, 6, dtype=torch.float64)[:, None] * 0.02)
+    Tp = robot.fk(qs).numpy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        path = solver.solve_path(Tp, q0, **kw)  # from the arm's joints at the first waypoint, as a planner calls it
+    qp, ok = path.q.numpy(), np.asarray(path.success)
+    free_path = _honest(robot, Tp, qp, bounds, world, self_on) & _user_ok(qp, user)
+    assert (ok <= free_path).all() and ok.mean() >= 5 / 6
