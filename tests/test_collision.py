@@ -337,6 +337,7 @@ def _box_overreach(centers, radii, half) -> float:
     return float(np.linalg.norm(np.maximum(np.abs(pts[out]) - half, 0.0), axis=1).max())
 
 
+@pytest.mark.long  # 71 s: two fits of 16-256 spheres and their exact covers
 def test_static_and_overreaching_links_get_more_spheres_and_stay_conservative(tmp_path):
     path = tmp_path / "plates.urdf"
     path.write_text(PLATES)
