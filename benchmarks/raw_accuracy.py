@@ -17,11 +17,11 @@ How this matches their protocol:
   are; mean and median over samples and targets together.
 - **Raw.** The network's hypotheses clamped to the limits (``net.hypotheses``), no LM, no restarts.
 
-Rows beyond theirs: ``+ k GN steps``: the network's hypotheses followed by ``k`` damped Gauss-Newton steps through the
-differentiable FK (fixed damping, no line search, clamped to the limits; not the solver's LM): what a network with
-refinement steps in its forward pass reaches, reported apart from the network alone. ``us / target``: wall time of
-the forward pass (all heads), and of the forward pass plus the steps (torch, autograd Jacobians, one thread: an upper
-bound of what compiled steps would cost).
+Rows beyond theirs: ``+ k LM iterations``: every head polished on its own by ``k`` iterations of nik's LM
+(:func:`nik.ik.samples.network_samples`: no restarts, the limits held; the samples a user gets from the network),
+reported apart from the network alone. ``distinct / target``: samples of a target more than 0.1 rad apart in some
+joint from every earlier one (the polish must not collapse the heads onto one solution). ``us / target``: wall time
+of the forward pass (all heads), and of the forward pass plus the iterations (torch, one thread).
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ from pathlib import Path
 
 import torch
 
+from nik.ik.samples import SampleCfg, network_samples
 from nik.nets import load_pretrained
 from nik.nets.multi import hypothesis_pose_error
 from nik.nets.pair import load_pair
-from nik.poses import rotation_vector
 from nik.tolerances import score
 
 #: The results file's hand-written section (what was tried to improve the figures) starts here; a rerun keeps it.
@@ -66,32 +66,18 @@ def stats(pos: torch.Tensor, rot: torch.Tensor) -> dict:
     }
 
 
-def gn_steps(robot, T: torch.Tensor, q: torch.Tensor, k: int, damping: float = 1e-3) -> torch.Tensor:
-    """``k`` damped Gauss-Newton steps on ``q: (B, K, dof)`` toward ``T: (B, 4, 4)``: residual (position m, rotation
-    vector rad), Jacobian by autograd of the FK, ``dq = (J^T J + damping I)^-1 J^T r``, clamped to the limits."""
-    B, K, dof = q.shape
-    Tt = T[:, None].expand(B, K, 4, 4).reshape(-1, 4, 4)
-    x = q.reshape(-1, dof).clone()
-
-    def residual(x):
-        Tq = robot.fk(x)
-        dp = Tt[:, :3, 3] - Tq[:, :3, 3]
-        dr = rotation_vector(Tt[:, :3, :3] @ Tq[:, :3, :3].transpose(-1, -2))
-        return torch.cat([dp, dr], -1)
-
-    eye = torch.eye(dof, dtype=x.dtype)
-    for _ in range(k):
-        r = residual(x)
-        # each row's residual depends on its own joints only: the Jacobian of the batch sum is every row's (6 passes)
-        J = torch.autograd.functional.jacobian(lambda v: residual(v).sum(0), x).permute(1, 0, 2)  # (N, 6, dof)
-        Jt = J.transpose(-1, -2)
-        dq = torch.linalg.solve(Jt @ J + damping * eye, Jt @ r[..., None])[..., 0]
-        x = robot.clamp(x - dq)
-    return x.reshape(B, K, dof)
+def distinct(q: torch.Tensor, tol: float = 0.1) -> float:
+    """Mean number of distinct samples per target in ``q: (B, K, dof)``: a sample counts when every earlier one of
+    its target differs from it by more than ``tol`` rad in some joint (how many solutions the samples really give)."""
+    d = (q[:, :, None] - q[:, None]).abs().amax(-1)  # (B, K, K)
+    earlier = torch.ones(q.shape[1], q.shape[1], dtype=torch.bool).tril(-1)
+    same = (d <= tol) & earlier
+    return float((~same.any(-1)).sum(-1).double().mean())
 
 
-def measure(net, n: int, seed: int, gn: tuple[int, ...]) -> list[tuple[str, dict]]:
-    """Rows ``(label, stats)`` of one network on ``n`` targets: every head, head 0, best of heads, and ``+ k GN``."""
+def measure(net, n: int, seed: int, iters: tuple[int, ...]) -> list[tuple[str, dict]]:
+    """Rows ``(label, stats)`` of one network on ``n`` targets: every head, head 0, best of heads, and every head
+    polished by ``k`` LM iterations (:func:`nik.ik.samples.network_samples`)."""
     robot = net.robot
     _, T = targets(robot, n, seed)
     t0 = time.perf_counter()
@@ -104,13 +90,14 @@ def measure(net, n: int, seed: int, gn: tuple[int, ...]) -> list[tuple[str, dict
         ("head 0 only", stats(pos[:, 0], rot[:, 0])),
         ("best of heads", stats(pos.gather(1, best), rot.gather(1, best))),
     ]
-    rows[0][1]["us"] = 1e6 * fwd_s / n
-    for k in gn:
+    rows[0][1].update(us=1e6 * fwd_s / n, distinct=distinct(hyp))
+    for k in iters:
         t0 = time.perf_counter()
-        qk = gn_steps(robot, T, hyp, k)
-        gn_s = time.perf_counter() - t0
+        qk = network_samples(net, T, SampleCfg(iters=k))
+        s = time.perf_counter() - t0
         pk, rk = hypothesis_pose_error(robot, T, qk)
-        rows.append((f"per sample + {k} GN steps", {**stats(pk, rk), "us": 1e6 * (fwd_s + gn_s) / n}))
+        row = {**stats(pk, rk), "us": 1e6 * s / n, "distinct": distinct(qk)}
+        rows.append((f"per sample, + {k} LM iterations", row))
     return rows
 
 
@@ -121,13 +108,14 @@ def table(name: str, meta: str, rows: list[tuple[str, dict]]) -> str:
         meta,
         "",
         "| samples | n | pos mean mm | pos median mm | pos p95 mm | rot mean deg | rot median deg | rot p95 deg "
-        "| us / target |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| distinct / target | us / target |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for label, s in rows:
         out.append(
             f"| {label} | {s['n']} | {s['pos_mean']:.2f} | {s['pos_median']:.2f} | {s['pos_p95']:.2f} | "
             f"{s['rot_mean']:.2f} | {s['rot_median']:.2f} | {s['rot_p95']:.2f} | "
+            + (f"{s['distinct']:.2f} | " if "distinct" in s else " | ")
             + (f"{s['us']:.0f} |" if "us" in s else " |")
         )
     return "\n".join(out) + "\n"
@@ -139,7 +127,7 @@ def main(argv=None) -> int:
     ap.add_argument("--net", nargs="*", default=None, help="network files (.safetensors), one per robot, in order")
     ap.add_argument("--n", type=int, default=2000, help="targets per arm")
     ap.add_argument("--seed", type=int, default=4848)
-    ap.add_argument("--gn", type=int, nargs="*", default=[1, 3], help="rows with k GN steps after the network")
+    ap.add_argument("--iters", type=int, nargs="*", default=[3, 5], help="rows of every head + k LM iterations")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
@@ -161,7 +149,7 @@ def main(argv=None) -> int:
             src = f"shipped network of {name}"
         cfg = net.config()
         meta = f"{src}: {cfg.get('kind')} {cfg.get('hidden')}, {net.n_hypotheses} hypotheses, {net.n_params} params"
-        rows = measure(net, a.n, a.seed, tuple(a.gn))
+        rows = measure(net, a.n, a.seed, tuple(a.iters))
         text = table(name, meta, rows)
         print(text, flush=True)
         parts.append(text)

@@ -10,6 +10,7 @@ configuration and composes these stages for poses and the paths' stages for sequ
 - :mod:`nik.ik.guesses`: guess providers ``(robot, T, ...) -> q`` (network, closed form, multistart) and
   de-duplication;
 - :mod:`nik.ik.refiners`: refiners ``(robot, T, q0) -> RefineResult`` (LM, the swarms);
+- :mod:`nik.ik.samples`: several solutions per pose, every network head polished on its own (IKFlow's use);
 - :mod:`nik.ik.targets`: target poses in any accepted form -> ``(B, 4, 4)``, the input checks of both backends;
   :mod:`nik.ik.result`: :class:`IKResult`;
 
