@@ -169,7 +169,7 @@ class IKSolver:
 
     @net.setter
     def net(self, value) -> None:
-        self._net, self._given = value, value is not None
+        self._net, self._given, self._net_one = value, value is not None, None
 
     @property
     def has_network(self) -> bool:
@@ -178,8 +178,9 @@ class IKSolver:
 
     @property
     def single_pose_net(self):
-        """The arm's small shipped network for the CPU (``nik train --single-pose``, recorded role ``single_pose``),
-        found with the main one (``checkpoint="auto"``); None where there is none."""
+        """The small network that guesses on the CPU (recorded role ``single_pose``): the arm's shipped one with the
+        shipped main one, or an installed one with an installed main one (``checkpoint="auto"``; ``nik train
+        --install`` installs one where the main network does not pay for single poses); None where there is none."""
         return self._net_one
 
     @property

@@ -246,3 +246,57 @@ def _no_warning():
             yield
 
     return ctx()
+
+
+def test_where_the_network_slows_single_poses_a_small_one_is_trained_beside_it_and_installed_with_it(
+    tmp_path, capsys, monkeypatch
+):
+    """Issue 48 item 1: ``nik train`` by default produces what pays for both call types: where the main network's
+    record says single poses are faster without it, a single-pose network is trained for the rest of the budget,
+    linked from the main JSON, reported per call type, installed with it, and used by ``IKSolver(robot)``."""
+    from nik.nets import registry
+    from nik.nets.pair import load_pair
+
+    monkeypatch.setenv("NIK_HOME", str(tmp_path / "home"))
+    arm = _arm(tmp_path)
+    out = tmp_path / "mine.safetensors"
+    args = ["train", str(arm), *TINY, "--eval-batch", "20", "--eval-one", "2", "--runs", str(tmp_path / "runs")]
+    assert main([*args, "--out", str(out), "--install"]) == 0
+    printed = capsys.readouterr().out
+    meta = json.loads(out.with_suffix(".json").read_text())
+    one = tmp_path / "mine_one.safetensors"
+    if meta["network_use"]["against"]["multistart"]["pose"]:  # the main network pays for single poses: none needed
+        assert "single_pose_network" not in meta and not one.exists()
+        return
+    assert meta["single_pose_network"] == one.name
+    one_meta = json.loads(one.with_suffix(".json").read_text())
+    assert one_meta["role"] == "single_pose" and one_meta["net"]["hidden"] == [64, 64]
+    assert (tmp_path / "runs" / "test_arm_one" / "last.ckpt").is_file()
+    rec = one_meta["network_use"]["against"]["multistart"]
+    for call, key in (("single poses:", "pose"), ("batches:", "batch")):
+        w, wo = rec[f"{key}_us"]
+        (line,) = [ln for ln in printed.splitlines() if ln.strip().startswith(f"[mine_one.safetensors] {call}")]
+        assert f"{w:.1f} us a pose with the network, {wo:.1f} us without" in line
+    installed = registry.user_dir() / "test_arm_one.safetensors"
+    assert installed.is_file() and load_pair(installed).n_params == load_pair(one).n_params
+    solver = nik.IKSolver(nik.load_robot(arm))
+    assert solver.net is not None and solver.single_pose_net is not None
+    assert solver.single_pose_net.n_params == load_pair(one).n_params
+    use = solver.network_use
+    assert use["how"] == "record" and (use["pose"], use["batch"]) == (rec["pose"], rec["batch"])
+    # the main file by path: the main network alone, as its own record says
+    by_path = nik.IKSolver(nik.load_robot(arm), checkpoint=str(out))
+    assert by_path.single_pose_net is None
+    assert by_path.network_use["pose"] == meta["network_use"]["against"]["multistart"]["pose"]
+
+
+def test_a_zero_single_pose_share_trains_the_main_network_alone_on_the_whole_budget(tmp_path, capsys):
+    arm = _arm(tmp_path)
+    out = tmp_path / "alone.safetensors"
+    args = ["train", str(arm), *TINY, "--no-eval", "--runs", str(tmp_path / "runs"), "--single-pose-share", "0"]
+    assert main([*args, "--out", str(out)]) == 0
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert "single_pose_network" not in meta and not (tmp_path / "alone_one.safetensors").exists()
+    assert meta["training"]["minutes_budget"] == 1.0
+    assert main([*args[:-1], "1.5", "--out", str(tmp_path / "bad.safetensors")]) == 2
+    assert "--single-pose-share must be in [0, 1), got 1.5" in capsys.readouterr().err

@@ -57,6 +57,15 @@ def register(sub) -> None:
         help="a small network (default hidden 64 64) that the solver uses on the CPU (its compiled "
         "backend), next to the main network of the arm (recorded role single_pose)",
     )
+    t.add_argument(
+        "--single-pose-share",
+        type=float,
+        default=0.2,
+        metavar="F",
+        help="share of the budget for a small single-pose network, trained after the main one only where the main "
+        "one makes single poses slower on the CPU; saved beside it as NAME_one and named in its JSON (default 0.2; "
+        "0: never)",
+    )
     t.add_argument("--batch-size", type=int, default=1024, help="samples per step (default 1024)")
     t.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate at the start (default 1e-3, cosine)")
     t.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -101,6 +110,7 @@ def _cmd_train(args) -> int:
         hidden=tuple(args.hidden) if args.hidden else (SINGLE_POSE_HIDDEN if args.single_pose else DEFAULT_HIDDEN),
         heads=args.heads,
         single_pose=args.single_pose,
+        single_pose_share=args.single_pose_share,
         batch_size=args.batch_size,
         lr=args.lr,
         seed=args.seed,
@@ -118,8 +128,10 @@ def _cmd_train(args) -> int:
         f"trained {res.kind} network for {res.wall_s / 60:.1f} min ({res.steps} steps, {res.samples / 1e6:.2f} M "
         f"samples); wrote {res.out} and {res.out.with_suffix('.json')}"
     )
+    if res.single_pose is not None:
+        print(f"{res.single_pose_note}: wrote {res.single_pose} (installed, it guesses on the CPU)")
     if res.installed is not None:
-        print(f"installed as {res.installed}")
+        print(f"installed as {res.installed}" + (" (its single-pose network beside it)" if res.single_pose else ""))
         for line in res.usage:
             print(f"  {line}")
     else:

@@ -80,12 +80,16 @@ def checkpoint_network(path, robot, device) -> torch.nn.Module:
 def solver_networks(checkpoint, robot, device, closed_form: bool) -> tuple:
     """``(net, single_pose_net, given)`` of an :class:`nik.IKSolver` built with ``checkpoint``: ``"auto"`` the
     arm's installed or shipped networks where it has no closed form (loaded once per process, SHA-256 checked: a
-    damaged file is refused here), a path that network (``given``), None none."""
+    damaged file is refused here; an installed main network takes an installed single-pose one only), a path that
+    network alone (``given``), None none. ``single_pose_net``, where there is one, guesses on the CPU
+    (:func:`nik.ik.plan.choose_network`)."""
     if isinstance(checkpoint, str) and checkpoint == "auto":
         if closed_form:
             return None, None, False
         net, given = known_network(robot, device)
-        one = known_network(robot, device, single_pose=True)[0] if net is not None else None
+        one, one_installed = known_network(robot, device, single_pose=True) if net is not None else (None, False)
+        if given and not one_installed:  # the user's own network is not served by a shipped single-pose one
+            one = None
         return net, one, given
     if checkpoint is not None:
         return checkpoint_network(checkpoint, robot, device), None, True

@@ -10,7 +10,8 @@ A :class:`Plan` is data. The torch backend interprets it with a Python loop over
 
 1. a network *given* to the solver (``checkpoint=PATH``, or ``solver.net = net``) or *installed* by the user
    (``nik networks install`` / ``nik train --install``: the user folder, :mod:`nik.nets.registry`) serves on every
-   backend;
+   backend, except that on the compiled backend an installed single-pose network serves instead of an installed
+   main one (``nik train --install`` installs one with it where the main network does not pay for single poses);
 2. else, with ``checkpoint="auto"``, the network shipped with nik for the arm: on the compiled backend (the CPU) its
    small single-pose network where it has one (about a twentieth of the main network's multiply-adds for about one
    more LM iteration: docs/learned.md), on torch the main one;
@@ -116,11 +117,11 @@ def choose_network(
     main, single_pose, given: bool, backend: str, robot=None, refine="none", fallback="none", *, call="batch",
     asked=None, solver_type=None,
 ):  # fmt: skip
-    """The network that guesses (module docstring, "Which guess serves"): ``main`` (the solver's network) unless it
-    is the shipped one (``given`` False) and the call runs on the compiled backend, where the arm's ``single_pose``
-    network serves when it has one. Where the plan refines and has a fallback (``refine``, ``fallback``: the
-    solver's settings), a given or installed network that does not earn its place on ``robot``
-    (:func:`nik.ik.judge.earns`: its best hypothesis no better a start than uniform ones) gives way: None
+    """The network that guesses (module docstring, "Which guess serves"): ``main`` (the solver's network), or on the
+    compiled backend the ``single_pose`` network where the solver holds one. Where the plan refines and has a
+    fallback (``refine``, ``fallback``: the solver's settings), a given or installed network that does not earn its
+    place on ``robot`` (:func:`nik.ik.judge.earns`: its best hypothesis no better a start than uniform ones) gives
+    way: None
     (the closed form or uniform starts serve); on the compiled backend a network gives way for a ``call`` type
     (``"pose"`` | ``"batch"``) where it does not pay (:func:`nik.ik.judge.use`, timed with solvers of
     ``solver_type``: :class:`nik.IKSolver`; None: not timed, the wins alone), unless ``asked``
@@ -132,7 +133,7 @@ def _choose(main, single_pose, given, backend, robot, settings, call, asked, sol
     """``(network or None, final)``: :func:`choose_network`; ``final`` False where the decision is provisional (the
     kernels still compiling: :func:`nik.ik.judge.use`), so that the plan is not kept."""
     net = main
-    if main is not None and not given and single_pose is not None and backend == "compiled":
+    if main is not None and single_pose is not None and backend == "compiled":
         net = single_pose
     if net is None or robot is None or "none" in settings:
         return net, True
@@ -156,7 +157,7 @@ def network_use(solver) -> dict:
 
     s = solver
     net = s._net
-    if net is not None and not s._given and s._net_one is not None:
+    if net is not None and s._net_one is not None:
         net = s._net_one
     if net is None:
         return Use(False, False, how="no network").as_dict()

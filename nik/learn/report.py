@@ -13,6 +13,8 @@
 3. **what the solver uses** per call type (:attr:`nik.IKSolver.network_use`, read from the record the pair's JSON
    carries: :func:`record_use`, which ``nik train`` runs after exporting): for single poses and for batches, the
    CPU time per pose with and without the network on the probes of :mod:`nik.ik.judge` and whether it serves.
+   Where the file names a single-pose network beside it (``nik train`` made one), its lines follow: what
+   ``IKSolver(robot)`` uses on the CPU once both are installed.
 
 Timings depend on the machine and its load; the two solvers run in the same process, interleaved.
 """
@@ -42,6 +44,8 @@ class NetworkReport:
     raw: dict
     rows: list[dict] = field(default_factory=list)  # {"case", "solver", "success", "ms"}
     use: dict = field(default_factory=dict)  # IKSolver.network_use of the solver given the network
+    single_pose: str = ""  # the single-pose network the file names beside it ("": none)
+    single_pose_use: dict = field(default_factory=dict)  # its IKSolver.network_use
 
     def lines(self) -> list[str]:
         r = self.raw
@@ -53,7 +57,12 @@ class NetworkReport:
         ]
         for row in self.rows:
             out.append(f"{row['case']:<24} {row['solver']:<42} {100 * row['success']:7.2f}% {row['ms']:12.4f}")
-        return out + use_lines(self.use)
+        out += use_lines(self.use)
+        if self.single_pose:
+            out.append(f"the single-pose network {self.single_pose} beside it (what IKSolver(robot) uses on the CPU "
+                       "once both are installed, nik train --install):")  # fmt: skip
+            out += [f"  [{self.single_pose}] {line.strip()}" for line in use_lines(self.single_pose_use)[1:]]
+        return out
 
 
 def use_lines(use: dict) -> list[str]:
@@ -119,7 +128,10 @@ def network_report(
     seed: int = 2026,
 ) -> NetworkReport:
     """Measure the network at ``checkpoint`` for ``robot`` (module docstring)."""
+    from nik.nets.pair import single_pose_companion
+
     with_net = IKSolver(robot, checkpoint=checkpoint)
+    one = single_pose_companion(checkpoint)
     use = with_net.network_use  # what the solver uses (from the pair's record where it has one)
     with_net.network_use = {"pose": True, "batch": True}  # the rows: the network serving every call
     without = IKSolver(robot, checkpoint=None)
@@ -139,6 +151,8 @@ def network_report(
         "rot_deg_p95": float(torch.quantile(r, 0.95)),
     }
     report = NetworkReport(robot.name, raw, use=use)
+    if one is not None:
+        report.single_pose, report.single_pose_use = one.name, IKSolver(robot, checkpoint=one).network_use
     Tb = _targets(robot, n_batch, seed + 1)
     names = {"with the network": with_net, "no network": without}
     times = {k: [] for k in names}

@@ -9,6 +9,9 @@ The JSON holds what rebuilds and checks the network:
 - ``weights_sha256``, ``weights_bytes``: the SHA-256 and size of the ``.safetensors`` file beside it;
 - ``training``: the command that really ran (``sys.argv``), the data it used, counters;
 - ``validation``: its recorded error on a seeded validation set (:func:`nik.nets.pretrained.validation_error`);
+- ``single_pose_network`` (optional): the file name of a small network for single poses beside it (``nik train``
+  makes one where the main network does not pay for single poses, and ``--install`` installs both;
+  :func:`link_single_pose`, :func:`single_pose_companion`);
 - ``network_use`` (optional): whether it pays per call type on the CPU, with the figures
   (:func:`nik.ik.judge.record`, written by ``nik train``: :func:`nik.learn.report.record_use`); :func:`load_pair`
   attaches it to the network (``net.network_use_record``: the record and the weights' version counters, so a network
@@ -46,12 +49,14 @@ from nik.robots import Robot, load_robot
 __all__ = [
     "PAIR_FORMAT",
     "architecture_mismatch",
+    "link_single_pose",
     "load_pair",
     "pair_config",
     "pair_paths",
     "read_pair_meta",
     "recover_pairs",
     "save_pair",
+    "single_pose_companion",
     "write_pair_files",
 ]
 
@@ -366,3 +371,28 @@ def save_pair(
         meta["role"] = role
 
     return write_pair_files(st, data, json.dumps(meta, indent=2) + "\n")
+
+
+def link_single_pose(main: str | Path, companion: str | Path) -> None:
+    """Record in ``main``'s JSON the single-pose network ``companion`` (a pair in the same folder) by its file name;
+    the pair is replaced whole (:func:`write_pair_files`), the weights untouched."""
+    st, _ = pair_paths(main)
+    one, _ = pair_paths(companion)
+    if one.parent.resolve() != st.parent.resolve():
+        raise ValueError(f"{one}: a single-pose network must lie beside its main network {st}")
+    meta = read_pair_meta(st)
+    meta["single_pose_network"] = one.name
+    write_pair_files(st, st.read_bytes(), json.dumps(meta, indent=2) + "\n")
+
+
+def single_pose_companion(path: str | Path) -> Path | None:
+    """The single-pose network that the pair at ``path`` names (:func:`link_single_pose`), or None: not a pair, none
+    named, or the named file is not beside it (a pair copied without it)."""
+    st, js = pair_paths(path)
+    if st.suffix != ".safetensors" or not js.is_file():
+        return None
+    name = read_pair_meta(st).get("single_pose_network")
+    if not isinstance(name, str) or Path(name).name != name:
+        return None
+    one = st.with_name(name)
+    return one if one.is_file() else None

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nik.errors import CheckpointError
-from nik.nets.pair import pair_paths, read_pair_meta, recover_pairs, write_pair_files
+from nik.nets.pair import pair_paths, read_pair_meta, recover_pairs, single_pose_companion, write_pair_files
 
 __all__ = [
     "SHIPPED_DIR",
@@ -204,7 +204,8 @@ def find_same_arm(robot, dirs: list[Path] | None = None, *, role: str | None = N
 
 def install(path: str | Path, *, name: str | None = None, directory: str | Path | None = None) -> Path:
     """Copy the pair at ``path`` into the user folder (or ``directory``) as ``<name>.safetensors`` + ``.json``
-    (default name: the robot's recorded name); the copy is checked (:func:`nik.nets.pair.load_pair`) first and
+    (default name: the robot's recorded name), and the single-pose network it names beside it as ``<name>_one``
+    (:func:`nik.nets.pair.single_pose_companion`); the copy is checked (:func:`nik.nets.pair.load_pair`) first and
     replaces an installed pair of that name so that a kill at any instant leaves the old or the new one whole
     (:func:`nik.nets.pair.write_pair_files`). Returns the installed ``.safetensors``."""
     from nik.nets.pair import load_pair
@@ -215,8 +216,17 @@ def install(path: str | Path, *, name: str | None = None, directory: str | Path 
     name = _plain_name(name or meta.get("robot") or st.stem, "install")
     d = Path(directory) if directory is not None else user_dir()
     d.mkdir(parents=True, exist_ok=True)
+    one = single_pose_companion(st)
+    text = js.read_text()
+    if one is not None:  # its single-pose network goes with it, as <name>_one
+        load_pair(one)
+        meta["single_pose_network"] = f"{name}_one.safetensors"
+        text = json.dumps(meta, indent=2) + "\n"
     # the bytes written are checked against the JSON's checksum again (the source may change after load_pair)
-    return write_pair_files(d / f"{name}.safetensors", st.read_bytes(), js.read_text())
+    out = write_pair_files(d / f"{name}.safetensors", st.read_bytes(), text)
+    if one is not None:
+        write_pair_files(d / f"{name}_one.safetensors", one.read_bytes(), one.with_suffix(".json").read_text())
+    return out
 
 
 @dataclass(frozen=True)
