@@ -2,9 +2,13 @@
 
     python benchmarks/network_use.py --pair runs/ARM/ARM.safetensors --robot ARM.urdf [--end-link LINK] \
         --out benchmarks/results/network_use.md
+    python benchmarks/network_use.py --pair auto --robot ARM.urdf --root-link R --end-link T   # what is installed
     python benchmarks/network_use.py --record-shipped      # write the shipped pairs' records (nik/nets/weights)
 
 One torch thread, one process, CPU. For the pair given (e.g. from ``nik train ARM --minutes 2``):
+
+``--pair auto``: the networks ``IKSolver(robot)`` finds installed (``nik train --install``: the main network and the
+single-pose one beside it, which guesses on the CPU) instead of a file.
 
 - what the solver decided per call type (``network_use``: from the pair's record, no measurement) and the figures
   of that record (microseconds per pose with and without the network on the probes of :mod:`nik.ik.judge`);
@@ -67,14 +71,17 @@ def record_shipped(rounds: int) -> list[str]:
 
 def measure(robot, pair: str, n_one: int, n_batch: int, reps: int, seed: int) -> list[str]:
     """The A/B of the module docstring; the lines of the results."""
-    choice = nik.IKSolver(robot, checkpoint=pair)
-    forced = nik.IKSolver(robot, checkpoint=pair)
+    checkpoint = "auto" if pair == "auto" else pair
+    choice = nik.IKSolver(robot, checkpoint=checkpoint)
+    forced = nik.IKSolver(robot, checkpoint=checkpoint)
     forced.network_use = {"pose": True, "batch": True}
     none = nik.IKSolver(robot, checkpoint=None)
     use = choice.network_use
     names = {"solver's choice": choice, "network forced": forced, "no network": none}
     lines = [
-        f"robot {robot.name} ({robot.dof} joints), network {pair}; one torch thread",
+        f"robot {robot.name} ({robot.dof} joints), network {pair}"
+        + (" (installed; its single-pose network guesses on the CPU)" if choice.single_pose_net is not None else "")
+        + "; one torch thread",
         f"network_use ({use['how']}): single poses {'network' if use['pose'] else 'no network'}, batches "
         f"{'network' if use['batch'] else 'no network'}; probes: one pose {use['pose_us'][0]:.1f} us with, "
         f"{use['pose_us'][1]:.1f} us without; batch {use['batch_us'][0]:.1f} us with, {use['batch_us'][1]:.1f} us "
@@ -131,9 +138,10 @@ def measure(robot, pair: str, n_one: int, n_batch: int, reps: int, seed: int) ->
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--pair", help="an exported network (NAME.safetensors)")
+    ap.add_argument("--pair", help="an exported network (NAME.safetensors), or auto: the installed ones")
     ap.add_argument("--robot", help="the robot (built-in name, YAML or URDF)")
     ap.add_argument("--end-link", default=None)
+    ap.add_argument("--root-link", default=None)
     ap.add_argument("--n-one", type=int, default=500)
     ap.add_argument("--n-batch", type=int, default=2000)
     ap.add_argument("--reps", type=int, default=5)
@@ -148,7 +156,7 @@ def main() -> None:
     if a.record_shipped:
         lines = record_shipped(a.rounds)
     else:
-        kw = {} if a.end_link is None else {"end_link": a.end_link}
+        kw = {k: v for k, v in (("end_link", a.end_link), ("root_link", a.root_link)) if v is not None}
         robot = nik.load_robot(a.robot, **kw)
         lines = measure(robot, a.pair, a.n_one, a.n_batch, a.reps, a.seed)
     lines.append(

@@ -364,7 +364,7 @@ def _train(cfg: TrainCfg, robot: Robot, write) -> TrainResult:
         out=out,
         run_dir=run_dir,
         kind=kind,
-        wall_s=model.wall_s,
+        wall_s=counters["wall_s"],
         samples=int(model.sample_evals),
         steps=int(trainer.global_step),
     )
