@@ -41,18 +41,14 @@ class MeshDistance:
         coal = check._coal
         self.check, self.robot, self._coal = check, check.robot, coal
         self._hulls, self._bound = [], []
-        for g in check._geoms:
+        for k, g in enumerate(check._geoms):
             if not hasattr(g, "vertices"):  # a primitive (convex already): its own bounding sphere and hull
                 g.computeLocalAABB()
                 self._bound.append((np.asarray(g.aabb_center, dtype=np.float64), float(g.aabb_radius)))
                 self._hulls.append(g)
                 continue
-            v = np.asarray(g.vertices(), dtype=np.float64).reshape(-1, 3)
-            c = (v.min(0) + v.max(0)) / 2
-            self._bound.append((c, float(np.sqrt(((v - c) ** 2).sum(1).max()))))
-            if g.convex is None:  # built once per mesh check (Qhull: about 0.05 s a link), kept on its geometry
-                g.buildConvexHull(False, "Qt")
-            self._hulls.append(g.convex)
+            self._bound.append(check._bounds[k])  # the mesh check's sphere around the mesh (computed once there)
+            self._hulls.append(None)  # built when a pair of this link first overlaps (:meth:`_hull`)
         self._obstacles = []
         for geom, tf, name in check._world_geoms(world) if world is not None else []:
             half = _half_size(geom)
@@ -105,6 +101,17 @@ class MeshDistance:
                 J[i, m] = row
         return r, J, d
 
+    def _hull(self, k: int):
+        """The convex hull of link ``k``'s mesh (a primitive is its own), built on first use (Qhull: about 10-50 ms a
+        link) and kept on its geometry for every later :class:`MeshDistance` of the same mesh check."""
+        hull = self._hulls[k]
+        if hull is None:
+            g = self.check._geoms[k]
+            if g.convex is None:
+                g.buildConvexHull(False, "Qt")
+            hull = self._hulls[k] = g.convex
+        return hull
+
     def _geometry(self, tf, b: int):
         """``(geometry, transform)`` of row side ``b`` (a link placed by ``tf``, or obstacle ``-1 - b``)."""
         return (self.check._geoms[b], tf[b]) if b >= 0 else self._obstacles[-1 - b][:2]
@@ -125,7 +132,7 @@ class MeshDistance:
         coal = self._coal
         ta = tf[a]
         if b >= 0:
-            gb, tb, hb = self.check._geoms[b], tf[b], self._hulls[b]
+            gb, tb, hb = self.check._geoms[b], tf[b], self._hull(b)
         else:
             gb, tb = self._obstacles[-1 - b][:2]
             hb = gb
@@ -137,7 +144,7 @@ class MeshDistance:
             return float(dist), pa, pb, (pb - pa) / gap
         req.enable_signed_distance = True
         res = coal.DistanceResult()
-        dist = coal.distance(self._hulls[a], ta, hb, tb, req, res)
+        dist = coal.distance(self._hull(a), ta, hb, tb, req, res)
         normal = np.array(res.normal, dtype=np.float64)
         norm = float(np.linalg.norm(normal))
         if not np.isfinite(dist) or norm < 1e-12:
