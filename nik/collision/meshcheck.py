@@ -2,8 +2,10 @@
 
 :class:`MeshCheck` places every link's collision geometry (:func:`nik.collision.urdf.urdf_bodies`; meshes as
 they are, curved primitives by the polyhedra around them) with nik's frames and asks coal, pair by pair and
-against the world's spheres, boxes and capsules, whether anything overlaps. It shares no distance code with
-the sphere model, so tests and ``benchmarks/collisions.py`` compare the two verdicts. ``pip install
+against the world's spheres, boxes and capsules, whether anything overlaps; a broad phase first (a sphere around
+each link's mesh and each obstacle) leaves out the pairs too far apart to touch, so coal is asked about a few pairs
+of a configuration, not every one. It shares no distance code with the sphere model, so tests and
+``benchmarks/collisions.py`` compare the two verdicts. ``pip install
 'nik-ik[collision-check]'`` (coal); without it, constructing one is a one-line ``ImportError``.
 
 :func:`mesh_check` is the one the solver's mesh verdict uses (``IKSolver(mesh_verdict=)``, :mod:`nik.ik.collide`):
