@@ -284,7 +284,12 @@ def test_mesh_check_asks_coal_only_about_pairs_whose_bounding_spheres_meet(panda
     checked pair and every moving link against every obstacle, with far fewer coal queries."""
     from nik.collision.meshcheck import MeshCheck
 
-    robot, urdf, world = panda_meshes
+    robot, urdf, _ = panda_meshes
+    rot = np.eye(4)
+    rot[:3, :3] = [[0.8, -0.6, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]]  # a box turned about z
+    rot[:3, 3] = [0.35, -0.3, 0.35]
+    world = (nik.World().add_box([0.4, 0.0, -0.05], [1.2, 1.2, 0.1]).add_box(rot, [0.3, 0.1, 0.2])
+             .add_sphere([0.0, 0.45, 0.5], 0.1).add_capsule([0.5, 0.3, 0.2], [0.3, 0.5, 0.7], 0.05))  # fmt: skip
     check = _coal(robot, urdf)
     q = robot.sample(60, generator=torch.Generator().manual_seed(7), dtype=torch.float64).numpy()
     obstacles = check._world_geoms(world)

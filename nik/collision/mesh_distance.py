@@ -65,7 +65,9 @@ class MeshDistance:
     def rows_at(self, Q, margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(r (B, M), J (B, M, dof), d (B, M))`` for ``Q: (B, dof)``: the rows ``max(0, margin - d)`` metres,
         their Jacobian and the distances ``d`` (metres, negative where the hulls overlap; for a pair not asked
-        about, a lower bound: the bounding spheres' gap, or ``margin`` where coal finds the meshes no nearer)."""
+        about, a lower bound: the bounding spheres' gap (a link's sphere and the obstacle's own shape), or ``margin``
+        where coal finds the meshes no nearer)."""
+        from nik.collision.meshcheck import _core
         from nik.collision.urdf import frames_at
 
         Q = np.asarray(Q, dtype=np.float64).reshape(-1, self.robot.dof)
@@ -78,6 +80,11 @@ class MeshDistance:
         radius = np.array([rad for _, rad in self._bound] + [o[4] for o in reversed(self._obstacles)])
         fixed = np.array([o[3] for o in reversed(self._obstacles)]).reshape(-1, 3)  # b < 0 indexes from the end
         reach = margin + 2e-9  # a pair coal finds farther than this: rowless, and free by the check (d > 1e-9)
+        obs = np.flatnonzero(b_idx < 0)  # the rows of a link against an obstacle, and each obstacle's frame and shape
+        placed = [self._obstacles[-1 - b][1] for b in b_idx[obs]]
+        ocentre = np.array([np.asarray(t.getTranslation()) for t in placed]).reshape(-1, 3)
+        orot = np.array([np.asarray(t.getRotation()) for t in placed]).reshape(-1, 3, 3)
+        core = np.array([_core(self._obstacles[-1 - b][0]) for b in b_idx[obs]]).reshape(-1, 4)
         for i, q in enumerate(Q):
             F = frames_at(self.robot, q)
             tf = self.check._transforms(q)
@@ -85,6 +92,9 @@ class MeshDistance:
             t = np.array([np.asarray(t.getTranslation()) for t in tf])
             centres = np.concatenate([np.einsum("kij,kj->ki", R, local) + t, fixed])
             d[i] = np.linalg.norm(centres[a_idx] - centres[b_idx], axis=1) - radius[a_idx] - radius[b_idx]
+            if obs.size:  # a link against an obstacle: the exact distance of its sphere's centre to the obstacle
+                p = np.abs(np.einsum("mji,mj->mi", orot, centres[a_idx[obs]] - ocentre))
+                d[i, obs] = np.linalg.norm(np.maximum(p - core[:, :3], 0.0), axis=1) - core[:, 3] - radius[a_idx[obs]]
             for m in np.flatnonzero(d[i] <= margin):  # the bounding spheres within the margin: coal asked
                 a, b = self.rows[m]
                 if not self._near(tf, a, b, reach):  # farther than the margin: no row (d: that lower bound)

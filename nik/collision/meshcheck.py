@@ -91,23 +91,27 @@ class MeshCheck:
         pa = np.array([a for a, _ in self.pairs], dtype=np.int64)
         pb = np.array([b for _, b in self.pairs], dtype=np.int64)
         oc = np.array([np.asarray(ot.getTranslation()) for _, ot, _ in obstacles]).reshape(-1, 3)
-        orad = np.array([_bound_radius(og) for og, _, _ in obstacles])
+        orot = np.array([np.asarray(ot.getRotation()) for _, ot, _ in obstacles]).reshape(-1, 3, 3)
+        shape = np.array([_core(og) for og, _, _ in obstacles]).reshape(-1, 4)  # half extents and rounding
         moving = np.array([f > 0 for f in self.frames], dtype=bool)
-        return local, radius, pa, pb, oc, orad, moving
+        return local, radius, pa, pb, (oc, orot, shape), moving
 
     def _near(self, tf, broad) -> tuple[np.ndarray, list]:
         """The broad phase for one configuration placed by ``tf`` (``broad``: :meth:`_broad`): ``(pairs, links)``,
         the indices into :attr:`pairs` whose links' bounding spheres overlap and the ``(link, obstacle)`` index pairs
-        whose bounding spheres overlap (an obstacle inside the sphere of its half diagonal; the fixed base never:
-        as nik's model): the only ones that can touch, so the only ones coal is asked about."""
-        local, radius, pa, pb, oc, orad, moving = broad
+        whose link's bounding sphere reaches the obstacle (its exact distance from the sphere's centre: a sphere,
+        a box, a capsule; the fixed base never: as nik's model): the only ones that can touch, so the only ones coal
+        is asked about."""
+        local, radius, pa, pb, (oc, orot, shape), moving = broad
         R = np.array([t.getRotation() for t in tf])
         centre = np.einsum("kij,kj->ki", R, local) + np.array([t.getTranslation() for t in tf])
         gap = np.sqrt(((centre[pa] - centre[pb]) ** 2).sum(1)) - radius[pa] - radius[pb]
         pairs = np.flatnonzero(gap <= 0.0)
         links = []
         if len(oc):
-            gap = np.sqrt(((centre[:, None, :] - oc[None]) ** 2).sum(2)) - radius[:, None] - orad[None]
+            p = np.abs(np.einsum("oji,koj->koi", orot, centre[:, None, :] - oc[None]))  # in each obstacle's frame
+            out = np.maximum(p - shape[None, :, :3], 0.0)
+            gap = np.sqrt((out**2).sum(2)) - shape[None, :, 3] - radius[:, None]
             links = list(zip(*np.nonzero((gap <= 0.0) & moving[:, None]), strict=True))
         return pairs, links
 
@@ -185,16 +189,20 @@ class MeshCheck:
         return out
 
 
-def _bound_radius(geom) -> float:
-    """The radius of a sphere about its centre around the obstacle ``geom`` (coal's Sphere, Box or Capsule)."""
+def _core(geom) -> tuple[float, float, float, float]:
+    """``(hx, hy, hz, r)``: the obstacle ``geom`` (coal's Sphere, Box or Capsule, centred on its transform) as the
+    points within ``r`` of the box of half extents ``h`` in its frame, so that a point's distance to it is
+    ``|max(|p| - h, 0)| - r`` (a sphere: ``h = 0``; a box: ``r = 0``; a capsule: ``h = (0, 0, half length)``);
+    anything else: everywhere (``r`` infinite)."""
     name = type(geom).__name__
     if name == "Sphere":
-        return float(geom.radius)
+        return 0.0, 0.0, 0.0, float(geom.radius)
     if name == "Box":
-        return float(np.linalg.norm(geom.halfSide))
+        hx, hy, hz = (float(x) for x in np.asarray(geom.halfSide).reshape(3))
+        return hx, hy, hz, 0.0
     if name == "Capsule":
-        return float(geom.halfLength + geom.radius)
-    return float("inf")
+        return 0.0, 0.0, float(geom.halfLength), float(geom.radius)
+    return 0.0, 0.0, 0.0, float("inf")
 
 
 def fitted_urdf(model) -> Path | None:
