@@ -16,7 +16,7 @@ as the compiled collision LM does. An answer is kept only where the meshes call 
 check passes, on the answer as it is returned (float32 answers rounded and clamped first). Cost: one coal collision
 query per pair whose bounding spheres are near and one distance query per pair within the margin, per LM
 iteration (:class:`nik.collision.mesh_distance.MeshDistance`): about 5 ms a refused target on the panda and the
-xarm7 in ``benchmarks/collision_feasible.py``'s scenes, up to about 0.1 s where every start must be tried (only
+xarm7 in ``benchmarks/collision_feasible.py``'s scenes, up to 0.2-0.4 s where most starts must be tried (only
 those targets pay it).
 """
 
