@@ -88,3 +88,35 @@ def test_mesh_term_autograd_matches_its_rows_and_checks_by_the_meshes(panda_chec
     np.testing.assert_array_equal(term.check(q).numpy(), ~check.collides(q.numpy(), world))
     with pytest.raises(ValueError, match="margin must be"):
         mesh_collision(robot, world, margin=-1.0, check=check)
+
+
+def test_distance_asked_only_of_pairs_within_the_margin(panda_check, monkeypatch):
+    """coal's collision query with the margin as security margin screens the pairs: the distance with its nearest
+    points is asked only of those within the margin, and the rows, Jacobians and the verdict are those of coal's
+    distance on every pair (a pair left out reports a lower bound at or above the margin)."""
+    import coal
+
+    from nik.collision.mesh_distance import MeshDistance
+
+    robot, check = panda_check
+    world = nik.World().add_box([0.45, 0.0, 0.3], [0.2, 0.2, 0.2]).add_sphere([0.0, 0.45, 0.5], 0.1)
+    md = MeshDistance(check, world)
+    q = robot.sample(30, generator=torch.Generator().manual_seed(5), dtype=torch.float64).numpy()
+    margin = 0.02
+    exact = np.empty((len(q), len(md)))  # the reference: coal's distance of every row
+    for i, x in enumerate(q):
+        tf = check._transforms(x)
+        for m, (a, b) in enumerate(md.rows):
+            gb, tb = (check._geoms[b], tf[b]) if b >= 0 else md._obstacles[-1 - b][:2]
+            exact[i, m] = coal.distance(check._geoms[a], tf[a], gb, tb, coal.DistanceRequest(), coal.DistanceResult())
+    asked = []
+    pair = MeshDistance._pair
+    monkeypatch.setattr(MeshDistance, "_pair", lambda self, *a: asked.append(1) or pair(self, *a))
+    r, J, d = md.rows_at(q, margin)
+    near = exact < margin
+    assert len(asked) == near.sum() > 0  # the distance query of the near pairs only
+    apart = near & (exact > 1e-9)
+    np.testing.assert_allclose(d[apart], exact[apart], atol=1e-6)
+    np.testing.assert_allclose(r[apart], margin - exact[apart], atol=1e-6)
+    assert (d[~near] >= margin).all() and (r[~near] == 0).all() and (J[~near] == 0).all()
+    np.testing.assert_array_equal(d.min(1) <= 1e-9, check.collides(q, world))

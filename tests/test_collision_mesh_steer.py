@@ -50,3 +50,31 @@ def test_target_refused_by_the_spheres_is_found_with_the_meshes(refused_target):
     off = solver.solve(T)
     assert not off.success[0]
     assert not nik.IKSolver(robot, world=world, mesh_verdict=False).solve(T).success[0]  # the spheres judging
+
+
+def test_mesh_step_from_a_free_start_off_the_goal_ends_at_its_first_answer(refused_target, monkeypatch):
+    """A start free on the meshes but 1-2 cm off the pose (the sphere re-solve's compromise): the mesh step reaches
+    the goal with the rows at margin 0 and stops at its first iterate on the goal and free (a few coal evaluations,
+    not a descent to the margin's minimum and another from there), judged by an independent coal check."""
+    from nik.collision.mesh_distance import MeshDistance
+    from nik.ik.collide import CollideCfg, setup
+    from nik.ik.collide.mesh_step import MeshStep, mesh_step
+    from nik.ik.model import model_of
+
+    robot, T, world, meshes = refused_target
+    plan = nik.IKSolver(robot, world=world).plan()
+    model = model_of(robot, plan.lm_cfg)
+    step = MeshStep(plan, setup(robot, world, None, "auto"), CollideCfg(), False, model.lo32, model.hi32)
+    q_star = np.array([[-0.386, -0.335, 1.614, -2.512, 0.547, 1.668, -0.916]])
+    evaluations = []
+    rows_at = MeshDistance.rows_at
+    monkeypatch.setattr(MeshDistance, "rows_at", lambda self, Q, m: evaluations.append(m) or rows_at(self, Q, m))
+    for j, delta in ((0, -0.02), (3, 0.01), (6, -0.01)):
+        start = q_star.copy()
+        start[0, j] += delta
+        assert not meshes.collides(start, world)[0]
+        evaluations.clear()
+        q, ok = mesh_step(robot, step, T, start, start)
+        assert ok[0] and not meshes.collides(q, world)[0]
+        assert plan.tol_pos >= float(np.linalg.norm(robot.fk(q)[0, :3, 3] - T[0, :3, 3]))
+        assert len(evaluations) <= 4 and set(evaluations) == {0.0}  # measured: 2-3 (7-8 through the margin first)

@@ -277,3 +277,37 @@ def test_an_answer_only_the_spheres_call_colliding_succeeds(builtin_panda, terms
     assert judged.success[0] and judged.collision_free[0] and judged.collisions[0] is None
     assert not mesh.collides(judged.q, world)[0] and collides(robot, judged.q, world)[0]
     assert judged.pos_err[0] <= 1e-3
+
+
+def test_mesh_check_asks_coal_only_about_pairs_whose_bounding_spheres_meet(panda_meshes, monkeypatch):
+    """The broad phase of MeshCheck.collides / collision_names: the same verdict and names as coal asked about every
+    checked pair and every moving link against every obstacle, with far fewer coal queries."""
+    from nik.collision.meshcheck import MeshCheck
+
+    robot, urdf, _ = panda_meshes
+    rot = np.eye(4)
+    rot[:3, :3] = [[0.8, -0.6, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]]  # a box turned about z
+    rot[:3, 3] = [0.35, -0.3, 0.35]
+    world = (nik.World().add_box([0.4, 0.0, -0.05], [1.2, 1.2, 0.1]).add_box(rot, [0.3, 0.1, 0.2])
+             .add_sphere([0.0, 0.45, 0.5], 0.1).add_capsule([0.5, 0.3, 0.2], [0.3, 0.5, 0.7], 0.05))  # fmt: skip
+    check = _coal(robot, urdf)
+    q = robot.sample(60, generator=torch.Generator().manual_seed(7), dtype=torch.float64).numpy()
+    obstacles = check._world_geoms(world)
+    every, names = [], []
+    for x in q:  # the reference: coal on every pair, every link and obstacle
+        tf = check._transforms(x)
+        pairs = [f"{check.links[a]}|{check.links[b]}" for a, b in check.pairs
+                 if check._hit(check._geoms[a], tf[a], check._geoms[b], tf[b])]  # fmt: skip
+        links = [f"{check.links[k]}|{name}" for k, g in enumerate(check._geoms) if check.frames[k] > 0
+                 for og, ot, name in obstacles if check._hit(g, tf[k], og, ot)]  # fmt: skip
+        every.append(bool(pairs or links))
+        names.append(sorted(pairs + links) or None)
+    asked = []
+    hit = MeshCheck._hit
+    monkeypatch.setattr(MeshCheck, "_hit", lambda self, *a: asked.append(1) or hit(self, *a))
+    verdict = check.collides(q, world)
+    assert 0 < verdict.sum() < len(q)
+    np.testing.assert_array_equal(verdict, every)
+    free = int((~verdict).sum())  # a free configuration asks every pair and link the broad phase leaves
+    assert len(asked) < 0.5 * free * (len(check.pairs) + sum(f > 0 for f in check.frames) * len(obstacles))
+    assert check.collision_names(q, world) == names

@@ -65,20 +65,12 @@ def blocked_targets(
     The halving (``depth`` 4: pieces down to 1/16 of a step) proves a swept link that collides at every value by
     less than one step's motion (measured on the same scene: one more target on seed 2); ``depth=0`` is the plain
     sweep."""
-    from nik.kernels.collision import blocked_poses, hand_lever
+    from nik.kernels.collision import blocked_poses
 
     if depth < 0:
         raise ValueError(f"blocked_targets: depth must be >= 0 (halvings of a step), got {depth}")
     (G, joints), rest = kernel_arguments(robot, model, world, self_collision=self_collision)
-    spheres, frames, n = rest[0].spheres, rest[0].sphere_frame, joints.shape[0]
-    tool = G[n][:3, 3]
-    hand = float(hand_lever(G, spheres, frames))
-    levers = [hand]
-    if n >= 2:  # frame n - 1 turns about the tool's last joint: bounded by its distance to that frame's origin
-        inv = np.linalg.inv(G[n - 1])
-        wrist = spheres[frames == n - 1, :3] @ inv[:3, :3].T + inv[:3, 3]
-        levers += list(np.linalg.norm(wrist, axis=1) + np.linalg.norm(tool))
-    lever = float(max(levers))
+    hand, lever = _levers(robot, model, G, rest[0])
     Tn = np.ascontiguousarray(np.asarray(T, dtype=np.float64).reshape(-1, 4, 4))
     out = np.empty(len(Tn), dtype=np.bool_)
     blocked_poses(G, joints, Tn, *rest, float(tol_pos + tol_rot * hand), 0, 0, out)  # the fixed rows alone
@@ -89,6 +81,27 @@ def blocked_targets(
         blocked_poses(G, joints, Tr, *rest, float(tol_pos + tol_rot * lever), int(samples), int(depth), more)
         out[rest_idx] = more
     return out
+
+
+def _levers(robot, model, G, arm) -> tuple[float, float]:
+    """``(hand, sweep)`` levers of :func:`blocked_targets` (metres; its docstring), kept on the robot per model (they
+    depend on the chain and the spheres only)."""
+    from nik.kernels.collision import hand_lever
+
+    memo = robot.__dict__.setdefault("_blocked_levers", {})
+    got = memo.get(id(model))
+    if got is not None and got[0] is model:
+        return got[1]
+    spheres, frames, n = arm.spheres, arm.sphere_frame, G.shape[0] - 1
+    tool = G[n][:3, 3]
+    hand = float(hand_lever(G, spheres, frames))
+    levers = [hand]
+    if n >= 2:  # frame n - 1 turns about the tool's last joint: bounded by its distance to that frame's origin
+        inv = np.linalg.inv(G[n - 1])
+        wrist = spheres[frames == n - 1, :3] @ inv[:3, :3].T + inv[:3, 3]
+        levers += list(np.linalg.norm(wrist, axis=1) + np.linalg.norm(tool))
+    memo[id(model)] = (model, (hand, float(max(levers))))
+    return hand, float(max(levers))
 
 
 def collision_names_compiled(robot, q, world=None, *, model=None, self_collision: bool = True) -> list:

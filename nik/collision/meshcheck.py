@@ -2,8 +2,10 @@
 
 :class:`MeshCheck` places every link's collision geometry (:func:`nik.collision.urdf.urdf_bodies`; meshes as
 they are, curved primitives by the polyhedra around them) with nik's frames and asks coal, pair by pair and
-against the world's spheres, boxes and capsules, whether anything overlaps. It shares no distance code with
-the sphere model, so tests and ``benchmarks/collisions.py`` compare the two verdicts. ``pip install
+against the world's spheres, boxes and capsules, whether anything overlaps; a broad phase first (a sphere around
+each link's mesh and each obstacle) leaves out the pairs too far apart to touch, so coal is asked about a few pairs
+of a configuration, not every one. It shares no distance code with the sphere model, so tests and
+``benchmarks/collisions.py`` compare the two verdicts. ``pip install
 'nik-ik[collision-check]'`` (coal); without it, constructing one is a one-line ``ImportError``.
 
 :func:`mesh_check` is the one the solver's mesh verdict uses (``IKSolver(mesh_verdict=)``, :mod:`nik.ik.collide`):
@@ -53,7 +55,7 @@ class MeshCheck:
         bodies = urdf_bodies(robot, urdf)
         self.links = [b.name for b in bodies]
         self.frames = [b.frame for b in bodies]
-        self._geoms = []
+        self._geoms, self._bounds = [], []  # each link's mesh, and a sphere around it (its frame: centre, radius)
         for b in bodies:
             v = b.triangles.reshape(-1, 3)
             f = np.arange(len(v), dtype=np.int64).reshape(-1, 3)
@@ -63,6 +65,8 @@ class MeshCheck:
             m.addTriangles(f)
             m.endModel()
             self._geoms.append(m)
+            c = (v.min(0) + v.max(0)) / 2 if len(v) else np.zeros(3)
+            self._bounds.append((c, float(np.sqrt(((v - c) ** 2).sum(1).max())) if len(v) else 0.0))
         self.pairs = [
             (a, b)
             for a in range(len(bodies))
@@ -78,6 +82,38 @@ class MeshCheck:
 
         F = frames_at(self.robot, np.asarray(q, dtype=np.float64))
         return [self._coal.Transform3s(F[k][:3, :3].copy(), F[k][:3, 3].copy()) for k in self.frames]
+
+    def _broad(self, obstacles):
+        """The fixed arrays of :meth:`_near` for ``obstacles`` (:meth:`_world_geoms`): the link spheres' centres in
+        their frames and radii, the checked pairs' index arrays, the obstacles' centres and radii."""
+        local = np.array([c for c, _ in self._bounds]).reshape(-1, 3)
+        radius = np.array([r for _, r in self._bounds])
+        pa = np.array([a for a, _ in self.pairs], dtype=np.int64)
+        pb = np.array([b for _, b in self.pairs], dtype=np.int64)
+        oc = np.array([np.asarray(ot.getTranslation()) for _, ot, _ in obstacles]).reshape(-1, 3)
+        orot = np.array([np.asarray(ot.getRotation()) for _, ot, _ in obstacles]).reshape(-1, 3, 3)
+        shape = np.array([_core(og) for og, _, _ in obstacles]).reshape(-1, 4)  # half extents and rounding
+        moving = np.array([f > 0 for f in self.frames], dtype=bool)
+        return local, radius, pa, pb, (oc, orot, shape), moving
+
+    def _near(self, tf, broad) -> tuple[np.ndarray, list]:
+        """The broad phase for one configuration placed by ``tf`` (``broad``: :meth:`_broad`): ``(pairs, links)``,
+        the indices into :attr:`pairs` whose links' bounding spheres overlap and the ``(link, obstacle)`` index pairs
+        whose link's bounding sphere reaches the obstacle (its exact distance from the sphere's centre: a sphere,
+        a box, a capsule; the fixed base never: as nik's model): the only ones that can touch, so the only ones coal
+        is asked about."""
+        local, radius, pa, pb, (oc, orot, shape), moving = broad
+        R = np.array([t.getRotation() for t in tf])
+        centre = np.einsum("kij,kj->ki", R, local) + np.array([t.getTranslation() for t in tf])
+        gap = np.sqrt(((centre[pa] - centre[pb]) ** 2).sum(1)) - radius[pa] - radius[pb]
+        pairs = np.flatnonzero(gap <= 0.0)
+        links = []
+        if len(oc):
+            p = np.abs(np.einsum("oji,koj->koi", orot, centre[:, None, :] - oc[None]))  # in each obstacle's frame
+            out = np.maximum(p - shape[None, :, :3], 0.0)
+            gap = np.sqrt((out**2).sum(2)) - shape[None, :, 3] - radius[:, None]
+            links = list(zip(*np.nonzero((gap <= 0.0) & moving[:, None]), strict=True))
+        return pairs, links
 
     def _hit(self, g1, t1, g2, t2) -> bool:
         res = self._coal.CollisionResult()
@@ -124,16 +160,14 @@ class MeshCheck:
         Q = np.asarray(Q, dtype=np.float64).reshape(-1, self.robot.dof)
         obstacles = self._world_geoms(world) if world is not None else []
         out = np.zeros(len(Q), dtype=bool)
+        broad = self._broad(obstacles)
         for i, q in enumerate(Q):
             tf = self._transforms(q)
-            hit = self_collision and any(self._hit(self._geoms[a], tf[a], self._geoms[b], tf[b]) for a, b in self.pairs)
+            pairs, links = self._near(tf, broad)
+            hit = self_collision and any(self._hit(self._geoms[a], tf[a], self._geoms[b], tf[b])
+                                         for a, b in (self.pairs[j] for j in pairs))  # fmt: skip
             if not hit:
-                hit = any(
-                    self._hit(g, tf[k], og, ot)
-                    for k, g in enumerate(self._geoms)
-                    if self.frames[k] > 0  # the fixed base: as nik's model
-                    for og, ot, _ in obstacles
-                )
+                hit = any(self._hit(self._geoms[k], tf[k], *obstacles[o][:2]) for k, o in links)
             out[i] = hit
         return out
 
@@ -143,14 +177,32 @@ class MeshCheck:
         Q = np.asarray(Q, dtype=np.float64).reshape(-1, self.robot.dof)
         obstacles = self._world_geoms(world) if world is not None else []
         out = []
+        broad = self._broad(obstacles)
         for q in Q:
             tf = self._transforms(q)
-            names = [f"{self.links[a]}|{self.links[b]}" for a, b in self.pairs if self_collision
+            pairs, links = self._near(tf, broad)
+            names = [f"{self.links[a]}|{self.links[b]}" for a, b in (self.pairs[j] for j in pairs) if self_collision
                      and self._hit(self._geoms[a], tf[a], self._geoms[b], tf[b])]  # fmt: skip
-            names += [f"{self.links[k]}|{name}" for k, g in enumerate(self._geoms) if self.frames[k] > 0
-                      for og, ot, name in obstacles if self._hit(g, tf[k], og, ot)]  # fmt: skip
+            names += [f"{self.links[k]}|{obstacles[o][2]}" for k, o in links
+                      if self._hit(self._geoms[k], tf[k], *obstacles[o][:2])]  # fmt: skip
             out.append(sorted(names) or None)
         return out
+
+
+def _core(geom) -> tuple[float, float, float, float]:
+    """``(hx, hy, hz, r)``: the obstacle ``geom`` (coal's Sphere, Box or Capsule, centred on its transform) as the
+    points within ``r`` of the box of half extents ``h`` in its frame, so that a point's distance to it is
+    ``|max(|p| - h, 0)| - r`` (a sphere: ``h = 0``; a box: ``r = 0``; a capsule: ``h = (0, 0, half length)``);
+    anything else: everywhere (``r`` infinite)."""
+    name = type(geom).__name__
+    if name == "Sphere":
+        return 0.0, 0.0, 0.0, float(geom.radius)
+    if name == "Box":
+        hx, hy, hz = (float(x) for x in np.asarray(geom.halfSide).reshape(3))
+        return hx, hy, hz, 0.0
+    if name == "Capsule":
+        return 0.0, 0.0, float(geom.halfLength), float(geom.radius)
+    return 0.0, 0.0, 0.0, float("inf")
 
 
 def fitted_urdf(model) -> Path | None:

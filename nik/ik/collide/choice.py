@@ -107,10 +107,16 @@ class Setup:
         return out
 
     def arguments(self, robot):
-        """``(G, joints), rest``: :func:`nik.collision.compiled.kernel_arguments`."""
+        """``(G, joints), rest``: :func:`nik.collision.compiled.kernel_arguments`, built once per call's check (the
+        stage asks for them at each step: 20-50 us a time) and again only after the world changed."""
         from nik.collision.compiled import kernel_arguments
 
-        return kernel_arguments(robot, self.model, self.world, self_collision=self.self_on)
+        version = None if self.world is None else self.world.version
+        got = self.__dict__.get("_arguments")  # a frozen dataclass: the memo lives in the instance's dict
+        if got is None or got[0] is not robot or got[1] != version:
+            got = (robot, version, kernel_arguments(robot, self.model, self.world, self_collision=self.self_on))
+            self.__dict__["_arguments"] = got
+        return got[2]
 
 
 def attached_model(robot):

@@ -6,12 +6,18 @@ spheres (a hand that must pass within a few centimetres of an obstacle, a tight 
 the sphere re-solve. For those targets :func:`mesh_step` solves the problem of the call's pose term (the classic
 pose or ``bounds=``) and the mesh rows (:func:`nik.costs.mesh.mesh_collision`: coal's distances and nearest points
 of each near link pair, ``max(0, margin - d)`` with its Jacobian) with the torch LM of
-:func:`nik.lm.problem.solve_problem`, from the sphere re-solve's answer, the call's own answer, then the closed
-form's branches or the network's hypotheses (:func:`nik.ik.collide.starts._starts`), each with the rows at the
-stage's margin, then once more at margin 0 from where that ended (a goal nearer an obstacle than the margin). An
-answer is kept only where the meshes call it free at margin 0 and the goal's check passes, on the answer as it is
-returned (float32 answers rounded and clamped first). Cost: a few coal queries per near pair and LM iteration,
-about 0.05-0.5 s a refused target on a 7-joint arm (only those pay it).
+:func:`nik.lm.loop.lm_loop` (:func:`_descend`), from the sphere re-solve's answer, the call's own answer, then the
+closed form's branches or the network's hypotheses (:func:`nik.ik.collide.starts._starts`). From each start: where
+the start is free on the meshes (the sphere re-solve's answer usually is: a compromise held off the goal by the
+spheres' overreach), the rows at margin 0 first (a few iterations reach the goal); then the rows at the stage's
+margin, then once more at margin 0 from where that ended (a goal nearer an obstacle than the margin). Each descent
+stops at its first iterate within the goal's tolerance and free on the meshes (the same coal queries as its rows),
+as the compiled collision LM does. An answer is kept only where the meshes call it free at margin 0 and the goal's
+check passes, on the answer as it is returned (float32 answers rounded and clamped first). Cost: one coal collision
+query per pair whose bounding spheres are near and one distance query per pair within the margin, per LM
+iteration (:class:`nik.collision.mesh_distance.MeshDistance`): about 5 ms a refused target on the panda and the
+xarm7 in ``benchmarks/collision_feasible.py``'s scenes, up to 0.2-0.4 s where most starts must be tried (only
+those targets pay it).
 """
 
 from __future__ import annotations
@@ -101,7 +107,7 @@ def mesh_step(robot, step: MeshStep, T: np.ndarray, first: np.ndarray, own: np.n
     not)."""
     from nik.costs.mesh import MeshCollisionTerm
     from nik.ik.collide.starts import _starts
-    from nik.lm.problem import ProblemCfg, solve_problem
+    from nik.lm.problem import ProblemCfg
 
     plan, s, cfg = step.plan, step.s, step.cfg
     k = T.shape[0]
@@ -109,8 +115,8 @@ def mesh_step(robot, step: MeshStep, T: np.ndarray, first: np.ndarray, own: np.n
     distance = _distance(s)
     term = MeshCollisionTerm(distance, s.world, s.self_on, cfg.margin, cfg.weight)
     flush = MeshCollisionTerm(distance, s.world, s.self_on, 0.0, cfg.weight)
-    problems = [_problem(robot, plan, Tt, term), _problem(robot, plan, Tt, flush)]
-    lm = ProblemCfg(iters=cfg.iters)
+    margin_p, flush_p = _problem(robot, plan, Tt, term), _problem(robot, plan, Tt, flush)
+    lm = ProblemCfg(iters=cfg.iters, accept="decrease_or_done")
     hyp, count = _starts(robot, plan, T, first)
     starts = [first, own] + [np.where((count > h)[:, None], hyp[:, h], first) for h in range(1, 1 + HYPOTHESES)
                              if h < hyp.shape[1]]  # fmt: skip
@@ -119,16 +125,50 @@ def mesh_step(robot, step: MeshStep, T: np.ndarray, first: np.ndarray, own: np.n
         todo = ~ok
         if not todo.any():
             break
-        x = torch.from_numpy(np.ascontiguousarray(start, dtype=np.float64))
-        for problem in problems:  # the margin's rows, then margin 0 from where they ended
-            act = torch.from_numpy(todo)
-            x = solve_problem(problem, x, active=act, cfg=lm).x
+        x0 = torch.from_numpy(np.ascontiguousarray(start, dtype=np.float64))
+        x = x0
+        free = todo.copy()  # margin 0 first from a start free on the meshes (off the goal: a few iterations reach it)
+        free[todo] = ~s.mesh.collides(start[todo], s.world, self_collision=s.self_on)
+        # then the margin's rows from the start, then margin 0 from where they ended (a goal nearer an obstacle than
+        # the margin)
+        for problem, origin, rows in ((flush_p, True, free), (margin_p, True, None), (flush_p, False, None)):
+            rows = todo if rows is None else rows & todo
+            if not rows.any():
+                continue
+            x = _descend(problem, x0 if origin else x, torch.from_numpy(rows), lm)
             qx = _returned(step, x.numpy())
-            won = todo & _accepted(robot, step, problems[0], Tt, qx)
+            won = todo & _accepted(robot, step, margin_p, Tt, qx)
             q[won], ok[won], todo = qx[won], True, todo & ~won
             if not todo.any():
                 break
     return q, ok
+
+
+def _descend(problem, x0: torch.Tensor, active: torch.Tensor, cfg) -> torch.Tensor:
+    """``(k, n)``: the LM of :func:`nik.lm.loop.lm_loop` on ``problem`` (the goal term, then the mesh rows) from
+    ``x0: (k, n)`` on the rows ``active``, each ending at its first iterate that is **done**: within the goal's
+    tolerance and free on the meshes (every distance above 0, from the same coal queries as its rows), as the
+    compiled collision LM does (the margin rows pull on past that point where the goal lies nearer an obstacle than
+    the margin, to a compromise off the goal). The rows that start done stay where they are."""
+    from nik.lm.loop import Box, Eval, lm_loop
+    from nik.threads import threads_for
+
+    goal, mesh = problem.terms
+    lo, hi, wrap = problem.box(x0)
+
+    def evaluate(xq, rows):
+        xv = xq[:, 0]
+        rg, Jg = goal.evaluate(xv)
+        rm, Jm, d = mesh.distance.rows_at(xv.detach().cpu().numpy(), mesh.margin)
+        r = torch.cat([goal.weight * rg, mesh.weight * torch.from_numpy(rm).to(xv)], 1)
+        J = torch.cat([goal.weight * Jg, mesh.weight * torch.from_numpy(Jm).to(xv)], 1)
+        free = torch.from_numpy((d > 1e-9).all(1) if d.shape[1] else np.ones(len(d), dtype=bool))
+        done = goal.check(xv) & free.to(xv.device)
+        return Eval(-r[:, None], J[:, None], (r * r).sum(-1)[:, None], done[:, None])
+
+    with threads_for(x0.shape[0]):  # one thread for a few targets (the ops are small), as solve_problem
+        run = lm_loop(evaluate, x0[:, None], Box(lo, hi, wrap, problem.project), cfg, active=active, compact=False)
+    return run.q
 
 
 def _returned(step: MeshStep, q: np.ndarray) -> np.ndarray:
