@@ -226,7 +226,7 @@ def train_network(cfg: TrainCfg, *, log=None) -> TrainResult:
     if not 0.0 <= share < 1.0:
         raise ValueError(f"--single-pose-share must be in [0, 1), got {cfg.single_pose_share}")
     share = 0.0 if cfg.single_pose else share
-    result = _train(replace(cfg, minutes=cfg.minutes * (1.0 - share)), robot, write)
+    result = _train(replace(cfg, minutes=cfg.minutes * (1.0 - share)), robot, write, cfg.minutes)
     if share > 0:
         _single_pose_companion(cfg, robot, result, write)
     name = result.run_dir.name
@@ -271,14 +271,15 @@ def _single_pose_companion(cfg: TrainCfg, robot: Robot, main: TrainResult, write
         cfg, minutes=minutes, name=name, out=str(out), hidden=SINGLE_POSE_HIDDEN, single_pose=True, install=False,
         evaluate=False, resume=cfg.resume and (Path(cfg.runs) / name / "last.ckpt").is_file(),
     )  # fmt: skip
-    one = _train(one_cfg, robot, write)
+    one = _train(one_cfg, robot, write, cfg.minutes)
     link_single_pose(main.out, one.out)
     main.single_pose = one.out
     main.single_pose_note = f"single-pose network {one.out.name} ({one.wall_s / 60:.1f} min, {one.steps} steps)"
 
 
-def _train(cfg: TrainCfg, robot: Robot, write) -> TrainResult:
-    """Train, export and record one network of ``cfg`` (module docstring, 1-6); no install, no evaluation."""
+def _train(cfg: TrainCfg, robot: Robot, write, budget: float) -> TrainResult:
+    """Train, export and record one network of ``cfg`` within ``cfg.minutes`` (module docstring, 1-6), the command's
+    whole budget being ``budget`` minutes (both recorded); no install, no evaluation."""
     name = cfg.name or robot.name
     if not name or Path(name).name != name:
         raise ValueError(f"--name must be a plain name, got {name!r}")
@@ -350,7 +351,8 @@ def _train(cfg: TrainCfg, robot: Robot, write) -> TrainResult:
         "data": data,
         "data_sha256": data_sha256(data, robot.definition_hash),
         "kind_choice": why,
-        "minutes_budget": cfg.minutes,
+        "minutes_budget": budget,
+        "minutes_network": cfg.minutes,
         "steps": int(trainer.global_step),
         "counters": counters,
         "seed": cfg.seed,
