@@ -349,7 +349,7 @@ def _has_collision(path: Path) -> bool:
     return b"<collision" in path.read_bytes()
 
 
-def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress=None):
+def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress=None, grid_pitch=None):
     urdf = _urdf_of(robot) if source in (None, "urdf") else None
     if source == "urdf" and (urdf is None or not _has_collision(urdf)):
         raise ValueError(f"robot {robot.name!r}: no URDF with <collision> geometry to fit spheres to")
@@ -361,7 +361,7 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, pro
         for i, b in enumerate(bodies):
             if progress is not None:
                 progress.say(f"fitting spheres to link {i + 1} of {len(bodies)} ({b.name})")
-            fits.append(_fit_link(b, tolerance, max_spheres, seed))
+            fits.append(_fit_link(b, tolerance, max_spheres, seed, grid_pitch))
         spheres = [(f.centers, f.radii) for f in fits]
         return bodies, spheres, [f.gap for f in fits], [f.volume_ratio for f in fits], f"urdf:{urdf}"
     if source not in (None, "capsules"):
@@ -387,7 +387,12 @@ MORE_SPHERES = 4
 CANDIDATES = (800, 2000)
 
 
-def _fit_link(body, tolerance: float, max_spheres: int, seed: int):
+def _grid_bound(pitch: float) -> float:
+    """:attr:`nik.collision.sdf.SdfGrid.bound` of a grid of ``pitch`` metres."""
+    return float(pitch) * (math.sqrt(3) + 2 / 9)
+
+
+def _fit_link(body, tolerance: float, max_spheres: int, seed: int, grid_pitch: float | None = None):
     """The spheres of one URDF body (:func:`nik.collision.fit.fit_spheres`), tightened (choices): a body on frame
     0 (static relative to the base) may use :data:`STATIC_SPHERES` times ``max_spheres`` among
     ``CANDIDATES[1]`` centres (its spheres cost a check only where a moving link comes near: the broad phase skips
@@ -396,9 +401,20 @@ def _fit_link(body, tolerance: float, max_spheres: int, seed: int):
     the tighter fit kept. Every fit is an exact cover, so every choice stays conservative; a link still far over
     is named by :func:`_warn_overreach` (over :data:`OVERREACH_WARNING`). ``body``: a
     :class:`nik.collision.urdf.Body` (triangles ``(T, 3, 3)``, metres); returns its
-    :class:`nik.collision.fit.SphereFit`."""
+    :class:`nik.collision.fit.SphereFit`.
+
+    With ``grid_pitch``, a static body is fitted with ``max_spheres`` first: where those reach farther past it than
+    a grid of that pitch may fall short (:func:`_grid_bound`), they stay (the broad phase's bounds) and the body is
+    checked on its grid (:func:`_static_grids`); else the static budget's fit as above, the tighter kept."""
     from nik.collision.fit import fit_spheres
 
+    if body.frame == 0 and grid_pitch is not None:
+        fit = fit_spheres(body.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed,
+                          candidates=CANDIDATES[0])  # fmt: skip
+        if fit.gap > _grid_bound(grid_pitch):
+            return fit
+        more = _fit_link(body, tolerance, max_spheres, seed)
+        return more if more.gap < fit.gap else fit
     if body.frame == 0:
         budget = int(max_spheres) * STATIC_SPHERES
         return fit_spheres(body.triangles, tolerance=tolerance, max_spheres=budget, seed=seed, candidates=CANDIDATES[1])
@@ -638,7 +654,7 @@ def _static_grids(bodies, gaps, pitch, progress=None) -> dict:
     out = {}
     if pitch is None:
         return out
-    bound = float(pitch) * (math.sqrt(3) + 1 / (3 * math.sqrt(3)))  # SdfGrid.bound of that pitch
+    bound = _grid_bound(pitch)
     for i, b in enumerate(bodies):
         if b.frame != 0 or b.radius is not None or not gaps[i] > bound:
             continue
@@ -651,7 +667,7 @@ def _static_grids(bodies, gaps, pitch, progress=None) -> dict:
 
 def _fitted(robot, source, radius, tolerance, max_spheres, seed, progress=None, grid_pitch=None) -> CollisionModel:
     """The spheres of every link (no pairs yet), and the grids of the static links (:func:`_static_grids`)."""
-    found = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress)
+    found = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress, grid_pitch)
     bodies, spheres, gaps, ratios, src = found
     gaps = list(gaps)
     grids = _static_grids(bodies, gaps, grid_pitch, progress) if src.startswith("urdf:") else {}

@@ -5,17 +5,18 @@ A link that never moves relative to the base (frame 0: a torso, a pedestal, the 
 from it by at least ``v(x) - r``, ``v`` the trilinear interpolation of the grid (:func:`grid_values`), and
 outside the grid's box by the distance to the geometry's bounding box. Spheres covering a large flat face reach
 out of it by about the radius of the patch each holds; the grid does not (its bound is
-:attr:`SdfGrid.bound`, about a centimetre at the default pitch).
+:attr:`SdfGrid.bound`: 11 mm beside a flat face at the default pitch, 20 mm at worst).
 
-Conservative by construction (choices): the surface is split into triangles with edges at most ``pitch / 3``
-(:func:`nik.collision.fit.subdivide`), so every surface point lies within ``e / sqrt(3)`` of a corner; a node's
-distance to the nearest corner (a k-d tree) minus that is at most its true distance to the surface. Inside
-(negative) are the nodes that a flood from the grid's border cannot reach without crossing a node within
-``pitch / 2`` of the surface, and, of those near the surface, the ones behind the nearest triangle's outward face;
-an inside node stores minus its distance to the nearest corner (at most the true signed distance). Every node then
-loses ``pitch * sqrt(3) / 2``, the most that the interpolation of a 1-Lipschitz function overshoots it inside a
-cell (``sum_i w_i |x - c_i|`` at the cell's centre), so ``v(x)`` is at most the true signed distance at every
-``x`` of the box. A mistaken sign (an open mesh) only lowers a value: still conservative.
+Conservative by construction (choices): the surface is split into triangles with edges at most ``e = pitch / 3``
+(:func:`nik.collision.fit.subdivide`), so every surface point lies within ``2 e / 3`` of a triangle's centroid (two
+thirds of a median); a node's distance to the nearest centroid (a k-d tree) minus that is at most its true distance to
+the surface (for the nodes within :data:`BAND` of it; farther, a distance transform of the nodes nearest the centroids
+bounds it, ``pitch * sqrt(3) / 2`` lower). Inside (negative) are the nodes that a flood from the grid's border cannot
+reach without crossing a node within ``pitch / 2`` of the surface, and, of those near the surface, the ones behind the
+nearest triangle's outward face; an inside node stores minus its distance to the nearest centroid (at most the true
+signed distance). Every node then loses ``pitch * sqrt(3) / 2``, the most that the interpolation of a 1-Lipschitz
+function overshoots it inside a cell (``sum_i w_i |x - c_i|`` at the cell's centre), so ``v(x)`` is at most the true
+signed distance at every ``x`` of the box. A mistaken sign (an open mesh) only lowers a value: still conservative.
 """
 
 from __future__ import annotations
@@ -31,6 +32,10 @@ __all__ = ["GRID_PITCH", "SdfGrid", "grid_values", "grid_values_torch", "static_
 #: default pitch of the grid (metres): about 1.2 million nodes for Baxter's torso and pedestal (5 MB float32)
 GRID_PITCH = 0.01
 
+#: the nodes within this of the surface (metres) get their distance from the nearest centroid (a k-d tree); the
+#: others from a distance transform of the nodes nearest the centroids, which loses ``pitch * sqrt(3) / 2`` more
+BAND = 0.06
+
 
 @dataclass
 class SdfGrid:
@@ -41,9 +46,9 @@ class SdfGrid:
         pitch: node spacing.
         values: (nx, ny, nz) float32, each at most the true signed distance minus ``pitch * sqrt(3) / 2``.
         box: (2, 3) the geometry's bounding box (lower, upper corner): outside the grid, the distance to it.
-        bound: how far below the true signed distance a value may be: ``pitch * sqrt(3)`` (the nodes' offset and
-            the interpolation's; half of it beside a flat face, where the distance is linear) plus the sampling's
-            ``e / sqrt(3)``: what the model reports as the link's gap.
+        bound: how far below the true signed distance a value within :data:`BAND` of the surface may be:
+            ``pitch * sqrt(3)`` (the nodes' offset and the interpolation's; half of it beside a flat face, where the
+            distance is linear) plus the sampling's ``2 e / 3``: what the model reports as the link's gap.
     """
 
     origin: np.ndarray
@@ -90,23 +95,34 @@ def static_grid(triangles: np.ndarray, pitch: float = GRID_PITCH) -> SdfGrid:
     shape = tuple(int(k) for k in np.ceil((hi + 2 * pitch - origin) / pitch).astype(int) + 1)
     edge = pitch / 3
     fine = subdivide(tri, edge)
-    corners = fine.reshape(-1, 3)
-    owner = np.repeat(np.arange(len(fine)), 3)
+    centres = fine.mean(axis=1)
+    sampling = 2 * edge / 3
+    half_cell = pitch * math.sqrt(3) / 2
+    # the band near the surface: nodes within BAND of an occupied node (one nearest to a centroid), exact there
+    occupied = np.zeros(shape, dtype=bool)
+    at = np.rint((centres - origin) / pitch).astype(np.int64)
+    occupied[at[:, 0], at[:, 1], at[:, 2]] = True
+    apart = ndimage.distance_transform_edt(~occupied).ravel() * pitch
+    band = apart <= BAND
     axes = [origin[k] + pitch * np.arange(shape[k]) for k in range(3)]
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    near, idx = cKDTree(corners).query(nodes, workers=1)
-    sampling = edge / math.sqrt(3)
-    shell = (near <= pitch / 2 + sampling).reshape(shape)  # every grid edge crossing the surface has such an end
+    near = apart + half_cell  # beyond the band: a centroid within this (an upper bound of the distance)
+    low = np.maximum(apart - half_cell - sampling, 0.0)  # ... and the distance at least this
+    idx = np.zeros(len(nodes), dtype=np.int64)
+    near[band], idx[band] = cKDTree(centres).query(nodes[band], workers=1)
+    low[band] = np.maximum(near[band] - sampling, 0.0)
+    shell = (band & (near <= pitch / 2 + sampling)).reshape(shape)  # every grid edge crossing the surface has one
     labels, _ = ndimage.label(~shell)
     border = np.unique(np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(),
                                        labels[:, :, [0, -1]].ravel()]))  # fmt: skip
     inside = ~np.isin(labels, border[border > 0]) & ~shell
-    t = fine[owner[idx]]
+    s = shell.ravel()
+    t = fine[idx[s]]
     normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    behind = (np.einsum("ij,ij->i", nodes - corners[idx], normal) < 0).reshape(shape)
-    inside |= shell & behind
-    flat_inside = inside.ravel()
-    signed = np.where(flat_inside, -near, np.maximum(near - sampling, 0.0))
+    behind = np.zeros(len(nodes), dtype=bool)
+    behind[s] = np.einsum("ij,ij->i", nodes[s] - centres[idx[s]], normal) < 0
+    inside |= shell & behind.reshape(shape)
+    signed = np.where(inside.ravel(), -near, low)
     interp = pitch * math.sqrt(3) / 2
     values = (signed - interp).reshape(shape)
     values32 = values.astype(np.float32)
