@@ -73,9 +73,9 @@ class CollisionModel:
         volume_ratios: (L,) sphere volume over geometry volume per link.
         source: ``"urdf:PATH"`` or ``"capsules"``.
         options: the options it was built with.
-        grids: ``{link: SdfGrid}``, the static links (frame 0) checked on a grid of signed distances to their
-            geometry in the base frame (:mod:`nik.collision.sdf`) instead of their spheres, in every pair with
-            another link; their spheres stay (the broad phase's bounds, drawing). None or empty: spheres only.
+        grids: ``{link: SdfGrid}``, static links (frame 0) that also carry a grid of signed distances to their
+            geometry in the base frame (:mod:`nik.collision.sdf`): the row of a pair with such a link is the larger
+            of the spheres' and the grid's (both lower bounds of the distance). None or empty: spheres only.
     """
 
     robot_hash: str
@@ -349,7 +349,7 @@ def _has_collision(path: Path) -> bool:
     return b"<collision" in path.read_bytes()
 
 
-def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress=None, grid_pitch=None):
+def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress=None):
     urdf = _urdf_of(robot) if source in (None, "urdf") else None
     if source == "urdf" and (urdf is None or not _has_collision(urdf)):
         raise ValueError(f"robot {robot.name!r}: no URDF with <collision> geometry to fit spheres to")
@@ -361,7 +361,7 @@ def _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, pro
         for i, b in enumerate(bodies):
             if progress is not None:
                 progress.say(f"fitting spheres to link {i + 1} of {len(bodies)} ({b.name})")
-            fits.append(_fit_link(b, tolerance, max_spheres, seed, grid_pitch))
+            fits.append(_fit_link(b, tolerance, max_spheres, seed))
         spheres = [(f.centers, f.radii) for f in fits]
         return bodies, spheres, [f.gap for f in fits], [f.volume_ratio for f in fits], f"urdf:{urdf}"
     if source not in (None, "capsules"):
@@ -392,7 +392,7 @@ def _grid_bound(pitch: float) -> float:
     return float(pitch) * (math.sqrt(3) + 2 / 9)
 
 
-def _fit_link(body, tolerance: float, max_spheres: int, seed: int, grid_pitch: float | None = None):
+def _fit_link(body, tolerance: float, max_spheres: int, seed: int):
     """The spheres of one URDF body (:func:`nik.collision.fit.fit_spheres`), tightened (choices): a body on frame
     0 (static relative to the base) may use :data:`STATIC_SPHERES` times ``max_spheres`` among
     ``CANDIDATES[1]`` centres (its spheres cost a check only where a moving link comes near: the broad phase skips
@@ -401,20 +401,9 @@ def _fit_link(body, tolerance: float, max_spheres: int, seed: int, grid_pitch: f
     the tighter fit kept. Every fit is an exact cover, so every choice stays conservative; a link still far over
     is named by :func:`_warn_overreach` (over :data:`OVERREACH_WARNING`). ``body``: a
     :class:`nik.collision.urdf.Body` (triangles ``(T, 3, 3)``, metres); returns its
-    :class:`nik.collision.fit.SphereFit`.
-
-    With ``grid_pitch``, a static body is fitted with ``max_spheres`` first: where those reach farther past it than
-    a grid of that pitch may fall short (:func:`_grid_bound`), they stay (the broad phase's bounds) and the body is
-    checked on its grid (:func:`_static_grids`); else the static budget's fit as above, the tighter kept."""
+    :class:`nik.collision.fit.SphereFit`."""
     from nik.collision.fit import fit_spheres
 
-    if body.frame == 0 and grid_pitch is not None:
-        fit = fit_spheres(body.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed,
-                          candidates=CANDIDATES[0])  # fmt: skip
-        if fit.gap > _grid_bound(grid_pitch):
-            return fit
-        more = _fit_link(body, tolerance, max_spheres, seed)
-        return more if more.gap < fit.gap else fit
     if body.frame == 0:
         budget = int(max_spheres) * STATIC_SPHERES
         return fit_spheres(body.triangles, tolerance=tolerance, max_spheres=budget, seed=seed, candidates=CANDIDATES[1])
@@ -647,8 +636,10 @@ def _store(model: CollisionModel, path: Path) -> None:
 
 def _static_grids(bodies, gaps, pitch, progress=None) -> dict:
     """``{link: SdfGrid}`` for the URDF bodies on frame 0 whose spheres reach farther past their geometry than a
-    grid of ``pitch`` metres may fall short of it (:attr:`nik.collision.sdf.SdfGrid.bound`; None: no grids); their
-    ``gaps`` entries become the grid's bound. A primitive fitted tightly (a head's ball) keeps its spheres."""
+    grid of ``pitch`` metres may fall short of it (:attr:`nik.collision.sdf.SdfGrid.bound`, its worst cell; None:
+    no grids); their ``gaps`` entries become the grid's bound. Such a link keeps its spheres: a pair's row is the
+    larger of the spheres' and the grid's (both lower bounds of the distance), so the grid tightens where the
+    spheres reach out (large flat faces) and the spheres where they hold the surface closely."""
     from nik.collision.sdf import static_grid
 
     out = {}
@@ -667,7 +658,7 @@ def _static_grids(bodies, gaps, pitch, progress=None) -> dict:
 
 def _fitted(robot, source, radius, tolerance, max_spheres, seed, progress=None, grid_pitch=None) -> CollisionModel:
     """The spheres of every link (no pairs yet), and the grids of the static links (:func:`_static_grids`)."""
-    found = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress, grid_pitch)
+    found = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress)
     bodies, spheres, gaps, ratios, src = found
     gaps = list(gaps)
     grids = _static_grids(bodies, gaps, grid_pitch, progress) if src.startswith("urdf:") else {}
@@ -755,8 +746,9 @@ def collision_model(
         cache: read and write nik's cache folder.
         grid_pitch: the static links of a URDF (frame 0: a torso, a pedestal, the rest of the robot placed by
             ``joint_values=``) whose spheres reach farther past their geometry than a grid of this pitch (metres)
-            may fall short of it are checked on a grid of signed distances instead (:mod:`nik.collision.sdf`,
-            :attr:`CollisionModel.grids`); None: spheres only.
+            may fall short of it also get a grid of signed distances (:mod:`nik.collision.sdf`,
+            :attr:`CollisionModel.grids`): their pairs' rows are the larger of the spheres' and the grid's. None:
+            spheres only.
     """
     options = {
         "source": source,

@@ -11,10 +11,13 @@ them):
   sizes), ``capsules: (Nc, 7)``.
 
 Inside a kernel the groups are read by position (``arm[0]`` the spheres, ...), so a plain tuple in the same order
-works too. ``arm``'s last three fields (defaults: none) check the static links (frame 0) that carry a grid of
-signed distances (:mod:`nik.collision.sdf`) on it: a pair of such a link and another is the smallest
-``v(c_s) - r_s`` over the other link's spheres, ``v`` the grid's trilinear value (a lower bound of the distance to
-the static link's geometry), its Jacobian row the grid's gradient at the minimising sphere ``dv/dx . dc_s/dq``.
+works too. ``arm``'s last three fields (defaults: none) give the static links (frame 0) that carry a grid of
+signed distances (:mod:`nik.collision.sdf`): the row of a pair of such a link and another is the larger of the
+spheres' row and the grid's, the smallest ``v(c_s) - r_s`` over the other link's spheres (``v`` the grid's
+trilinear value, a lower bound of the distance to the static link's geometry): both are lower bounds of the
+distance between the other link's spheres and the static geometry, so the larger is one too. Its Jacobian row is
+the larger one's, for the grid its gradient at the minimising sphere ``dv/dx . dc_s/dq``. The spheres' minimum is
+skipped where the grid's row is already at least the cutoff.
 
 Rows (``R = P + L``): row ``p < P`` is the smallest ``|c_i - c_j| - r_i - r_j`` over the spheres of pair ``p``
 (``inf`` when ``self_on`` is False); row ``P + l`` is the smallest signed distance from link ``l``'s spheres
@@ -612,31 +615,23 @@ def _rows_in(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop
         if bounds[a, 3] < 0 or bounds[b, 3] < 0:
             d[p] = np.inf
             continue
+        gd, gs, k = -np.inf, -1, -1  # the grid's row of a static link on its grid: the pair's row is the larger
         ka, kb = _grid_of(arm, a), _grid_of(arm, b)
-        if ka >= 0 or kb >= 0:  # a static link on its distance grid: the other link's spheres against the grid
+        if ka >= 0 or kb >= 0:  # (both are lower bounds of the distance): the spheres only where the grid's is low
             k, mover = (ka, b) if ka >= 0 else (kb, a)
             x, y, z = Bc[mover, 0], Bc[mover, 1], Bc[mover, 2]
-            lower = -np.inf  # the link's spheres all outside the nodes: the geometry's box bounds them
-            if _grid_box_gap(arm[6], k, x, y, z, False) > bounds[mover, 3]:
-                lower = _grid_box_gap(arm[6], k, x, y, z, True) - bounds[mover, 3]
-            best, bs = np.inf, -1
-            if lower <= cutoff:
-                lower = np.inf
+            if _grid_box_gap(arm[6], k, x, y, z, False) > bounds[mover, 3]:  # all outside the nodes: the box's
+                gd = _grid_box_gap(arm[6], k, x, y, z, True) - bounds[mover, 3]
+            if gd <= cutoff:
                 _place_link(F, spheres, sphere_frame, body_start, mover, X, placed)
-                best, bs = _grid_row(X, arm, k, mover, cutoff if stop else -np.inf, g)
-                if stop and best < cutoff:
-                    d[p] = best
-                    return True
-            d[p] = min(best, lower)
-            if want_jacobian and bs >= 0 and best <= lower:
-                _grid_value(arm[6], arm[7], k, X[bs, 0], X[bs, 1], X[bs, 2], gb, True)
-                _add_point_jacobian(F, joints, sphere_frame[bs], X[bs, 0], X[bs, 1], X[bs, 2], gb[0], gb[1], gb[2],
-                                    1.0, J, p)  # fmt: skip
-            if d[p] < cutoff:
-                hit = True
-                if stop:
-                    return True
-            continue
+                gd, gs = _grid_row(X, arm, k, mover, -np.inf, g)
+            if gd >= cutoff:
+                d[p] = gd
+                if want_jacobian and gs >= 0:
+                    _grid_value(arm[6], arm[7], k, X[gs, 0], X[gs, 1], X[gs, 2], gb, True)
+                    _add_point_jacobian(F, joints, sphere_frame[gs], X[gs, 0], X[gs, 1], X[gs, 2], gb[0], gb[1],
+                                        gb[2], 1.0, J, p)  # fmt: skip
+                continue
         dx, dy, dz = Bc[a, 0] - Bc[b, 0], Bc[a, 1] - Bc[b, 1], Bc[a, 2] - Bc[b, 2]
         lower = math.sqrt(dx * dx + dy * dy + dz * dz) - bounds[a, 3] - bounds[b, 3]
         best, bi, bj = np.inf, -1, -1
@@ -687,10 +682,16 @@ def _rows_in(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop
                     if reach > 0 and sq < reach * reach:
                         best, bi, bj = math.sqrt(sq) - spheres[i, 3] - spheres[j, 3], i, j
                         if stop and best < cutoff:
-                            d[p] = best
+                            d[p] = max(best, gd)
                             return True
         d[p] = min(best, lower)
-        if want_jacobian and bi >= 0 and best <= lower:
+        if k >= 0 and gd > d[p]:
+            d[p] = gd
+            if want_jacobian and gs >= 0:
+                _grid_value(arm[6], arm[7], k, X[gs, 0], X[gs, 1], X[gs, 2], gb, True)
+                _add_point_jacobian(F, joints, sphere_frame[gs], X[gs, 0], X[gs, 1], X[gs, 2], gb[0], gb[1], gb[2],
+                                    1.0, J, p)  # fmt: skip
+        elif want_jacobian and bi >= 0 and best <= lower:
             dx, dy, dz = X[bi, 0] - X[bj, 0], X[bi, 1] - X[bj, 1], X[bi, 2] - X[bj, 2]
             nn = math.sqrt(dx * dx + dy * dy + dz * dz)
             if nn > 0:
@@ -842,29 +843,34 @@ def _pair_row(X, F, bounds, arm, a, b, c, cb, cut, below):
     """The row of links ``a`` and ``b``: exact where at most ``cut``, else a lower bound above it (their bounding
     spheres' distance); returned as soon as it is below ``below``."""
     spheres, sphere_frame, body_start = arm[0], arm[1], arm[2]
+    gd = -np.inf
     ka, kb = _grid_of(arm, a), _grid_of(arm, b)
-    if ka >= 0 or kb >= 0:  # a static link on its distance grid (as in _rows_in)
+    if ka >= 0 or kb >= 0:  # a static link on its distance grid: the larger of its row and the spheres' (_rows_in)
         k, mover = (ka, b) if ka >= 0 else (kb, a)
         rm = _link_bound(F, bounds, sphere_frame, body_start, mover, c)
         if _grid_box_gap(arm[6], k, c[0], c[1], c[2], False) > rm:
-            lower = _grid_box_gap(arm[6], k, c[0], c[1], c[2], True) - rm
-            if lower > cut:
-                return lower
-        return _grid_row(X, arm, k, mover, below, cb)[0]
+            gd = _grid_box_gap(arm[6], k, c[0], c[1], c[2], True) - rm
+            if gd > cut:
+                return gd
+        gd = _grid_row(X, arm, k, mover, -np.inf, cb)[0]
+        if gd > cut:
+            return gd
+        if gd >= below:
+            below = -np.inf  # the pair's row is at least the grid's: the spheres' exact minimum decides
     ra = _link_bound(F, bounds, sphere_frame, body_start, a, c)
     rb = _link_bound(F, bounds, sphere_frame, body_start, b, cb)
     dx, dy, dz = c[0] - cb[0], c[1] - cb[1], c[2] - cb[2]
     lower = math.sqrt(dx * dx + dy * dy + dz * dz) - ra - rb
     if lower > cut:
-        return lower
+        return max(lower, gd)
     best = np.inf
     for i in range(body_start[a], body_start[a + 1]):
         for j in range(body_start[b], body_start[b + 1]):
             dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
             best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
             if best < below:
-                return best
-    return best
+                return max(best, gd)
+    return max(best, gd)
 
 
 @kernel
