@@ -121,8 +121,9 @@ def report(rows: list[dict], command: str, samples: int) -> str:
         out.append(f"- {r['name']}: {wide}")
     out += [
         "",
-        "Static links checked on a grid of signed distances instead of their spheres (the model's `grids`:",
-        "pitch, nodes, memory, and the most a value may fall short of the true distance, the link's gap):",
+        "Static links that also carry a grid of signed distances (the model's `grids`: a pair's row is the larger",
+        "of the spheres' and the grid's; pitch, nodes, memory, and the most a value may fall short of the true",
+        "distance, the link's gap):",
         "",
     ]
     for r in rows:
