@@ -104,6 +104,10 @@ def test_touching_the_plate_collides_and_15_mm_above_its_face_is_free(plate):
     assert collides(robot, torch.as_tensor(q), model=model, compiled=False).tolist() == [True, False, False]
     spheres_only = collision_model(robot, grid_pitch=None)
     assert collides(robot, q, model=spheres_only).tolist() == [True, True, False]  # the plate's spheres reach out
+    g = torch.Generator().manual_seed(2)
+    qs = torch.rand(200, 2, generator=g, dtype=torch.float64) * torch.tensor([0.2, 6.0]) + torch.tensor([0.0, -3.0])
+    with_grid, without = signed_distances(robot, qs, model=model), signed_distances(robot, qs, model=spheres_only)
+    assert (with_grid >= without).all() and (with_grid > without + 0.005).any()  # the larger of two lower bounds
 
 
 def test_compiled_rows_and_jacobian_match_torch_and_finite_differences_on_a_grid(plate):
