@@ -14,7 +14,8 @@ Robots: ``panda`` (nik's built-in, its shipped model fitted to the vendor's mesh
 (example-robot-data's panda URDF, ``end_link="panda_hand"``: a model fitted by ``collision_model``), ``baxter``
 (example-robot-data's Baxter, ``root_link="torso"``, ``end_link="right_hand_link"``, its SRDF found by search).
 Also printed: each model's spheres, fit time (``--no-cache``: fitted now, else nik's cache may answer), and the
-links whose spheres reach more than 2 cm past their meshes (the model's ``gaps``). Extras ``collision-check``
+links whose spheres reach more than 2 cm past their meshes (the model's ``gaps``), and the static links checked on
+a grid of signed distances (the model's ``grids``: pitch, size, bound). Extras ``collision-check``
 (coal, trimesh, pycollada) and ``urdf-tests`` (example-robot-data).
 """
 
@@ -89,6 +90,11 @@ def measure(name: str, samples: int, seed: int, cache: bool) -> dict:
     }
 
 
+def _grid_note(model) -> str:
+    """``" + grids on torso, pedestal"`` for a model with static links on grids, else empty."""
+    return f" + grids on {', '.join(model.grids)}" if model.grids else ""
+
+
 def report(rows: list[dict], command: str, samples: int) -> str:
     out = [
         "# Sphere models against the meshes: self-collision refused for nothing",
@@ -102,7 +108,7 @@ def report(rows: list[dict], command: str, samples: int) -> str:
     for r in rows:
         m = r["model"]
         out.append(
-            f"| {r['name']} | {len(m.radii)} on {len(m.links)} links, {len(m.pairs)} pairs | "
+            f"| {r['name']} | {len(m.radii)} on {len(m.links)} links{_grid_note(m)}, {len(m.pairs)} pairs | "
             f"{100 * r['spheres']:.1f} % / {100 * r['meshes']:.1f} % | {100 * r['over']:.1f} % | {r['false_free']} |"
         )
     out += ["", "Link pairs behind the configurations refused for nothing (share of all configurations):", ""]
@@ -113,6 +119,18 @@ def report(rows: list[dict], command: str, samples: int) -> str:
     for r in rows:
         wide = ", ".join(f"{n} {1000 * g:.0f}" for g, n in r["wide"]) or "none"
         out.append(f"- {r['name']}: {wide}")
+    out += [
+        "",
+        "Static links that also carry a grid of signed distances (the model's `grids`: a pair's row is the larger",
+        "of the spheres' and the grid's; pitch, nodes, memory, and the most a value may fall short of the true",
+        "distance, the link's gap):",
+        "",
+    ]
+    for r in rows:
+        grids = (r["model"].grids or {}).items()
+        text = ", ".join(f"{n} ({1000 * g.pitch:.0f} mm, {g.values.size / 1e6:.2f} M nodes, "
+                         f"{g.values.nbytes / 1e6:.1f} MB, {1000 * g.bound:.0f} mm)" for n, g in grids)  # fmt: skip
+        out.append(f"- {r['name']}: {text or 'none'}")
     out += [
         "",
         "Time: the model (from nik's cache unless `--no-cache`; CPU time of the process, wall beside it), the spheres'",

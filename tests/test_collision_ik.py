@@ -427,7 +427,7 @@ def test_a_uniform_start_is_the_free_draw_nearest_the_pose_with_fewer_collision_
     world = _table_and_box()
     T = _poses(robot, 8, seed=7, world=world)
     (G, joints), rest = kernel_arguments(robot, model, world)
-    spheres, sphere_frame, body_start, pairs, self_on = rest[0]
+    spheres, sphere_frame, body_start, pairs, self_on = rest[0][:5]  # ArmSpheres: then the static grids
     opts, _ = lm_options()
     rw, n, tries = opts[ROT_WEIGHT], robot.dof, 16
     R = pairs.shape[0] + body_start.shape[0] - 1

@@ -20,10 +20,10 @@ _EMPTY = (np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
 
 def kernel_arguments(robot, model, world=None, *, self_collision: bool = True):
     """``(G, joints), (arm, scene)``: the model arrays before ``q`` and the collision groups after it,
-    ``arm = ArmSpheres(spheres, sphere_frame, body_start, pairs, self_on)`` and
+    ``arm = ArmSpheres(spheres, sphere_frame, body_start, pairs, self_on, link_grid, grids, grid_values)`` and
     ``scene = Scene(spheres, boxes, capsules)`` (:mod:`nik.kernels.collision`)."""
     G, joints = robot.chain_arrays()
-    arm = ArmSpheres(*model.arrays(), bool(self_collision))
+    arm = ArmSpheres(*model.arrays(), bool(self_collision), *model.grid_arrays())
     return (G, joints), (arm, Scene(*(world.packed() if world is not None else _EMPTY)))
 
 

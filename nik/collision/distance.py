@@ -62,12 +62,34 @@ def _segment_min(values: torch.Tensor, index: np.ndarray, count: int) -> torch.T
 
 
 def self_distances(model, centers: torch.Tensor) -> torch.Tensor:
-    """``(B, P)``: per active pair of ``model.pairs``, the smallest signed distance between their spheres."""
+    """``(B, P)``: per active pair of ``model.pairs``, the smallest signed distance between their spheres; for a
+    pair with a static link that has a grid (:attr:`nik.collision.CollisionModel.grids`), the larger of that and
+    the smallest ``v(c) - r`` over the other link's spheres (:func:`nik.collision.sdf.grid_values_torch`): both are
+    lower bounds of the distance to the static link's geometry."""
     i, j, pid = model.sphere_pairs()
     r = torch.as_tensor(model.radii, dtype=centers.dtype, device=centers.device)
+    link_grid, grid_rows, flat = model.grid_arrays()
+    on_grid = np.zeros(len(model.pairs), dtype=bool)
+    if len(link_grid) and len(model.pairs):
+        on_grid = (link_grid[model.pairs[:, 0]] >= 0) | (link_grid[model.pairs[:, 1]] >= 0)
     ii, jj = torch.as_tensor(i, device=centers.device), torch.as_tensor(j, device=centers.device)
     d = torch.linalg.vector_norm(centers[:, ii] - centers[:, jj], dim=-1) - r[ii] - r[jj]
-    return _segment_min(d, pid, len(model.pairs))
+    out = _segment_min(d, pid, len(model.pairs))
+    if on_grid.any():
+        from nik.collision.sdf import grid_values_torch
+
+        cols = []
+        for p in range(len(model.pairs)):
+            if not on_grid[p]:
+                cols.append(out[:, p])
+                continue
+            a, b = (int(x) for x in model.pairs[p])
+            k, mover = (link_grid[a], b) if link_grid[a] >= 0 else (link_grid[b], a)
+            s = slice(int(model.body_start[mover]), int(model.body_start[mover + 1]))
+            v = grid_values_torch(grid_rows, flat, int(k), centers[:, s]) - r[s]
+            cols.append(torch.maximum(v.amin(dim=1), out[:, p]) if v.shape[1] else out[:, p])
+        out = torch.stack(cols, dim=1)
+    return out
 
 
 def _box_sdf(p: torch.Tensor, boxes: torch.Tensor) -> torch.Tensor:

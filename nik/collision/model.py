@@ -42,13 +42,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from nik.collision.sdf import GRID_PITCH
+
 __all__ = ["COLLISION_FORMAT", "CollisionModel", "collision_model", "link_capsule_bodies", "set_collision_model"]
 
 #: version of the saved model's file format (the shipped models' files carry it)
 COLLISION_FORMAT = 1
 
 #: version of the fitting and the pair rules, part of the cache key (bump when they change: a cached fit is redone)
-FIT_VERSION = 3
+FIT_VERSION = 4
 
 
 @dataclass
@@ -71,6 +73,9 @@ class CollisionModel:
         volume_ratios: (L,) sphere volume over geometry volume per link.
         source: ``"urdf:PATH"`` or ``"capsules"``.
         options: the options it was built with.
+        grids: ``{link: SdfGrid}``, static links (frame 0) that also carry a grid of signed distances to their
+            geometry in the base frame (:mod:`nik.collision.sdf`): the row of a pair with such a link is the larger
+            of the spheres' and the grid's (both lower bounds of the distance). None or empty: spheres only.
     """
 
     robot_hash: str
@@ -86,6 +91,7 @@ class CollisionModel:
     volume_ratios: np.ndarray | None = None
     source: str = ""
     options: dict = field(default_factory=dict)
+    grids: dict | None = None
 
     # -- views ------------------------------------------------------------------
     @property
@@ -142,6 +148,27 @@ class CollisionModel:
             np.ascontiguousarray(np.asarray(self.pairs, dtype=np.int64).reshape(-1, 2)),
         )
 
+    def grid_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The grids as the kernels take them (:class:`nik.kernels.collision.ArmSpheres`' last fields):
+        ``link_grid (L,)`` int64 (-1: none; ``(0,)`` for a model without grids), ``grids (Ng, 14)`` float64
+        (:meth:`nik.collision.sdf.SdfGrid.row`), ``values (N,)`` float32, the grids one after the other."""
+        cached = self.__dict__.get("_grid_arrays")
+        if cached is not None and cached[0] is self.grids:
+            return cached[1]
+        if not self.grids:
+            out = (np.zeros(0, np.int64), np.zeros((0, 14)), np.zeros(0, np.float32))
+        else:
+            link_grid = np.full(len(self.links), -1, dtype=np.int64)
+            rows, flat, start = [], [], 0
+            for name, grid in self.grids.items():
+                link_grid[self.links.index(name)] = len(rows)
+                rows.append(grid.row(start))
+                flat.append(np.ascontiguousarray(grid.values, dtype=np.float32).ravel())
+                start += grid.values.size
+            out = (link_grid, np.ascontiguousarray(np.stack(rows)), np.ascontiguousarray(np.concatenate(flat)))
+        self.__dict__["_grid_arrays"] = (self.grids, out)
+        return out
+
     def __repr__(self) -> str:
         return (
             f"CollisionModel({len(self.links)} links, {len(self.radii)} spheres, {len(self.pairs)} pairs, "
@@ -169,8 +196,7 @@ class CollisionModel:
                     current.discard(key)
                     left[name] = "removed"
         pairs = np.array(sorted(current), dtype=np.int64).reshape(-1, 2)
-        copy = CollisionModel(**{**self.__dict__, "pairs": pairs, "left_out": left})
-        copy.__dict__.pop("_sphere_pairs", None)
+        copy = CollisionModel(**{**_fields(self), "pairs": pairs, "left_out": left})
         return copy
 
     # -- files ---------------------------------------------------------------------
@@ -190,6 +216,7 @@ class CollisionModel:
             "volume_ratios": None if self.volume_ratios is None else np.asarray(self.volume_ratios).tolist(),
             "source": self.source,
             "options": dict(self.options),
+            "grids": {name: g.to_dict() for name, g in (self.grids or {}).items()},
         }
 
     @classmethod
@@ -211,6 +238,7 @@ class CollisionModel:
                 volume_ratios=None if d.get("volume_ratios") is None else np.asarray(d["volume_ratios"]),
                 source=str(d.get("source", "")),
                 options=dict(d.get("options") or {}),
+                grids=_grids_from(d.get("grids")),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as err:
             raise ValueError(f"{source}: not a nik collision model ({err})") from None
@@ -238,6 +266,19 @@ class CollisionModel:
                 f"(hash {robot.definition_hash})"
             )
         return model
+
+
+def _fields(model: CollisionModel) -> dict:
+    """The model's fields (not its cached views), for a copy."""
+    return {k: v for k, v in model.__dict__.items() if not k.startswith("_")}
+
+
+def _grids_from(d) -> dict | None:
+    if not d:
+        return None
+    from nik.collision.sdf import SdfGrid
+
+    return {str(name): SdfGrid.from_dict(g) for name, g in d.items()}
 
 
 # ---------------------------------------------------------------------------
@@ -344,6 +385,11 @@ MORE_SPHERES = 4
 
 #: candidate centres of a fit (:func:`nik.collision.fit.fit_spheres`): a moving link's, a static link's
 CANDIDATES = (800, 2000)
+
+
+def _grid_bound(pitch: float) -> float:
+    """:attr:`nik.collision.sdf.SdfGrid.bound` of a grid of ``pitch`` metres."""
+    return float(pitch) * (math.sqrt(3) + 2 / 9)
 
 
 def _fit_link(body, tolerance: float, max_spheres: int, seed: int):
@@ -462,7 +508,7 @@ def _pair_rows(robot, model: CollisionModel, Q: np.ndarray, never_clearance, pro
 
     G, joints = robot.chain_arrays()  # the arguments of nik.collision.compiled.kernel_arguments, no world
     no_world = Scene(np.zeros((0, 4)), np.zeros((0, 15)), np.zeros((0, 7)))
-    rest = (ArmSpheres(*model.arrays(), True), no_world)
+    rest = (ArmSpheres(*model.arrays(), True, *model.grid_arrays()), no_world)
     cutoff = max(0.0, float(never_clearance)) if never_clearance is not None else 0.0
     P = len(model.pairs)
     for s in range(0, len(Q), PAIR_CHUNK):
@@ -588,10 +634,34 @@ def _store(model: CollisionModel, path: Path) -> None:
         model.save(path)
 
 
-def _fitted(robot, source, radius, tolerance, max_spheres, seed, progress=None) -> CollisionModel:
-    """The spheres of every link (no pairs yet)."""
+def _static_grids(bodies, gaps, pitch, progress=None) -> dict:
+    """``{link: SdfGrid}`` for the URDF bodies on frame 0 whose spheres reach farther past their geometry than a
+    grid of ``pitch`` metres may fall short of it (:attr:`nik.collision.sdf.SdfGrid.bound`, its worst cell; None:
+    no grids); their ``gaps`` entries become the grid's bound. Such a link keeps its spheres: a pair's row is the
+    larger of the spheres' and the grid's (both lower bounds of the distance), so the grid tightens where the
+    spheres reach out (large flat faces) and the spheres where they hold the surface closely."""
+    from nik.collision.sdf import static_grid
+
+    out = {}
+    if pitch is None:
+        return out
+    bound = _grid_bound(pitch)
+    for i, b in enumerate(bodies):
+        if b.frame != 0 or b.radius is not None or not gaps[i] > bound:
+            continue
+        if progress is not None:
+            progress.say(f"distance grid of the static link {b.name}")
+        out[b.name] = static_grid(b.triangles, pitch)
+        gaps[i] = out[b.name].bound
+    return out
+
+
+def _fitted(robot, source, radius, tolerance, max_spheres, seed, progress=None, grid_pitch=None) -> CollisionModel:
+    """The spheres of every link (no pairs yet), and the grids of the static links (:func:`_static_grids`)."""
     found = _bodies_and_spheres(robot, source, radius, tolerance, max_spheres, seed, progress)
     bodies, spheres, gaps, ratios, src = found
+    gaps = list(gaps)
+    grids = _static_grids(bodies, gaps, grid_pitch, progress) if src.startswith("urdf:") else {}
     counts = [len(r) for _, r in spheres]
     return CollisionModel(
         robot_hash=robot.definition_hash,
@@ -605,6 +675,7 @@ def _fitted(robot, source, radius, tolerance, max_spheres, seed, progress=None) 
         gaps=np.asarray(gaps, dtype=float),
         volume_ratios=np.asarray(ratios, dtype=float),
         source=src,
+        grids=grids or None,
     )
 
 
@@ -645,6 +716,7 @@ def collision_model(
     srdf: bool | str | Path | None = None,
     seed: int = 0,
     cache: bool = True,
+    grid_pitch: float | None = GRID_PITCH,
 ) -> CollisionModel:
     """The collision model of ``robot`` (module docstring), from a file beside the robot's, nik's cache, or built.
 
@@ -672,6 +744,11 @@ def collision_model(
     cache key holds those values.
         seed: seed of the fitting and the sampling.
         cache: read and write nik's cache folder.
+        grid_pitch: the static links of a URDF (frame 0: a torso, a pedestal, the rest of the robot placed by
+            ``joint_values=``) whose spheres reach farther past their geometry than a grid of this pitch (metres)
+            may fall short of it also get a grid of signed distances (:mod:`nik.collision.sdf`,
+            :attr:`CollisionModel.grids`): their pairs' rows are the larger of the spheres' and the grid's. None:
+            spheres only.
     """
     options = {
         "source": source,
@@ -683,6 +760,8 @@ def collision_model(
         "srdf": _srdf_choice(robot, srdf),
         "seed": int(seed),
     }
+    if grid_pitch != GRID_PITCH:
+        options["grid_pitch"] = None if grid_pitch is None else float(grid_pitch)
     from nik.collision.urdf import placed_values
 
     placed = placed_values(robot)
@@ -715,8 +794,8 @@ def collision_model(
             memo[memo_key] = shipped
             return shipped
     urdf = _urdf_of(robot)
-    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed", "joint_values")
-                   if k in options}  # fmt: skip
+    fit_options = {k: options[k] for k in ("source", "radius", "tolerance", "max_spheres", "seed", "joint_values",
+                                           "grid_pitch") if k in options}  # fmt: skip
     key = f"{robot.definition_hash}|{json.dumps(fit_options, sort_keys=True)}|{COLLISION_FORMAT}|fit {FIT_VERSION}"
     h = hashlib.sha256(key.encode())
     if urdf is not None:
@@ -738,10 +817,10 @@ def collision_model(
         progress = Progress(f"collision model of {robot.name!r}")
         spheres = _cached(fit_path, robot) if cache else None
         if spheres is None:
-            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed, progress)
+            spheres = _fitted(robot, source, radius, tolerance, max_spheres, seed, progress, grid_pitch)
             if cache:
                 _store(spheres, fit_path)
-        model = CollisionModel(**{**spheres.__dict__, "options": options})
+        model = CollisionModel(**{**_fields(spheres), "options": options})
         model.__dict__.pop("_sphere_pairs", None)
         _find_pairs(robot, model, samples, never_clearance, seed, srdf_path, progress=progress)
         if cache:
@@ -827,7 +906,7 @@ def _builtin(robot, source, samples, never_clearance, srdf, seed) -> CollisionMo
         for k, why in model.left_out.items()
         if srdf and why.startswith("srdf: ")
     }
-    copy = CollisionModel(**{**model.__dict__, "options": {**model.options, "samples": samples, "srdf": srdf}})
+    copy = CollisionModel(**{**_fields(model), "options": {**model.options, "samples": samples, "srdf": srdf}})
     copy.options.update(never_clearance=never_clearance, seed=seed)
     copy.__dict__.pop("_sphere_pairs", None)
     _find_pairs(robot, copy, samples, never_clearance, seed, disabled=disabled)

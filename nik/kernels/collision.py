@@ -10,8 +10,14 @@ them):
 - ``scene`` (:class:`Scene`), the world: ``spheres: (Ns, 4)``, ``boxes: (Nb, 15)`` (R row by row, centre, half
   sizes), ``capsules: (Nc, 7)``.
 
-Inside a kernel the groups are unpacked by position (``spheres, sphere_frame, body_start, pairs, self_on = arm``),
-so a plain tuple in the same order works too.
+Inside a kernel the groups are read by position (``arm[0]`` the spheres, ...), so a plain tuple in the same order
+works too. ``arm``'s last three fields (defaults: none) give the static links (frame 0) that carry a grid of
+signed distances (:mod:`nik.collision.sdf`): the row of a pair of such a link and another is the larger of the
+spheres' row and the grid's, the smallest ``v(c_s) - r_s`` over the other link's spheres (``v`` the grid's
+trilinear value, a lower bound of the distance to the static link's geometry): both are lower bounds of the
+distance between the other link's spheres and the static geometry, so the larger is one too. Its Jacobian row is
+the larger one's, for the grid its gradient at the minimising sphere ``dv/dx . dc_s/dq``. The spheres' minimum is
+skipped where the grid's row is already at least the cutoff.
 
 Rows (``R = P + L``): row ``p < P`` is the smallest ``|c_i - c_j| - r_i - r_j`` over the spheres of pair ``p``
 (``inf`` when ``self_on`` is False); row ``P + l`` is the smallest signed distance from link ``l``'s spheres
@@ -58,14 +64,23 @@ __all__ = [
 ]
 
 
+_NO_LINK_GRID = np.zeros(0, dtype=np.int64)
+_NO_GRIDS = np.zeros((0, 14))
+_NO_GRID_VALUES = np.zeros(0, dtype=np.float32)
+
+
 class ArmSpheres(NamedTuple):
-    """The arm's sphere model as the kernels take it (:meth:`nik.collision.CollisionModel.arrays`)."""
+    """The arm's sphere model as the kernels take it (:meth:`nik.collision.CollisionModel.arrays`, then
+    :meth:`nik.collision.CollisionModel.grid_arrays`: the static links checked on a distance grid)."""
 
     spheres: np.ndarray  #: (S, 4) centre in its frame and radius (metres)
     sphere_frame: np.ndarray  #: (S,) int64, the frame each sphere rides on (0 the base, k after joint k)
     body_start: np.ndarray  #: (L + 1,) int64, link ``l`` owns spheres ``body_start[l]:body_start[l + 1]``
     pairs: np.ndarray  #: (P, 2) int64, the link pairs checked
     self_on: bool  #: whether the pairs count (False: their rows are ``inf``)
+    link_grid: np.ndarray = _NO_LINK_GRID  #: (L,) int64, the grid of each link (-1 none), or (0,): no grids
+    grids: np.ndarray = _NO_GRIDS  #: (Ng, 14) origin, pitch, shape, start in ``grid_values``, box (lower, upper)
+    grid_values: np.ndarray = _NO_GRID_VALUES  #: (N,) float32, the grids' values, x slowest (metres)
 
 
 class Scene(NamedTuple):
@@ -360,6 +375,85 @@ def _segment_segment(p1x, p1y, p1z, q1x, q1y, q1z, p2x, p2y, p2z, q2x, q2y, q2z)
 
 
 @kernel(inline="always")
+def _grid_of(arm, link):
+    """The grid checking link ``link`` (:class:`ArmSpheres`' ``link_grid``), -1 for none."""
+    link_grid = arm[5]
+    if link < link_grid.shape[0]:
+        return link_grid[link]
+    return -1
+
+
+@kernel(inline="always")
+def _grid_box_gap(grids, k, x, y, z, box):
+    """How far ``(x, y, z)`` lies outside grid ``k``'s nodes (``box`` False) or its geometry's bounding box
+    (``box`` True), metres (0 within)."""
+    dx, dy, dz = 0.0, 0.0, 0.0
+    if box:
+        lx, ly, lz, hx, hy, hz = grids[k, 8], grids[k, 9], grids[k, 10], grids[k, 11], grids[k, 12], grids[k, 13]
+    else:
+        h = grids[k, 3]
+        lx, ly, lz = grids[k, 0], grids[k, 1], grids[k, 2]
+        hx, hy, hz = lx + h * (grids[k, 4] - 1), ly + h * (grids[k, 5] - 1), lz + h * (grids[k, 6] - 1)
+    dx = max(lx - x, max(x - hx, 0.0))
+    dy = max(ly - y, max(y - hy, 0.0))
+    dz = max(lz - z, max(z - hz, 0.0))
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@kernel(inline="always")
+def _grid_value(grids, values, k, x, y, z, g, want):
+    """The value of grid ``k`` at ``(x, y, z)`` (:mod:`nik.collision.sdf`: at most the signed distance to the
+    static link's geometry, metres): trilinear between its nodes, the distance to the geometry's bounding box
+    outside them; its gradient in ``g (3,)`` where ``want``."""
+    h = grids[k, 3]
+    nx, ny, nz = int(grids[k, 4]), int(grids[k, 5]), int(grids[k, 6])
+    fx, fy, fz = (x - grids[k, 0]) / h, (y - grids[k, 1]) / h, (z - grids[k, 2]) / h
+    if fx < 0.0 or fy < 0.0 or fz < 0.0 or fx > nx - 1 or fy > ny - 1 or fz > nz - 1:
+        lx, ly, lz, hx, hy, hz = grids[k, 8], grids[k, 9], grids[k, 10], grids[k, 11], grids[k, 12], grids[k, 13]
+        dx, dy, dz = max(lx - x, max(x - hx, 0.0)), max(ly - y, max(y - hy, 0.0)), max(lz - z, max(z - hz, 0.0))
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if want:
+            gx = dx if x > hx else -dx
+            gy = dy if y > hy else -dy
+            gz = dz if z > hz else -dz
+            g[0], g[1], g[2] = gx / d, gy / d, gz / d
+        return d
+    i, j, m = min(int(fx), nx - 2), min(int(fy), ny - 2), min(int(fz), nz - 2)
+    tx, ty, tz = fx - i, fy - j, fz - m
+    b = int(grids[k, 7]) + (i * ny + j) * nz + m
+    sx, sy = ny * nz, nz
+    v000, v001 = float(values[b]), float(values[b + 1])
+    v010, v011 = float(values[b + sy]), float(values[b + sy + 1])
+    v100, v101 = float(values[b + sx]), float(values[b + sx + 1])
+    v110, v111 = float(values[b + sx + sy]), float(values[b + sx + sy + 1])
+    c00, c01 = v000 + (v001 - v000) * tz, v010 + (v011 - v010) * tz
+    c10, c11 = v100 + (v101 - v100) * tz, v110 + (v111 - v110) * tz
+    c0, c1 = c00 + (c01 - c00) * ty, c10 + (c11 - c10) * ty
+    if want:
+        g[0] = (c1 - c0) / h
+        g[1] = ((1 - tx) * (c01 - c00) + tx * (c11 - c10)) / h
+        a0 = (1 - ty) * (v001 - v000) + ty * (v011 - v010)
+        a1 = (1 - ty) * (v101 - v100) + ty * (v111 - v110)
+        g[2] = ((1 - tx) * a0 + tx * a1) / h
+    return c0 + (c1 - c0) * tx
+
+
+@kernel
+def _grid_row(X, arm, k, mover, below, g):
+    """``(best, s)``: the smallest ``v(c_s) - r_s`` over the placed spheres ``X`` of link ``mover`` against grid
+    ``k`` (:func:`_grid_value`) and the sphere giving it; returned as soon as it is below ``below``."""
+    spheres, body_start, grids, values = arm[0], arm[2], arm[6], arm[7]
+    best, bs = np.inf, -1
+    for s in range(body_start[mover], body_start[mover + 1]):
+        dist = _grid_value(grids, values, k, X[s, 0], X[s, 1], X[s, 2], g, False) - spheres[s, 3]
+        if dist < best:
+            best, bs = dist, s
+            if best < below:
+                return best, bs
+    return best, bs
+
+
+@kernel(inline="always")
 def _place_link(F, spheres, sphere_frame, body_start, link, X, placed):
     """The world positions of link ``link``'s spheres in ``X``, once per evaluation (``placed[link]``)."""
     if placed[link]:
@@ -413,7 +507,7 @@ def _rows_in(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop
     bounding sphere) is skipped; a link and an obstacle whose bound is above ``cutoff``
     likewise. A row is the smallest of its exact distances and its skipped bounds, so below ``cutoff`` it equals
     the all-pairs minimum (the minimising pair is never skipped)."""
-    spheres, sphere_frame, body_start, pairs, self_on = arm
+    spheres, sphere_frame, body_start, pairs, self_on = arm[0], arm[1], arm[2], arm[3], arm[4]
     w_spheres, w_boxes, w_capsules = scene
     wf, wi = work
     n = q.shape[0]
@@ -521,6 +615,23 @@ def _rows_in(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop
         if bounds[a, 3] < 0 or bounds[b, 3] < 0:
             d[p] = np.inf
             continue
+        gd, gs, k = -np.inf, -1, -1  # the grid's row of a static link on its grid: the pair's row is the larger
+        ka, kb = _grid_of(arm, a), _grid_of(arm, b)
+        if ka >= 0 or kb >= 0:  # (both are lower bounds of the distance): the spheres only where the grid's is low
+            k, mover = (ka, b) if ka >= 0 else (kb, a)
+            x, y, z = Bc[mover, 0], Bc[mover, 1], Bc[mover, 2]
+            if _grid_box_gap(arm[6], k, x, y, z, False) > bounds[mover, 3]:  # all outside the nodes: the box's
+                gd = _grid_box_gap(arm[6], k, x, y, z, True) - bounds[mover, 3]
+            if gd <= cutoff:
+                _place_link(F, spheres, sphere_frame, body_start, mover, X, placed)
+                gd, gs = _grid_row(X, arm, k, mover, -np.inf, g)
+            if gd >= cutoff:
+                d[p] = gd
+                if want_jacobian and gs >= 0:
+                    _grid_value(arm[6], arm[7], k, X[gs, 0], X[gs, 1], X[gs, 2], gb, True)
+                    _add_point_jacobian(F, joints, sphere_frame[gs], X[gs, 0], X[gs, 1], X[gs, 2], gb[0], gb[1],
+                                        gb[2], 1.0, J, p)  # fmt: skip
+                continue
         dx, dy, dz = Bc[a, 0] - Bc[b, 0], Bc[a, 1] - Bc[b, 1], Bc[a, 2] - Bc[b, 2]
         lower = math.sqrt(dx * dx + dy * dy + dz * dz) - bounds[a, 3] - bounds[b, 3]
         best, bi, bj = np.inf, -1, -1
@@ -571,10 +682,16 @@ def _rows_in(G, joints, q, arm, scene, d, J, want_jacobian, cutoff, bounds, stop
                     if reach > 0 and sq < reach * reach:
                         best, bi, bj = math.sqrt(sq) - spheres[i, 3] - spheres[j, 3], i, j
                         if stop and best < cutoff:
-                            d[p] = best
+                            d[p] = max(best, gd)
                             return True
         d[p] = min(best, lower)
-        if want_jacobian and bi >= 0 and best <= lower:
+        if k >= 0 and gd > d[p]:
+            d[p] = gd
+            if want_jacobian and gs >= 0:
+                _grid_value(arm[6], arm[7], k, X[gs, 0], X[gs, 1], X[gs, 2], gb, True)
+                _add_point_jacobian(F, joints, sphere_frame[gs], X[gs, 0], X[gs, 1], X[gs, 2], gb[0], gb[1], gb[2],
+                                    1.0, J, p)  # fmt: skip
+        elif want_jacobian and bi >= 0 and best <= lower:
             dx, dy, dz = X[bi, 0] - X[bj, 0], X[bi, 1] - X[bj, 1], X[bi, 2] - X[bj, 2]
             nn = math.sqrt(dx * dx + dy * dy + dz * dz)
             if nn > 0:
@@ -726,20 +843,34 @@ def _pair_row(X, F, bounds, arm, a, b, c, cb, cut, below):
     """The row of links ``a`` and ``b``: exact where at most ``cut``, else a lower bound above it (their bounding
     spheres' distance); returned as soon as it is below ``below``."""
     spheres, sphere_frame, body_start = arm[0], arm[1], arm[2]
+    gd = -np.inf
+    ka, kb = _grid_of(arm, a), _grid_of(arm, b)
+    if ka >= 0 or kb >= 0:  # a static link on its distance grid: the larger of its row and the spheres' (_rows_in)
+        k, mover = (ka, b) if ka >= 0 else (kb, a)
+        rm = _link_bound(F, bounds, sphere_frame, body_start, mover, c)
+        if _grid_box_gap(arm[6], k, c[0], c[1], c[2], False) > rm:
+            gd = _grid_box_gap(arm[6], k, c[0], c[1], c[2], True) - rm
+            if gd > cut:
+                return gd
+        gd = _grid_row(X, arm, k, mover, -np.inf, cb)[0]
+        if gd > cut:
+            return gd
+        if gd >= below:
+            below = -np.inf  # the pair's row is at least the grid's: the spheres' exact minimum decides
     ra = _link_bound(F, bounds, sphere_frame, body_start, a, c)
     rb = _link_bound(F, bounds, sphere_frame, body_start, b, cb)
     dx, dy, dz = c[0] - cb[0], c[1] - cb[1], c[2] - cb[2]
     lower = math.sqrt(dx * dx + dy * dy + dz * dz) - ra - rb
     if lower > cut:
-        return lower
+        return max(lower, gd)
     best = np.inf
     for i in range(body_start[a], body_start[a + 1]):
         for j in range(body_start[b], body_start[b + 1]):
             dx, dy, dz = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
             best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3] - spheres[j, 3])
             if best < below:
-                return best
-    return best
+                return max(best, gd)
+    return max(best, gd)
 
 
 @kernel
@@ -747,7 +878,7 @@ def _fixed_rows(X, F, bounds, arm, scene, on, g, cut):
     """The smallest row among those whose links all have ``on[frame]`` (placed in ``X``, frames ``F``, the links'
     bounds ``bounds``): pairs with both links on such frames, and such links (not on frame 0) against the world;
     exact where at most ``cut``, else a lower bound above it."""
-    _, sphere_frame, body_start, pairs, self_on = arm
+    sphere_frame, body_start, pairs, self_on = arm[1], arm[2], arm[3], arm[4]
     L = body_start.shape[0] - 1
     best = np.inf
     c, cb = np.empty(3), np.empty(3)
@@ -772,7 +903,7 @@ def _sweep_rows(X, F, bounds, arm, scene, k, n, g, below):
     """The smallest row of the links on frame ``k`` (placed in ``X``, frames ``F``, the links' bounds ``bounds``):
     against the world, and against the links on frames 0, ``k`` and ``n``; exact where at most ``below``, else a
     lower bound above it; returned as soon as one is below ``below`` (then an upper bound of it)."""
-    _, sphere_frame, body_start, pairs, self_on = arm
+    sphere_frame, body_start, pairs, self_on = arm[1], arm[2], arm[3], arm[4]
     L = body_start.shape[0] - 1
     best = np.inf
     c, cb = np.empty(3), np.empty(3)

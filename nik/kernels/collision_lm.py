@@ -355,7 +355,7 @@ def collision_lm(G, joints, targets, given, arm, scene, opts, iopts, settings, s
     starts, n_starts, restarts = given
     margin, weight, tries, patience, finish, descents, converged, converged_given = settings
     q, free, done_out, iterations, pos, rot = out
-    spheres, sphere_frame, body_start, pairs, _ = arm
+    spheres, sphere_frame, body_start, pairs = arm[0], arm[1], arm[2], arm[3]
     B, n = q.shape
     R = pairs.shape[0] + body_start.shape[0] - 1
     rw, tol_pos, tol_rot = opts[ROT_WEIGHT], opts[TOL_POS], opts[TOL_ROT]
