@@ -335,7 +335,8 @@ def _terms(G, joints, T, Q, ends, opts, col, build, sums, fit):
 def _no_collision():
     """The collision arguments of no model (no rows)."""
     arm = ArmSpheres(np.empty((0, 4)), np.empty(0, dtype=np.int64), np.zeros(1, dtype=np.int64),
-                     np.empty((0, 2), dtype=np.int64), False)  # fmt: skip
+                     np.empty((0, 2), dtype=np.int64), False, np.zeros(0, dtype=np.int64), np.zeros((0, 14)),
+                     np.zeros(0, dtype=np.float32))  # fmt: skip
     return arm, Scene(np.empty((0, 4)), np.empty((0, 15)), np.empty((0, 7)))
 
 
