@@ -54,13 +54,14 @@ def load(name: str):
         return nik.load_robot(urdf, end_link="panda_hand")
 
 
-def measure(name: str, samples: int, seed: int, cache: bool) -> dict:
-    """The figures of one robot (module docstring) as a dict."""
+def measure(name: str, samples: int, seed: int, cache: bool, max_spheres: int | None = None) -> dict:
+    """The figures of one robot (module docstring) as a dict; ``max_spheres``: the fit's option (None: its default)."""
     robot = load(name)
     t, cpu = time.perf_counter(), time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = collision_model(robot, cache=cache)
+        options = {} if max_spheres is None else {"max_spheres": int(max_spheres)}
+        model = collision_model(robot, cache=cache, **options)
     fit_s, fit_cpu = time.perf_counter() - t, time.process_time() - cpu
     mesh = mesh_check(robot, model, required=True)
     q = robot.sample(samples, generator=torch.Generator().manual_seed(seed), dtype=torch.float64).numpy()
@@ -151,6 +152,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--robots", default=",".join(ROBOTS), help=f"comma-separated, of {', '.join(ROBOTS)}")
     ap.add_argument("--no-cache", action="store_true", help="fit the models now (time the fit)")
+    ap.add_argument("--max-spheres", type=int, default=None, help="the fit's max_spheres (default: its own)")
     ap.add_argument("--out", default=None, help="write the markdown table here (temporary name, then renamed)")
     args = ap.parse_args(argv)
     names = [n for n in args.robots.split(",") if n]
@@ -161,7 +163,7 @@ def main(argv=None) -> None:
         raise SystemExit(2)
     rows = []
     for name in names:
-        rows.append(measure(name, args.samples, args.seed, not args.no_cache))
+        rows.append(measure(name, args.samples, args.seed, not args.no_cache, args.max_spheres))
         r = rows[-1]
         print(
             f"{name}: spheres {100 * r['spheres']:.1f} %, meshes {100 * r['meshes']:.1f} %, spheres only "

@@ -27,7 +27,7 @@ from nik.collision import (
 )
 from nik.collision.compiled import kernel_arguments, signed_distances_compiled
 from nik.collision.fit import fit_spheres
-from nik.collision.shapes import box_triangles, cylinder_triangles
+from nik.collision.shapes import box_triangles, cylinder_triangles, sphere_triangles
 
 URDF = """<?xml version="1.0"?>
 <robot name="prims">
@@ -97,6 +97,18 @@ def test_spheres_hold_every_surface_point_of_a_cylinder():
     z = rng.uniform(-length / 2, length / 2, 20000)
     side = np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
     assert _inside(side, fit).all()
+
+
+def test_a_urdf_sphere_is_held_by_one_ball_that_reaches_out_millimetres_not_centimetres():
+    from nik.collision.model import _fit_link
+    from nik.collision.urdf import Body
+
+    tri = sphere_triangles(0.22) + np.array([0.1, -0.2, 0.7])  # Baxter's head ball, off the frame's origin
+    many = fit_spheres(tri, seed=0)
+    for frame in (0, 3):  # a static link and a moving one
+        fit = _fit_link(Body("head", frame, tri), tolerance=0.005, max_spheres=16, seed=0)
+        assert len(fit.radii) == 1 and fit.gap < 0.005 < many.gap
+        assert _inside(tri.reshape(-1, 3), fit).all()  # still an exact cover: every corner inside
 
 
 def test_refined_spheres_still_hold_every_surface_point_and_reach_out_less():

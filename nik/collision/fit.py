@@ -54,7 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SphereFit", "fit_spheres", "subdivide"]
+__all__ = ["SphereFit", "fit_spheres", "one_sphere", "subdivide"]
 
 
 @dataclass
@@ -93,6 +93,22 @@ def subdivide(triangles: np.ndarray, max_edge: float) -> np.ndarray:
         tri = np.concatenate([np.stack([a, m, c], axis=1), np.stack([m, b, c], axis=1)])
     out.append(tri)
     return np.concatenate(out, axis=0)
+
+
+def one_sphere(triangles: np.ndarray, seed: int = 0, edge: float = 0.005) -> SphereFit:
+    """One ball around the whole closed surface ``triangles: (T, 3, 3)``: centred at the middle of its bounding box,
+    through its farthest corner, so an exact cover (every corner inside, hence the convex hull and the surface).
+    For a URDF ``<sphere>`` (a polyhedron around the ball) it reaches only the polyhedron's own slack past the
+    surface, where a cover of many spheres overreaches its large faces. The gap is measured on the surface
+    subdivided to ``edge`` metres."""
+    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    corners = tri.reshape(-1, 3)
+    c = (corners.min(axis=0) + corners.max(axis=0)) / 2
+    r = float(np.sqrt(((corners - c) ** 2).sum(axis=1).max())) * (1 + 1e-12)
+    centers, radii = c[None], np.array([r])
+    surface = subdivide(tri, edge).reshape(-1, 3)
+    rng = np.random.default_rng(seed)
+    return SphereFit(centers, radii, _gap(centers, radii, surface), _volume_ratio(centers, radii, _volume(tri), rng))
 
 
 def _hull_planes(points: np.ndarray) -> np.ndarray | None:

@@ -50,7 +50,7 @@ __all__ = ["COLLISION_FORMAT", "CollisionModel", "collision_model", "link_capsul
 COLLISION_FORMAT = 1
 
 #: version of the fitting and the pair rules, part of the cache key (bump when they change: a cached fit is redone)
-FIT_VERSION = 4
+FIT_VERSION = 5
 
 
 @dataclass
@@ -398,15 +398,19 @@ def _fit_link(body, tolerance: float, max_spheres: int, seed: int):
     ``CANDIDATES[1]`` centres (its spheres cost a check only where a moving link comes near: the broad phase skips
     the others; a torso or pedestal of large thin faces needs many); a moving body whose spheres reach more than
     :data:`GAP_GOAL` past it is fitted again with :data:`MORE_SPHERES` times the spheres and twice the candidates,
-    the tighter fit kept. Every fit is an exact cover, so every choice stays conservative; a link still far over
+    the tighter fit kept; one ball around the whole body (:func:`nik.collision.fit.one_sphere`) replaces the fit where
+    it reaches less far (a URDF ``<sphere>``, a round head). Every fit is an exact cover, so every choice stays
+    conservative; a link still far over
     is named by :func:`_warn_overreach` (over :data:`OVERREACH_WARNING`). ``body``: a
     :class:`nik.collision.urdf.Body` (triangles ``(T, 3, 3)``, metres); returns its
     :class:`nik.collision.fit.SphereFit`."""
-    from nik.collision.fit import fit_spheres
+    from nik.collision.fit import fit_spheres, one_sphere
 
+    one = one_sphere(body.triangles, seed)
     if body.frame == 0:
         budget = int(max_spheres) * STATIC_SPHERES
-        return fit_spheres(body.triangles, tolerance=tolerance, max_spheres=budget, seed=seed, candidates=CANDIDATES[1])
+        fit = fit_spheres(body.triangles, tolerance=tolerance, max_spheres=budget, seed=seed, candidates=CANDIDATES[1])
+        return one if one.gap < fit.gap else fit
     fit = fit_spheres(body.triangles, tolerance=tolerance, max_spheres=max_spheres, seed=seed, candidates=CANDIDATES[0])
     if fit.gap > GAP_GOAL:
         more = fit_spheres(
@@ -414,7 +418,7 @@ def _fit_link(body, tolerance: float, max_spheres: int, seed: int):
             candidates=2 * CANDIDATES[0],
         )  # fmt: skip
         fit = more if more.gap < fit.gap else fit
-    return fit
+    return one if one.gap < fit.gap else fit
 
 
 def find_srdf(urdf: Path | None) -> tuple[Path | None, str]:
