@@ -129,7 +129,7 @@ def _cmd_train(args) -> int:
         f"samples); wrote {res.out} and {res.out.with_suffix('.json')}"
     )
     if res.single_pose is not None:
-        print(f"{res.single_pose_note}: wrote {res.single_pose} (installed, it guesses on the CPU)")
+        print(f"{res.single_pose_note}: wrote {res.single_pose} (installed with it, it guesses on the CPU)")
     if res.installed is not None:
         print(f"installed as {res.installed}" + (" (its single-pose network beside it)" if res.single_pose else ""))
         for line in res.usage:
