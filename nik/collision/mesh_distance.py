@@ -67,7 +67,7 @@ class MeshDistance:
         their Jacobian and the distances ``d`` (metres, negative where the hulls overlap; for a pair not asked
         about, a lower bound: the bounding spheres' gap (a link's sphere and the obstacle's own shape), or ``margin``
         where coal finds the meshes no nearer)."""
-        from nik.collision.meshcheck import _core
+        from nik.collision.meshcheck import _core, ball_obstacle_gap
         from nik.collision.urdf import frames_at
 
         Q = np.asarray(Q, dtype=np.float64).reshape(-1, self.robot.dof)
@@ -92,9 +92,8 @@ class MeshDistance:
             t = np.array([np.asarray(t.getTranslation()) for t in tf])
             centres = np.concatenate([np.einsum("kij,kj->ki", R, local) + t, fixed])
             d[i] = np.linalg.norm(centres[a_idx] - centres[b_idx], axis=1) - radius[a_idx] - radius[b_idx]
-            if obs.size:  # a link against an obstacle: the exact distance of its sphere's centre to the obstacle
-                p = np.abs(np.einsum("mji,mj->mi", orot, centres[a_idx[obs]] - ocentre))
-                d[i, obs] = np.linalg.norm(np.maximum(p - core[:, :3], 0.0), axis=1) - core[:, 3] - radius[a_idx[obs]]
+            if obs.size:  # a link against an obstacle: its sphere's exact gap to the obstacle
+                d[i, obs] = ball_obstacle_gap(centres[a_idx[obs]], radius[a_idx[obs]], (ocentre, orot, core))
             for m in np.flatnonzero(d[i] <= margin):  # the bounding spheres within the margin: coal asked
                 a, b = self.rows[m]
                 if not self._near(tf, a, b, reach):  # farther than the margin: no row (d: that lower bound)

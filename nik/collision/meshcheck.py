@@ -109,9 +109,7 @@ class MeshCheck:
         pairs = np.flatnonzero(gap <= 0.0)
         links = []
         if len(oc):
-            p = np.abs(np.einsum("oji,koj->koi", orot, centre[:, None, :] - oc[None]))  # in each obstacle's frame
-            out = np.maximum(p - shape[None, :, :3], 0.0)
-            gap = np.sqrt((out**2).sum(2)) - shape[None, :, 3] - radius[:, None]
+            gap = ball_obstacle_gap(centre[:, None, :], radius[:, None], (oc, orot, shape))  # (links, obstacles)
             links = list(zip(*np.nonzero((gap <= 0.0) & moving[:, None]), strict=True))
         return pairs, links
 
@@ -187,6 +185,15 @@ class MeshCheck:
                       if self._hit(self._geoms[k], tf[k], *obstacles[o][:2])]  # fmt: skip
             out.append(sorted(names) or None)
         return out
+
+
+def ball_obstacle_gap(centre: np.ndarray, radius: np.ndarray, obstacles) -> np.ndarray:
+    """The exact gap between balls ``(centre (..., 3), radius (...))`` and obstacles ``(origin (..., 3), rotation
+    (..., 3, 3), core (..., 4))`` (:func:`_core`), shapes broadcast together: ``|max(|R^T (c - o)| - h, 0)| - r -
+    radius`` metres (negative where they overlap)."""
+    origin, rot, core = obstacles
+    p = np.abs(np.einsum("...ji,...j->...i", rot, centre - origin))  # the centre in the obstacle's frame
+    return np.linalg.norm(np.maximum(p - core[..., :3], 0.0), axis=-1) - core[..., 3] - radius
 
 
 def _core(geom) -> tuple[float, float, float, float]:
